@@ -1,0 +1,130 @@
+"""VO cones of moving vehicles with spherical protected zones: eqs (1)–(6) and the virtual
+sphere of section 3.1.6, vectorised over n neighbours."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .frames import rotation_el_az
+
+#: The paper's smallest virtual-sphere factor (section 3.1.6: tau >= 1.5).
+TAU_MIN = 1.5
+
+
+@dataclass(frozen=True)
+class VOCones:
+    """n VO cones seen from the avoiding vehicle A. Velocities are in m/s, the cone's length
+    d_vo in the same units (the paper draws the collision cone to scale in velocity space)."""
+
+    rel: np.ndarray  # (n, 3) p_B - p_A
+    apex: np.ndarray  # (n, 3) A_vo = V_B (eq. 3), or (V_A + V_B)/2 when reciprocal
+    r_pz: np.ndarray  # (n,)
+    d_oi: np.ndarray  # (n,) eq. (1)
+    theta_el: np.ndarray  # (n,) eq. (1)
+    psi_az: np.ndarray  # (n,) eq. (1)
+    R: np.ndarray  # (n, 3, 3) eq. (6); column 0 is the cone axis
+    d_vo: np.ndarray  # (n,) eq. (2), times tau
+    r_vo: np.ndarray  # (n,) eq. (2), times tau
+    tau: np.ndarray  # (n,) virtual-sphere factor (section 3.1.6); 1 when not expanded
+    inside: np.ndarray  # (n,) bool: A is already inside B's protected zone (d_oi <= r_pz)
+
+    def __len__(self) -> int:
+        return len(self.d_oi)
+
+    @property
+    def axis(self) -> np.ndarray:
+        """Unit symmetry-line direction (n, 3): from A towards B."""
+        return self.R[:, :, 0]
+
+    @property
+    def sin_alpha(self) -> np.ndarray:
+        """Sine of the half-angle alpha of the cone: r_pz / d_oi."""
+        return np.clip(self.r_pz / self.d_oi, 0.0, 1.0)
+
+    @property
+    def cos_alpha(self) -> np.ndarray:
+        return np.sqrt(1.0 - self.sin_alpha**2)
+
+    @property
+    def center(self) -> np.ndarray:
+        """C_vo of eq. (5), (n, 3)."""
+        return self.apex + self.d_vo[:, None] * self.axis
+
+    def base_points(self, t: np.ndarray) -> np.ndarray:
+        """B_vo(t) of eq. (4) for angles t (K,), shape (n, K, 3)."""
+        body = np.stack(
+            [
+                np.broadcast_to(self.d_vo[:, None], (len(self), len(t))),
+                self.r_vo[:, None] * np.cos(t),
+                self.r_vo[:, None] * np.sin(t),
+            ],
+            axis=-1,
+        )
+        return np.einsum("nij,nkj->nki", self.R, body) + self.apex[:, None, :]
+
+    def outward_normals(self, t: np.ndarray) -> np.ndarray:
+        """Unit outward normal of the cone surface along the generator through B_vo(t).
+
+        ``t`` has shape (n, ...); the result (n, ..., 3). The plane through the apex with this
+        normal is tangent to the cone along the whole generator: a supporting plane."""
+        sa, ca = self.sin_alpha, self.cos_alpha
+        shape = (len(self),) + (1,) * (t.ndim - 1)
+        body = np.stack(
+            [
+                np.broadcast_to(-sa.reshape(shape), t.shape),
+                ca.reshape(shape) * np.cos(t),
+                ca.reshape(shape) * np.sin(t),
+            ],
+            axis=-1,
+        )
+        return np.einsum("nij,n...j->n...i", self.R, body)
+
+
+def vo_cones(
+    p_A: np.ndarray,
+    p_B: np.ndarray,
+    V_B: np.ndarray,
+    r_pz: np.ndarray,
+    *,
+    reach: float | None = None,
+    virtual_sphere: bool = True,
+    tau_min: float = TAU_MIN,
+    apex: np.ndarray | None = None,
+) -> VOCones:
+    """Build the VO cones of eqs (1)–(6) for neighbours at ``p_B`` (n, 3) moving at ``V_B``.
+
+    ``reach`` is the largest own speed of interest (m/s). With ``virtual_sphere`` (section
+    3.1.6) a cone whose base lies inside that reach is lengthened by the factor
+    tau = max(tau_min, needed) (the virtual sphere tau·r_pz at tau·|p_B - p_A|, eq. 18), so that
+    its finite conic sections are exact for every speed up to ``reach``. Without ``reach`` the
+    paper's rule applies: tau = tau_min when A is within 2 r_pz of B.
+    """
+    p_B = np.atleast_2d(np.asarray(p_B, dtype=float)).reshape(-1, 3)
+    V_B = np.atleast_2d(np.asarray(V_B, dtype=float)).reshape(-1, 3)
+    r_pz = np.broadcast_to(np.asarray(r_pz, dtype=float), (len(p_B),)).copy()
+    rel = p_B - np.asarray(p_A, dtype=float)
+    d_oi = np.linalg.norm(rel, axis=1)  # eq. (1)
+    safe_d = np.maximum(d_oi, 1e-12)
+    theta_el = np.arcsin(np.clip(rel[:, 2] / safe_d, -1.0, 1.0))  # eq. (1), = atan(dz / dxy)
+    psi_az = np.arctan2(rel[:, 1], rel[:, 0])  # eq. (1)
+    R = rotation_el_az(theta_el, psi_az)
+    inside = d_oi <= r_pz
+    # eq. (2): the tangent circle of the cone on the sphere, at distance d_vo along the axis.
+    dd = np.maximum(d_oi**2 - r_pz**2, 0.0)
+    d_vo = dd / safe_d
+    r_vo = r_pz * np.sqrt(dd) / safe_d
+    a = V_B if apex is None else np.atleast_2d(np.asarray(apex, dtype=float)).reshape(-1, 3)
+    tau = np.ones_like(d_oi)
+    if virtual_sphere:
+        if reach is None:
+            tau = np.where(d_oi < 2.0 * r_pz, tau_min, 1.0)
+        else:
+            # The base must lie beyond every |v| <= reach: axial(v - apex) <= reach + |apex|.
+            needed = (reach + np.linalg.norm(a, axis=1)) / np.maximum(d_vo, 1e-12)
+            tau = np.where(needed > 1.0, np.maximum(tau_min, needed * 1.01), 1.0)
+    tau = np.where(inside, 1.0, tau)
+    return VOCones(
+        rel=rel, apex=a, r_pz=r_pz, d_oi=d_oi, theta_el=theta_el, psi_az=psi_az, R=R,
+        d_vo=d_vo * tau, r_vo=r_vo * tau, tau=tau, inside=inside,
+    )

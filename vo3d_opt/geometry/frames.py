@@ -1,0 +1,106 @@
+"""Rotations of the paper (eqs 6 and 8) and the avoidance planes P_phi (section 2.1.1).
+
+Frame choice (documented in formulations/geometry.md): every avoidance plane passes through the
+origin of velocity space and contains one common axis e_x, the preferred-velocity direction, so
+the preferred velocity lies in every plane. e_y0 is horizontal (left of e_x) and e_z0 = e_x × e_y0
+points up; P_phi is spanned by e_x and e2(phi) = cos(phi) e_y0 + sin(phi) e_z0, so P_0 is the most
+horizontal plane and phi runs from -90° to 90°. Eq. (8) is the rotation that takes a vector's
+(e_x, e_y0, e_z0) coordinates to (x^phi, y^phi, z^phi), z^phi = 0 being the plane itself.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+_Z = np.array([0.0, 0.0, 1.0])
+
+
+def rotation_el_az(theta_el: np.ndarray, psi_az: np.ndarray) -> np.ndarray:
+    """R_{theta_el|psi_az} of eq. (6), shape (..., 3, 3): maps cone-body coordinates
+    [along axis, horizontal side, 'up' side] to the world frame."""
+    ct, st = np.cos(theta_el), np.sin(theta_el)
+    cp, sp = np.cos(psi_az), np.sin(psi_az)
+    zero = np.zeros_like(ct)
+    return np.stack(
+        [
+            np.stack([cp * ct, -sp, -cp * st], axis=-1),
+            np.stack([sp * ct, cp, -sp * st], axis=-1),
+            np.stack([st, zero, ct], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def rotation_plane(phi: np.ndarray) -> np.ndarray:
+    """R_{P_phi} of eq. (8), shape (..., 3, 3): a rotation by phi about the common x axis."""
+    c, s = np.cos(phi), np.sin(phi)
+    one, zero = np.ones_like(c), np.zeros_like(c)
+    return np.stack(
+        [
+            np.stack([one, zero, zero], axis=-1),
+            np.stack([zero, c, s], axis=-1),
+            np.stack([zero, -s, c], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+@dataclass(frozen=True)
+class AvoidancePlanes:
+    """P avoidance planes through the velocity-space origin sharing the axis e1.
+
+    ``to_plane`` (P, 3, 3) maps world vectors to plane coordinates (x^phi, y^phi, z^phi);
+    its rows are e1, e2(phi) and the plane normal n(phi)."""
+
+    phi: np.ndarray  # (P,) rad
+    frame: np.ndarray  # (3, 3) rows e_x, e_y0, e_z0
+    to_plane: np.ndarray  # (P, 3, 3) = R_{P_phi} @ frame
+
+    @property
+    def e1(self) -> np.ndarray:
+        return self.frame[0]
+
+    @property
+    def e2(self) -> np.ndarray:
+        return self.to_plane[:, 1, :]
+
+    @property
+    def normal(self) -> np.ndarray:
+        return self.to_plane[:, 2, :]
+
+    def lift(self, xy: np.ndarray) -> np.ndarray:
+        """Plane coordinates (P, ..., 2) to world velocities (P, ..., 3)."""
+        e1, e2 = self.e1, self.e2
+        shape = (len(self.phi),) + (1,) * (xy.ndim - 2) + (3,)
+        return xy[..., :1] * e1 + xy[..., 1:2] * e2.reshape(shape)
+
+    def project(self, v: np.ndarray) -> np.ndarray:
+        """World vectors (..., 3) to coordinates on every plane (P, ..., 3)."""
+        return np.einsum("pij,...j->p...i", self.to_plane, v)
+
+
+def avoidance_frame(direction: np.ndarray) -> np.ndarray:
+    """Rows e_x (unit ``direction``), e_y0 (horizontal, left of e_x), e_z0 = e_x × e_y0 (up)."""
+    e_x = np.asarray(direction, dtype=float)
+    norm = np.linalg.norm(e_x)
+    e_x = e_x / norm if norm > 1e-12 else np.array([1.0, 0.0, 0.0])
+    e_y = np.cross(_Z, e_x)
+    if np.linalg.norm(e_y) < 1e-9:  # preferred velocity is vertical: any horizontal side works
+        e_y = np.array([0.0, 1.0, 0.0])
+    e_y = e_y / np.linalg.norm(e_y)
+    return np.stack([e_x, e_y, np.cross(e_x, e_y)])
+
+
+def avoidance_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
+    """The planes P_phi for angles ``phi`` (rad) about the axis ``direction``."""
+    phi = np.atleast_1d(np.asarray(phi, dtype=float))
+    frame = avoidance_frame(direction)
+    return AvoidancePlanes(phi=phi, frame=frame, to_plane=rotation_plane(phi) @ frame)
+
+
+def default_phis(step_deg: float = 10.0) -> np.ndarray:
+    """Plane angles from -90° to 90° every ``step_deg`` (the paper's P_-90 … P_90)."""
+    if not (0 < step_deg <= 180):
+        raise ValueError("plane_step_deg must be in (0, 180]")
+    return np.deg2rad(np.arange(-90.0, 90.0 + 1e-9, step_deg))
