@@ -53,6 +53,9 @@ class Sections:
     symmetry: np.ndarray  # (n, P, 2) H of eq. (13)
     halfplane: np.ndarray  # (n, P, 3) inside-zone VO: a x + b y > c
     vo_lines: bool
+    curve: np.ndarray  # (n, P, K, 2) points of eq. (12) kept as vertices (NaN otherwise)
+    t: np.ndarray  # (K,) generator angles of the curve samples
+    chord_t: np.ndarray  # (n, P, 2) generator angles of the chord points (NaN when none)
 
     @property
     def kind_names(self) -> np.ndarray:
@@ -236,6 +239,7 @@ def cone_sections(
     return Sections(
         kind=kind, polygon=polygon, apex=A_phi[..., :2], chord=chord_pts, symmetry=H,
         halfplane=halfplane, vo_lines="vo_lines" in corrections,
+        curve=np.where(use_curve[..., None], curve, np.nan), t=t, chord_t=chord_t,
     )
 
 
@@ -287,4 +291,5 @@ def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
     return Sections(
         kind=kind, polygon=polygon, apex=apex, chord=chord, symmetry=symmetry,
         halfplane=halfplane, vo_lines=True,
+        curve=np.full((m, P, 0, 2), np.nan), t=np.zeros(0), chord_t=np.full((m, P, 2), np.nan),
     )

@@ -1,0 +1,51 @@
+"""Random encounters for the selector's property tests (shared by test modules)."""
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import strategies as st
+
+from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor
+
+
+@st.composite
+def encounters(draw, max_neighbors: int = 12, max_obstacles: int = 6):
+    """Keyword arguments of ``select``: 1–12 neighbours, 0–6 obstacles, random limits and dt,
+    the own vehicle in bounds and outside every protected zone."""
+    seed = draw(st.integers(0, 2**32 - 1))
+    n = draw(st.integers(1, max_neighbors))
+    m = draw(st.integers(0, max_obstacles))
+    rng = np.random.default_rng(seed)
+    v_max = float(rng.uniform(1.0, 6.0))
+    z_min, z_max = 0.0, float(rng.uniform(15.0, 60.0))
+    dt = float(rng.uniform(0.05, 0.5))
+    p = np.array([0.0, 0.0, rng.uniform(z_min + 0.5, z_max - 0.5)])
+    heading = rng.normal(size=3)
+    heading[2] *= 0.3
+    v_pref = heading / np.linalg.norm(heading) * rng.uniform(0.3, 1.0) * v_max
+    neighbors = []
+    for _ in range(n):
+        r_pz = float(rng.uniform(2.0, 10.0))
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        dist = rng.uniform(r_pz * 1.05, 55.0)
+        vb = rng.normal(size=3)
+        vb *= rng.uniform(0.0, 4.0) / np.linalg.norm(vb)
+        neighbors.append(Neighbor(position=p + dist * d, velocity=vb, r_pz=r_pz))
+    obstacles = []
+    while len(obstacles) < m:
+        c = rng.uniform(-45.0, 45.0, 2)
+        h = float(rng.uniform(5.0, 70.0))
+        if rng.random() < 0.5:
+            o = Cylinder(center=c, radius=float(rng.uniform(0.5, 5.0)), height=h)
+        else:
+            o = Box(center=c, size=rng.uniform(1.0, 8.0, 2), height=h, yaw=float(rng.uniform(-3.2, 3.2)))
+        if np.linalg.norm(c - p[:2]) > o.side / 2 + 0.5:  # own vehicle outside the prism
+            obstacles.append(o)
+    return dict(
+        own=AgentState(position=p, velocity=v_pref),
+        preferred_velocity=v_pref,
+        neighbors=neighbors,
+        obstacles=obstacles,
+        limits=Limits(speed=(0.0, v_max), altitude=(z_min, z_max)),
+        dt=dt,
+    )

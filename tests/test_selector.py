@@ -1,0 +1,223 @@
+"""VelocitySelector: the contract of shared/spec/contracts.md §1, properties over random
+encounters checked against the exact 3D membership, and the hard cases."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+
+from encounters import encounters
+from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
+from vo3d_opt.formulations.common import Options, prepare
+from vo3d_opt.formulations.problem import Result
+from vo3d_opt.solvers import Backend, available_qp_solvers, register_backend, unregister_backend
+
+QP_SOLVERS = available_qp_solvers()
+SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
+
+CONTRACT = dict(
+    own=AgentState(position=(0.0, 0.0, 20.0), velocity=(4.0, 0.0, 0.0)),
+    preferred_velocity=(4.0, 0.0, 0.0),
+    neighbors=[Neighbor(position=(30.0, 0.0, 20.0), velocity=(-4.0, 0.0, 0.0), r_pz=10.0)],
+    obstacles=[Cylinder(center=(15.0, 8.0), radius=3.0, height=30.0),
+               Box(center=(40.0, -5.0), size=(6.0, 4.0), height=25.0, yaw=0.3)],
+    limits=Limits(speed=(0.0, 4.0), altitude=(0.0, 40.0)),
+    dt=0.2,
+)
+
+
+def exact(kw):
+    """The encounter as the exact checker sees it."""
+    return prepare(kw["own"], np.asarray(kw["preferred_velocity"], float), kw["neighbors"],
+                   kw["obstacles"], kw["limits"], kw["dt"], Options())
+
+
+def assert_within_limits(kw, v):
+    lim = kw["limits"]
+    assert v.shape == (3,) and np.all(np.isfinite(v))
+    assert np.linalg.norm(v) <= lim.v_max + 1e-6
+    z = kw["own"].position[2] + v[2] * kw["dt"]
+    assert lim.z_min - 1e-6 <= z <= lim.z_max + 1e-6
+
+
+def safe(kw, v) -> bool:
+    return not exact(kw).unsafe(v)[0]
+
+
+@pytest.mark.parametrize("formulation,solver", [("sampled", None), ("nlp", "casadi")]
+                         + [("plane_qp", s) for s in QP_SOLVERS] + [("cone_qp", s) for s in QP_SOLVERS])
+def test_contract_example(formulation, solver):
+    d = VelocitySelector(formulation=formulation, solver=solver).select(**CONTRACT)
+    assert isinstance(d.velocity, np.ndarray) and d.velocity.shape == (3,)
+    assert isinstance(d.status, str) and isinstance(d.solve_time, float) and d.solve_time > 0
+    assert d.status == "optimal"
+    assert safe(CONTRACT, d.velocity)
+    assert_within_limits(CONTRACT, d.velocity)
+
+
+@settings(max_examples=60, **SETTINGS)
+@given(encounters())
+def test_plane_qp_safe_whenever_sampled_is_and_no_worse(kw):
+    ref = VelocitySelector("sampled").select(**kw)
+    got = VelocitySelector("plane_qp").select(**kw)
+    for d in (ref, got):
+        assert_within_limits(kw, d.velocity)
+    if ref.status == "optimal":
+        assert safe(kw, ref.velocity)
+        assert got.status == "optimal" and safe(kw, got.velocity)
+        o = Options()
+        v_max = kw["limits"].v_max
+        resolution = v_max / (o.speed_levels - 1) + v_max * np.deg2rad(o.heading_step_deg)
+        dev = exact(kw).deviation
+        assert dev(got.velocity)[0] <= dev(ref.velocity)[0] + resolution
+
+
+@settings(max_examples=25, **SETTINGS)
+@given(encounters())
+def test_cone_qp_and_nlp(kw):
+    start = VelocitySelector("plane_qp").select(**kw)
+    for form in ("cone_qp", "nlp"):
+        d = VelocitySelector(form).select(**kw)
+        assert_within_limits(kw, d.velocity)
+        if d.status == "optimal":
+            assert safe(kw, d.velocity)
+    d = VelocitySelector("nlp").select(**kw)
+    if start.status == "optimal":  # the NLP starts from plane_qp's answer and never does worse
+        dev = exact(kw).deviation
+        assert d.status == "optimal"
+        assert dev(d.velocity)[0] <= dev(start.velocity)[0] + 1e-9
+
+
+@pytest.mark.parametrize("solver", QP_SOLVERS)
+@settings(max_examples=8, **SETTINGS)
+@given(kw=encounters(max_neighbors=6, max_obstacles=3))
+def test_every_backend_keeps_limits_and_safety(solver, kw):
+    d = VelocitySelector("plane_qp", solver=solver).select(**kw)
+    assert_within_limits(kw, d.velocity)
+    if d.status == "optimal":
+        assert safe(kw, d.velocity)
+
+
+# --- hard cases never raise ------------------------------------------------------------------
+
+def surrounded():
+    p = np.array([0.0, 0.0, 20.0])
+    dirs = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1],
+                     [1, 1, 1], [1, 1, -1], [1, -1, 1], [1, -1, -1], [-1, 1, 1], [-1, 1, -1],
+                     [-1, -1, 1], [-1, -1, -1]], float)
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    nbs = [Neighbor(position=p + 11.0 * d, velocity=-2.0 * d, r_pz=10.0) for d in dirs]
+    return dict(own=AgentState(position=p, velocity=(1.0, 0, 0)), preferred_velocity=(3.0, 0, 0),
+                neighbors=nbs, obstacles=[], limits=Limits(speed=(0, 4), altitude=(0, 40)), dt=0.2)
+
+
+@pytest.mark.parametrize("formulation", ["sampled", "plane_qp", "cone_qp", "nlp"])
+def test_surrounded_returns_least_bad(formulation):
+    kw = surrounded()
+    assert exact(kw).unsafe(np.zeros((1, 3)))[0]  # even hovering is unsafe: no safe velocity
+    d = VelocitySelector(formulation).select(**kw)
+    assert d.status == "infeasible_min_violation"
+    assert_within_limits(kw, d.velocity)
+
+
+@pytest.mark.parametrize("formulation", ["sampled", "plane_qp", "cone_qp", "nlp"])
+def test_inside_protected_zone_escapes(formulation):
+    own = AgentState(position=(0.0, 0.0, 20.0), velocity=(2.0, 0.0, 0.0))
+    nb = Neighbor(position=(5.0, 0.0, 20.0), velocity=(0.0, 0.0, 0.0), r_pz=10.0)
+    kw = dict(own=own, preferred_velocity=(4.0, 0.0, 0.0), neighbors=[nb], obstacles=[],
+              limits=Limits(speed=(0, 4), altitude=(0, 40)), dt=0.2)
+    d = VelocitySelector(formulation).select(**kw)
+    assert d.status == "inside_protected_zone"
+    assert d.velocity @ (nb.position - own.position) <= 1e-9  # not closing in
+    assert_within_limits(kw, d.velocity)
+
+
+class Exploding(Backend):
+    name, has_cones, kind = "exploding", False, "qp"
+
+    def solve(self, qp, warm_start=None):
+        raise RuntimeError("boom")
+
+
+class Garbage(Backend):
+    name, has_cones, kind = "garbage", False, "qp"
+
+    def solve(self, qp, warm_start=None):
+        return Result(np.full(qp.n, 1e3), "optimal", self.name)  # violates the speed bound
+
+
+@pytest.mark.parametrize("backend", [Exploding(), Garbage()])
+def test_failing_backend_falls_back(backend):
+    register_backend(backend.name, backend)
+    try:
+        d = VelocitySelector("plane_qp", solver=backend.name).select(**CONTRACT)
+    finally:
+        unregister_backend(backend.name)
+    assert d.status == "solver_failed_fallback"
+    assert safe(CONTRACT, d.velocity)
+    assert_within_limits(CONTRACT, d.velocity)
+
+
+# --- options -----------------------------------------------------------------------------------
+
+@settings(max_examples=15, **SETTINGS)
+@given(encounters(max_neighbors=5, max_obstacles=2))
+def test_acceleration_limit(kw):
+    a_max = 2.0
+    kw = dict(kw, limits=Limits(speed=kw["limits"].speed, altitude=kw["limits"].altitude, acceleration=a_max),
+              own=AgentState(position=kw["own"].position, velocity=np.zeros(3)))
+    d = VelocitySelector("plane_qp").select(**kw)
+    if d.status == "optimal":
+        assert np.all(np.abs(d.velocity) <= a_max * kw["dt"] + 1e-6)
+
+
+def test_reciprocal_takes_half_the_avoidance():
+    own = AgentState(position=(0.0, 0.0, 20.0), velocity=(2.0, 0.0, 0.0))
+    nb = Neighbor(position=(30.0, 1.0, 20.0), velocity=(-2.0, 0.0, 0.0), r_pz=10.0)
+    kw = dict(own=own, preferred_velocity=(2.0, 0.0, 0.0), neighbors=[nb], obstacles=[],
+              limits=Limits(speed=(0, 4), altitude=(0, 40)), dt=0.2)
+    full = VelocitySelector("plane_qp").select(**kw)
+    half = VelocitySelector("plane_qp", reciprocal=True).select(**kw)
+    dev = exact(kw).deviation
+    assert full.status == half.status == "optimal"
+    assert dev(half.velocity)[0] < dev(full.velocity)[0]
+
+
+def test_horizon_ignores_far_threats():
+    own = AgentState(position=(0.0, 0.0, 20.0), velocity=(2.0, 0.0, 0.0))
+    nb = Neighbor(position=(50.0, 0.0, 20.0), velocity=(0.0, 0.0, 0.0), r_pz=5.0)
+    kw = dict(own=own, preferred_velocity=(2.0, 0.0, 0.0), neighbors=[nb], obstacles=[],
+              limits=Limits(speed=(0, 4), altitude=(0, 40)), dt=0.2)
+    assert not np.allclose(VelocitySelector("plane_qp").select(**kw).velocity, [2, 0, 0])
+    d = VelocitySelector("plane_qp", horizon=5.0).select(**kw)
+    assert d.status == "optimal" and np.allclose(d.velocity, [2, 0, 0])
+
+
+# --- bad input ---------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("change,field", [
+    (dict(preferred_velocity=(1.0, np.nan, 0.0)), "preferred_velocity"),
+    (dict(preferred_velocity=(1.0, 0.0)), "preferred_velocity"),
+    (dict(dt=0.0), "dt"),
+    (dict(dt=float("inf")), "dt"),
+    (dict(own=(0, 0, 0)), "own"),
+    (dict(neighbors=[(1, 2, 3)]), "neighbors[0]"),
+    (dict(obstacles=["tree"]), "obstacles[0]"),
+    (dict(limits=(0, 4)), "limits"),
+])
+def test_bad_input_names_the_field(change, field):
+    with pytest.raises(ValueError, match=field.replace("[", r"\[").replace("]", r"\]")):
+        VelocitySelector().select(**dict(CONTRACT, **change))
+
+
+def test_unknown_names_list_what_is_available():
+    with pytest.raises(ValueError, match="plane_qp"):
+        VelocitySelector(formulation="magic")
+    with pytest.raises(ValueError, match="osqp"):
+        VelocitySelector(solver="no-such-solver")
+    with pytest.raises(ValueError, match="casadi"):
+        VelocitySelector("nlp", solver="osqp")
+    with pytest.raises(ValueError, match="plane_step_deg"):
+        VelocitySelector(plane_step_deg=0)
+    with pytest.raises(ValueError, match="unknown option"):
+        VelocitySelector(colour="red")

@@ -1,0 +1,190 @@
+"""What every formulation shares: the prepared encounter (VO cones and pyramids of one decision),
+the limits as linear constraints, the exact safety check, and the least-bad fallback."""
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..geometry import VOCones, VOPyramids, in_vo_cones, in_vo_pyramids, pyramid_entry_time, vo_cones, vo_pyramids
+from ..types import AgentState, Box, Cylinder, Limits, Neighbor
+from .problem import QP, NLP, Result
+
+#: Tolerance (m/s) on the speed and altitude limits when checking a candidate.
+LIMIT_TOL = 1e-6
+
+Solve = Callable[[QP], Result]
+SolveNLP = Callable[[NLP], Result]
+
+
+@dataclass(frozen=True)
+class Options:
+    """Formulation options (the selector's keyword arguments)."""
+
+    plane_step_deg: float = 10.0  # avoidance planes every this many degrees in [-90, 90]
+    heading_step_deg: float = 10.0  # sampled: polar grid, heading resolution in each plane
+    speed_levels: int = 9  # sampled: speeds from v_min to v_max
+    polygon_sides: int = 24  # inscribed polygon replacing the speed cone on QP-only backends
+    reciprocal: bool = False  # RVO-style: the apex at (V_A + V_B)/2, each takes half
+    horizon: float | None = None  # s; VOs truncated at this time (None: infinite)
+    corrections: frozenset[str] | None = None  # None: all six of section 3.1
+    n_samples: int = 72  # generator samples of the curve of eq. (12)
+    margin: float = 1e-3  # m/s; linearised VO half-spaces are pushed out by this much, so a
+    # solver's answer on the boundary (within its tolerance) is still strictly outside the VO
+
+
+@dataclass
+class Encounter:
+    """One decision's inputs, with the VO shapes built once."""
+
+    position: np.ndarray
+    v_now: np.ndarray
+    v_pref: np.ndarray  # clamped to v_max
+    cones: VOCones
+    pyramids: VOPyramids
+    limits: Limits
+    dt: float
+    options: Options
+
+    @property
+    def inside_any(self) -> bool:
+        return bool(np.any(self.cones.inside) or np.any(self.pyramids.inside))
+
+    # --- the limits -------------------------------------------------------------------------
+    def vz_range(self) -> tuple[float, float]:
+        """Vertical speeds that keep z + v_z dt within [z_min, z_max]."""
+        z, lim, vmax = self.position[2], self.limits, self.limits.v_max
+        lo = (lim.z_min - z) / self.dt
+        hi = (lim.z_max - z) / self.dt
+        lo, hi = max(lo, -vmax), min(hi, vmax)
+        if lo > hi:  # out of bounds already: head back at full speed
+            lo = hi = vmax if z < lim.z_min else -vmax
+        return lo, hi
+
+    def linear_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Altitude and acceleration limits as G v <= h in 3D."""
+        lo, hi = self.vz_range()
+        G = [np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])]
+        h = [hi, -lo]
+        if self.limits.acceleration is not None:
+            dv = self.limits.acceleration * self.dt
+            for k in range(3):
+                e = np.zeros(3)
+                e[k] = 1.0
+                G += [e, -e]
+                h += [self.v_now[k] + dv, dv - self.v_now[k]]
+        return np.array(G), np.array(h)
+
+    def within_limits(self, v: np.ndarray) -> np.ndarray:
+        """(M,) whether each velocity respects speed, altitude and acceleration limits."""
+        v = np.atleast_2d(v)
+        speed = np.linalg.norm(v, axis=1)
+        ok = (speed <= self.limits.v_max + LIMIT_TOL) & (speed >= self.limits.v_min - LIMIT_TOL)
+        G, h = self.linear_bounds()
+        return ok & np.all(v @ G.T <= h + LIMIT_TOL, axis=1)
+
+    # --- safety -----------------------------------------------------------------------------
+    def unsafe(self, v: np.ndarray) -> np.ndarray:
+        """(M,) whether each velocity lies in some VO (exact 3D membership)."""
+        v = np.atleast_2d(v)
+        out = np.zeros(len(v), dtype=bool)
+        hz = self.options.horizon
+        if len(self.cones):
+            out |= np.any(in_vo_cones(self.cones, v, horizon=hz), axis=0)
+        if len(self.pyramids):
+            out |= np.any(in_vo_pyramids(self.pyramids, v, horizon=hz), axis=0)
+        return out
+
+    def time_to_intrusion(self, v: np.ndarray) -> np.ndarray:
+        """(M,) the earliest time any protected zone would be entered (inf: never; 0: inside and
+        closing). The least-bad velocity maximises it."""
+        v = np.atleast_2d(v)
+        t = np.full(len(v), np.inf)
+        if len(self.cones):
+            c = self.cones
+            u = v[None, :, :] - c.apex[:, None, :]
+            uu = np.einsum("nmi,nmi->nm", u, u)
+            pu = np.einsum("ni,nmi->nm", c.rel, u)
+            disc = pu**2 - uu * (c.d_oi**2 - c.r_pz**2)[:, None]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                t_hit = (pu - np.sqrt(np.maximum(disc, 0.0))) / uu
+            t_hit = np.where((disc > 0) & (pu > 0) & (uu > 0), np.maximum(t_hit, 0.0), np.inf)
+            t_hit = np.where(c.inside[:, None], np.where(pu > 0, 0.0, np.inf), t_hit)
+            t = np.minimum(t, t_hit.min(axis=0))
+        if len(self.pyramids):
+            t_p = pyramid_entry_time(self.pyramids, v)
+            closing = np.einsum("mi,ki->mk", self.pyramids.frame[:, 0, :], v) > 0
+            t_p = np.where(self.pyramids.inside[:, None], np.where(closing, 0.0, np.inf), t_p)
+            t = np.minimum(t, t_p.min(axis=0))
+        return t
+
+    def deviation(self, v: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(np.atleast_2d(v) - self.v_pref, axis=1)
+
+
+def prepare(
+    own: AgentState,
+    v_pref: np.ndarray,
+    neighbors: Sequence[Neighbor],
+    obstacles: Sequence[Cylinder | Box],
+    limits: Limits,
+    dt: float,
+    options: Options,
+) -> Encounter:
+    """Build the VO cones and pyramids of one decision (geometry layer)."""
+    p = own.position
+    speed = np.linalg.norm(v_pref)
+    if speed > limits.v_max:  # the goal velocity beyond reach: aim at the reachable one
+        v_pref = v_pref * (limits.v_max / speed)
+    if neighbors:
+        p_B = np.array([nb.position for nb in neighbors])
+        V_B = np.array([nb.velocity for nb in neighbors])
+        r_pz = np.array([nb.r_pz for nb in neighbors])
+    else:
+        p_B = V_B = np.zeros((0, 3))
+        r_pz = np.zeros(0)
+    corrections = options.corrections
+    apex = 0.5 * (V_B + own.velocity) if options.reciprocal else None
+    cones = vo_cones(
+        p, p_B, V_B, r_pz, reach=limits.v_max,
+        virtual_sphere=corrections is None or "virtual_sphere" in corrections, apex=apex,
+    )
+    return Encounter(
+        position=p, v_now=own.velocity, v_pref=np.asarray(v_pref, dtype=float), cones=cones,
+        pyramids=vo_pyramids(p, list(obstacles)), limits=limits, dt=dt, options=options,
+    )
+
+
+@dataclass
+class Outcome:
+    """A formulation's answer before the selector times it."""
+
+    velocity: np.ndarray
+    status: str
+    plane: float | None = None  # phi (rad) of the plane the velocity was chosen on
+    info: dict = field(default_factory=dict)
+
+
+def first_safe(enc: Encounter, candidates: np.ndarray) -> int | None:
+    """Index of the first candidate (in the given order) that is within the limits and outside
+    every VO by the exact 3D check, or None."""
+    if len(candidates) == 0:
+        return None
+    ok = enc.within_limits(candidates) & ~enc.unsafe(candidates)
+    idx = np.flatnonzero(ok)
+    return int(idx[0]) if len(idx) else None
+
+
+def least_bad(enc: Encounter, candidates: np.ndarray) -> np.ndarray:
+    """Among candidates within the limits, the one whose first protected-zone intrusion comes
+    latest (ties: nearest the preferred velocity). Falls back to a safe stop-like velocity."""
+    extra = np.array([np.zeros(3), enc.v_now])
+    c = np.vstack([candidates.reshape(-1, 3), extra]) if len(candidates) else extra
+    c = c[enc.within_limits(c)]
+    if len(c) == 0:  # e.g. v_min > 0 with a zero candidate: the limits' own closest point
+        lo, hi = enc.vz_range()
+        return np.array([0.0, 0.0, min(max(0.0, lo), hi)])
+    t = np.minimum(enc.time_to_intrusion(c), 1e9)
+    key = np.lexsort((enc.deviation(c), -t))
+    return c[key[0]]

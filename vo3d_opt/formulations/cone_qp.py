@@ -1,0 +1,121 @@
+"""cone_qp — one QP in 3D (formulations/cone_qp.md).
+
+Each VO cone contributes the half-space beyond its tangent plane along the generator nearest the
+preferred velocity; each VO pyramid the half-space beyond the supporting face plane that the
+preferred velocity is least inside of (or most outside of). Both are supporting planes of a
+convex VO, so every feasible velocity is outside every VO. Same speed, altitude and acceleration
+bounds as plane_qp; the speed ball is exact on cone-capable backends and an inscribed polytope
+elsewhere."""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from ..geometry.pyramid import VOPyramids
+from .common import Encounter, Outcome, Solve, first_safe
+from .plane_qp import fallback
+from .planes import plane_sections
+from .problem import QP
+
+
+#: Rounds: the tangent generator nearest v_pref, then turned about each cone's axis by these angles.
+TURNS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
+
+
+def cone_tangent_halfspaces(enc: Encounter, v0: np.ndarray, turn: float = 0.0):
+    """Tangent planes N·(v - apex) >= 0 of every cone along the generator nearest v0, turned by
+    ``turn`` about the cone's axis (pi: the opposite side). Inside a protected zone: the escape
+    half-space."""
+    c = enc.cones
+    a = c.axis
+    u = v0 - c.apex
+    perp = u - np.sum(u * a, axis=1, keepdims=True) * a
+    norm = np.linalg.norm(perp, axis=1, keepdims=True)
+    # Head-on (v0 on the axis): pass on the right, horizontally, as a convention.
+    right = np.cross(a, np.array([0.0, 0.0, 1.0]))
+    right = np.where(np.linalg.norm(right, axis=1, keepdims=True) > 1e-9, right, np.array([0.0, 1.0, 0.0]))
+    e_perp = np.where(norm > 1e-9, perp / np.maximum(norm, 1e-12), right / np.linalg.norm(right, axis=1, keepdims=True))
+    if turn:  # rotate e_perp about the axis (Rodrigues; e_perp is perpendicular to a)
+        e_perp = np.cos(turn) * e_perp + np.sin(turn) * np.cross(a, e_perp)
+    N = -c.sin_alpha[:, None] * a + c.cos_alpha[:, None] * e_perp
+    N = np.where(c.inside[:, None], -c.rel, N)  # escape: (v - apex)·rel <= 0
+    return N, np.sum(N * c.apex, axis=1)
+
+
+def pyramid_face_halfspaces(pyr: VOPyramids, v0: np.ndarray):
+    """For each pyramid the supporting plane through the apex (origin) and two corners of C_pz
+    that v0 is least inside of: N·v >= 0 keeps v out of the pyramid."""
+    corners = pyr.corners  # (m, 8, 3)
+    i, j = np.triu_indices(8, 1)
+    N = np.cross(corners[:, i], corners[:, j])  # (m, 28, 3) candidate planes through the apex
+    N /= np.maximum(np.linalg.norm(N, axis=-1, keepdims=True), 1e-12)
+    side = np.einsum("mfi,mki->mfk", N, corners)
+    # A supporting plane has every corner on one side; orient it so the corners are behind it.
+    outward = np.all(side <= 1e-9, axis=-1)
+    inward = np.all(side >= -1e-9, axis=-1)
+    N = np.where(inward[..., None] & ~outward[..., None], -N, N)
+    supporting = outward | inward
+    score = np.where(supporting, N @ v0, -np.inf)
+    best = np.argmax(score, axis=1)
+    Nb = N[np.arange(len(pyr)), best]
+    Nb = np.where(pyr.inside[:, None], -pyr.frame[:, 0, :], Nb)  # escape: horizontal, outwards
+    return Nb, np.zeros(len(pyr))
+
+
+def fibonacci_directions(k: int) -> np.ndarray:
+    """k nearly uniform unit vectors."""
+    i = np.arange(k) + 0.5
+    phi = np.arccos(1 - 2 * i / k)
+    theta = np.pi * (1 + 5**0.5) * i
+    return np.stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)], axis=-1)
+
+
+@lru_cache(maxsize=4)
+def _unit_polytope(k: int) -> tuple[np.ndarray, float]:
+    D = fibonacci_directions(k)
+    probe = fibonacci_directions(20000)
+    rho = np.max(np.arccos(np.clip(np.max(probe @ D.T, axis=1), -1, 1)))
+    return D, float(np.cos(rho) * 0.995)  # margin for the sampled covering angle
+
+
+def speed_polytope(radius: float, k: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """A polytope inside the ball |v| <= radius: n_i·v <= radius cos(rho), rho the covering
+    angle of the directions: every vertex then lies within the ball."""
+    D, c = _unit_polytope(k)
+    return D, np.full(k, radius * c)
+
+
+def build_qp(enc: Encounter, has_cones: bool, turn: float = 0.0) -> QP:
+    rows_G, rows_h = [], []
+    if len(enc.cones):
+        N, b = cone_tangent_halfspaces(enc, enc.v_pref, turn)
+        rows_G.append(-N)
+        rows_h.append(-b - enc.options.margin)
+    if len(enc.pyramids):
+        N, b = pyramid_face_halfspaces(enc.pyramids, enc.v_pref)
+        rows_G.append(-N)
+        rows_h.append(-b - enc.options.margin)
+    G3, h3 = enc.linear_bounds()
+    rows_G.append(G3)
+    rows_h.append(h3)
+    if not has_cones:
+        Gs, hs = speed_polytope(enc.limits.v_max)
+        rows_G.append(Gs)
+        rows_h.append(hs)
+    return QP(P=2.0 * np.eye(3), q=-2.0 * enc.v_pref, G=np.vstack(rows_G), h=np.concatenate(rows_h),
+              soc_radius=enc.limits.v_max if has_cones else None)
+
+
+def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
+    tried, failed = [], 0
+    for turn in TURNS if len(enc.cones) else TURNS[:1]:
+        res = solve(build_qp(enc, has_cones, turn))
+        if res.ok and res.x.shape == (3,):
+            tried.append(res.x)
+            if first_safe(enc, res.x[None]) is not None:
+                return Outcome(res.x, "optimal", None, {"round": f"turn {np.degrees(turn):.0f}"})
+        elif res.status == "failed":
+            failed += 1
+    all_failed = failed == (len(TURNS) if len(enc.cones) else 1)
+    return fallback(enc, plane_sections(enc), np.array(tried).reshape(-1, 3), all_failed)

@@ -1,0 +1,42 @@
+"""The paper's sampled selection, kept as the reference (formulations/sampled.md).
+
+On every avoidance plane a polar grid of candidate velocities spans the speed range; candidates
+inside a conic section (section 3.1 / 4.2) or outside the limits are dropped, and the one nearest
+the preferred velocity wins, confirmed by the exact 3D check."""
+from __future__ import annotations
+
+import numpy as np
+
+from .common import Encounter, Outcome, first_safe, least_bad
+from .planes import PlaneSections, plane_sections
+
+
+def polar_grid(enc: Encounter) -> np.ndarray:
+    """(M, 2) in-plane candidates: ``speed_levels`` speeds x headings every ``heading_step_deg``."""
+    o = enc.options
+    speeds = np.linspace(enc.limits.v_min, enc.limits.v_max, o.speed_levels)
+    heading = np.deg2rad(np.arange(0.0, 360.0 - 1e-9, o.heading_step_deg))
+    grid = speeds[:, None, None] * np.stack([np.cos(heading), np.sin(heading)], axis=-1)[None]
+    return np.unique(grid.reshape(-1, 2).round(12), axis=0)
+
+
+def candidates(enc: Encounter, ps: PlaneSections) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every grid velocity (P·M, 3), its plane index, and whether it lies outside every section."""
+    grid = polar_grid(enc)
+    P = len(ps.planes.phi)
+    xy = np.broadcast_to(grid, (P,) + grid.shape)
+    free = ~ps.contains(xy)
+    plane_idx = np.broadcast_to(np.arange(P)[:, None], free.shape)
+    return ps.planes.lift(xy).reshape(-1, 3), plane_idx.ravel(), free.ravel()
+
+
+def select(enc: Encounter) -> Outcome:
+    ps = plane_sections(enc)
+    v, plane_idx, free = candidates(enc, ps)
+    order = np.flatnonzero(free)
+    order = order[np.argsort(enc.deviation(v[order]), kind="stable")]  # nearest first
+    k = first_safe(enc, v[order])  # within the limits, confirmed by the exact 3D check
+    if k is not None:
+        best = order[k]
+        return Outcome(v[best], "optimal", float(ps.planes.phi[plane_idx[best]]), {"free": len(order)})
+    return Outcome(least_bad(enc, v), "infeasible_min_violation", None, {"free": len(order)})
