@@ -29,7 +29,8 @@ class Options:
     reciprocal: bool = False  # RVO-style: the apex at (V_A + V_B)/2, each takes half
     horizon: float | None = None  # s; VOs truncated at this time (None: infinite)
     corrections: frozenset[str] | None = None  # None: all six of section 3.1
-    n_samples: int = 72  # generator samples of the curve of eq. (12)
+    n_samples: int = 72  # generator samples of the curve of eq. (12) (sampled's sections)
+    qp_samples: int = 36  # the same for plane_qp, where they only seed the tangent points
     margin: float = 1e-3  # m/s; linearised VO half-spaces are pushed out by this much, so a
     # solver's answer on the boundary (within its tolerance) is still strictly outside the VO
 

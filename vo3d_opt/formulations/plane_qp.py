@@ -10,6 +10,8 @@ z + v_z dt in [z_min, z_max]. Each plane's QP minimises ||w - w_pref||²; the pl
 deviation wins after the exact 3D check, else the next candidate."""
 from __future__ import annotations
 
+import heapq
+
 import numpy as np
 
 from ..geometry.sections import CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, Sections
@@ -100,57 +102,93 @@ def speed_polygon(radius: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([np.cos(ang), np.sin(ang)], axis=-1), np.full(sides, radius * np.cos(np.pi / sides))
 
 
-def plane_qps(enc: Encounter, ps: PlaneSections, mode: str, has_cones: bool) -> list[QP]:
-    """One QP per plane in the variables w = (x, y)."""
-    a, b, active = section_halfplanes(enc, ps, mode)
-    G3, h3 = enc.linear_bounds()
-    E = np.stack([np.broadcast_to(ps.planes.e1, ps.planes.e2.shape), ps.planes.e2], axis=-1)  # (P, 3, 2)
-    vmax = enc.limits.v_max
-    Gs, hs = speed_polygon(vmax, enc.options.polygon_sides) if not has_cones else (np.zeros((0, 2)), np.zeros(0))
-    Pm = 2.0 * np.eye(2)
-    q = -2.0 * ps.w_pref
-    qps = []
-    for p in range(len(ps.planes.phi)):
+class PlaneProblems:
+    """Every (round, plane) QP of one decision, built lazily: the bounds that order the search
+    are computed for a whole round at once, the QP only for those actually solved."""
+
+    def __init__(self, enc: Encounter, ps: PlaneSections, has_cones: bool) -> None:
+        self.enc, self.ps, self.has_cones = enc, ps, has_cones
+        self.v_max = enc.limits.v_max
+        self.w0 = ps.w_pref
+        G3, h3 = enc.linear_bounds()
+        E = np.stack([np.broadcast_to(ps.planes.e1, ps.planes.e2.shape), ps.planes.e2], axis=-1)
+        self.G_lim = G3 @ E  # (P, r, 2): altitude and acceleration rows on each plane
+        self.h_lim = h3
+        self.G_speed, self.h_speed = (np.zeros((0, 2)), np.zeros(0)) if has_cones else \
+            speed_polygon(self.v_max, enc.options.polygon_sides)
+        lim = (self.G_lim @ self.w0 - h3) / np.maximum(np.linalg.norm(self.G_lim, axis=-1), 1e-12)
+        self.base_bound = np.maximum(np.max(lim, axis=1, initial=0.0),
+                                     np.max(self.G_speed @ self.w0 - self.h_speed, initial=0.0))
+        self.rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def add_round(self) -> list[tuple[float, int, int]]:
+        """Linearise the next round and return its (lower bound, round, plane) entries, without
+        planes on which it repeats an earlier round."""
+        r = len(self.rounds)
+        a, b, active = section_halfplanes(self.enc, self.ps, ROUNDS[r])
+        self.rounds.append((a, b, active))
+        # Distance from w0 to each violated half-plane a·w >= b bounds that QP's optimum.
+        viol = np.where(active, (b - a @ self.w0) / np.maximum(np.linalg.norm(a, axis=-1), 1e-12), 0.0)
+        lb = np.maximum(self.base_bound, np.max(viol, axis=0, initial=0.0))
+        repeat = np.zeros(len(lb), dtype=bool)
+        for q in range(r):
+            repeat |= self._same(r, q)
+        return [(float(lb[p]), r, int(p)) for p in np.flatnonzero(~repeat)]
+
+    def _same(self, r: int, q: int) -> np.ndarray:
+        """(P,) planes on which rounds r and q give the same half-planes."""
+        (a1, b1, s1), (a2, b2, s2) = self.rounds[r], self.rounds[q]
+        equal = (s1 == s2) & (~s1 | (np.all(np.abs(a1 - a2) < 1e-12, axis=-1) & (np.abs(b1 - b2) < 1e-12)))
+        return np.all(equal, axis=0)
+
+    def qp(self, r: int, p: int) -> QP:
+        a, b, active = self.rounds[r]
         act = active[:, p]
-        G = np.vstack([-a[act, p], G3 @ E[p], Gs])
-        h = np.concatenate([-b[act, p], h3, hs])
-        qps.append(QP(P=Pm, q=q, G=G, h=h, soc_radius=vmax if has_cones else None))
-    return qps
-
-
-def solve_planes(enc: Encounter, ps: PlaneSections, solve: Solve, has_cones: bool, mode: str):
-    """Solve every plane's QP: candidate velocities (k, 3), their plane indices, failures."""
-    vs, idx, failed = [], [], 0
-    E1, E2 = ps.planes.e1, ps.planes.e2
-    for p, qp in enumerate(plane_qps(enc, ps, mode, has_cones)):
-        res: Result = solve(qp)
-        if res.ok and res.x.shape == (2,):
-            vs.append(res.x[0] * E1 + res.x[1] * E2[p])
-            idx.append(p)
-        elif res.status == "failed":
-            failed += 1
-    return (np.array(vs).reshape(-1, 3), np.array(idx, dtype=int), failed)
+        G = np.vstack([-a[act, p], self.G_lim[p], self.G_speed])
+        h = np.concatenate([-b[act, p], self.h_lim, self.h_speed])
+        return QP(P=2.0 * np.eye(2), q=-2.0 * self.w0, G=G, h=h,
+                  soc_radius=self.v_max if self.has_cones else None)
 
 
 def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
-    """Solve every round (nearest sides, all left, all right) on every plane and keep the safe
-    answer nearest the preferred velocity: a section's nearest side is not always the best one
-    once the other sections are taken into account."""
-    ps = plane_sections(enc)
-    vs, planes, rounds, failed = [], [], [], 0
-    for mode in ROUNDS:
-        v, idx, f = solve_planes(enc, ps, solve, has_cones, mode)
-        failed += f
-        vs.append(v)
-        planes.append(idx)
-        rounds += [mode] * len(v)
-    v, idx = np.vstack(vs), np.concatenate(planes)
-    order = np.argsort(enc.deviation(v), kind="stable")
-    k = first_safe(enc, v[order])
-    if k is not None:
-        best = order[k]
-        return Outcome(v[best], "optimal", float(ps.planes.phi[idx[best]]), {"round": rounds[best], "failed": failed})
-    return fallback(enc, ps, v, all_failed=failed == len(ROUNDS) * len(ps.planes.phi))
+    """Best-first over the (round, plane) QPs. Rounds: every section linearised at its boundary
+    point nearest the preferred velocity, then every section passed on its left, then on its
+    right (the nearest side is not always best once the other sections count). QPs are solved
+    in order of a lower bound on their deviation (the distance to the farthest violated
+    half-plane); the search stops once the best safe answer beats every remaining bound. The
+    nearest-point round has the smallest bound on each plane (the distance from an interior
+    point to any supporting line is at least its distance to the boundary), so the later rounds
+    are linearised only while some plane's first bound is still below the best answer."""
+    ps = plane_sections(enc, enc.options.qp_samples)
+    problems = PlaneProblems(enc, ps, has_cones)
+    E1, E2 = ps.planes.e1, ps.planes.e2
+    queue = problems.add_round()
+    first_bounds = {p: lb for lb, _, p in queue}
+    heapq.heapify(queue)
+    best, best_dev, tried, failed, attempts = None, np.inf, [], 0, 0
+    while True:
+        if not queue or queue[0][0] >= best_dev:
+            more = len(problems.rounds) < len(ROUNDS) and min(first_bounds.values(), default=np.inf) < best_dev
+            if not more:
+                break
+            for item in problems.add_round():
+                heapq.heappush(queue, item)
+            continue
+        _, r, p = heapq.heappop(queue)
+        res: Result = solve(problems.qp(r, p))
+        attempts += 1
+        if not (res.ok and res.x.shape == (2,)):
+            failed += res.status == "failed"
+            continue
+        v = res.x[0] * E1 + res.x[1] * E2[p]
+        tried.append(v)
+        dev = enc.deviation(v)[0]
+        if dev < best_dev and first_safe(enc, v[None]) is not None:
+            best, best_dev = (v, p, ROUNDS[r]), dev
+    if best is not None:
+        v, p, mode = best
+        return Outcome(v, "optimal", float(ps.planes.phi[p]), {"round": mode, "solved": attempts})
+    return fallback(enc, ps, np.array(tried).reshape(-1, 3), all_failed=attempts > 0 and failed == attempts)
 
 
 def fallback(enc: Encounter, ps: PlaneSections, tried: np.ndarray, all_failed: bool) -> Outcome:

@@ -27,7 +27,7 @@ class PlaneSections:
         return out
 
 
-def plane_sections(enc: Encounter) -> PlaneSections:
+def plane_sections(enc: Encounter, n_samples: int | None = None) -> PlaneSections:
     """Planes every ``plane_step_deg`` about the preferred direction (or the current heading, or
     world x when both are zero) and the conic sections of all VOs on them."""
     direction = enc.v_pref
@@ -37,7 +37,7 @@ def plane_sections(enc: Encounter) -> PlaneSections:
     corrections = enc.options.corrections if enc.options.corrections is not None else CORRECTIONS
     return PlaneSections(
         planes=planes,
-        cones=cone_sections(enc.cones, planes, corrections=corrections, n_samples=enc.options.n_samples),
+        cones=cone_sections(enc.cones, planes, corrections=corrections, n_samples=n_samples or enc.options.n_samples),
         pyramids=pyramid_sections(enc.pyramids, planes),
         w_pref=np.array([planes.e1 @ enc.v_pref, 0.0]),
     )

@@ -61,7 +61,7 @@ class VOCones:
             ],
             axis=-1,
         )
-        return np.einsum("nij,nkj->nki", self.R, body) + self.apex[:, None, :]
+        return body @ self.R.transpose(0, 2, 1) + self.apex[:, None, :]
 
     def outward_normals(self, t: np.ndarray) -> np.ndarray:
         """Unit outward normal of the cone surface along the generator through B_vo(t).

@@ -75,6 +75,18 @@ class AvoidancePlanes:
         shape = (len(self.phi),) + (1,) * (xy.ndim - 2) + (3,)
         return xy[..., :1] * e1 + xy[..., 1:2] * e2.reshape(shape)
 
+    def coords(self, v: np.ndarray) -> np.ndarray:
+        """Plane coordinates of per-shape vectors: v (n, ..., 3) -> (n, P, ..., 3).
+
+        Eq. (8) as a rotation about the common axis: x is the same on every plane, so only the
+        (e_y0, e_z0) components are rotated, which is much cheaper than P full products."""
+        f = v @ self.frame.T  # (n, ..., 3) in (e_x, e_y0, e_z0)
+        shape = (1, len(self.phi)) + (1,) * (f.ndim - 2)
+        c, s = np.cos(self.phi).reshape(shape), np.sin(self.phi).reshape(shape)
+        f1, f2 = f[:, None, ..., 1], f[:, None, ..., 2]
+        x = np.broadcast_to(f[:, None, ..., 0], np.broadcast_shapes(f1.shape, c.shape))
+        return np.stack([x, c * f1 + s * f2, c * f2 - s * f1], axis=-1)
+
     def project(self, v: np.ndarray) -> np.ndarray:
         """World vectors (..., 3) to coordinates on every plane (P, ..., 3)."""
         return np.einsum("pij,...j->p...i", self.to_plane, v)

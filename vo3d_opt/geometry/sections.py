@@ -20,6 +20,7 @@ the original formulas of Jenie et al. get wrong; the default applies all of them
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -47,7 +48,8 @@ class Sections:
     """Sections of n VO shapes on P planes. Arrays are (n, P, ...); NaN marks 'none'."""
 
     kind: np.ndarray  # (n, P) codes into KIND_NAMES
-    polygon: np.ndarray  # (n, P, V, 2) vertices in angular order (padded with NaN)
+    vertices: np.ndarray  # (n, P, V, 2) candidate polygon vertices ...
+    vertex_mask: np.ndarray  # (n, P, V) ... and which of them are used
     apex: np.ndarray  # (n, P, 2) A^phi projected on the plane
     chord: np.ndarray  # (n, P, 2, 2) base points of eq. (17)
     symmetry: np.ndarray  # (n, P, 2) H of eq. (13)
@@ -60,6 +62,13 @@ class Sections:
     @property
     def kind_names(self) -> np.ndarray:
         return KIND_NAMES[self.kind]
+
+    @cached_property
+    def polygon(self) -> np.ndarray:
+        """(n, P, V, 2) the section's polygon, vertices in angular order, padded with NaN
+        (all NaN when degenerate). Built on first use: the QPs need only the boundary points."""
+        poly = _angular_order(self.vertices, self.vertex_mask)
+        return np.where((_polygon_area(poly) > 1e-14)[..., None, None], poly, np.nan)
 
     def contains(self, xy: np.ndarray) -> np.ndarray:
         """Whether in-plane points lie inside each section: xy (P, M, 2) -> (n, P, M)."""
@@ -170,10 +179,9 @@ def cone_sections(
         raise ValueError(f"corrections: unknown {sorted(unknown)}; known {sorted(CORRECTIONS)}")
     n, P = len(cones), len(planes.phi)
     t = np.linspace(0.0, 2.0 * np.pi, n_samples, endpoint=False)
-    T = planes.to_plane  # (P, 3, 3)
-    A_phi = np.einsum("pij,nj->npi", T, cones.apex)  # eq. (7), (n, P, 3)
-    B_phi = np.einsum("pij,nkj->npki", T, cones.base_points(t))  # eq. (9), (n, P, K, 3)
-    C_phi = np.einsum("pij,nj->npi", T, cones.center)
+    A_phi = planes.coords(cones.apex)  # eq. (7), (n, P, 3)
+    B_phi = planes.coords(cones.base_points(t))  # eq. (9), (n, P, K, 3)
+    C_phi = planes.coords(cones.center)
     zA = A_phi[..., 2]
     scale = 1.0 + np.linalg.norm(cones.apex, axis=1)[:, None] + cones.d_vo[:, None]
     on_apex = np.abs(zA) <= 1e-9 * scale  # section 3.1.3: A_vo lies on the plane
@@ -218,8 +226,6 @@ def cone_sections(
     use_apex = (kind == TRIANGLE)[..., None]
     pts = np.concatenate([curve, np.nan_to_num(chord_pts), A_phi[:, :, None, :2]], axis=2)
     mask = np.concatenate([use_curve, use_chord, use_apex], axis=2)
-    polygon = _angular_order(pts, mask)
-    polygon = np.where((_polygon_area(polygon) > 1e-14)[..., None, None], polygon, np.nan)
 
     # Eq. (13): the symmetry-line point H.
     dzc = C_phi[..., 2] - zA
@@ -232,12 +238,12 @@ def cone_sections(
     H = np.where(parallel[..., None], C_phi[..., :2], H)
 
     # Inside the protected zone: the VO is the closing half-space (v - apex)·rel > 0.
-    rel_p = np.einsum("pij,nj->npi", T, cones.rel)
+    rel_p = planes.coords(cones.rel)
     halfplane = np.concatenate([rel_p[..., :2], (A_phi * rel_p).sum(-1, keepdims=True)], axis=-1)
     kind = np.where(cones.inside[:, None], INSIDE_CODE, kind)
 
     return Sections(
-        kind=kind, polygon=polygon, apex=A_phi[..., :2], chord=chord_pts, symmetry=H,
+        kind=kind, vertices=pts, vertex_mask=mask, apex=A_phi[..., :2], chord=chord_pts, symmetry=H,
         halfplane=halfplane, vo_lines="vo_lines" in corrections,
         curve=np.where(use_curve[..., None], curve, np.nan), t=t, chord_t=chord_t,
     )
@@ -250,8 +256,11 @@ def _base_points_on_planes(cones: VOCones, planes: AvoidancePlanes, t: np.ndarra
          cones.r_vo[:, None, None] * np.cos(t), cones.r_vo[:, None, None] * np.sin(t)],
         axis=-1,
     )
-    world = np.einsum("nij,npkj->npki", cones.R, body) + cones.apex[:, None, None, :]
-    return np.einsum("pij,npkj->npki", planes.to_plane[:, :2, :], world)
+    world = body @ cones.R[:, None].transpose(0, 1, 3, 2) + cones.apex[:, None, None, :]
+    # Each plane's own points: rotate about the common axis with that plane's phi.
+    f = world @ planes.frame.T
+    c, s = np.cos(planes.phi)[None, :, None], np.sin(planes.phi)[None, :, None]
+    return np.stack([f[..., 0], c * f[..., 1] + s * f[..., 2]], axis=-1)
 
 
 def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
@@ -259,7 +268,7 @@ def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
     velocity origin, eq. 19), so a section is a triangle (apex and the two extreme points where
     C_pz's edges meet the plane; with the VO lines, the whole wedge), a line, or the apex point."""
     m, P = len(pyramids), len(planes.phi)
-    corners = np.einsum("pij,mkj->mpki", planes.to_plane, pyramids.corners)  # (m, P, 8, 3)
+    corners = planes.coords(pyramids.corners)  # (m, P, 8, 3)
     za = corners[:, :, BOX_EDGES[:, 0], 2]
     zb = corners[:, :, BOX_EDGES[:, 1], 2]
     pa = corners[:, :, BOX_EDGES[:, 0], :2]
@@ -281,15 +290,15 @@ def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
     kind = np.where(any_cross, np.where(width > 1e-9, TRIANGLE, LINE), POINT)
     chord = np.where((kind == TRIANGLE)[..., None, None], np.stack([p1, p2], axis=2), np.nan)
     apex = np.zeros((m, P, 2))
-    polygon = np.concatenate([apex[:, :, None, :], chord], axis=2)
-    polygon = np.where((kind == TRIANGLE)[..., None, None], _angular_order(polygon, np.ones(polygon.shape[:3], bool)), np.nan)
+    vertices = np.concatenate([apex[:, :, None, :], np.nan_to_num(chord)], axis=2)
+    vertex_mask = np.broadcast_to((kind == TRIANGLE)[..., None], vertices.shape[:3])
     # Inside C_pz: the VO is every velocity with a horizontal component towards its centre.
-    h_p = np.einsum("pij,mj->mpi", planes.to_plane, pyramids.frame[:, 0, :])
+    h_p = planes.coords(pyramids.frame[:, 0, :])
     halfplane = np.concatenate([h_p[..., :2], np.zeros((m, P, 1))], axis=-1)
     kind = np.where(pyramids.inside[:, None], INSIDE_CODE, kind)
     symmetry = np.where(any_cross[..., None], _nanmean(pts, axis=2), np.nan)
     return Sections(
-        kind=kind, polygon=polygon, apex=apex, chord=chord, symmetry=symmetry,
+        kind=kind, vertices=vertices, vertex_mask=vertex_mask, apex=apex, chord=chord, symmetry=symmetry,
         halfplane=halfplane, vo_lines=True,
         curve=np.full((m, P, 0, 2), np.nan), t=np.zeros(0), chord_t=np.full((m, P, 2), np.nan),
     )

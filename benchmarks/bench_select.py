@@ -1,0 +1,93 @@
+"""Time per select() for every formulation x installed backend (issue: speed).
+
+Encounters: the own UAV at (0, 0, 20) m flying +x at 4 m/s; one neighbour head-on 30 m ahead
+(so the preferred velocity is never safe: every call has to avoid), the others at random within
+the 55 m sensing range, and with obstacles six random cylinders/boxes, one 20 m ahead.
+Prints median and p99 microseconds per call, and plane_qp's speed-up over sampled.
+
+    python benchmarks/bench_select.py [--encounters 40] [--repeat 3] [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import platform
+import time
+import warnings
+
+import numpy as np
+
+from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
+from vo3d_opt.solvers import available_qp_solvers
+
+
+def encounter(rng: np.random.Generator, n: int, m: int) -> dict:
+    p = np.array([0.0, 0.0, 20.0])
+    nbs = [Neighbor(position=(30.0, rng.uniform(-1, 1), 20.0 + rng.uniform(-1, 1)),
+                    velocity=(-4.0, 0.0, 0.0), r_pz=10.0)]
+    while len(nbs) < n:
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        pos = p + rng.uniform(12.0, 55.0) * d
+        pos[2] = np.clip(pos[2], 1.0, 39.0)
+        if np.linalg.norm(pos - p) > 11.0:
+            vel = rng.normal(size=3)
+            nbs.append(Neighbor(position=pos, velocity=vel / np.linalg.norm(vel) * rng.uniform(0, 4), r_pz=10.0))
+    obs = []
+    if m:
+        obs.append(Cylinder(center=(20.0, rng.uniform(-2, 2)), radius=2.0, height=30.0))
+    while len(obs) < m:
+        c = rng.uniform(-50, 50, 2)
+        if np.linalg.norm(c) < 12:
+            continue
+        if rng.random() < 0.5:
+            obs.append(Cylinder(center=c, radius=rng.uniform(1, 4), height=rng.uniform(10, 45)))
+        else:
+            obs.append(Box(center=c, size=rng.uniform(2, 8, 2), height=rng.uniform(10, 45), yaw=rng.uniform(-3, 3)))
+    return dict(own=AgentState(position=p, velocity=(4.0, 0.0, 0.0)), preferred_velocity=(4.0, 0.0, 0.0),
+                neighbors=nbs, obstacles=obs, limits=Limits(speed=(0.0, 4.0), altitude=(0.0, 40.0)), dt=0.2)
+
+
+def time_calls(selector: VelocitySelector, cases: list[dict], repeat: int) -> tuple[np.ndarray, dict]:
+    for kw in cases[:3]:
+        selector.select(**kw)  # warm up caches and solver objects
+    times, statuses = [], {}
+    for _ in range(repeat):
+        for kw in cases:
+            d = selector.select(**kw)
+            times.append(d.solve_time)
+            statuses[d.status] = statuses.get(d.status, 0) + 1
+    return np.array(times) * 1e6, statuses
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--encounters", type=int, default=40)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--quick", action="store_true", help="only 9 neighbours x 6 obstacles")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    rng = np.random.default_rng(7)
+    grid = [(9, 6)] if args.quick else [(1, 0), (1, 6), (5, 0), (5, 6), (9, 6), (10, 0), (10, 6), (20, 0), (20, 6)]
+    combos = [("sampled", None)] + [("plane_qp", s) for s in available_qp_solvers()] \
+        + [("cone_qp", s) for s in available_qp_solvers()] + [("nlp", "casadi")]
+    print(f"# {platform.processor() or platform.machine()}, {platform.python_implementation()} "
+          f"{platform.python_version()}, {time.strftime('%Y-%m-%d')}")
+    print("| neighbours | obstacles | formulation | solver | median µs | p99 µs | statuses |")
+    print("|---:|---:|---|---|---:|---:|---|")
+    for n, m in grid:
+        cases = [encounter(rng, n, m) for _ in range(args.encounters)]
+        medians = {}
+        for form, solver in combos:
+            rep = 1 if form in ("sampled", "nlp") or solver.startswith("cvxpy") else args.repeat
+            t, st = time_calls(VelocitySelector(form, solver=solver), cases, rep)
+            medians[(form, solver)] = np.median(t)
+            print(f"| {n} | {m} | {form} | {solver or '-'} | {np.median(t):.0f} | {np.percentile(t, 99):.0f} | "
+                  + ", ".join(f"{k}: {v}" for k, v in sorted(st.items())) + " |", flush=True)
+        qp = {k: v for k, v in medians.items() if k[0] == "plane_qp"}
+        best = min(qp, key=qp.get)
+        print(f"| {n} | {m} | **fastest plane_qp** | {best[1]} | {qp[best]:.0f} | | "
+              f"{medians[('sampled', None)] / qp[best]:.0f}x faster than sampled |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
