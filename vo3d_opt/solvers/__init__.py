@@ -1,0 +1,361 @@
+"""Solver backends: one small module per solver behind one interface, chosen by a string.
+
+``get_backend("osqp")`` returns a :class:`Backend` whose ``solve(qp)`` answers a
+:class:`~vo3d_opt.formulations.problem.QP` (or whose ``solve_nlp(nlp)`` answers an
+:class:`~vo3d_opt.formulations.problem.NLP`). Accepted names:
+
+- ``"osqp"``, ``"clarabel"``: the solvers' own Python APIs;
+- ``"cvxpy"`` (cvxpy picks the solver) and ``"cvxpy:<SOLVER>"`` for any installed cvxpy solver
+  that accepts a quadratic objective;
+- ``"qpsolvers:<name>"`` for every name in ``qpsolvers.available_solvers``;
+- ``"casadi"`` (plugin ipopt) and ``"casadi:<plugin>"`` for the non-convex NLP.
+
+Every backend answers with status "optimal" only when its x is finite and satisfies every
+constraint within :data:`FEAS_TOL` (relative to the data's scale), "infeasible" when the solver
+proved infeasibility, and "failed" otherwise; it never raises on a well-formed problem.
+Backend modules are imported lazily, so importing this package stays cheap.
+"""
+from __future__ import annotations
+
+import functools
+import importlib.util
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from vo3d_opt.formulations.problem import NLP, QP, Result
+
+#: Largest constraint violation, relative to 1 + the largest finite right-hand side, that an
+#: "optimal" answer may have.
+FEAS_TOL = 1e-6
+
+#: Plugins of ``casadi.nlpsol`` this package knows how to run quietly (see casadi_backend).
+CASADI_PLUGINS = ("ipopt", "sqpmethod")
+
+
+class Backend:
+    """One solver behind the common interface; subclasses set the three attributes."""
+
+    name: str
+    #: True when ``QP.soc_radius`` is taken as an exact second-order cone.
+    has_cones: bool
+    kind: Literal["qp", "nlp"]
+
+    def solve(self, qp: QP, warm_start: np.ndarray | None = None) -> Result:
+        """Solve a QP (QP backends)."""
+        raise NotImplementedError(f"backend {self.name!r} does not solve QPs")
+
+    def solve_nlp(self, nlp: NLP) -> Result:
+        """Solve an NLP with exact cone constraints (nlp backends)."""
+        raise NotImplementedError(f"backend {self.name!r} does not solve NLPs")
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name!r}>"
+
+
+# ----------------------------------------------------------------------------------------------
+# helpers shared by the backend modules
+
+
+@dataclass(slots=True)
+class Standard:
+    """A QP as  min ½xᵀPx + qᵀx  s.t.  l <= C x <= u,  ||x|| <= r (when r is not None).
+
+    The rows of C are G's (l = -inf, u = h), then A's (l = u = b), then the n rows of the
+    identity (l = lb, u = ub, infinite where absent). P is symmetric; arrays are float.
+    """
+
+    P: np.ndarray
+    q: np.ndarray
+    C: np.ndarray
+    l: np.ndarray
+    u: np.ndarray
+    r: float | None
+    m_ineq: int
+    m_eq: int
+
+    @property
+    def n(self) -> int:
+        return self.q.shape[0]
+
+    def split(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(E, e, D, d): the equalities E x = e, and every finite bound as a row of D x <= d
+        (upper bounds first, then lower bounds negated)."""
+        eq = slice(self.m_ineq, self.m_ineq + self.m_eq)
+        ineq = np.ones(self.C.shape[0], dtype=bool)
+        ineq[eq] = False
+        upper, lower = ineq & np.isfinite(self.u), ineq & np.isfinite(self.l)
+        return (self.C[eq], self.u[eq], np.vstack([self.C[upper], -self.C[lower]]),
+                np.concatenate([self.u[upper], -self.l[lower]]))
+
+    def violation(self, x: np.ndarray) -> float:
+        """Largest constraint violation of x, relative to 1 + the largest finite bound.
+
+        Violations up to :data:`FEAS_TOL` are returned unscaled (an upper bound), to save time.
+        """
+        Cx = self.C @ x
+        worst = max((self.l - Cx).max(), (Cx - self.u).max())
+        if self.r is not None:
+            worst = max(worst, float(np.sqrt(x @ x)) - self.r)
+        if worst <= FEAS_TOL:  # the scale only matters for larger violations
+            return float(worst)
+        bounds = np.concatenate([self.l, self.u, [0.0 if self.r is None else self.r]])
+        return float(worst) / (1.0 + np.abs(bounds[np.isfinite(bounds)]).max())
+
+
+@functools.cache
+def _eye(n: int) -> np.ndarray:
+    """The n×n identity, shared (read-only)."""
+    eye = np.eye(n)
+    eye.setflags(write=False)
+    return eye
+
+
+def _matrix(value: np.ndarray | None, cols: int, field: str) -> np.ndarray:
+    if value is None:
+        return _eye(cols)[:0]
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 1 and arr.size == cols:
+        arr = arr.reshape(1, cols)
+    if arr.ndim != 2 or arr.shape[1] != cols:
+        raise ValueError(f"QP.{field} must have shape (m, {cols}), got {np.shape(value)}")
+    return arr
+
+
+def _vector(value: np.ndarray | None, size: int, fill: float, field: str) -> np.ndarray:
+    if value is None:
+        return np.full(size, fill)
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (size,):
+        if arr.size != size:
+            raise ValueError(f"QP.{field} must have shape ({size},), got {np.shape(value)}")
+        arr = arr.reshape(size)
+    return arr
+
+
+def standardise(qp: QP) -> Standard:
+    """``qp`` in :class:`Standard` form; ValueError when its shapes do not fit together.
+
+    Non-finite numbers are kept: see :func:`screen`.
+    """
+    q = np.asarray(qp.q, dtype=float).reshape(-1)
+    n = q.shape[0]
+    if n == 0:
+        raise ValueError("QP.q must have at least one entry")
+    P = np.asarray(qp.P, dtype=float)
+    if P.shape != (n, n):
+        raise ValueError(f"QP.P must have shape ({n}, {n}), got {P.shape}")
+    if (qp.G is None) != (qp.h is None) or (qp.A is None) != (qp.b is None):
+        raise ValueError("QP.G and QP.h (and QP.A and QP.b) must be given together")
+    G, A = _matrix(qp.G, n, "G"), _matrix(qp.A, n, "A")
+    h = _vector(qp.h, G.shape[0], np.inf, "h")
+    b = _vector(qp.b, A.shape[0], 0.0, "b")
+    lb, ub = _vector(qp.lb, n, -np.inf, "lb"), _vector(qp.ub, n, np.inf, "ub")
+    return Standard(
+        P=0.5 * (P + P.T), q=q, C=np.concatenate([G, A, _eye(n)]),
+        l=np.concatenate([np.full(G.shape[0], -np.inf), b, lb]), u=np.concatenate([h, b, ub]),
+        r=None if qp.soc_radius is None else float(qp.soc_radius),
+        m_ineq=G.shape[0], m_eq=A.shape[0])
+
+
+def screen(std: Standard, solver: str) -> Result | None:
+    """The Result for data no solver should see (NaN, misplaced infinities), else None.
+
+    Infinities are allowed only where they drop a constraint (h = +inf, lb = -inf, ub = +inf).
+    Lower bounds above upper bounds, h = -inf and a negative radius are infeasible.
+    """
+    finite = bool(np.isfinite(std.P.sum() + std.q.sum() + std.C.sum())) and (
+        std.r is None or np.isfinite(std.r))
+    l, u = std.l, std.u
+    if finite and (l <= u).all() and (l < np.inf).all() and (u > -np.inf).all() and (
+            std.r is None or std.r >= 0):
+        return None
+    if not finite or np.isnan(l).any() or np.isnan(u).any():
+        return Result(None, "failed", solver, "problem data contains NaN or a misplaced infinity")
+    if np.isinf(l[std.m_ineq:std.m_ineq + std.m_eq]).any():
+        return Result(None, "failed", solver, "b contains an infinity")
+    return Result(None, "infeasible", solver, "a bound or a negative radius excludes every point")
+
+
+def require_no_cone(backend: Backend, qp: QP) -> None:
+    """Raise ValueError when a backend without cones is given a QP with ``soc_radius``."""
+    if qp.soc_radius is not None:
+        raise ValueError(
+            f"solver {backend.name!r} has no second-order cones: replace QP.soc_radius with a "
+            "polygon first (see Backend.has_cones)")
+
+
+def failure(solver: str, exc: BaseException) -> Result:
+    """The Result for an exception raised inside a solver."""
+    return Result(None, "failed", solver, f"{type(exc).__name__}: {exc}")
+
+
+def make_result(solver: str, std: Standard, x: np.ndarray | None, status: str,
+                info: str = "") -> Result:
+    """A Result whose x is None or a finite array of shape (n,).
+
+    An "optimal" claim is downgraded to "failed" when x is missing, not finite, or violates a
+    constraint by more than :data:`FEAS_TOL`; an "infeasible" answer carries no x.
+    """
+    arr = None
+    if x is not None and status != "infeasible":
+        arr = np.array(x, dtype=float).reshape(-1)
+        if arr.shape != (std.n,) or not np.isfinite(arr).all():
+            arr = None
+    if status == "optimal":
+        if arr is None:
+            status, info = "failed", info or "solver returned no finite solution"
+        elif not (v := std.violation(arr)) <= FEAS_TOL:
+            status, info = "failed", f"solution violates the constraints by {v:.2e} (relative)"
+    return Result(arr, status, solver, info)
+
+
+# ----------------------------------------------------------------------------------------------
+# registry
+
+_CACHE: dict[str, Backend] = {}
+_REGISTERED: dict[str, Backend] = {}
+
+
+def _installed(module: str) -> bool:
+    return importlib.util.find_spec(module) is not None
+
+
+@functools.cache
+def _cvxpy_solvers() -> dict[str, bool]:
+    """Installed cvxpy solvers that take a quadratic objective -> whether they take a SOC."""
+    if not _installed("cvxpy"):
+        return {}
+    import cvxpy as cp
+    from cvxpy.constraints import SOC
+    from cvxpy.reductions.solvers.defines import QP_SOLVERS, SOLVER_MAP_CONIC
+
+    found: dict[str, bool] = {}
+    for name in cp.installed_solvers():
+        conic = SOLVER_MAP_CONIC.get(name)
+        socp = conic is not None and SOC in conic.SUPPORTED_CONSTRAINTS
+        if name in QP_SOLVERS or socp or (conic is not None and conic.supports_quad_obj()):
+            found[name] = socp
+    return found
+
+
+@functools.cache
+def _qpsolvers_solvers() -> tuple[str, ...]:
+    if not _installed("qpsolvers"):
+        return ()
+    import qpsolvers
+
+    return tuple(sorted(qpsolvers.available_solvers))
+
+
+@functools.cache
+def _casadi_plugins() -> tuple[str, ...]:
+    if not _installed("casadi"):
+        return ()
+    import casadi
+
+    return tuple(p for p in CASADI_PLUGINS if casadi.has_nlpsol(p))
+
+
+@functools.cache
+def _builtin_names() -> tuple[str, ...]:
+    names = [n for n in ("osqp", "clarabel") if _installed(n)]
+    if cvx := _cvxpy_solvers():
+        names += ["cvxpy"] + [f"cvxpy:{s}" for s in sorted(cvx)]
+    names += [f"qpsolvers:{s}" for s in _qpsolvers_solvers()]
+    if plugins := _casadi_plugins():
+        names += ["casadi"] + [f"casadi:{p}" for p in plugins]
+    return tuple(names)
+
+
+def available_solvers() -> list[str]:
+    """Every name :func:`get_backend` accepts here (installed solvers and registered ones)."""
+    return list(_builtin_names()) + [n for n in _REGISTERED if n not in _builtin_names()]
+
+
+def available_qp_solvers() -> list[str]:
+    """The names in :func:`available_solvers` whose backend solves QPs (kind "qp")."""
+    return [n for n in available_solvers()
+            if (n in _REGISTERED and _REGISTERED[n].kind == "qp")
+            or (n not in _REGISTERED and not n.startswith("casadi"))]
+
+
+def _canonical(name: str) -> str:
+    """Lower-case prefix; cvxpy solver names upper-case, the others lower-case."""
+    prefix, _, suffix = name.strip().partition(":")
+    prefix, suffix = prefix.strip().lower(), suffix.strip()
+    suffix = suffix.upper() if prefix == "cvxpy" else suffix.lower()
+    return f"{prefix}:{suffix}" if suffix else prefix
+
+
+def _unknown(name: str) -> ValueError:
+    return ValueError(f"unknown or uninstalled solver {name!r}; available: "
+                      + ", ".join(available_solvers()))
+
+
+def _construct(name: str) -> Backend:
+    """A new backend for a canonical name, or ValueError when it is not available."""
+    prefix, _, suffix = name.partition(":")
+    if name == "osqp" and _installed("osqp"):
+        from vo3d_opt.solvers.osqp_backend import OsqpBackend
+
+        return OsqpBackend()
+    if name == "clarabel" and _installed("clarabel"):
+        from vo3d_opt.solvers.clarabel_backend import ClarabelBackend
+
+        return ClarabelBackend()
+    if prefix == "cvxpy" and (solvers := _cvxpy_solvers()) and (suffix in solvers or not suffix):
+        from vo3d_opt.solvers.cvxpy_backend import CvxpyBackend
+
+        has_cones = solvers[suffix] if suffix else any(solvers.values())
+        return CvxpyBackend(name, suffix or None, has_cones)
+    if prefix == "qpsolvers" and suffix in _qpsolvers_solvers():
+        from vo3d_opt.solvers.qpsolvers_backend import QpsolversBackend
+
+        return QpsolversBackend(name, suffix)
+    if prefix == "casadi" and (suffix or "ipopt") in _casadi_plugins():
+        from vo3d_opt.solvers.casadi_backend import CasadiBackend
+
+        return CasadiBackend(name, suffix or "ipopt")
+    raise _unknown(name)
+
+
+def get_backend(name: str) -> Backend:
+    """The (cached) backend for a solver name; ValueError listing the available names if unknown."""
+    if not isinstance(name, str):
+        raise ValueError(f"solver must be a string, got {type(name).__name__}")
+    if name in _REGISTERED:
+        return _REGISTERED[name]
+    key = _canonical(name)
+    if key in _REGISTERED:
+        return _REGISTERED[key]
+    if key not in _CACHE:
+        _CACHE[key] = _construct(key)
+    return _CACHE[key]
+
+
+def certified_infeasible(qp: QP) -> bool:
+    """Whether Clarabel proves ``qp`` infeasible: the second opinion for backends whose solver
+    reports only "no solution" (qpsolvers) or calls feasible problems infeasible (ProxQP).
+    Costs one Clarabel solve (tens of microseconds), on failures only."""
+    return _installed("clarabel") and get_backend("clarabel").solve(qp).status == "infeasible"
+
+
+def register_backend(name: str, backend: Backend) -> None:
+    """Make ``get_backend(name)`` return ``backend`` (e.g. a deliberately failing one in tests)."""
+    if not isinstance(backend, Backend):
+        raise ValueError(f"backend must be a Backend, got {type(backend).__name__}")
+    _REGISTERED[name] = backend
+
+
+def unregister_backend(name: str) -> None:
+    """Undo :func:`register_backend` (a no-op for names never registered)."""
+    _REGISTERED.pop(name, None)
+
+
+__all__ = [
+    "Backend", "CASADI_PLUGINS", "FEAS_TOL", "Standard", "available_qp_solvers",
+    "available_solvers", "certified_infeasible", "failure", "get_backend", "make_result",
+    "register_backend", "require_no_cone", "screen", "standardise", "unregister_backend",
+]

@@ -1,0 +1,68 @@
+"""Any solver of qpsolvers (``qpsolvers:<name>``), through ``qpsolvers.solve_problem``.
+
+The problem is passed without infinities, as ``G x <= h`` (every finite bound of the
+:class:`~vo3d_opt.solvers.Standard` rows, box bounds included) and ``A x = b``, in CSC form for
+the solvers that want sparse matrices. qpsolvers reports only whether a solution was found:
+when none is, the problem is "infeasible" if Clarabel proves it so, else "failed". No cones: the
+formulation substitutes a polygon for ``soc_radius``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import qpsolvers
+import scipy.sparse as sp
+
+from vo3d_opt.formulations.problem import QP, Result
+from vo3d_opt.solvers import (
+    Backend, Standard, certified_infeasible, failure, make_result, require_no_cone, screen,
+    standardise,
+)
+
+#: Extra options per solver, for answers as tight as the direct backends'. OSQP is left
+#: unpolished: OSQP 1.x prints a line per polished solve without an active set. ProxQP stays
+#: unreliable here whatever its settings (it calls some narrow feasible QPs infeasible).
+SOLVER_OPTIONS: dict[str, dict[str, float | int | bool]] = {
+    "osqp": dict(eps_abs=1e-8, eps_rel=1e-8, polishing=False, max_iter=20_000),
+    "scs": dict(eps_abs=1e-9, eps_rel=1e-9, max_iters=20_000),
+    "proxqp": dict(eps_abs=1e-9),
+}
+
+
+def to_problem(std: Standard, sparse: bool) -> qpsolvers.Problem:
+    """The qpsolvers Problem for ``std``; CSC matrices when ``sparse``."""
+    E, e, D, d = std.split()
+    P = sp.csc_matrix(std.P) if sparse else std.P
+    G = (sp.csc_matrix(D) if sparse else D) if d.size else None
+    A = (sp.csc_matrix(E) if sparse else E) if e.size else None
+    return qpsolvers.Problem(P, std.q, G, d if d.size else None, A, e if e.size else None)
+
+
+class QpsolversBackend(Backend):
+    """One qpsolvers solver; polygons only (no cones)."""
+
+    has_cones = False
+    kind = "qp"
+
+    def __init__(self, name: str, solver: str) -> None:
+        self.name = name
+        self._solver = solver
+        self._options = SOLVER_OPTIONS.get(solver, {})
+        self._sparse = solver not in qpsolvers.dense_solvers
+
+    def solve(self, qp: QP, warm_start: np.ndarray | None = None) -> Result:
+        """Solve ``qp``; ``warm_start`` is passed on as qpsolvers' ``initvals``."""
+        require_no_cone(self, qp)
+        std = standardise(qp)
+        if (early := screen(std, self.name)) is not None:
+            return early
+        try:
+            init = None if warm_start is None else np.asarray(warm_start, float).reshape(std.n)
+            sol = qpsolvers.solve_problem(to_problem(std, self._sparse), solver=self._solver,
+                                          initvals=init, **self._options)
+            if sol.found:
+                return make_result(self.name, std, sol.x, "optimal")
+        except Exception as exc:  # noqa: BLE001 - a backend never raises on a well-formed QP
+            return failure(self.name, exc)
+        if certified_infeasible(qp):
+            return Result(None, "infeasible", self.name, "no solution; Clarabel proves infeasible")
+        return Result(None, "failed", self.name, "no solution found, yet QP not proved infeasible")
