@@ -22,7 +22,7 @@ import numpy as np
 from .formulations import cone_qp, nlp, plane_qp, sampled
 from .formulations.common import Encounter, Options, Outcome, prepare
 from .formulations.problem import NLP, QP, Result
-from .solvers import available_qp_solvers, available_solvers, get_backend
+from .solvers import FEAS_TOL, available_qp_solvers, available_solvers, get_backend, standardise
 from .types import AgentState, Box, Cylinder, Limits, Neighbor
 
 FORMULATIONS = ("sampled", "plane_qp", "cone_qp", "nlp")
@@ -64,14 +64,6 @@ def _items(value, cls, name: str) -> list:
     return items
 
 
-def _violation(qp: QP, x: np.ndarray) -> float:
-    """Largest violation of the problem's inequality rows and speed cone by x."""
-    worst = float(np.max(qp.G @ x - qp.h, initial=0.0)) if qp.G is not None else 0.0
-    if qp.soc_radius is not None:
-        worst = max(worst, float(np.linalg.norm(x)) - qp.soc_radius)
-    return worst
-
-
 def _checked(solve, kind: str):
     """Wrap a backend call: exceptions and answers that break the problem's own constraints
     become "failed" results, so a misbehaving backend can never crash the control loop."""
@@ -86,7 +78,7 @@ def _checked(solve, kind: str):
         if res.status == "optimal":
             qp = problem.qp if isinstance(problem, NLP) else problem
             x = None if res.x is None else np.asarray(res.x, dtype=float).reshape(-1)
-            if x is None or x.shape != (qp.n,) or not np.all(np.isfinite(x)) or _violation(qp, x) > 1e-5:
+            if x is None or x.shape != (qp.n,) or not np.all(np.isfinite(x)) or standardise(qp).violation(x) > FEAS_TOL:
                 return Result(None, "failed", res.solver, "garbage answer rejected")
             return Result(x, "optimal", res.solver, res.info)
         return res
@@ -101,7 +93,8 @@ class VelocitySelector:
     ``solver``: a name from ``vo3d_opt.solvers.available_solvers()``; QP formulations default to
     the fastest QP backend, "nlp" to "casadi" (its start comes from plane_qp on ``start_solver``).
     Keyword options (see ``Options``): plane_step_deg, heading_step_deg, speed_levels,
-    polygon_sides, reciprocal, horizon, corrections, n_samples, and for nlp start_solver.
+    polygon_sides, reciprocal, horizon, corrections, n_samples, qp_samples, pz_buffer (m: plan
+    with every neighbour's sphere this much larger), margin, and for nlp start_solver.
     """
 
     def __init__(self, formulation: str = "plane_qp", solver: str | None = None, *,
@@ -145,6 +138,8 @@ class VelocitySelector:
             raise ValueError("polygon_sides: must be at least 3")
         if o.n_samples < 8:
             raise ValueError("n_samples: must be at least 8")
+        if not (math.isfinite(o.pz_buffer) and o.pz_buffer >= 0):
+            raise ValueError("pz_buffer: must be a non-negative number of metres")
         if o.horizon is not None and not (math.isfinite(o.horizon) and o.horizon > 0):
             raise ValueError("horizon: must be a positive number of seconds")
 

@@ -13,6 +13,8 @@ from .problem import QP, NLP, Result
 
 #: Tolerance (m/s) on the speed and altitude limits when checking a candidate.
 LIMIT_TOL = 1e-6
+#: With ``pz_buffer``, the planning sphere grows by at most this share of the remaining gap.
+BUFFER_GAP_SHARE = 0.9
 
 Solve = Callable[[QP], Result]
 SolveNLP = Callable[[NLP], Result]
@@ -31,6 +33,7 @@ class Options:
     corrections: frozenset[str] | None = None  # None: all six of section 3.1
     n_samples: int = 72  # generator samples of the curve of eq. (12) (sampled's sections)
     qp_samples: int = 36  # the same for plane_qp, where they only seed the tangent points
+    pz_buffer: float = 0.0  # m; plan with protected spheres this much larger (see prepare)
     margin: float = 1e-3  # m/s; linearised VO half-spaces are pushed out by this much, so a
     # solver's answer on the boundary (within its tolerance) is still strictly outside the VO
 
@@ -145,6 +148,20 @@ def prepare(
     else:
         p_B = V_B = np.zeros((0, 3))
         r_pz = np.zeros(0)
+    if options.horizon is not None and len(r_pz):
+        # With a time horizon, a zone that cannot be reached in time has an empty VO: drop it.
+        reach = options.horizon * (limits.v_max + np.linalg.norm(V_B, axis=1))
+        keep = np.linalg.norm(p_B - p, axis=1) - r_pz <= reach
+        p_B, V_B, r_pz = p_B[keep], V_B[keep], r_pz[keep]
+    if options.horizon is not None:
+        obstacles = [o for o in obstacles
+                     if np.linalg.norm(o.center - p[:2]) - o.side / np.sqrt(2) <= options.horizon * limits.v_max]
+    if options.pz_buffer > 0 and len(r_pz):
+        # A buffer against the discretisation and the neighbours' own manoeuvres: plan with a
+        # larger sphere, but never so large that A is 'inside' it while outside the real one
+        # (the VO would degenerate to a half-space): it takes at most 90 % of the gap left.
+        gap = np.linalg.norm(p_B - p, axis=1) - r_pz
+        r_pz = np.where(gap > 0, r_pz + np.minimum(options.pz_buffer, BUFFER_GAP_SHARE * gap), r_pz)
     corrections = options.corrections
     apex = 0.5 * (V_B + own.velocity) if options.reciprocal else None
     cones = vo_cones(

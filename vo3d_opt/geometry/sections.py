@@ -76,6 +76,10 @@ class Sections:
         inside = _in_polygon(self.polygon, xy)
         if self.vo_lines:
             inside |= _beyond_chord(self.polygon, self.apex, self.chord, xy)
+        # The VO is open at its apex: zero relative velocity never collides (e.g. hovering
+        # beside a static obstacle), although the apex is a vertex of the triangle.
+        at_apex = np.linalg.norm(xy[None] - self.apex[:, :, None, :], axis=-1) <= 1e-9
+        inside &= ~(at_apex & (self.kind == TRIANGLE)[..., None])
         hp = self.halfplane
         in_half = hp[..., None, 0] * xy[None, ..., 0] + hp[..., None, 1] * xy[None, ..., 1] > hp[..., None, 2]
         return np.where((self.kind == INSIDE_CODE)[..., None], in_half, inside)
@@ -194,7 +198,8 @@ def cone_sections(
         valid = (t_g >= 0.0) & (t_g <= 1.0)
     else:  # the original condition z_Bvo != z_A: both nappes, any length
         valid = np.isfinite(t_g) & (np.abs(dz) > 1e-12)
-    curve = (B_phi[..., :2] - A_phi[:, :, None, :2]) * t_g[..., None] + A_phi[:, :, None, :2]
+    with np.errstate(invalid="ignore"):  # t_g is inf/NaN where unused: masked by ``valid``
+        curve = (B_phi[..., :2] - A_phi[:, :, None, :2]) * t_g[..., None] + A_phi[:, :, None, :2]
 
     # Eqs (14)–(17): where the base circle meets the plane.
     t1, t2 = base_circle_crossings(cones, planes)
@@ -234,7 +239,8 @@ def cone_sections(
     if "symmetry_abs" in corrections:
         t_h = np.abs(t_h)
     parallel = np.abs(dzc) <= 1e-12 * scale
-    H = (C_phi[..., :2] - A_phi[..., :2]) * t_h[..., None] + A_phi[..., :2]
+    with np.errstate(invalid="ignore"):  # t_h undefined when parallel: replaced just below
+        H = (C_phi[..., :2] - A_phi[..., :2]) * t_h[..., None] + A_phi[..., :2]
     H = np.where(parallel[..., None], C_phi[..., :2], H)
 
     # Inside the protected zone: the VO is the closing half-space (v - apex)·rel > 0.
@@ -276,7 +282,8 @@ def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
     crosses = (za * zb <= 0) & (za != zb)
     with np.errstate(divide="ignore", invalid="ignore"):
         s = za / (za - zb)
-    pts = pa + s[..., None] * (pb - pa)  # (m, P, 12, 2): C_pz ∩ plane is their convex hull
+    with np.errstate(invalid="ignore"):  # an edge lying in the plane: masked by ``crosses``
+        pts = pa + s[..., None] * (pb - pa)  # (m, P, 12, 2): C_pz ∩ plane is their convex hull
     pts = np.where(crosses[..., None], pts, np.nan)
     unit = pts / np.linalg.norm(pts, axis=-1, keepdims=True)
     mean_dir = _nanmean(unit, axis=2)
