@@ -15,6 +15,7 @@ import heapq
 import numpy as np
 
 from ..geometry.sections import CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, Sections
+from ..geometry import in_vo_cones, in_vo_pyramids
 from .common import Encounter, Outcome, Solve, first_safe, least_bad
 from .planes import PlaneSections, plane_sections
 from .problem import QP, Result
@@ -102,9 +103,24 @@ def speed_polygon(radius: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([np.cos(ang), np.sin(ang)], axis=-1), np.full(sides, radius * np.cos(np.pi / sides))
 
 
+def row_owners(enc: Encounter) -> np.ndarray:
+    """The VO (cones first, then pyramids) each row of ``section_halfplanes`` belongs to."""
+    n, m = len(enc.cones), len(enc.pyramids)
+    parts = ([np.arange(n)] * 3 if n else []) + ([n + np.arange(m)] * 2 if m else [])
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=int)
+
+
+def violated_vos(enc: Encounter, v: np.ndarray) -> np.ndarray:
+    """(n + m,) which VOs contain velocity v (exact 3D membership)."""
+    hz = enc.options.horizon
+    return np.concatenate([in_vo_cones(enc.cones, v[None], horizon=hz)[:, 0],
+                           in_vo_pyramids(enc.pyramids, v[None], horizon=hz)[:, 0]])
+
+
 class PlaneProblems:
-    """Every (round, plane) QP of one decision, built lazily: the bounds that order the search
-    are computed for a whole round at once, the QP only for those actually solved."""
+    """The (round, plane) QPs of one decision, built lazily: the bounds that order the search
+    are computed for a whole round at once, a QP only when it is solved, and a VO's half-plane
+    joins a QP only once the preferred velocity or an answer of that QP lies in the VO."""
 
     def __init__(self, enc: Encounter, ps: PlaneSections, has_cones: bool) -> None:
         self.enc, self.ps, self.has_cones = enc, ps, has_cones
@@ -119,21 +135,44 @@ class PlaneProblems:
         lim = (self.G_lim @ self.w0 - h3) / np.maximum(np.linalg.norm(self.G_lim, axis=-1), 1e-12)
         self.base_bound = np.maximum(np.max(lim, axis=1, initial=0.0),
                                      np.max(self.G_speed @ self.w0 - self.h_speed, initial=0.0))
+        self.owner = row_owners(enc)
+        inside = np.concatenate([enc.cones.inside, enc.pyramids.inside])
+        #: VOs constrained from the start: those holding v_pref, and the zones A is inside.
+        self.initial = violated_vos(enc, enc.v_pref) | inside
         self.rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
-    def add_round(self) -> list[tuple[float, int, int]]:
-        """Linearise the next round and return its (lower bound, round, plane) entries, without
-        planes on which it repeats an earlier round."""
+    def add_round(self) -> list[tuple[float, int, int, int, np.ndarray]]:
+        """Linearise the next round; its queue entries (bound, round, plane, tie, VOs
+        included), without planes on which it repeats an earlier round."""
         r = len(self.rounds)
-        a, b, active = section_halfplanes(self.enc, self.ps, ROUNDS[r])
-        self.rounds.append((a, b, active))
-        # Distance from w0 to each violated half-plane a·w >= b bounds that QP's optimum.
-        viol = np.where(active, (b - a @ self.w0) / np.maximum(np.linalg.norm(a, axis=-1), 1e-12), 0.0)
-        lb = np.maximum(self.base_bound, np.max(viol, axis=0, initial=0.0))
-        repeat = np.zeros(len(lb), dtype=bool)
+        self.rounds.append(section_halfplanes(self.enc, self.ps, ROUNDS[r]))
+        repeat = np.zeros(len(self.ps.planes.phi), dtype=bool)
         for q in range(r):
             repeat |= self._same(r, q)
-        return [(float(lb[p]), r, int(p)) for p in np.flatnonzero(~repeat)]
+        lb = self.bounds(r, self.initial)
+        return [(float(lb[p]), r, int(p), int(p), self.initial)
+                for p in np.flatnonzero(~repeat & np.isfinite(lb))]
+
+    def bounds(self, r: int, included: np.ndarray) -> np.ndarray:
+        """(P,) lower bounds on every plane's QP deviation in round r (see ``bound``)."""
+        a, b, active = self.rounds[r]
+        act = active & included[self.owner][:, None]
+        norm = np.maximum(np.linalg.norm(a, axis=-1), 1e-12)
+        viol = np.where(act, (b - a @ self.w0) / norm, 0.0)
+        lb = np.maximum(self.base_bound, np.max(viol, axis=0, initial=0.0))
+        lb[np.any(act & (b / norm > self.v_max), axis=0)] = np.inf
+        return lb
+
+    def bound(self, r: int, p: int, included: np.ndarray) -> float:
+        """A lower bound on the QP's deviation: the distance from w0 to the farthest violated
+        half-plane; inf when a half-plane misses the whole speed disc (infeasible)."""
+        a, b, active = self.rounds[r]
+        act = active[:, p] & included[self.owner]
+        ap, bp = a[act, p], b[act, p]
+        norm = np.maximum(np.linalg.norm(ap, axis=-1), 1e-12)
+        if np.any(bp / norm > self.v_max):
+            return np.inf
+        return float(max(self.base_bound[p], np.max((bp - ap @ self.w0) / norm, initial=0.0)))
 
     def _same(self, r: int, q: int) -> np.ndarray:
         """(P,) planes on which rounds r and q give the same half-planes."""
@@ -141,9 +180,9 @@ class PlaneProblems:
         equal = (s1 == s2) & (~s1 | (np.all(np.abs(a1 - a2) < 1e-12, axis=-1) & (np.abs(b1 - b2) < 1e-12)))
         return np.all(equal, axis=0)
 
-    def qp(self, r: int, p: int) -> QP:
+    def qp(self, r: int, p: int, included: np.ndarray) -> QP:
         a, b, active = self.rounds[r]
-        act = active[:, p]
+        act = active[:, p] & included[self.owner]
         G = np.vstack([-a[act, p], self.G_lim[p], self.G_speed])
         h = np.concatenate([-b[act, p], self.h_lim, self.h_speed])
         return QP(P=2.0 * np.eye(2), q=-2.0 * self.w0, G=G, h=h,
@@ -151,31 +190,34 @@ class PlaneProblems:
 
 
 def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
-    """Best-first over the (round, plane) QPs. Rounds: every section linearised at its boundary
-    point nearest the preferred velocity, then every section passed on its left, then on its
-    right (the nearest side is not always best once the other sections count). QPs are solved
-    in order of a lower bound on their deviation (the distance to the farthest violated
-    half-plane); the search stops once the best safe answer beats every remaining bound. The
-    nearest-point round has the smallest bound on each plane (the distance from an interior
-    point to any supporting line is at least its distance to the boundary), so the later rounds
-    are linearised only while some plane's first bound is still below the best answer."""
+    """Best-first search over (round, plane) QPs with lazily added VO constraints.
+
+    Rounds: every section linearised at its boundary point nearest the preferred velocity, then
+    every section passed on its left, then on its right (the nearest side is not always best
+    once the other sections count). A VO's half-plane joins a QP when v_pref lies in that VO or
+    when an answer of the QP does (constraint generation: the QP is re-queued with it), so
+    sections far from the answer never over-constrain it. QPs are solved in order of a lower
+    bound on their deviation (the distance to the farthest violated half-plane, which only
+    grows as constraints join); the search stops once the best safe answer beats every
+    remaining bound. The nearest-point round has the smallest bound on each plane (the distance
+    from an interior point to any supporting line is at least its distance to the boundary), so
+    the later rounds are linearised only while a plane's first bound is below the best answer."""
     ps = plane_sections(enc, enc.options.qp_samples)
     problems = PlaneProblems(enc, ps, has_cones)
     E1, E2 = ps.planes.e1, ps.planes.e2
     queue = problems.add_round()
-    first_bounds = {p: lb for lb, _, p in queue}
+    first_bounds = [item[0] for item in queue]
     heapq.heapify(queue)
-    best, best_dev, tried, failed, attempts = None, np.inf, [], 0, 0
+    best, best_dev, tried, failed, attempts, tie = None, np.inf, [], 0, 0, 0
     while True:
         if not queue or queue[0][0] >= best_dev:
-            more = len(problems.rounds) < len(ROUNDS) and min(first_bounds.values(), default=np.inf) < best_dev
-            if not more:
-                break
-            for item in problems.add_round():
-                heapq.heappush(queue, item)
-            continue
-        _, r, p = heapq.heappop(queue)
-        res: Result = solve(problems.qp(r, p))
+            if len(problems.rounds) < len(ROUNDS) and min(first_bounds, default=np.inf) < best_dev:
+                for item in problems.add_round():
+                    heapq.heappush(queue, item)
+                continue
+            break
+        _, r, p, _, included = heapq.heappop(queue)
+        res: Result = solve(problems.qp(r, p, included))
         attempts += 1
         if not (res.ok and res.x.shape == (2,)):
             failed += res.status == "failed"
@@ -183,8 +225,16 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
         v = res.x[0] * E1 + res.x[1] * E2[p]
         tried.append(v)
         dev = enc.deviation(v)[0]
-        if dev < best_dev and first_safe(enc, v[None]) is not None:
-            best, best_dev = (v, p, ROUNDS[r]), dev
+        if dev >= best_dev:
+            continue
+        entered = violated_vos(enc, v)
+        if not entered.any():
+            if enc.within_limits(v)[0]:
+                best, best_dev = (v, p, ROUNDS[r]), dev
+        elif not np.all(included[entered]):  # constrain the VOs it entered and solve again
+            more = included | entered
+            tie += 1
+            heapq.heappush(queue, (problems.bound(r, p, more), r, p, -tie, more))
     if best is not None:
         v, p, mode = best
         return Outcome(v, "optimal", float(ps.planes.phi[p]), {"round": mode, "solved": attempts})
