@@ -14,7 +14,7 @@ import numpy as np
 
 from ..geometry.pyramid import VOPyramids
 from .common import Encounter, Outcome, Solve, first_safe
-from .plane_qp import fallback
+from .plane_qp import fallback, violated_vos
 from .planes import plane_sections
 from .problem import QP
 
@@ -86,16 +86,20 @@ def speed_polytope(radius: float, k: int = 64) -> tuple[np.ndarray, np.ndarray]:
     return D, np.full(k, radius * c)
 
 
-def build_qp(enc: Encounter, has_cones: bool, turn: float = 0.0) -> QP:
+def build_qp(enc: Encounter, has_cones: bool, turn: float = 0.0, included: np.ndarray | None = None) -> QP:
+    """The 3D QP with the half-spaces of the ``included`` VOs (cones first, then pyramids;
+    all when None)."""
+    n = len(enc.cones)
+    inc = np.ones(n + len(enc.pyramids), dtype=bool) if included is None else included
     rows_G, rows_h = [], []
-    if len(enc.cones):
+    if n and inc[:n].any():
         N, b = cone_tangent_halfspaces(enc, enc.v_pref, turn)
-        rows_G.append(-N)
-        rows_h.append(-b - enc.options.margin)
-    if len(enc.pyramids):
+        rows_G.append(-N[inc[:n]])
+        rows_h.append(-b[inc[:n]] - enc.options.margin)
+    if len(enc.pyramids) and inc[n:].any():
         N, b = pyramid_face_halfspaces(enc.pyramids, enc.v_pref)
-        rows_G.append(-N)
-        rows_h.append(-b - enc.options.margin)
+        rows_G.append(-N[inc[n:]])
+        rows_h.append(-b[inc[n:]] - enc.options.margin)
     G3, h3 = enc.linear_bounds()
     rows_G.append(G3)
     rows_h.append(h3)
@@ -108,14 +112,29 @@ def build_qp(enc: Encounter, has_cones: bool, turn: float = 0.0) -> QP:
 
 
 def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
-    tried, failed = [], 0
+    """For each turn of the cone tangents: solve with the half-spaces of the VOs that hold v_pref
+    (and the zones A is inside), add those of the VOs the answer enters, and repeat until the
+    answer is safe or the QP infeasible (constraint generation, at most one round per VO).
+    The safe answer nearest v_pref over the turns wins."""
+    tried, failed, attempts, best = [], 0, 0, None
+    start = violated_vos(enc, enc.v_pref) | np.concatenate([enc.cones.inside, enc.pyramids.inside])
     for turn in TURNS if len(enc.cones) else TURNS[:1]:
-        res = solve(build_qp(enc, has_cones, turn))
-        if res.ok and res.x.shape == (3,):
+        included = start.copy()
+        while True:
+            res = solve(build_qp(enc, has_cones, turn, included))
+            attempts += 1
+            if not (res.ok and res.x.shape == (3,)):
+                failed += res.status == "failed"
+                break
             tried.append(res.x)
-            if first_safe(enc, res.x[None]) is not None:
-                return Outcome(res.x, "optimal", None, {"round": f"turn {np.degrees(turn):.0f}"})
-        elif res.status == "failed":
-            failed += 1
-    all_failed = failed == (len(TURNS) if len(enc.cones) else 1)
-    return fallback(enc, plane_sections(enc), np.array(tried).reshape(-1, 3), all_failed)
+            entered = violated_vos(enc, res.x)
+            if not entered.any():
+                if enc.within_limits(res.x)[0] and (best is None or enc.deviation(res.x)[0] < enc.deviation(best[0])[0]):
+                    best = (res.x, turn)
+                break
+            if np.all(included[entered]):
+                break
+            included |= entered
+    if best is not None:
+        return Outcome(best[0], "optimal", None, {"round": f"turn {np.degrees(best[1]):.0f}", "solved": attempts})
+    return fallback(enc, plane_sections(enc), np.array(tried).reshape(-1, 3), failed == attempts)
