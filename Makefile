@@ -21,7 +21,7 @@ demo: $(STAMP)
 	$(PY) -m vo3d_opt.demo
 
 test: $(STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider
+	$(PY) -m pytest -q -p no:cacheprovider -n 2
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_select.py

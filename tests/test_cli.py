@@ -1,0 +1,178 @@
+"""The ``vo3d`` command line (contract §3), run as a separate process like a user would."""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from vo3d_opt.sim.metrics import CONTRACT_KEYS
+from vo3d_opt.sim.scenario import bundled_files, load_scenario
+
+SMALL = {
+    "name": "cli-small",
+    "description": "Two UAVs head-on past a cylinder. Small enough for the CLI tests.",
+    "dt": 0.2,
+    "max_time": 14.0,
+    "goal_tolerance": 1.0,
+    "limits": {"speed": [0.0, 4.0], "altitude": [0.0, 40.0]},
+    "sensing": {"vehicle_range": 55.0, "obstacle_range": 55.0},
+    "defaults": {"r_pz": 5.0, "radius": 0.5, "max_speed": 4.0},
+    "agents": [
+        {"id": "u0", "start": [-20.0, 0.0, 20.0], "goal": [20.0, 0.0, 20.0]},
+        {"id": "u1", "start": [20.0, 0.5, 20.0], "goal": [-20.0, 0.5, 20.0]},
+    ],
+    "obstacles": [{"type": "cylinder", "center": [0.0, 9.0], "radius": 1.5, "height": 30.0}],
+}
+
+
+def vo3d(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    script = Path(sys.executable).with_name("vo3d")
+    cmd = [str(script)] if script.exists() else [sys.executable, "-m", "vo3d_opt.cli"]
+    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
+    return subprocess.run(cmd + [str(a) for a in args], capture_output=True, text=True,
+                          timeout=600, cwd=cwd, env=env)
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("cli") / "small.yaml"
+    path.write_text(yaml.safe_dump(SMALL, sort_keys=False))
+    return path
+
+
+@pytest.fixture(scope="module")
+def run_json(small) -> subprocess.CompletedProcess:
+    return vo3d("run", small, "--json")
+
+
+def test_run_json_prints_exactly_one_object_with_the_contract_keys(run_json):
+    assert run_json.returncode == 0, run_json.stderr
+    out = run_json.stdout.strip()
+    assert out.startswith("{") and out.count("\n") == 0, out[:500]
+    summary = json.loads(out)
+    assert set(CONTRACT_KEYS) <= set(summary)
+    assert summary["scenario"] == "cli-small" and summary["formulation"] == "plane_qp"
+    assert isinstance(summary["solver"], str) and summary["solver"]
+    assert summary["agents"] == 2 and summary["steps"] > 0
+    assert summary["time"] == pytest.approx(summary["steps"] * 0.2)
+    for key in ("reached", "pz_intrusions", "collisions", "altitude_violations",
+                "speed_violations", "fallbacks", "steps", "agents"):
+        assert isinstance(summary[key], int) and not isinstance(summary[key], bool), key
+    assert isinstance(summary["all_reached"], bool)
+    for key in ("min_vehicle_distance", "min_obstacle_distance", "decision_time_median_us",
+                "decision_time_p99_us"):
+        assert isinstance(summary[key], float) and summary[key] >= 0.0, key
+    assert "running cli-small" in run_json.stderr  # logs go to stderr
+
+
+def test_run_prints_a_table_by_default(small):
+    res = vo3d("run", small, "--formulation", "sampled")
+    assert res.returncode == 0, res.stderr
+    lines = dict(line.split(None, 1) for line in res.stdout.strip().splitlines())
+    assert set(CONTRACT_KEYS) <= set(lines)
+    assert lines["formulation"].strip() == "sampled"
+
+
+def test_run_accepts_a_bundled_name():
+    res = vo3d("run", "paper-flight-test", "--json")
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stdout)
+    assert summary["scenario"] == "paper-flight-test" and summary["min_vehicle_distance"] is None
+
+
+def test_run_out_writes_csv_summary_and_plots(small, tmp_path):
+    out = tmp_path / "out"
+    res = vo3d("run", small, "--solver", "osqp", "--json", "--out", out)
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stdout)
+    assert json.loads((out / "summary.json").read_text()) == summary
+    with (out / "trajectories.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == (summary["steps"] + 1) * 2
+    assert {"step", "time", "agent", "x", "y", "z", "vx", "vy", "vz", "status"} <= set(rows[0])
+    for name in ("trajectories_3d.png", "top_view.png", "vehicle_distance.png",
+                 "obstacle_distance.png"):
+        data = (out / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000, name
+
+
+@pytest.mark.parametrize(
+    "mutation, fragment",
+    [
+        pytest.param({"spead": 3.0}, "spead", id="unknown-key"),
+        pytest.param({"dt": -1.0}, "dt", id="negative-dt"),
+        pytest.param({"limits": {"speed": [0.0, 4.0], "altitude": [0.0, 10.0]}},
+                     "agents[0].start", id="start-above-ceiling"),
+    ],
+)
+def test_invalid_scenario_exits_2_with_one_line(tmp_path, mutation, fragment):
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump({**SMALL, **mutation}))
+    res = vo3d("run", path, "--json")
+    assert res.returncode == 2
+    assert res.stdout == ""
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(path) in lines[0] and fragment in lines[0], res.stderr
+
+
+def test_unreadable_scenario_exits_2(tmp_path):
+    res = vo3d("run", tmp_path / "missing.yaml")
+    assert res.returncode == 2 and res.stdout == ""
+    assert len(res.stderr.strip().splitlines()) == 1 and "missing.yaml" in res.stderr
+
+
+@pytest.mark.parametrize(
+    "args, fragment",
+    [
+        pytest.param(["--formulation", "magic"], "magic", id="unknown-formulation"),
+        pytest.param(["--solver", "no-such-solver"], "no-such-solver", id="unknown-solver"),
+    ],
+)
+def test_unknown_formulation_or_solver_exits_2(small, args, fragment):
+    res = vo3d("run", small, "--json", *args)
+    assert res.returncode == 2 and res.stdout == ""
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and fragment in lines[0], res.stderr
+
+
+def test_compare_one_row_per_combination(small):
+    res = vo3d("compare", small, "--formulations", "sampled", "plane_qp", "--json")
+    assert res.returncode == 0, res.stderr
+    rows = json.loads(res.stdout)
+    assert [r["formulation"] for r in rows] == ["sampled", "plane_qp"]
+    assert all(set(CONTRACT_KEYS) <= set(r) for r in rows)
+    table = vo3d("compare", small, "--formulations", "plane_qp", "--solvers", "osqp", "clarabel")
+    assert table.returncode == 0, table.stderr
+    lines = table.stdout.strip().splitlines()
+    assert lines[1].split()[:2] == ["formulation", "solver"] and len(lines) == 4
+    assert "min_vehicle_distance" in lines[1]
+
+
+def test_compare_unknown_name_exits_2(small):
+    res = vo3d("compare", small, "--formulations", "plane_qp", "magic")
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
+
+
+def test_list_shows_every_bundled_scenario():
+    res = vo3d("list")
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.strip().splitlines()
+    files = bundled_files()
+    assert len(lines) == len(files) + 1
+    for path in files:
+        sc = load_scenario(path)
+        (line,) = [ln for ln in lines if ln.split()[0] == sc.name]
+        assert line.split()[1] == str(sc.n_agents)
+    listed = json.loads(vo3d("list", "--json").stdout)
+    assert {r["name"] for r in listed} == {load_scenario(p).name for p in files}
+
+
+def test_usage_errors_exit_2():
+    res = vo3d("run")
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1

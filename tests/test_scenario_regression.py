@@ -1,0 +1,42 @@
+"""Regression over the bundled scenarios: every one under the default formulation (plane_qp),
+and the paper's cases also under the paper's sampled selection, must end with every agent
+arrived, no collision, no protected-zone intrusion and no speed or altitude violation."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from vo3d_opt.sim.metrics import summarize
+from vo3d_opt.sim.scenario import bundled_files
+from vo3d_opt.sim.simulator import run_scenario
+
+pytest.importorskip("vo3d_opt.selector")
+
+FILES = bundled_files()
+PAPER = [p for p in FILES if p.stem.startswith("paper-")]
+CASES = [pytest.param(p, "plane_qp", id=f"{p.stem}-plane_qp") for p in FILES] + [
+    pytest.param(p, "sampled", id=f"{p.stem}-sampled") for p in PAPER
+]
+
+
+def test_there_is_something_to_check():
+    assert len(FILES) >= 11 and len(PAPER) == 6
+
+
+@pytest.mark.parametrize("path, formulation", CASES)
+def test_bundled_scenario_is_safe(path, formulation):
+    record = run_scenario(path, formulation=formulation, progress=False)
+    s = summarize(record)
+    problems = []
+    if not s["all_reached"]:
+        problems.append(f"{s['agents'] - s['reached']} of {s['agents']} agents did not arrive "
+                        f"within {record.scenario.max_time:g} s")
+    for key in ("collisions", "pz_intrusions", "altitude_violations", "speed_violations"):
+        if s[key]:
+            problems.append(f"{key} = {s[key]}")
+    brief = {k: s[k] for k in ("steps", "min_vehicle_distance", "min_obstacle_distance",
+                               "fallbacks", "status_counts", "decision_time_median_us",
+                               "wall_time")}
+    assert not problems, (f"{s['scenario']} under {formulation}/{s['solver']}: "
+                          + "; ".join(problems) + f"  {json.dumps(brief)}")

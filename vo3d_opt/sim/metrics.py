@@ -1,0 +1,209 @@
+"""Safety and timing summary of a run (contract §3) and the distance series behind the plots.
+
+Distances between two vehicles are evaluated *continuously*: within a step both fly straight
+lines, so their relative motion is linear and the closest approach on each segment is exact
+(a sampled-only check could miss a pass between two samples). Distances to obstacles are
+evaluated at the samples and at three interior points of every segment. A 1e-6 tolerance
+absorbs rounding in every threshold (distance, altitude, speed).
+
+Keys of :func:`summarize` beyond the contract: ``decisions`` (select() calls),
+``status_counts`` (per status), ``vehicle_collisions`` / ``obstacle_collisions`` (the two parts
+of ``collisions``), ``obstacle_pz_intrusions`` (vehicle–obstacle pairs whose centre ever entered
+the obstacle's protected prism C_pz, or a sphere's protected zone), ``starts_inside_pz``
+(vehicle pairs and vehicle–obstacle pairs already inside such a zone at t = 0, which also count
+in the intrusions), ``arrival_time_max`` (s, null unless all arrived), ``path_length_ratio``
+(flown path over straight start–goal distance, mean over arrived agents), ``decision_time_max_us``
+and ``wall_time`` (s).
+"""
+from __future__ import annotations
+
+from collections import Counter
+from typing import Any
+
+import numpy as np
+
+from vo3d_opt.sim.scenario import prism_contains, sphere_surface_distance
+from vo3d_opt.sim.simulator import RunRecord
+
+TOL = 1e-6
+#: Interior points per segment at which obstacle distances are also evaluated.
+OBSTACLE_SUBSAMPLES = (0.25, 0.5, 0.75)
+_CHUNK = 256
+
+CONTRACT_KEYS = (
+    "scenario", "formulation", "solver", "agents", "steps", "time", "reached", "all_reached",
+    "min_vehicle_distance", "min_obstacle_distance", "pz_intrusions", "collisions",
+    "altitude_violations", "speed_violations", "fallbacks", "decision_time_median_us",
+    "decision_time_p99_us",
+)
+
+
+def pair_min_distances(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closest approach of every vehicle pair over the whole run, along the straight segments.
+
+    Returns (i, j, dmin) for the pairs i < j, each of shape (P,).
+    """
+    n = positions.shape[1]
+    ii, jj = np.triu_indices(n, 1)
+    dmin = np.full(ii.shape, np.inf)
+    if ii.size == 0:
+        return ii, jj, dmin
+    last = positions.shape[0] - 1
+    for a in range(0, max(last, 1), _CHUNK):
+        b = min(a + _CHUNK, last)
+        rel = positions[a : b + 1, ii] - positions[a : b + 1, jj]  # (S+1, P, 3)
+        dmin = np.minimum(dmin, np.linalg.norm(rel, axis=-1).min(axis=0))
+        if b > a:
+            r0, w = rel[:-1], rel[1:] - rel[:-1]
+            ww = np.einsum("spk,spk->sp", w, w)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                t = np.where(ww > 0, -np.einsum("spk,spk->sp", r0, w) / ww, 0.0)
+            t = np.clip(t, 0.0, 1.0)
+            closest = np.linalg.norm(r0 + t[..., None] * w, axis=-1)
+            dmin = np.minimum(dmin, closest.min(axis=0))
+    return ii, jj, dmin
+
+
+def _with_subsamples(positions: np.ndarray) -> np.ndarray:
+    """Samples plus interior points of each segment, shape (S, N, 3)."""
+    if positions.shape[0] < 2:
+        return positions
+    a, d = positions[:-1], positions[1:] - positions[:-1]
+    inner = [a + f * d for f in OBSTACLE_SUBSAMPLES]
+    return np.concatenate([positions, *inner], axis=0)
+
+
+def _physical_obstacles(record: RunRecord) -> list[tuple[str, Any]]:
+    """(kind, object) for every obstacle the metrics count: bodies and physical spheres."""
+    sc = record.scenario
+    out: list[tuple[str, Any]] = [("body", b) for b in sc.bodies]
+    out += [("sphere", s) for s in sc.spheres if s.physical]
+    return out
+
+
+def obstacle_min_distances(record: RunRecord, positions: np.ndarray | None = None,
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """(N, M) smallest centre-to-surface distance and (N, M) 'entered the protected zone', over
+    the M physical obstacles, for the record's positions (or the ``positions`` given)."""
+    pts = _with_subsamples(record.positions if positions is None else positions)
+    obstacles = _physical_obstacles(record)
+    n = record.n_agents
+    dist = np.full((n, len(obstacles)), np.inf)
+    entered = np.zeros((n, len(obstacles)), dtype=bool)
+    for m, (kind, ob) in enumerate(obstacles):
+        if kind == "body":
+            dist[:, m] = ob.surface_distance(pts).min(axis=0)
+            shrunk = pts.copy()
+            horiz = pts[..., :2] - ob.center
+            norm = np.linalg.norm(horiz, axis=-1, keepdims=True)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                shrunk[..., :2] += np.where(norm > 0, horiz / norm * TOL, 0.0)
+            shrunk[..., 2] += TOL
+            entered[:, m] = prism_contains(ob, shrunk).any(axis=0)
+        else:
+            centre = np.asarray(ob.center, dtype=float)
+            dist[:, m] = sphere_surface_distance(centre, ob.radius, pts).min(axis=0)
+            entered[:, m] = (np.linalg.norm(pts - centre, axis=-1) < ob.r_pz - TOL).any(axis=0)
+    return dist, entered
+
+
+def nearest_vehicle_distance(record: RunRecord) -> np.ndarray:
+    """(T+1, N): each vehicle's distance to its nearest other vehicle at each sample (inf alone)."""
+    p = record.positions
+    n = p.shape[1]
+    out = np.full(p.shape[:2], np.inf)
+    if n < 2:
+        return out
+    for a in range(0, p.shape[0], _CHUNK):
+        q = p[a : a + _CHUNK]
+        d = np.linalg.norm(q[:, :, None, :] - q[:, None, :, :], axis=-1)
+        d[:, np.arange(n), np.arange(n)] = np.inf
+        out[a : a + _CHUNK] = d.min(axis=2)
+    return out
+
+
+def nearest_obstacle_distance(record: RunRecord) -> np.ndarray:
+    """(T+1, N): each vehicle's distance to the nearest obstacle surface (inf without any)."""
+    p = record.positions
+    out = np.full(p.shape[:2], np.inf)
+    for kind, ob in _physical_obstacles(record):
+        d = (ob.surface_distance(p) if kind == "body"
+             else sphere_surface_distance(np.asarray(ob.center), ob.radius, p))
+        out = np.minimum(out, d)
+    return out
+
+
+def _opt(x: float) -> float | None:
+    return None if not np.isfinite(x) else float(x)
+
+
+def summarize(record: RunRecord) -> dict[str, Any]:
+    """The JSON summary of contract §3 (exact keys first) plus the extra keys listed above."""
+    sc = record.scenario
+    n, steps = record.n_agents, record.steps
+    r_pz, radius = sc.r_pz, sc.radius
+
+    ii, jj, dmin = pair_min_distances(record.positions)
+    pz_limit = np.maximum(r_pz[ii], r_pz[jj])
+    vehicle_pz = int(np.count_nonzero(dmin < pz_limit - TOL))
+    vehicle_coll = int(np.count_nonzero(dmin < radius[ii] + radius[jj] - TOL))
+    start_d = np.linalg.norm(record.positions[0, ii] - record.positions[0, jj], axis=-1)
+    starts_pz = int(np.count_nonzero(start_d < pz_limit - TOL))
+
+    odist, entered = obstacle_min_distances(record)
+    obstacle_coll = int(np.count_nonzero(odist < radius[:, None] - TOL))
+    obstacle_pz = int(np.count_nonzero(entered))
+    if odist.size:
+        starts_pz += int(np.count_nonzero(obstacle_min_distances(record, record.positions[:1])[1]))
+
+    z = record.positions[..., 2]
+    z_lo, z_hi = sc.limits.altitude
+    altitude_violations = int(np.count_nonzero((z < z_lo - TOL) | (z > z_hi + TOL)))
+    speed = np.linalg.norm(record.velocities, axis=-1)
+    v_lo = sc.limits.speed[0]
+    speed_bad = (speed > sc.max_speed[None, :] + TOL) | (record.decided & (speed < v_lo - TOL))
+    speed_violations = int(np.count_nonzero(speed_bad))
+
+    statuses = record.statuses[record.decided]
+    counts = Counter(str(s) for s in statuses)
+    fallbacks = int(sum(c for s, c in counts.items() if s != "optimal"))
+    times_us = record.decision_times[record.decided] * 1e6
+    times_us = times_us[np.isfinite(times_us)]
+
+    reached_mask = record.arrived[-1]
+    arrival = record.arrival_times()
+    steps_flown = np.linalg.norm(np.diff(record.positions, axis=0), axis=-1).sum(axis=0)
+    straight = np.linalg.norm(sc.goals - sc.starts, axis=1)
+    ratio_ok = reached_mask & (straight > 0)
+
+    return {
+        "scenario": sc.name,
+        "formulation": record.formulation,
+        "solver": record.solver,
+        "agents": n,
+        "steps": steps,
+        "time": round(steps * record.dt, 9),
+        "reached": int(np.count_nonzero(reached_mask)),
+        "all_reached": bool(reached_mask.all()),
+        "min_vehicle_distance": _opt(dmin.min()) if dmin.size else None,
+        "min_obstacle_distance": _opt(odist.min()) if odist.size else None,
+        "pz_intrusions": vehicle_pz,
+        "collisions": vehicle_coll + obstacle_coll,
+        "altitude_violations": altitude_violations,
+        "speed_violations": speed_violations,
+        "fallbacks": fallbacks,
+        "decision_time_median_us": float(np.median(times_us)) if times_us.size else None,
+        "decision_time_p99_us": float(np.percentile(times_us, 99)) if times_us.size else None,
+        # extras
+        "decisions": int(statuses.size),
+        "status_counts": dict(sorted(counts.items())),
+        "vehicle_collisions": vehicle_coll,
+        "obstacle_collisions": obstacle_coll,
+        "obstacle_pz_intrusions": obstacle_pz,
+        "starts_inside_pz": starts_pz,
+        "arrival_time_max": float(np.nanmax(arrival)) if reached_mask.all() else None,
+        "path_length_ratio": (float(np.mean(steps_flown[ratio_ok] / straight[ratio_ok]))
+                              if ratio_ok.any() else None),
+        "decision_time_max_us": float(times_us.max()) if times_us.size else None,
+        "wall_time": round(float(record.wall_time), 6),
+    }
