@@ -89,16 +89,17 @@ class Encounter:
         return ok & np.all(v @ G.T <= h + LIMIT_TOL, axis=1)
 
     # --- safety -----------------------------------------------------------------------------
+    def containing(self, v: np.ndarray) -> np.ndarray:
+        """(n + m, M): which VOs (cones first, then pyramids) contain each velocity, by the
+        exact 3D membership."""
+        v = np.atleast_2d(v)
+        hz = self.options.horizon
+        return np.concatenate([in_vo_cones(self.cones, v, horizon=hz),
+                               in_vo_pyramids(self.pyramids, v, horizon=hz)])
+
     def unsafe(self, v: np.ndarray) -> np.ndarray:
         """(M,) whether each velocity lies in some VO (exact 3D membership)."""
-        v = np.atleast_2d(v)
-        out = np.zeros(len(v), dtype=bool)
-        hz = self.options.horizon
-        if len(self.cones):
-            out |= np.any(in_vo_cones(self.cones, v, horizon=hz), axis=0)
-        if len(self.pyramids):
-            out |= np.any(in_vo_pyramids(self.pyramids, v, horizon=hz), axis=0)
-        return out
+        return np.any(self.containing(v), axis=0)
 
     def time_to_intrusion(self, v: np.ndarray) -> np.ndarray:
         """(M,) the earliest time any protected zone would be entered (inf: never; 0: inside and

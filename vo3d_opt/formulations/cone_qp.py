@@ -14,7 +14,7 @@ import numpy as np
 
 from ..geometry.pyramid import VOPyramids
 from .common import Encounter, Outcome, Solve, first_safe
-from .plane_qp import fallback, violated_vos
+from .plane_qp import fallback
 from .planes import plane_sections
 from .problem import QP
 
@@ -117,7 +117,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     answer is safe or the QP infeasible (constraint generation, at most one round per VO).
     The safe answer nearest v_pref over the turns wins."""
     tried, failed, attempts, best = [], 0, 0, None
-    start = violated_vos(enc, enc.v_pref) | np.concatenate([enc.cones.inside, enc.pyramids.inside])
+    start = enc.containing(enc.v_pref)[:, 0] | np.concatenate([enc.cones.inside, enc.pyramids.inside])
     for turn in TURNS if len(enc.cones) else TURNS[:1]:
         included = start.copy()
         while True:
@@ -127,7 +127,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
                 failed += res.status == "failed"
                 break
             tried.append(res.x)
-            entered = violated_vos(enc, res.x)
+            entered = enc.containing(res.x)[:, 0]
             if not entered.any():
                 if enc.within_limits(res.x)[0] and (best is None or enc.deviation(res.x)[0] < enc.deviation(best[0])[0]):
                     best = (res.x, turn)

@@ -15,7 +15,6 @@ import heapq
 import numpy as np
 
 from ..geometry.sections import CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, Sections
-from ..geometry import in_vo_cones, in_vo_pyramids
 from .common import Encounter, Outcome, Solve, first_safe, least_bad
 from .planes import PlaneSections, plane_sections
 from .problem import QP, Result
@@ -110,13 +109,6 @@ def row_owners(enc: Encounter) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0, dtype=int)
 
 
-def violated_vos(enc: Encounter, v: np.ndarray) -> np.ndarray:
-    """(n + m,) which VOs contain velocity v (exact 3D membership)."""
-    hz = enc.options.horizon
-    return np.concatenate([in_vo_cones(enc.cones, v[None], horizon=hz)[:, 0],
-                           in_vo_pyramids(enc.pyramids, v[None], horizon=hz)[:, 0]])
-
-
 class PlaneProblems:
     """The (round, plane) QPs of one decision, built lazily: the bounds that order the search
     are computed for a whole round at once, a QP only when it is solved, and a VO's half-plane
@@ -138,7 +130,7 @@ class PlaneProblems:
         self.owner = row_owners(enc)
         inside = np.concatenate([enc.cones.inside, enc.pyramids.inside])
         #: VOs constrained from the start: those holding v_pref, and the zones A is inside.
-        self.initial = violated_vos(enc, enc.v_pref) | inside
+        self.initial = enc.containing(enc.v_pref)[:, 0] | inside
         self.rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
     def add_round(self) -> list[tuple[float, int, int, int, np.ndarray]]:
@@ -227,7 +219,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
         dev = enc.deviation(v)[0]
         if dev >= best_dev:
             continue
-        entered = violated_vos(enc, v)
+        entered = enc.containing(v)[:, 0]
         if not entered.any():
             if enc.within_limits(v)[0]:
                 best, best_dev = (v, p, ROUNDS[r]), dev
