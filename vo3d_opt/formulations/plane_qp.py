@@ -186,9 +186,9 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
 
     Rounds: every section linearised at its boundary point nearest the preferred velocity, then
     every section passed on its left, then on its right (the nearest side is not always best
-    once the other sections count). A VO's half-plane joins a QP when v_pref lies in that VO or
-    when an answer of the QP does (constraint generation: the QP is re-queued with it), so
-    sections far from the answer never over-constrain it. QPs are solved in order of a lower
+    once the other sections count). A VO's half-plane joins the QPs when v_pref lies in that VO
+    or when a QP's answer does (constraint generation: that QP is re-queued), so sections far
+    from the answer never over-constrain it. QPs are solved in order of a lower
     bound on their deviation (the distance to the farthest violated half-plane, which only
     grows as constraints join); the search stops once the best safe answer beats every
     remaining bound. The nearest-point round has the smallest bound on each plane (the distance
@@ -197,18 +197,26 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     ps = plane_sections(enc, enc.options.qp_samples)
     problems = PlaneProblems(enc, ps, has_cones)
     E1, E2 = ps.planes.e1, ps.planes.e2
-    queue = problems.add_round()
+    # The VOs constrained so far, shared by every plane: one found on one plane usually bites
+    # on the next ones too. Queue entries remember how many were in when their bound was made.
+    included = problems.initial.copy()
+    queue = [(lb, r, p, tie, int(included.sum())) for lb, r, p, tie, _ in problems.add_round()]
     first_bounds = [item[0] for item in queue]
     heapq.heapify(queue)
-    best, best_dev, tried, failed, attempts, tie = None, np.inf, [], 0, 0, 0
+    best, best_dev, tried, failed, attempts, tie = None, np.inf, [], 0, 0, len(queue)
     while True:
         if not queue or queue[0][0] >= best_dev:
             if len(problems.rounds) < len(ROUNDS) and min(first_bounds, default=np.inf) < best_dev:
-                for item in problems.add_round():
-                    heapq.heappush(queue, item)
+                for lb, r, p, _, _ in problems.add_round():
+                    tie += 1
+                    heapq.heappush(queue, (problems.bound(r, p, included), r, p, tie, int(included.sum())))
                 continue
             break
-        _, r, p, _, included = heapq.heappop(queue)
+        lb, r, p, _, known = heapq.heappop(queue)
+        if known < included.sum():  # stale bound: VOs joined since; re-queue with the new one
+            tie += 1
+            heapq.heappush(queue, (max(lb, problems.bound(r, p, included)), r, p, tie, int(included.sum())))
+            continue
         res: Result = solve(problems.qp(r, p, included))
         attempts += 1
         if not (res.ok and res.x.shape == (2,)):
@@ -224,9 +232,9 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
             if enc.within_limits(v)[0]:
                 best, best_dev = (v, p, ROUNDS[r]), dev
         elif not np.all(included[entered]):  # constrain the VOs it entered and solve again
-            more = included | entered
+            included |= entered
             tie += 1
-            heapq.heappush(queue, (problems.bound(r, p, more), r, p, -tie, more))
+            heapq.heappush(queue, (problems.bound(r, p, included), r, p, tie, int(included.sum())))
     if best is not None:
         v, p, mode = best
         return Outcome(v, "optimal", float(ps.planes.phi[p]), {"round": mode, "solved": attempts})
