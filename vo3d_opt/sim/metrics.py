@@ -28,7 +28,10 @@ from vo3d_opt.sim.simulator import RunRecord
 TOL = 1e-6
 #: Interior points per segment at which obstacle distances are also evaluated.
 OBSTACLE_SUBSAMPLES = (0.25, 0.5, 0.75)
+#: Steps per chunk of the pairwise arrays, at most, and the elements per chunk (bounds memory to
+#: a few hundred MB however many vehicles: the arrays grow with the square of their number).
 _CHUNK = 256
+_CHUNK_ELEMENTS = 8_000_000
 
 CONTRACT_KEYS = (
     "scenario", "formulation", "solver", "agents", "steps", "time", "reached", "all_reached",
@@ -49,8 +52,9 @@ def pair_min_distances(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     if ii.size == 0:
         return ii, jj, dmin
     last = positions.shape[0] - 1
-    for a in range(0, max(last, 1), _CHUNK):
-        b = min(a + _CHUNK, last)
+    chunk = int(max(2, min(_CHUNK, _CHUNK_ELEMENTS // ii.size)))
+    for a in range(0, max(last, 1), chunk):
+        b = min(a + chunk, last)
         rel = positions[a : b + 1, ii] - positions[a : b + 1, jj]  # (S+1, P, 3)
         dmin = np.minimum(dmin, np.linalg.norm(rel, axis=-1).min(axis=0))
         if b > a:
