@@ -18,7 +18,6 @@ from vo3d_opt.sim.metrics import CONTRACT_KEYS
 from vo3d_opt.sim.scenario import bundled_dir, scenario_from_dict
 from vo3d_opt.sim.simulator import Simulator
 
-pytest.importorskip("rvo23d", reason="RVO2-3D baseline needs the 'baselines' extra (jt-pyrvo23d)")
 
 from vo3d_opt.baselines.rvo2 import run_rvo2, summarize_rvo2  # noqa: E402
 

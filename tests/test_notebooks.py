@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-nbformat = pytest.importorskip("nbformat")
+import nbformat
+from nbclient import NotebookClient
 
 ROOT = Path(__file__).resolve().parents[1]
 NB_DIR = ROOT / "notebooks"
@@ -52,8 +53,6 @@ def test_notebooks_match_their_generator():
 
 @pytest.fixture(scope="module")
 def kernel_path(tmp_path_factory):
-    pytest.importorskip("nbclient")
-    pytest.importorskip("ipykernel")
     d = tmp_path_factory.mktemp("jupyter")
     spec_dir = d / "kernels" / KERNEL
     spec_dir.mkdir(parents=True)
@@ -66,10 +65,6 @@ def kernel_path(tmp_path_factory):
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
 def test_notebook_runs(path, kernel_path, monkeypatch):
-    from nbclient import NotebookClient
-
-    if path.name.startswith("04_"):
-        pytest.importorskip("rvo23d", reason="needs the 'baselines' extra (jt-pyrvo23d)")
     monkeypatch.setenv("JUPYTER_PATH", str(kernel_path))
     monkeypatch.delenv("VO3D_NB_FULL", raising=False)
     nb = nbformat.read(path, as_version=4)

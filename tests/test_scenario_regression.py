@@ -11,7 +11,6 @@ from vo3d_opt.sim.metrics import summarize
 from vo3d_opt.sim.scenario import bundled_files
 from vo3d_opt.sim.simulator import run_scenario
 
-pytest.importorskip("vo3d_opt.selector")
 
 FILES = bundled_files()
 PAPER = [p for p in FILES if p.stem.startswith("paper-")]

@@ -172,7 +172,6 @@ def test_run_is_deterministic_with_a_stand_in():
 
 
 def test_run_is_deterministic_with_the_real_selector():
-    pytest.importorskip("vo3d_opt.selector")
     sc = scenario(max_time=6.0, obstacles=[
         {"type": "cylinder", "center": [0.0, 6.0], "radius": 2.0, "height": 30.0}])
     r1 = run_scenario(sc, formulation="plane_qp", progress=False)

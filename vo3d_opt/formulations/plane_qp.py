@@ -23,6 +23,8 @@ from .sampled import candidates
 CURVED = (CIRCLE, ELLIPSE, PARABOLA, HYPERBOLA)
 #: Linearisation rounds: nearest boundary point, then every section passed on its left, right.
 ROUNDS = ("near", "left", "right")
+#: Bounds within this much (m/s) of the best deviation found cannot improve on it meaningfully.
+_TIE = 1e-6
 
 
 def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray, mode: str) -> np.ndarray:
@@ -133,17 +135,16 @@ class PlaneProblems:
         self.initial = enc.containing(enc.v_pref)[:, 0] | inside
         self.rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
-    def add_round(self) -> list[tuple[float, int, int, int, np.ndarray]]:
-        """Linearise the next round; its queue entries (bound, round, plane, tie, VOs
-        included), without planes on which it repeats an earlier round."""
+    def add_round(self, included: np.ndarray) -> list[tuple[float, int, int]]:
+        """Linearise the next round: (bound, round, plane) for each plane on which it does not
+        repeat an earlier round and is not infeasible by its bound."""
         r = len(self.rounds)
         self.rounds.append(section_halfplanes(self.enc, self.ps, ROUNDS[r]))
         repeat = np.zeros(len(self.ps.planes.phi), dtype=bool)
         for q in range(r):
             repeat |= self._same(r, q)
-        lb = self.bounds(r, self.initial)
-        return [(float(lb[p]), r, int(p), int(p), self.initial)
-                for p in np.flatnonzero(~repeat & np.isfinite(lb))]
+        lb = self.bounds(r, included)
+        return [(float(lb[p]), r, int(p)) for p in np.flatnonzero(~repeat & np.isfinite(lb))]
 
     def bounds(self, r: int, included: np.ndarray) -> np.ndarray:
         """(P,) lower bounds on every plane's QP deviation in round r (see ``bound``)."""
@@ -200,16 +201,17 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     # The VOs constrained so far, shared by every plane: one found on one plane usually bites
     # on the next ones too. Queue entries remember how many were in when their bound was made.
     included = problems.initial.copy()
-    queue = [(lb, r, p, tie, int(included.sum())) for lb, r, p, tie, _ in problems.add_round()]
+    queue = [(lb, r, p, p, int(included.sum())) for lb, r, p in problems.add_round(included)]
     first_bounds = [item[0] for item in queue]
     heapq.heapify(queue)
     best, best_dev, tried, failed, attempts, tie = None, np.inf, [], 0, 0, len(queue)
     while True:
-        if not queue or queue[0][0] >= best_dev:
-            if len(problems.rounds) < len(ROUNDS) and min(first_bounds, default=np.inf) < best_dev:
-                for lb, r, p, _, _ in problems.add_round():
+        done = best_dev - _TIE  # bounds this close to the best answer cannot beat it
+        if not queue or queue[0][0] >= done:
+            if len(problems.rounds) < len(ROUNDS) and min(first_bounds, default=np.inf) < done:
+                for lb, r, p in problems.add_round(included):
                     tie += 1
-                    heapq.heappush(queue, (problems.bound(r, p, included), r, p, tie, int(included.sum())))
+                    heapq.heappush(queue, (lb, r, p, tie, int(included.sum())))
                 continue
             break
         lb, r, p, _, known = heapq.heappop(queue)
