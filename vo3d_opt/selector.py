@@ -27,7 +27,7 @@ from .types import AgentState, Box, Cylinder, Limits, Neighbor
 
 FORMULATIONS = ("sampled", "plane_qp", "cone_qp", "nlp")
 #: Default QP backend: the fastest on our benchmark (benchmarks/bench_select.py).
-DEFAULT_QP_SOLVER = "qpsolvers:quadprog"
+DEFAULT_QP_SOLVER = "clarabel"
 DEFAULT_NLP_SOLVER = "casadi"
 
 
