@@ -20,24 +20,26 @@ from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelect
 from vo3d_opt.solvers import available_qp_solvers
 
 
-def encounter(rng: np.random.Generator, n: int, m: int) -> dict:
+def encounter(rng: np.random.Generator, n: int, m: int, conflict: bool = True) -> dict:
+    """Own UAV at (0, 0, 20) flying +x; with ``conflict`` a neighbour head-on 30 m ahead and a
+    cylinder 20 m ahead, without it only neighbours and obstacles away from the path."""
     p = np.array([0.0, 0.0, 20.0])
     nbs = [Neighbor(position=(30.0, rng.uniform(-1, 1), 20.0 + rng.uniform(-1, 1)),
-                    velocity=(-4.0, 0.0, 0.0), r_pz=10.0)]
+                    velocity=(-4.0, 0.0, 0.0), r_pz=10.0)] if conflict else []
     while len(nbs) < n:
         d = rng.normal(size=3)
         d /= np.linalg.norm(d)
         pos = p + rng.uniform(12.0, 55.0) * d
         pos[2] = np.clip(pos[2], 1.0, 39.0)
-        if np.linalg.norm(pos - p) > 11.0:
+        if np.linalg.norm(pos - p) > 11.0 and (conflict or pos[0] < -12.0):
             vel = rng.normal(size=3)
             nbs.append(Neighbor(position=pos, velocity=vel / np.linalg.norm(vel) * rng.uniform(0, 4), r_pz=10.0))
     obs = []
-    if m:
+    if m and conflict:
         obs.append(Cylinder(center=(20.0, rng.uniform(-2, 2)), radius=2.0, height=30.0))
     while len(obs) < m:
         c = rng.uniform(-50, 50, 2)
-        if np.linalg.norm(c) < 12:
+        if np.linalg.norm(c) < 12 or not (conflict or c[0] < -12.0):
             continue
         if rng.random() < 0.5:
             obs.append(Cylinder(center=c, radius=rng.uniform(1, 4), height=rng.uniform(10, 45)))
@@ -64,6 +66,8 @@ def main() -> None:
     ap.add_argument("--encounters", type=int, default=40)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="only 9 neighbours x 6 obstacles")
+    ap.add_argument("--fast-path", action="store_true",
+                    help="encounters where the preferred velocity is already safe (all behind)")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(7)
@@ -75,7 +79,7 @@ def main() -> None:
     print("| neighbours | obstacles | formulation | solver | median µs | p99 µs | statuses |")
     print("|---:|---:|---|---|---:|---:|---|")
     for n, m in grid:
-        cases = [encounter(rng, n, m) for _ in range(args.encounters)]
+        cases = [encounter(rng, n, m, conflict=not args.fast_path) for _ in range(args.encounters)]
         medians = {}
         for form, solver in combos:
             rep = 1 if form in ("sampled", "nlp") or solver.startswith("cvxpy") else args.repeat
