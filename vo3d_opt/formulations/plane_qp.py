@@ -27,19 +27,20 @@ ROUNDS = ("near", "left", "right")
 _TIE = 1e-6
 
 
-def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray, mode: str) -> np.ndarray:
-    """Index of the chosen boundary candidate along the last axis."""
-    mask = valid
-    if mode != "near":
-        count = np.maximum(np.sum(valid, axis=-1, keepdims=True), 1)
-        centre = np.sum(np.where(valid, side_y, 0.0), axis=-1, keepdims=True) / count
-        on_side = valid & ((side_y >= centre) if mode == "left" else (side_y <= centre))
-        mask = np.where(np.any(on_side, axis=-1, keepdims=True), on_side, valid)
-    return np.argmin(np.where(mask, dist, np.inf), axis=-1)
+def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Index of the chosen boundary candidate along the last axis, for every round at once:
+    (len(ROUNDS), ...). "near": the nearest valid one; "left" / "right": the nearest in the
+    upper / lower half of the section (by in-plane y about the candidates' mean)."""
+    count = np.maximum(np.sum(valid, axis=-1, keepdims=True), 1)
+    centre = np.sum(np.where(valid, side_y, 0.0), axis=-1, keepdims=True) / count
+    masks = [valid]
+    for on_side in (valid & (side_y >= centre), valid & (side_y <= centre)):
+        masks.append(np.where(np.any(on_side, axis=-1, keepdims=True), on_side, valid))
+    return np.argmin(np.where(np.stack(masks), dist, np.inf), axis=-1)
 
 
-def _curved_halfplanes(enc: Encounter, ps: PlaneSections, w0: np.ndarray, mode: str):
-    """Tangent planes of the cones along the chosen generator, restricted to each plane."""
+def _curved_halfplanes(enc: Encounter, ps: PlaneSections, w0: np.ndarray):
+    """Tangent planes of the cones along the chosen generators, restricted to each plane."""
     sec = ps.cones
     n, P = sec.kind.shape
     Q = np.concatenate([sec.curve, sec.chord], axis=2)  # boundary candidates (n, P, K+2, 2)
@@ -47,17 +48,17 @@ def _curved_halfplanes(enc: Encounter, ps: PlaneSections, w0: np.ndarray, mode: 
     valid = np.isfinite(Q[..., 0])
     with np.errstate(invalid="ignore"):
         dist = np.linalg.norm(Q - w0, axis=-1)
-        k = _pick(dist, Q[..., 1], valid, mode)
-    t_star = np.take_along_axis(np.nan_to_num(tq), k[..., None], axis=-1)[..., 0]
-    N = enc.cones.outward_normals(t_star)  # (n, P, 3)
-    a = np.stack([N @ ps.planes.e1, np.einsum("npi,pi->np", N, ps.planes.e2)], axis=-1)
-    b = np.einsum("npi,ni->np", N, enc.cones.apex)
+    k = _pick(dist, Q[..., 1], valid)  # (R, n, P)
+    t_star = np.take_along_axis(np.nan_to_num(tq)[None], k[..., None], axis=-1)[..., 0]
+    N = enc.cones.outward_normals(t_star.transpose(1, 0, 2)).transpose(1, 0, 2, 3)  # (R, n, P, 3)
+    a = np.stack([N @ ps.planes.e1, np.einsum("rnpi,pi->rnp", N, ps.planes.e2)], axis=-1)
+    b = np.einsum("rnpi,ni->rnp", N, enc.cones.apex)
     active = np.isin(sec.kind, CURVED) & np.any(valid, axis=-1)
     return a, b, active
 
 
-def _triangle_halfplanes(sec: Sections, w0: np.ndarray, mode: str):
-    """The two boundary lines of a triangle (the generators through the apex in the plane)."""
+def _triangle_halfplanes(sec: Sections, w0: np.ndarray):
+    """One of the two boundary lines of each triangle (the generators through the apex)."""
     A = sec.apex[:, :, None, :]  # (k, P, 1, 2)
     Pts = sec.chord  # (k, P, 2, 2)
     d = Pts - A
@@ -65,9 +66,9 @@ def _triangle_halfplanes(sec: Sections, w0: np.ndarray, mode: str):
         s = np.maximum(np.sum((w0 - A) * d, axis=-1) / np.sum(d * d, axis=-1), 0.0)
         dist = np.linalg.norm(w0 - A - s[..., None] * d, axis=-1)
     valid = np.isfinite(dist)
-    i = _pick(np.nan_to_num(dist, nan=np.inf), np.nan_to_num(Pts[..., 1]), valid, mode)
-    d_i = np.take_along_axis(d, i[..., None, None], axis=2)[:, :, 0]
-    d_j = np.take_along_axis(d, (1 - i)[..., None, None], axis=2)[:, :, 0]
+    i = _pick(np.nan_to_num(dist, nan=np.inf), np.nan_to_num(Pts[..., 1]), valid)  # (R, k, P)
+    d_i = np.take_along_axis(d[None], i[..., None, None], axis=3)[..., 0, :]
+    d_j = np.take_along_axis(d[None], (1 - i)[..., None, None], axis=3)[..., 0, :]
     normal = np.stack([-d_i[..., 1], d_i[..., 0]], axis=-1)
     normal = np.where((np.sum(normal * d_j, axis=-1) > 0)[..., None], -normal, normal)  # away from P_j
     b = np.sum(normal * sec.apex, axis=-1)
@@ -76,24 +77,28 @@ def _triangle_halfplanes(sec: Sections, w0: np.ndarray, mode: str):
 
 
 def _inside_halfplanes(sec: Sections):
-    """Escape half-planes when A is inside a protected zone: not closing in."""
-    return -sec.halfplane[..., :2], -sec.halfplane[..., 2], sec.kind == INSIDE_CODE
+    """Escape half-planes when A is inside a protected zone: not closing in (every round)."""
+    R = len(ROUNDS)
+    a = np.broadcast_to(-sec.halfplane[..., :2], (R,) + sec.halfplane.shape[:-1] + (2,))
+    b = np.broadcast_to(-sec.halfplane[..., 2], (R,) + sec.halfplane.shape[:-1])
+    return a, b, sec.kind == INSIDE_CODE
 
 
-def section_halfplanes(enc: Encounter, ps: PlaneSections, mode: str = "near"):
-    """All VO half-planes a·w >= b on every plane: (a (k, P, 2), b (k, P), active (k, P))."""
+def section_halfplanes(enc: Encounter, ps: PlaneSections):
+    """Every round's VO half-planes a·w >= b on every plane: a (R, k, P, 2), b (R, k, P), and
+    which rows apply, active (k, P) (the same in every round)."""
     w0 = ps.w_pref
     parts = []
     if len(enc.cones):
-        parts += [_curved_halfplanes(enc, ps, w0, mode), _triangle_halfplanes(ps.cones, w0, mode),
+        parts += [_curved_halfplanes(enc, ps, w0), _triangle_halfplanes(ps.cones, w0),
                   _inside_halfplanes(ps.cones)]
     if len(enc.pyramids):
-        parts += [_triangle_halfplanes(ps.pyramids, w0, mode), _inside_halfplanes(ps.pyramids)]
+        parts += [_triangle_halfplanes(ps.pyramids, w0), _inside_halfplanes(ps.pyramids)]
     if not parts:
-        P = len(ps.planes.phi)
-        return np.zeros((0, P, 2)), np.zeros((0, P)), np.zeros((0, P), bool)
-    a = np.concatenate([p[0] for p in parts])
-    b = np.concatenate([p[1] for p in parts]) + enc.options.margin
+        P, R = len(ps.planes.phi), len(ROUNDS)
+        return np.zeros((R, 0, P, 2)), np.zeros((R, 0, P)), np.zeros((0, P), bool)
+    a = np.concatenate([p[0] for p in parts], axis=1)
+    b = np.concatenate([p[1] for p in parts], axis=1) + enc.options.margin
     active = np.concatenate([p[2] for p in parts])
     return a, b, active
 
@@ -117,7 +122,8 @@ class PlaneProblems:
     joins a QP only once the preferred velocity or an answer of that QP lies in the VO."""
 
     def __init__(self, enc: Encounter, ps: PlaneSections, has_cones: bool) -> None:
-        self.enc, self.ps, self.has_cones = enc, ps, has_cones
+        self.has_cones = has_cones
+        self.n_planes = len(ps.planes.phi)
         self.v_max = enc.limits.v_max
         self.w0 = ps.w_pref
         G3, h3 = enc.linear_bounds()
@@ -133,14 +139,16 @@ class PlaneProblems:
         inside = np.concatenate([enc.cones.inside, enc.pyramids.inside])
         #: VOs constrained from the start: those holding v_pref, and the zones A is inside.
         self.initial = enc.containing(enc.v_pref)[:, 0] | inside
+        self.halfplanes = section_halfplanes(enc, ps)  # every round's, computed at once
         self.rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
     def add_round(self, included: np.ndarray) -> list[tuple[float, int, int]]:
         """Linearise the next round: (bound, round, plane) for each plane on which it does not
         repeat an earlier round and is not infeasible by its bound."""
         r = len(self.rounds)
-        self.rounds.append(section_halfplanes(self.enc, self.ps, ROUNDS[r]))
-        repeat = np.zeros(len(self.ps.planes.phi), dtype=bool)
+        a, b, active = self.halfplanes
+        self.rounds.append((a[r], b[r], active))
+        repeat = np.zeros(self.n_planes, dtype=bool)
         for q in range(r):
             repeat |= self._same(r, q)
         lb = self.bounds(r, included)
