@@ -22,7 +22,7 @@ import numpy as np
 from .formulations import cone_qp, nlp, plane_qp, sampled
 from .formulations.common import Encounter, Options, Outcome, prepare
 from .formulations.problem import NLP, QP, Result
-from .solvers import FEAS_TOL, available_qp_solvers, available_solvers, get_backend, standardise
+from .solvers import FEAS_TOL, Backend, available_qp_solvers, available_solvers, get_backend, standardise
 from .types import AgentState, Box, Cylinder, Limits, Neighbor
 
 FORMULATIONS = ("sampled", "plane_qp", "cone_qp", "nlp")
@@ -64,18 +64,20 @@ def _items(value, cls, name: str) -> list:
     return items
 
 
-def _checked(solve, kind: str):
-    """Wrap a backend call: exceptions and answers that break the problem's own constraints
-    become "failed" results, so a misbehaving backend can never crash the control loop."""
+def _checked(backend: Backend, method: str):
+    """Wrap a backend call: exceptions, and answers from outside backends that break the
+    problem's own constraints, become "failed" results, so a misbehaving backend can never
+    crash the control loop."""
+    solve = getattr(backend, method)
 
     def call(problem: QP | NLP) -> Result:
         try:
             res = solve(problem)
         except Exception as exc:  # noqa: BLE001 - any backend error is a failed solve
-            return Result(None, "failed", kind, f"{type(exc).__name__}: {exc}")
+            return Result(None, "failed", backend.name, f"{type(exc).__name__}: {exc}")
         if not isinstance(res, Result):
-            return Result(None, "failed", kind, "backend returned no Result")
-        if res.status == "optimal":
+            return Result(None, "failed", backend.name, "backend returned no Result")
+        if res.status == "optimal" and not backend.checks_answers:
             qp = problem.qp if isinstance(problem, NLP) else problem
             x = None if res.x is None else np.asarray(res.x, dtype=float).reshape(-1)
             if x is None or x.shape != (qp.n,) or not np.all(np.isfinite(x)) or standardise(qp).violation(x) > FEAS_TOL:
@@ -187,12 +189,12 @@ class VelocitySelector:
         # The preferred velocity itself, when safe, is every formulation's optimum.
         if not enc.inside_any and enc.within_limits(enc.v_pref)[0] and not enc.unsafe(enc.v_pref)[0]:
             return Outcome(enc.v_pref.copy(), "optimal", 0.0, {"round": "preferred"})
-        solve = _checked(self._qp.solve, self._qp.name)
+        solve = _checked(self._qp, "solve")
         if self.formulation == "plane_qp":
             return plane_qp.select(enc, solve, self._qp.has_cones)
         if self.formulation == "cone_qp":
             return cone_qp.select(enc, solve, self._qp.has_cones)
-        return nlp.select(enc, solve, self._qp.has_cones, _checked(self._nlp.solve_nlp, self._nlp.name))
+        return nlp.select(enc, solve, self._qp.has_cones, _checked(self._nlp, "solve_nlp"))
 
 
 def _enforce_limits(enc: Encounter, v: np.ndarray) -> np.ndarray:

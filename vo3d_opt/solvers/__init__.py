@@ -41,6 +41,9 @@ class Backend:
     #: True when ``QP.soc_radius`` is taken as an exact second-order cone.
     has_cones: bool
     kind: Literal["qp", "nlp"]
+    #: True for the backends of this package, whose "optimal" answers are already checked
+    #: against every constraint (``make_result``); others are checked by the selector.
+    checks_answers: bool = False
 
     def solve(self, qp: QP, warm_start: np.ndarray | None = None) -> Result:
         """Solve a QP (QP backends)."""

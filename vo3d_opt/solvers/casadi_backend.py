@@ -92,6 +92,7 @@ class CasadiBackend(Backend):
 
     has_cones = True
     kind = "nlp"
+    checks_answers = True
 
     def __init__(self, name: str, plugin: str) -> None:
         self.name = name

@@ -57,6 +57,7 @@ class ClarabelBackend(Backend):
     name = "clarabel"
     has_cones = True
     kind = "qp"
+    checks_answers = True
 
     def __init__(self) -> None:
         self._solvers: dict[tuple[int, int, int, int], clarabel.DefaultSolver] = {}

@@ -80,6 +80,7 @@ class CvxpyBackend(Backend):
     """cvxpy with a fixed solver (``cvxpy:<SOLVER>``) or cvxpy's own choice (``cvxpy``)."""
 
     kind = "qp"
+    checks_answers = True
 
     def __init__(self, name: str, solver: str | None, has_cones: bool) -> None:
         self.name = name

@@ -79,6 +79,7 @@ class OsqpBackend(Backend):
     name = "osqp"
     has_cones = False
     kind = "qp"
+    checks_answers = True
 
     def __init__(self) -> None:
         self._solvers: dict[tuple[int, int], osqp.OSQP] = {}

@@ -42,6 +42,7 @@ class QpsolversBackend(Backend):
 
     has_cones = False
     kind = "qp"
+    checks_answers = True
 
     def __init__(self, name: str, solver: str) -> None:
         self.name = name
