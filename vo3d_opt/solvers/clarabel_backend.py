@@ -13,7 +13,7 @@ import numpy as np
 
 from vo3d_opt.formulations.problem import QP, Result
 from vo3d_opt.solvers import Backend, Standard, failure, make_result, screen, standardise
-from vo3d_opt.solvers.osqp_backend import dense_csc, triu_csc, triu_index
+from vo3d_opt.solvers._sparse import dense_csc, triu_csc, triu_index
 
 #: At most this many persistent solvers (one per structure); the cache is emptied when full.
 MAX_CACHED = 64
@@ -80,9 +80,10 @@ class ClarabelBackend(Backend):
                 solver = clarabel.DefaultSolver(triu_csc(std.P), std.q, dense_csc(M), b, cones,
                                                 settings())
                 self._solvers[key] = solver
-            else:
-                rows, cols = triu_index(std.n)
-                solver.update(P=std.P[rows, cols], q=std.q, A=M.ravel(order="F"), b=b)
+            # Always through update(), also right after set-up: a fresh solver and an updated
+            # one differ in the last digits, and a run must not depend on what came before.
+            rows, cols = triu_index(std.n)
+            solver.update(P=std.P[rows, cols], q=std.q, A=M.ravel(order="F"), b=b)
             sol = solver.solve()
             status = str(sol.status)
             return make_result(self.name, std, sol.x, _STATUS.get(status, "failed"), status)
