@@ -170,6 +170,14 @@ MISTAKES = [
                  "greater than 0", id="zero-sphere-radius"),
     pytest.param(_set("velocity_response_tau", 0.0), "velocity_response_tau", "greater than 0",
                  id="zero-tau"),
+    pytest.param(_set("selector_options", {"speed_levels": 2.5}), "selector_options.speed_levels",
+                 "integer", id="fractional-selector-option"),
+    pytest.param(_set("selector_options", {"corrections": ["bogus"]}), "selector_options.corrections[0]",
+                 "tg_range", id="unknown-correction"),
+    pytest.param(_set("selector_options", {"colour": 1}), "selector_options.colour", "unknown key",
+                 id="unknown-selector-option"),
+    pytest.param(_set("solver", "nosuch"), "solver", "available", id="unknown-solver"),
+    pytest.param(_set("formulation", "magic"), "formulation", "plane_qp", id="unknown-formulation"),
 ]
 
 

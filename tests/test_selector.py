@@ -219,5 +219,5 @@ def test_unknown_names_list_what_is_available():
         VelocitySelector("nlp", solver="osqp")
     with pytest.raises(ValueError, match="plane_step_deg"):
         VelocitySelector(plane_step_deg=0)
-    with pytest.raises(ValueError, match="unknown option"):
+    with pytest.raises(ValueError, match="colour"):
         VelocitySelector(colour="red")

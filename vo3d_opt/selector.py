@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -103,13 +103,7 @@ class VelocitySelector:
                  start_solver: str | None = None, **options) -> None:
         if formulation not in FORMULATIONS:
             raise ValueError(f"formulation: unknown {formulation!r}; available: {', '.join(FORMULATIONS)}")
-        known = {f.name for f in fields(Options)}
-        if unknown := set(options) - known:
-            raise ValueError(f"unknown option(s) {sorted(unknown)}; known: {sorted(known)}")
-        if options.get("corrections") is not None:
-            options["corrections"] = frozenset(options["corrections"])
-        self.options = Options(**options)
-        self._validate_options()
+        self.options = Options(**options)  # ValueError naming a wrong or unknown option
         self.formulation = formulation
         self._qp = self._nlp = None
         if formulation == "nlp":
@@ -127,23 +121,6 @@ class VelocitySelector:
         else:
             self.solver = solver or DEFAULT_QP_SOLVER
             self._qp = self._qp_backend(self.solver)
-
-    def _validate_options(self) -> None:
-        o = self.options
-        if not (0 < o.plane_step_deg <= 180):
-            raise ValueError("plane_step_deg: must be in (0, 180]")
-        if not (0 < o.heading_step_deg <= 180):
-            raise ValueError("heading_step_deg: must be in (0, 180]")
-        if o.speed_levels < 2:
-            raise ValueError("speed_levels: must be at least 2")
-        if o.polygon_sides < 3:
-            raise ValueError("polygon_sides: must be at least 3")
-        if o.n_samples < 8:
-            raise ValueError("n_samples: must be at least 8")
-        if not (math.isfinite(o.pz_buffer) and o.pz_buffer >= 0):
-            raise ValueError("pz_buffer: must be a non-negative number of metres")
-        if o.horizon is not None and not (math.isfinite(o.horizon) and o.horizon > 0):
-            raise ValueError("horizon: must be a positive number of seconds")
 
     @staticmethod
     def _qp_backend(name: str):

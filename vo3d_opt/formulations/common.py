@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Annotated, Literal
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
-from ..geometry import VOCones, VOPyramids, in_vo_cones, in_vo_pyramids, pyramid_entry_time, vo_cones, vo_pyramids
+from ..geometry import CORRECTIONS, VOCones, VOPyramids, in_vo_cones, in_vo_pyramids, pyramid_entry_time, vo_cones, vo_pyramids
 from ..types import AgentState, Box, Cylinder, Limits, Neighbor
 from .problem import QP, NLP, Result
 
@@ -20,22 +22,28 @@ Solve = Callable[[QP], Result]
 SolveNLP = Callable[[NLP], Result]
 
 
-@dataclass(frozen=True)
-class Options:
-    """Formulation options (the selector's keyword arguments)."""
+_Deg = Annotated[float, Field(gt=0, le=180, allow_inf_nan=False)]
 
-    plane_step_deg: float = 10.0  # avoidance planes every this many degrees in [-90, 90]
-    heading_step_deg: float = 10.0  # sampled: polar grid, heading resolution in each plane
-    speed_levels: int = 9  # sampled: speeds from v_min to v_max
-    polygon_sides: int = 24  # inscribed polygon replacing the speed cone on QP-only backends
-    reciprocal: bool = False  # RVO-style: the apex at (V_A + V_B)/2, each takes half
-    horizon: float | None = None  # s; VOs truncated at this time (None: infinite)
-    corrections: frozenset[str] | None = None  # None: all six of section 3.1
-    n_samples: int = 72  # generator samples of the curve of eq. (12) (sampled's sections)
-    qp_samples: int = 36  # the same for plane_qp, where they only seed the tangent points
-    pz_buffer: float = 0.0  # m; plan with protected spheres this much larger (see prepare)
-    margin: float = 1e-3  # m/s; linearised VO half-spaces are pushed out by this much, so a
-    # solver's answer on the boundary (within its tolerance) is still strictly outside the VO
+
+class Options(BaseModel):
+    """Formulation options (the selector's keyword arguments), validated: a wrong value raises
+    ``ValueError`` (pydantic's ``ValidationError``) naming the option."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    plane_step_deg: _Deg = 10.0  # avoidance planes every this many degrees in [-90, 90]
+    heading_step_deg: _Deg = 10.0  # sampled: polar grid, heading resolution in each plane
+    speed_levels: Annotated[int, Field(ge=2, strict=True)] = 9  # sampled: speeds v_min..v_max
+    polygon_sides: Annotated[int, Field(ge=3, strict=True)] = 24  # inscribed speed polygon
+    reciprocal: StrictBool = False  # RVO-style: the apex at (V_A + V_B)/2, each takes half
+    horizon: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None  # s; None: infinite
+    corrections: frozenset[Literal[tuple(CORRECTIONS)]] | None = None  # None: all six of 3.1
+    n_samples: Annotated[int, Field(ge=8, strict=True)] = 72  # generator samples of eq. (12), sampled
+    qp_samples: Annotated[int, Field(ge=8, strict=True)] = 36  # the same for plane_qp's tangent points
+    pz_buffer: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0  # m; see prepare
+    margin: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1e-3  # m/s; linearised VO
+    # half-spaces are pushed out by this much, so that a solver's answer on the boundary
+    # (within its tolerance) is still strictly outside the VO
 
 
 @dataclass

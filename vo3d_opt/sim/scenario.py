@@ -500,8 +500,31 @@ def _semantic_errors(sc: Scenario) -> list[tuple[str, str]]:
                 if d < radius[i] + radius[j]:
                     errs.append((f"agents[{i}].{key}", f"overlaps agents[{j}] ({sc.agents[j].id})"
                                                        f" at {d:.3g} m"))
+    errs += _selector_errors(sc)
     order = {k: n for n, k in enumerate(Scenario.model_fields)}
     return sorted(errs, key=lambda e: order.get(e[0].split(".")[0].split("[")[0], 99))
+
+
+def _selector_errors(sc: Scenario) -> list[tuple[str, str]]:
+    """The scenario's selector defaults, checked now rather than when the run starts."""
+    from vo3d_opt.selector import FORMULATIONS, Options
+    from vo3d_opt.solvers import get_backend
+
+    errs = []
+    try:
+        Options(**sc.selector_options)
+    except ValidationError as exc:
+        for err in exc.errors():
+            path, msg = _describe(err)
+            errs.append((f"selector_options.{path}", msg))
+    if sc.formulation is not None and sc.formulation not in FORMULATIONS:
+        errs.append(("formulation", f"unknown {sc.formulation!r} (expected one of {', '.join(FORMULATIONS)})"))
+    if sc.solver is not None:
+        try:
+            get_backend(sc.solver)
+        except ValueError as exc:
+            errs.append(("solver", str(exc)))
+    return errs
 
 
 def _fmt(v: Any) -> str:
