@@ -167,8 +167,7 @@ def test_acceleration_limit(kw):
     kw = dict(kw, limits=Limits(speed=kw["limits"].speed, altitude=kw["limits"].altitude, acceleration=a_max),
               own=AgentState(position=kw["own"].position, velocity=np.zeros(3)))
     d = VelocitySelector("plane_qp").select(**kw)
-    if d.status == "optimal":
-        assert np.all(np.abs(d.velocity) <= a_max * kw["dt"] + 1e-6)
+    assert np.all(np.abs(d.velocity) <= a_max * kw["dt"] + 1e-6)  # whatever the status
 
 
 def test_reciprocal_takes_half_the_avoidance():

@@ -13,6 +13,7 @@ Statuses (documented in the README):
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -23,7 +24,7 @@ from .formulations import cone_qp, nlp, plane_qp, sampled
 from .formulations.common import Encounter, Options, Outcome, prepare
 from .formulations.problem import NLP, QP, Result
 from .solvers import FEAS_TOL, Backend, available_qp_solvers, available_solvers, get_backend, standardise
-from .types import AgentState, Box, Cylinder, Limits, Neighbor
+from .types import AgentState, Box, Cylinder, Limits, Neighbor, check_vector
 
 FORMULATIONS = ("sampled", "plane_qp", "cone_qp", "nlp")
 #: Default QP backend: the fastest on our benchmark (benchmarks/bench_select.py).
@@ -46,21 +47,17 @@ class Decision:
 
 def _vec3(value, name: str) -> np.ndarray:
     try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name}: must be 3 numbers") from exc
-    if arr.shape != (3,):
-        raise ValueError(f"{name}: must be 3 numbers, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: must be finite (no NaN or inf)")
-    return arr
+        return check_vector(value, 3)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
 
 
 def _items(value, cls, name: str) -> list:
-    items = list(value or ())
+    items = [] if value is None else list(value)
+    expected = " or ".join(c.__name__ for c in (cls if isinstance(cls, tuple) else (cls,)))
     for i, item in enumerate(items):
         if not isinstance(item, cls):
-            raise ValueError(f"{name}[{i}]: expected {getattr(cls, '__name__', cls)}, got {type(item).__name__}")
+            raise ValueError(f"{name}[{i}]: expected {expected}, got {type(item).__name__}")
     return items
 
 
@@ -149,7 +146,7 @@ class VelocitySelector:
         limits = Limits() if limits is None else limits
         if not isinstance(limits, Limits):
             raise ValueError(f"limits: expected Limits, got {type(limits).__name__}")
-        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+        if isinstance(dt, bool) or not (isinstance(dt, numbers.Real) and math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt: must be a positive finite number of seconds, got {dt!r}")
         enc = prepare(own, v_pref, neighbors, obstacles, limits, float(dt), self.options)
         out = self._run(enc)
@@ -165,7 +162,7 @@ class VelocitySelector:
             return sampled.select(enc)
         # The preferred velocity itself, when safe, is every formulation's optimum.
         if not enc.inside_any and enc.within_limits(enc.v_pref)[0] and not enc.unsafe(enc.v_pref)[0]:
-            return Outcome(enc.v_pref.copy(), "optimal", 0.0, {"round": "preferred"})
+            return Outcome(enc.v_pref.copy(), "optimal", None, {"round": "preferred"})
         solve = _checked(self._qp, "solve")
         if self.formulation == "plane_qp":
             return plane_qp.select(enc, solve, self._qp.has_cones)

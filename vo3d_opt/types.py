@@ -16,20 +16,23 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PlainSeriali
 PZ_MARGIN = 2.0
 
 
-def _vector(n: int):
-    def check(value: Any) -> np.ndarray:
-        try:
-            arr = np.array(value, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"must be {n} numbers") from exc
-        if arr.shape != (n,):
-            raise ValueError(f"must be {n} numbers, got shape {arr.shape}")
-        if not np.all(np.isfinite(arr)):
-            raise ValueError("must be finite (no NaN or inf)")
-        arr.setflags(write=False)
-        return arr
+def check_vector(value: Any, n: int) -> np.ndarray:
+    """``value`` as a read-only float array of shape (n,); ValueError if it is not n finite
+    numbers."""
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"must be {n} numbers") from exc
+    if arr.shape != (n,):
+        raise ValueError(f"must be {n} numbers, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("must be finite (no NaN or inf)")
+    arr.setflags(write=False)
+    return arr
 
-    return check
+
+def _vector(n: int):
+    return lambda value: check_vector(value, n)
 
 
 Vec2 = Annotated[np.ndarray, BeforeValidator(_vector(2)), PlainSerializer(lambda a: a.tolist())]

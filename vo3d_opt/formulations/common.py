@@ -208,6 +208,9 @@ def least_bad(enc: Encounter, candidates: np.ndarray) -> np.ndarray:
     latest (ties: nearest the preferred velocity). Falls back to a safe stop-like velocity."""
     extra = np.array([np.zeros(3), enc.v_now])
     c = np.vstack([candidates.reshape(-1, 3), extra]) if len(candidates) else extra
+    if enc.limits.acceleration is not None:  # few grid points lie in the reachable box: clip
+        dv = enc.limits.acceleration * enc.dt
+        c = np.vstack([c, np.clip(c, enc.v_now - dv, enc.v_now + dv)])
     c = c[enc.within_limits(c)]
     if len(c) == 0:  # e.g. v_min > 0 with a zero candidate: the limits' own closest point
         lo, hi = enc.vz_range()

@@ -13,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..geometry.pyramid import VOPyramids
-from .common import Encounter, Outcome, Solve, first_safe
+from .common import Encounter, Outcome, Solve
 from .plane_qp import fallback
 from .planes import plane_sections
 from .problem import QP

@@ -15,11 +15,15 @@ from . import plane_qp
 from .problem import NLP, QP, ConeConstraint
 
 
+#: Metres added to every protected radius in the exact cone constraints.
+RADIUS_MARGIN = 1e-3
+
+
 def build_nlp(enc: Encounter, start: np.ndarray) -> NLP:
     c = enc.cones
-    # The protected sphere grows by a hair so that IPOPT's answer on the boundary, within its
-    # tolerance, is still strictly outside the exact VO.
-    sin_a = np.minimum((c.r_pz + enc.options.margin) / np.maximum(c.d_oi, 1e-12), 1.0)
+    # The protected sphere grows by a hair (m) so that IPOPT's answer on the boundary, within
+    # its tolerance, is still strictly outside the exact VO.
+    sin_a = np.minimum((c.r_pz + RADIUS_MARGIN) / np.maximum(c.d_oi, 1e-12), 1.0)
     cos_a = np.sqrt(1.0 - sin_a**2)
     cones = [ConeConstraint(apex=c.apex[i], axis=c.axis[i], cos_alpha=float(cos_a[i]))
              for i in range(len(c)) if not c.inside[i]]

@@ -117,9 +117,10 @@ def row_owners(enc: Encounter) -> np.ndarray:
 
 
 class PlaneProblems:
-    """The (round, plane) QPs of one decision, built lazily: the bounds that order the search
-    are computed for a whole round at once, a QP only when it is solved, and a VO's half-plane
-    joins a QP only once the preferred velocity or an answer of that QP lies in the VO."""
+    """The (round, plane) QPs of one decision. Every round's half-planes are computed at once
+    (one vectorised pass); a round joins the search only when needed, its bounds for all planes
+    at once; a QP is built only when it is solved; and a VO's half-plane joins only once the
+    preferred velocity or an answer lies in that VO."""
 
     def __init__(self, enc: Encounter, ps: PlaneSections, has_cones: bool) -> None:
         self.has_cones = has_cones
@@ -143,7 +144,7 @@ class PlaneProblems:
         self.rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
     def add_round(self, included: np.ndarray) -> list[tuple[float, int, int]]:
-        """Linearise the next round: (bound, round, plane) for each plane on which it does not
+        """Let the next round join: (bound, round, plane) for each plane on which it does not
         repeat an earlier round and is not infeasible by its bound."""
         r = len(self.rounds)
         a, b, active = self.halfplanes
@@ -202,7 +203,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     grows as constraints join); the search stops once the best safe answer beats every
     remaining bound. The nearest-point round has the smallest bound on each plane (the distance
     from an interior point to any supporting line is at least its distance to the boundary), so
-    the later rounds are linearised only while a plane's first bound is below the best answer."""
+    the later rounds join the search only while a plane's first bound is below the best answer."""
     ps = plane_sections(enc, enc.options.qp_samples)
     problems = PlaneProblems(enc, ps, has_cones)
     E1, E2 = ps.planes.e1, ps.planes.e2

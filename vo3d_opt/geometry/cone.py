@@ -40,7 +40,7 @@ class VOCones:
     @property
     def sin_alpha(self) -> np.ndarray:
         """Sine of the half-angle alpha of the cone: r_pz / d_oi."""
-        return np.clip(self.r_pz / self.d_oi, 0.0, 1.0)
+        return np.clip(self.r_pz / np.maximum(self.d_oi, 1e-12), 0.0, 1.0)
 
     @property
     def cos_alpha(self) -> np.ndarray:
