@@ -15,7 +15,7 @@ import numpy as np
 from ..geometry.pyramid import VOPyramids
 from .common import Encounter, Outcome, Solve
 from .plane_qp import fallback
-from .planes import plane_sections
+from .planes import decision_planes
 from .problem import QP
 
 
@@ -137,4 +137,4 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
             included |= entered
     if best is not None:
         return Outcome(best[0], "optimal", None, {"round": f"turn {np.degrees(best[1]):.0f}", "solved": attempts})
-    return fallback(enc, plane_sections(enc), np.array(tried).reshape(-1, 3), failed == attempts)
+    return fallback(enc, decision_planes(enc), np.array(tried).reshape(-1, 3), failed == attempts)

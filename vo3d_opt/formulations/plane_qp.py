@@ -14,11 +14,12 @@ import heapq
 
 import numpy as np
 
+from ..geometry import AvoidancePlanes
 from ..geometry.sections import CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, Sections
 from .common import Encounter, Outcome, Solve, first_safe, least_bad
 from .planes import PlaneSections, plane_sections
 from .problem import QP, Result
-from .sampled import candidates
+from .sampled import grid_velocities
 
 CURVED = (CIRCLE, ELLIPSE, PARABOLA, HYPERBOLA)
 #: Linearisation rounds: nearest boundary point, then every section passed on its left, right.
@@ -249,20 +250,20 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     if best is not None:
         v, p, mode = best
         return Outcome(v, "optimal", float(ps.planes.phi[p]), {"round": mode, "solved": attempts})
-    return fallback(enc, ps, np.array(tried).reshape(-1, 3), all_failed=attempts > 0 and failed == attempts)
+    return fallback(enc, ps.planes, np.array(tried).reshape(-1, 3), all_failed=attempts > 0 and failed == attempts)
 
 
-def fallback(enc: Encounter, ps: PlaneSections, tried: np.ndarray, all_failed: bool) -> Outcome:
-    """No QP answer passed the exact check: try the sampled reference's candidates; if none is
-    safe either, return the least-bad velocity. When the backend failed on every problem the
-    status says so whatever the fallback found."""
-    v, plane_idx, free = candidates(enc, ps)
+def fallback(enc: Encounter, planes: AvoidancePlanes, tried: np.ndarray, all_failed: bool) -> Outcome:
+    """No QP answer passed the exact check: try the sampled reference's grid with the exact check
+    (a stronger test than its sections); if none is safe either, return the least-bad velocity.
+    When the backend failed on every problem the status says so whatever the fallback found."""
+    v, plane_idx = grid_velocities(enc, planes)
     order = np.argsort(enc.deviation(v), kind="stable")
     k = first_safe(enc, v[order])
     reason = "solver_failed_fallback" if all_failed else None
     if k is not None:
         best = order[k]
-        return Outcome(v[best], reason or "optimal", float(ps.planes.phi[plane_idx[best]]),
+        return Outcome(v[best], reason or "optimal", float(planes.phi[plane_idx[best]]),
                        {"round": "sampled"})
     return Outcome(least_bad(enc, np.vstack([tried, v])), reason or "infeasible_min_violation", None,
                    {"round": "least_bad"})

@@ -27,13 +27,18 @@ class PlaneSections:
         return out
 
 
-def plane_sections(enc: Encounter, n_samples: int | None = None) -> PlaneSections:
+def decision_planes(enc: Encounter) -> AvoidancePlanes:
     """Planes every ``plane_step_deg`` about the preferred direction (or the current heading, or
-    world x when both are zero) and the conic sections of all VOs on them."""
+    world x when both are zero)."""
     direction = enc.v_pref
     if np.linalg.norm(direction) < 1e-9:
         direction = enc.v_now if np.linalg.norm(enc.v_now) > 1e-9 else np.array([1.0, 0.0, 0.0])
-    planes = avoidance_planes(direction, default_phis(enc.options.plane_step_deg))
+    return avoidance_planes(direction, default_phis(enc.options.plane_step_deg))
+
+
+def plane_sections(enc: Encounter, n_samples: int | None = None) -> PlaneSections:
+    """The decision's planes and the conic sections of all VOs on them."""
+    planes = decision_planes(enc)
     corrections = enc.options.corrections if enc.options.corrections is not None else CORRECTIONS
     return PlaneSections(
         planes=planes,

@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from .common import Encounter, Outcome, first_safe, least_bad
-from .planes import PlaneSections, plane_sections
+from ..geometry import AvoidancePlanes
+from .planes import plane_sections
 
 
 def polar_grid(enc: Encounter) -> np.ndarray:
@@ -20,19 +21,20 @@ def polar_grid(enc: Encounter) -> np.ndarray:
     return np.unique(grid.reshape(-1, 2).round(12), axis=0)
 
 
-def candidates(enc: Encounter, ps: PlaneSections) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every grid velocity (P·M, 3), its plane index, and whether it lies outside every section."""
+def grid_velocities(enc: Encounter, planes: AvoidancePlanes) -> tuple[np.ndarray, np.ndarray]:
+    """Every grid velocity on every plane, (P·M, 3), and its plane index (P·M,)."""
     grid = polar_grid(enc)
-    P = len(ps.planes.phi)
+    P = len(planes.phi)
     xy = np.broadcast_to(grid, (P,) + grid.shape)
-    free = ~ps.contains(xy)
-    plane_idx = np.broadcast_to(np.arange(P)[:, None], free.shape)
-    return ps.planes.lift(xy).reshape(-1, 3), plane_idx.ravel(), free.ravel()
+    plane_idx = np.repeat(np.arange(P), len(grid))
+    return planes.lift(xy).reshape(-1, 3), plane_idx
 
 
 def select(enc: Encounter) -> Outcome:
     ps = plane_sections(enc)
-    v, plane_idx, free = candidates(enc, ps)
+    v, plane_idx = grid_velocities(enc, ps.planes)
+    grid = polar_grid(enc)
+    free = ~ps.contains(np.broadcast_to(grid, (len(ps.planes.phi),) + grid.shape)).ravel()
     order = np.flatnonzero(free)
     order = order[np.argsort(enc.deviation(v[order]), kind="stable")]  # nearest first
     k = first_safe(enc, v[order])  # within the limits, confirmed by the exact 3D check
