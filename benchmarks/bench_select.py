@@ -66,6 +66,8 @@ def main() -> None:
     ap.add_argument("--encounters", type=int, default=40)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="only 9 neighbours x 6 obstacles")
+    ap.add_argument("--deviation", action="store_true",
+                    help="instead of times: mean |v - v_pref| per formulation (default backends)")
     ap.add_argument("--fast-path", action="store_true",
                     help="encounters where the preferred velocity is already safe (all behind)")
     args = ap.parse_args()
@@ -76,6 +78,17 @@ def main() -> None:
         + [("cone_qp", s) for s in available_qp_solvers()] + [("nlp", "casadi")]
     print(f"# {platform.processor() or platform.machine()}, {platform.python_implementation()} "
           f"{platform.python_version()}, {time.strftime('%Y-%m-%d')}")
+    if args.deviation:
+        print("| neighbours | obstacles | formulation | mean deviation m/s | max deviation m/s |")
+        print("|---:|---:|---|---:|---:|")
+        for n, m in grid:
+            cases = [encounter(rng, n, m, conflict=not args.fast_path) for _ in range(args.encounters)]
+            for form in ("sampled", "plane_qp", "cone_qp", "nlp"):
+                sel = VelocitySelector(form)
+                dev = [np.linalg.norm(sel.select(**kw).velocity - np.asarray(kw["preferred_velocity"]))
+                       for kw in cases]
+                print(f"| {n} | {m} | {form} | {np.mean(dev):.2f} | {np.max(dev):.2f} |", flush=True)
+        return
     print("| neighbours | obstacles | formulation | solver | median µs | p99 µs | statuses |")
     print("|---:|---:|---|---|---:|---:|---|")
     for n, m in grid:
