@@ -52,11 +52,10 @@ def _load(arg: str) -> Scenario:
 
 
 def _selector(sc: Scenario, formulation: str | None, solver: str | None):
-    f = formulation or sc.formulation
-    s = solver or sc.solver
     try:
-        return scenario_selector(sc, f, s)
+        return scenario_selector(sc, formulation, solver)
     except (ValueError, TypeError) as exc:
+        f, s = formulation or sc.formulation, solver or sc.solver
         what = f"formulation {f or 'default'!r}, solver {s or 'default'!r}"
         raise _UsageError(f"{what}: {exc}") from None
 
@@ -130,7 +129,8 @@ def _print_table(rows: list[dict[str, Any]], keys: list[str]) -> None:
         print("  ".join(v.ljust(w) for v, w in zip(c, widths)).rstrip())
 
 
-def _write_out(record: Any, summary: dict[str, Any], out: Path) -> list[Path]:
+def write_outputs(record: Any, summary: dict[str, Any], out: Path) -> list[Path]:
+    """trajectories.csv, summary.json and the PNG plots of a run in ``out``; the paths."""
     from vo3d_opt.plots import write_plots  # matplotlib only when asked for
 
     out.mkdir(parents=True, exist_ok=True)
@@ -147,7 +147,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     sel, formulation, solver = _selector(sc, args.formulation, args.solver)
     record, summary = _run(sc, sel, formulation, solver)
     if args.out:
-        for path in _write_out(record, summary, Path(args.out)):
+        for path in write_outputs(record, summary, Path(args.out)):
             _log(f"wrote {path}")
     if args.json:
         print(json.dumps(summary, allow_nan=False))

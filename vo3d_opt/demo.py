@@ -2,31 +2,26 @@
 formulation; writes the figures, the trajectories and the summary to ``./out/demo/``."""
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 from vo3d_opt.sim.metrics import summarize
 from vo3d_opt.sim.scenario import bundled_dir, load_scenario
-from vo3d_opt.sim.simulator import Simulator, scenario_selector, write_csv
+from vo3d_opt.cli import write_outputs
+from vo3d_opt.sim.simulator import Simulator, scenario_selector
 
 SCENARIO = "paper-case1-ten-uav-crossing.yaml"
 
 
 def main(out_dir: str | Path = Path("out") / "demo") -> int:
     """Run case 1, write ./out/demo/{summary.json, trajectories.csv, *.png}, print where."""
-    from vo3d_opt.plots import write_plots
-
     out = Path(out_dir)
     sc = load_scenario(bundled_dir() / SCENARIO)
     sel, formulation, solver = scenario_selector(sc)
     print(f"running {sc.name}: {sc.n_agents} UAVs, {formulation} / {solver} ...", flush=True)
     record = Simulator(sc, sel, formulation=formulation, solver=solver).run()
     summary = summarize(record)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    files = [write_csv(record, out / "trajectories.csv"), out / "summary.json"]
-    files += write_plots(record, out)
+    files = write_outputs(record, summary, out)
     print(f"{summary['reached']}/{summary['agents']} arrived in {summary['time']:.1f} s "
           f"simulated; closest approach {summary['min_vehicle_distance']:.3f} m "
           f"(r_pz {float(sc.r_pz.max()):g} m); pz intrusions {summary['pz_intrusions']}, "

@@ -139,60 +139,51 @@ def plot_top_view(record: RunRecord, path: str | Path) -> Path:
     return _save(fig, path)
 
 
-def plot_vehicle_distance(record: RunRecord, path: str | Path) -> Path:
-    """Each vehicle's distance to its nearest other vehicle over time with the r_pz line
-    (Figs. 14, 16a, 20a)."""
-    sc = record.scenario
+def _distance_figure(record: RunRecord, d: np.ndarray | None, path: str | Path, *, what: str,
+                     ylabel: str, lines: np.ndarray, line_label: str, empty: str = "") -> Path:
+    """Per-vehicle distance curves d (steps, agents) with the closest point marked and
+    horizontal threshold lines; ``empty`` is shown instead when d is None."""
     fig = _new()
     ax = fig.add_subplot()
-    d = nearest_vehicle_distance(record)
-    colors = _colors(record.n_agents)
-    if record.n_agents > 1:
+    if d is None:
+        ax.text(0.5, 0.5, empty, ha="center", transform=ax.transAxes)
+    else:
+        colors = _colors(record.n_agents)
         for i, name in enumerate(record.ids):
             ax.plot(record.times, d[:, i], color=colors[i], linewidth=1.0, label=name)
         k = int(np.argmin(d.min(axis=1)))
         ax.plot(record.times[k], d[k].min(), "k.", markersize=8)
         ax.annotate(f"min {d[k].min():.3f} m", (record.times[k], d[k].min()),
                     textcoords="offset points", xytext=(6, -12), fontsize="small")
-    else:
-        ax.text(0.5, 0.5, "one vehicle: no vehicle-vehicle distance", ha="center",
-                transform=ax.transAxes)
-    for r in np.unique(sc.r_pz):
-        ax.axhline(r, color="red", linestyle="--", linewidth=1.0, label=f"r_pz = {r:g} m")
+    for r in np.unique(lines):
+        ax.axhline(r, color="red", linestyle="--", linewidth=1.0, label=f"{line_label} = {r:g} m")
     ax.set_ylim(bottom=0.0)
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("distance to nearest vehicle (m)")
+    ax.set_ylabel(ylabel)
     ax.grid(True, linewidth=0.4, alpha=0.5)
-    ax.set_title(f"{sc.name}: vehicle-vehicle distance", fontsize="medium")
+    ax.set_title(f"{record.scenario.name}: {what}", fontsize="medium")
     _legend(ax, record.n_agents + 1)
     return _save(fig, path)
+
+
+def plot_vehicle_distance(record: RunRecord, path: str | Path) -> Path:
+    """Each vehicle's distance to its nearest other vehicle over time with the r_pz line
+    (Figs. 14, 16a, 20a)."""
+    d = nearest_vehicle_distance(record) if record.n_agents > 1 else None
+    return _distance_figure(record, d, path, what="vehicle-vehicle distance",
+                            ylabel="distance to nearest vehicle (m)", lines=record.scenario.r_pz,
+                            line_label="r_pz", empty="one vehicle: no vehicle-vehicle distance")
 
 
 def plot_obstacle_distance(record: RunRecord, path: str | Path) -> Path | None:
     """Each vehicle's distance to the nearest obstacle surface over time (Figs. 16b, 20b, 30);
     ``None`` (no file) when the scenario has no physical obstacle."""
-    sc = record.scenario
     d = nearest_obstacle_distance(record)
     if not np.isfinite(d).any():
         return None
-    fig = _new()
-    ax = fig.add_subplot()
-    colors = _colors(record.n_agents)
-    for i, name in enumerate(record.ids):
-        ax.plot(record.times, d[:, i], color=colors[i], linewidth=1.0, label=name)
-    k = int(np.argmin(d.min(axis=1)))
-    ax.plot(record.times[k], d[k].min(), "k.", markersize=8)
-    ax.annotate(f"min {d[k].min():.3f} m", (record.times[k], d[k].min()),
-                textcoords="offset points", xytext=(6, -12), fontsize="small")
-    for r in np.unique(sc.radius):
-        ax.axhline(r, color="red", linestyle="--", linewidth=1.0, label=f"radius = {r:g} m")
-    ax.set_ylim(bottom=0.0)
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("distance to nearest obstacle surface (m)")
-    ax.grid(True, linewidth=0.4, alpha=0.5)
-    ax.set_title(f"{sc.name}: vehicle-obstacle distance", fontsize="medium")
-    _legend(ax, record.n_agents + 1)
-    return _save(fig, path)
+    return _distance_figure(record, d, path, what="vehicle-obstacle distance",
+                            ylabel="distance to nearest obstacle surface (m)",
+                            lines=record.scenario.radius, line_label="radius")
 
 
 def write_plots(record: RunRecord, out_dir: str | Path) -> list[Path]:
