@@ -177,6 +177,9 @@ def prepare(
         p, p_B, V_B, r_pz, reach=limits.v_max,
         virtual_sphere=corrections is None or "virtual_sphere" in corrections, apex=apex,
     )
+    # A cone that no velocity within the speed limit reaches can neither hold an answer nor
+    # constrain one: leave it out of every formulation (and of the exact check, equivalently).
+    cones = cones.subset(cones.min_speed() <= limits.v_max + 1e-6)
     return Encounter(
         position=p, v_now=own.velocity, v_pref=np.asarray(v_pref, dtype=float), cones=cones,
         pyramids=vo_pyramids(p, list(obstacles)), limits=limits, dt=dt, options=options,

@@ -2,7 +2,7 @@
 sphere of section 3.1.6, vectorised over n neighbours."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -50,6 +50,21 @@ class VOCones:
     def center(self) -> np.ndarray:
         """C_vo of eq. (5), (n, 3)."""
         return self.apex + self.d_vo[:, None] * self.axis
+
+    def min_speed(self) -> np.ndarray:
+        """(n,) the smallest |v| inside each VO: the distance from the velocity origin to the
+        (infinite) cone; 0 when A is inside the zone or the origin is in the cone."""
+        u = -self.apex  # the origin seen from the apex
+        L = np.linalg.norm(u, axis=1)
+        cos_b = np.einsum("ni,ni->n", u, self.axis) / np.maximum(L, 1e-12)
+        beta = np.arccos(np.clip(cos_b, -1.0, 1.0))
+        alpha = np.arcsin(self.sin_alpha)
+        d = np.where(beta <= alpha, 0.0, np.where(beta >= alpha + np.pi / 2, L, L * np.sin(beta - alpha)))
+        return np.where(self.inside, 0.0, d)
+
+    def subset(self, keep: np.ndarray) -> "VOCones":
+        """The cones selected by the boolean or index array ``keep``."""
+        return VOCones(**{f.name: getattr(self, f.name)[keep] for f in fields(self)})
 
     def base_points(self, t: np.ndarray) -> np.ndarray:
         """B_vo(t) of eq. (4) for angles t (K,), shape (n, K, 3)."""
