@@ -11,13 +11,14 @@ deviation wins after the exact 3D check, else the next candidate."""
 from __future__ import annotations
 
 import heapq
+from dataclasses import replace
 
 import numpy as np
 
 from ..geometry import AvoidancePlanes
 from ..geometry.sections import CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, Sections
 from .common import Encounter, Outcome, Solve, first_safe, least_bad
-from .planes import PlaneSections, plane_sections
+from .planes import PlaneSections, decision_planes, plane_sections
 from .problem import QP, Result
 from .sampled import grid_velocities
 
@@ -118,18 +119,17 @@ def row_owners(enc: Encounter) -> np.ndarray:
 
 
 class PlaneProblems:
-    """The (round, plane) QPs of one decision. Every round's half-planes are computed at once
-    (one vectorised pass); a round joins the search only when needed, its bounds for all planes
-    at once; a QP is built only when it is solved; and a VO's half-plane joins only once the
-    preferred velocity or an answer lies in that VO."""
+    """The (round, plane) QPs of one decision, built lazily. A VO's sections and half-planes
+    (every round's, in one vectorised pass) are computed only when the VO joins the QPs: when
+    the preferred velocity or an answer lies in it; a round joins the search only when needed,
+    its bounds for all planes at once; a QP is built only when it is solved."""
 
-    def __init__(self, enc: Encounter, ps: PlaneSections, has_cones: bool) -> None:
-        self.has_cones = has_cones
-        self.n_planes = len(ps.planes.phi)
+    def __init__(self, enc: Encounter, planes: AvoidancePlanes, has_cones: bool) -> None:
+        self.enc, self.planes, self.has_cones = enc, planes, has_cones
         self.v_max = enc.limits.v_max
-        self.w0 = ps.w_pref
+        self.w0 = np.array([planes.e1 @ enc.v_pref, 0.0])  # v_pref lies in every plane
         G3, h3 = enc.linear_bounds()
-        E = np.stack([np.broadcast_to(ps.planes.e1, ps.planes.e2.shape), ps.planes.e2], axis=-1)
+        E = np.stack([np.broadcast_to(planes.e1, planes.e2.shape), planes.e2], axis=-1)
         self.G_lim = G3 @ E  # (P, r, 2): altitude and acceleration rows on each plane
         self.h_lim = h3
         self.G_speed, self.h_speed = (np.zeros((0, 2)), np.zeros(0)) if has_cones else \
@@ -137,29 +137,45 @@ class PlaneProblems:
         lim = (self.G_lim @ self.w0 - h3) / np.maximum(np.linalg.norm(self.G_lim, axis=-1), 1e-12)
         self.base_bound = np.maximum(np.max(lim, axis=1, initial=0.0),
                                      np.max(self.G_speed @ self.w0 - self.h_speed, initial=0.0))
-        self.owner = row_owners(enc)
+        R, P = len(ROUNDS), len(planes.phi)
+        # Half-plane rows of the VOs computed so far: a (R, k, P, 2), b (R, k, P), active (k, P),
+        # and the VO (cones first, then pyramids) each row belongs to.
+        self.a, self.b = np.zeros((R, 0, P, 2)), np.zeros((R, 0, P))
+        self.active, self.owner = np.zeros((0, P), dtype=bool), np.zeros(0, dtype=int)
+        self.computed = np.zeros(len(enc.cones) + len(enc.pyramids), dtype=bool)
+        self.n_rounds = 0
         inside = np.concatenate([enc.cones.inside, enc.pyramids.inside])
         #: VOs constrained from the start: those holding v_pref, and the zones A is inside.
         self.initial = enc.containing(enc.v_pref)[:, 0] | inside
-        self.halfplanes = section_halfplanes(enc, ps)  # every round's, computed at once
-        self.rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.ensure(self.initial)
+
+    def ensure(self, vos: np.ndarray) -> None:
+        """Compute the half-planes of the VOs in ``vos`` that have none yet."""
+        new = vos & ~self.computed
+        if not new.any():
+            return
+        n = len(self.enc.cones)
+        ci, pi = np.flatnonzero(new[:n]), np.flatnonzero(new[n:])
+        sub = replace(self.enc, cones=self.enc.cones.subset(ci), pyramids=self.enc.pyramids.subset(pi))
+        a, b, active = section_halfplanes(sub, plane_sections(sub, sub.options.qp_samples, self.planes))
+        self.a = np.concatenate([self.a, a], axis=1)
+        self.b = np.concatenate([self.b, b], axis=1)
+        self.active = np.concatenate([self.active, active])
+        self.owner = np.concatenate([self.owner, np.concatenate([ci, n + pi])[row_owners(sub)]])
+        self.computed |= new
 
     def add_round(self, included: np.ndarray) -> list[tuple[float, int, int]]:
-        """Let the next round join: (bound, round, plane) for each plane on which it does not
-        repeat an earlier round and is not infeasible by its bound."""
-        r = len(self.rounds)
-        a, b, active = self.halfplanes
-        self.rounds.append((a[r], b[r], active))
-        repeat = np.zeros(self.n_planes, dtype=bool)
-        for q in range(r):
-            repeat |= self._same(r, q)
+        """Let the next round join: (bound, round, plane) for each plane whose QP is not
+        infeasible by its bound."""
+        r = self.n_rounds
+        self.n_rounds += 1
         lb = self.bounds(r, included)
-        return [(float(lb[p]), r, int(p)) for p in np.flatnonzero(~repeat & np.isfinite(lb))]
+        return [(float(lb[p]), r, int(p)) for p in np.flatnonzero(np.isfinite(lb))]
 
     def bounds(self, r: int, included: np.ndarray) -> np.ndarray:
         """(P,) lower bounds on every plane's QP deviation in round r (see ``bound``)."""
-        a, b, active = self.rounds[r]
-        act = active & included[self.owner][:, None]
+        a, b = self.a[r], self.b[r]
+        act = self.active & included[self.owner][:, None]
         norm = np.maximum(np.linalg.norm(a, axis=-1), 1e-12)
         viol = np.where(act, (b - a @ self.w0) / norm, 0.0)
         lb = np.maximum(self.base_bound, np.max(viol, axis=0, initial=0.0))
@@ -169,25 +185,17 @@ class PlaneProblems:
     def bound(self, r: int, p: int, included: np.ndarray) -> float:
         """A lower bound on the QP's deviation: the distance from w0 to the farthest violated
         half-plane; inf when a half-plane misses the whole speed disc (infeasible)."""
-        a, b, active = self.rounds[r]
-        act = active[:, p] & included[self.owner]
-        ap, bp = a[act, p], b[act, p]
+        act = self.active[:, p] & included[self.owner]
+        ap, bp = self.a[r, act, p], self.b[r, act, p]
         norm = np.maximum(np.linalg.norm(ap, axis=-1), 1e-12)
         if np.any(bp / norm > self.v_max):
             return np.inf
         return float(max(self.base_bound[p], np.max((bp - ap @ self.w0) / norm, initial=0.0)))
 
-    def _same(self, r: int, q: int) -> np.ndarray:
-        """(P,) planes on which rounds r and q give the same half-planes."""
-        (a1, b1, s1), (a2, b2, s2) = self.rounds[r], self.rounds[q]
-        equal = (s1 == s2) & (~s1 | (np.all(np.abs(a1 - a2) < 1e-12, axis=-1) & (np.abs(b1 - b2) < 1e-12)))
-        return np.all(equal, axis=0)
-
     def qp(self, r: int, p: int, included: np.ndarray) -> QP:
-        a, b, active = self.rounds[r]
-        act = active[:, p] & included[self.owner]
-        G = np.vstack([-a[act, p], self.G_lim[p], self.G_speed])
-        h = np.concatenate([-b[act, p], self.h_lim, self.h_speed])
+        act = self.active[:, p] & included[self.owner]
+        G = np.vstack([-self.a[r, act, p], self.G_lim[p], self.G_speed])
+        h = np.concatenate([-self.b[r, act, p], self.h_lim, self.h_speed])
         return QP(P=2.0 * np.eye(2), q=-2.0 * self.w0, G=G, h=h,
                   soc_radius=self.v_max if self.has_cones else None)
 
@@ -199,15 +207,15 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     every section passed on its left, then on its right (the nearest side is not always best
     once the other sections count). A VO's half-plane joins the QPs when v_pref lies in that VO
     or when a QP's answer does (constraint generation: that QP is re-queued), so sections far
-    from the answer never over-constrain it. QPs are solved in order of a lower
-    bound on their deviation (the distance to the farthest violated half-plane, which only
-    grows as constraints join); the search stops once the best safe answer beats every
+    from the answer never over-constrain it, and are never computed. QPs are solved in order of
+    a lower bound on their deviation (the distance to the farthest violated half-plane, which
+    only grows as constraints join); the search stops once the best safe answer beats every
     remaining bound. The nearest-point round has the smallest bound on each plane (the distance
     from an interior point to any supporting line is at least its distance to the boundary), so
-    the later rounds join the search only while a plane's first bound is below the best answer."""
-    ps = plane_sections(enc, enc.options.qp_samples)
-    problems = PlaneProblems(enc, ps, has_cones)
-    E1, E2 = ps.planes.e1, ps.planes.e2
+    the later rounds join the search only while a plane's first bound is below the best answer.
+    A QP identical to one already solved (a round that changes nothing on a plane) is skipped."""
+    problems = PlaneProblems(enc, decision_planes(enc), has_cones)
+    planes = problems.planes
     # The VOs constrained so far, shared by every plane: one found on one plane usually bites
     # on the next ones too. Queue entries remember how many were in when their bound was made.
     included = problems.initial.copy()
@@ -215,10 +223,11 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     first_bounds = [item[0] for item in queue]
     heapq.heapify(queue)
     best, best_dev, tried, failed, attempts, tie = None, np.inf, [], 0, 0, len(queue)
+    solved: set[tuple[int, bytes, bytes]] = set()
     while True:
         done = best_dev - _TIE  # bounds this close to the best answer cannot beat it
         if not queue or queue[0][0] >= done:
-            if len(problems.rounds) < len(ROUNDS) and min(first_bounds, default=np.inf) < done:
+            if problems.n_rounds < len(ROUNDS) and min(first_bounds, default=np.inf) < done:
                 for lb, r, p in problems.add_round(included):
                     tie += 1
                     heapq.heappush(queue, (lb, r, p, tie, int(included.sum())))
@@ -229,12 +238,17 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
             tie += 1
             heapq.heappush(queue, (max(lb, problems.bound(r, p, included)), r, p, tie, int(included.sum())))
             continue
-        res: Result = solve(problems.qp(r, p, included))
+        qp = problems.qp(r, p, included)
+        key = (p, qp.G.tobytes(), qp.h.tobytes())
+        if key in solved:
+            continue
+        solved.add(key)
+        res: Result = solve(qp)
         attempts += 1
         if not (res.ok and res.x.shape == (2,)):
             failed += res.status == "failed"
             continue
-        v = res.x[0] * E1 + res.x[1] * E2[p]
+        v = res.x[0] * planes.e1 + res.x[1] * planes.e2[p]
         tried.append(v)
         dev = enc.deviation(v)[0]
         if dev >= best_dev:
@@ -244,13 +258,14 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
             if enc.within_limits(v)[0]:
                 best, best_dev = (v, p, ROUNDS[r]), dev
         elif not np.all(included[entered]):  # constrain the VOs it entered and solve again
+            problems.ensure(entered)
             included |= entered
             tie += 1
             heapq.heappush(queue, (problems.bound(r, p, included), r, p, tie, int(included.sum())))
     if best is not None:
         v, p, mode = best
-        return Outcome(v, "optimal", float(ps.planes.phi[p]), {"round": mode, "solved": attempts})
-    return fallback(enc, ps.planes, np.array(tried).reshape(-1, 3), all_failed=attempts > 0 and failed == attempts)
+        return Outcome(v, "optimal", float(planes.phi[p]), {"round": mode, "solved": attempts})
+    return fallback(enc, planes, np.array(tried).reshape(-1, 3), all_failed=attempts > 0 and failed == attempts)
 
 
 def fallback(enc: Encounter, planes: AvoidancePlanes, tried: np.ndarray, all_failed: bool) -> Outcome:

@@ -36,9 +36,10 @@ def decision_planes(enc: Encounter) -> AvoidancePlanes:
     return avoidance_planes(direction, default_phis(enc.options.plane_step_deg))
 
 
-def plane_sections(enc: Encounter, n_samples: int | None = None) -> PlaneSections:
-    """The decision's planes and the conic sections of all VOs on them."""
-    planes = decision_planes(enc)
+def plane_sections(enc: Encounter, n_samples: int | None = None,
+                   planes: AvoidancePlanes | None = None) -> PlaneSections:
+    """The decision's planes (or ``planes``) and the conic sections of all VOs on them."""
+    planes = decision_planes(enc) if planes is None else planes
     corrections = enc.options.corrections if enc.options.corrections is not None else CORRECTIONS
     return PlaneSections(
         planes=planes,

@@ -11,7 +11,7 @@ face is seen too and belongs to the obstacle's shadow (see formulations/geometry
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -37,6 +37,10 @@ class VOPyramids:
 
     def __len__(self) -> int:
         return len(self.L_pz)
+
+    def subset(self, keep: np.ndarray) -> "VOPyramids":
+        """The pyramids selected by the boolean or index array ``keep``."""
+        return VOPyramids(**{f.name: getattr(self, f.name)[keep] for f in fields(self)})
 
     @property
     def corners(self) -> np.ndarray:
