@@ -46,7 +46,20 @@ class Backend:
     checks_answers: bool = False
 
     def solve(self, qp: QP, warm_start: np.ndarray | None = None) -> Result:
-        """Solve a QP (QP backends)."""
+        """Solve a QP: the checks every QP backend shares, then its own ``_solve``. Never
+        raises on a well-formed QP (a ValueError for a cone given to a backend without cones)."""
+        if not self.has_cones:
+            require_no_cone(self, qp)
+        std = standardise(qp)
+        if (early := screen(std, self.name)) is not None:
+            return early
+        try:
+            return self._solve(qp, std, warm_start)
+        except Exception as exc:  # noqa: BLE001 - a backend never raises on a well-formed QP
+            return failure(self.name, exc)
+
+    def _solve(self, qp: QP, std: "Standard", warm_start: np.ndarray | None) -> Result:
+        """The backend's own solve of a screened QP (QP backends override it)."""
         raise NotImplementedError(f"backend {self.name!r} does not solve QPs")
 
     def solve_nlp(self, nlp: NLP) -> Result:

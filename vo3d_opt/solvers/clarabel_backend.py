@@ -12,7 +12,7 @@ import clarabel
 import numpy as np
 
 from vo3d_opt.formulations.problem import QP, Result
-from vo3d_opt.solvers import Backend, Standard, failure, make_result, screen, standardise
+from vo3d_opt.solvers import Backend, Standard, make_result
 from vo3d_opt.solvers._sparse import dense_csc, triu_csc, triu_index
 
 #: At most this many persistent solvers (one per structure); the cache is emptied when full.
@@ -62,30 +62,24 @@ class ClarabelBackend(Backend):
     def __init__(self) -> None:
         self._solvers: dict[tuple[int, int, int, int], clarabel.DefaultSolver] = {}
 
-    def solve(self, qp: QP, warm_start: np.ndarray | None = None) -> Result:
-        """Solve ``qp``; ``warm_start`` is ignored (interior-point)."""
-        std = standardise(qp)
-        if (early := screen(std, self.name)) is not None:
-            return early
-        try:
-            M, b, sizes = conic_rows(std)
-            key = (std.n, *sizes)
-            solver = self._solvers.get(key)
-            if solver is None:
-                if len(self._solvers) >= MAX_CACHED:
-                    self._solvers.clear()
-                cones = [cone(size) for cone, size in zip(
-                    (clarabel.ZeroConeT, clarabel.NonnegativeConeT, clarabel.SecondOrderConeT),
-                    sizes) if size]
-                solver = clarabel.DefaultSolver(triu_csc(std.P), std.q, dense_csc(M), b, cones,
-                                                settings())
-                self._solvers[key] = solver
-            # Always through update(), also right after set-up: a fresh solver and an updated
-            # one differ in the last digits, and a run must not depend on what came before.
-            rows, cols = triu_index(std.n)
-            solver.update(P=std.P[rows, cols], q=std.q, A=M.ravel(order="F"), b=b)
-            sol = solver.solve()
-            status = str(sol.status)
-            return make_result(self.name, std, sol.x, _STATUS.get(status, "failed"), status)
-        except Exception as exc:  # noqa: BLE001 - a backend never raises on a well-formed QP
-            return failure(self.name, exc)
+    def _solve(self, qp: QP, std: Standard, warm_start: np.ndarray | None) -> Result:
+        """``warm_start`` is ignored (interior-point)."""
+        M, b, sizes = conic_rows(std)
+        key = (std.n, *sizes)
+        solver = self._solvers.get(key)
+        if solver is None:
+            if len(self._solvers) >= MAX_CACHED:
+                self._solvers.clear()
+            cones = [cone(size) for cone, size in zip(
+                (clarabel.ZeroConeT, clarabel.NonnegativeConeT, clarabel.SecondOrderConeT),
+                sizes) if size]
+            solver = clarabel.DefaultSolver(triu_csc(std.P), std.q, dense_csc(M), b, cones,
+                                            settings())
+            self._solvers[key] = solver
+        # Always through update(), also right after set-up: a fresh solver and an updated
+        # one differ in the last digits, and a run must not depend on what came before.
+        rows, cols = triu_index(std.n)
+        solver.update(P=std.P[rows, cols], q=std.q, A=M.ravel(order="F"), b=b)
+        sol = solver.solve()
+        status = str(sol.status)
+        return make_result(self.name, std, sol.x, _STATUS.get(status, "failed"), status)

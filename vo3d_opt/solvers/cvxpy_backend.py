@@ -12,9 +12,7 @@ import cvxpy as cp
 import numpy as np
 
 from vo3d_opt.formulations.problem import QP, Result
-from vo3d_opt.solvers import (
-    Backend, certified_infeasible, failure, make_result, require_no_cone, screen, standardise,
-)
+from vo3d_opt.solvers import Backend, Standard, certified_infeasible, make_result
 
 #: Extra options per cvxpy solver, for answers as tight as the direct backends'. OSQP is left
 #: unpolished: OSQP 1.x prints a line per polished solve without an active set.
@@ -89,34 +87,26 @@ class CvxpyBackend(Backend):
         self._options = SOLVER_OPTIONS.get(solver or "", {})
         self._templates: dict[tuple[int, int, int, bool], _Template] = {}
 
-    def solve(self, qp: QP, warm_start: np.ndarray | None = None) -> Result:
-        """Solve ``qp``; ``warm_start`` is passed on to solvers that use one."""
-        if not self.has_cones:
-            require_no_cone(self, qp)
-        std = standardise(qp)
-        if (early := screen(std, self.name)) is not None:
-            return early
-        try:
-            E, e, D, d = std.split()
-            key = (std.n, D.shape[0], E.shape[0], std.r is not None)
-            if key not in self._templates:
-                self._templates[key] = _template(*key)
-            t = self._templates[key]
-            t.F.value, t.q.value = square_root(std.P), std.q
-            if t.D is not None:
-                t.D.value, t.d.value = D, d
-            if t.E is not None:
-                t.E.value, t.e.value = E, e
-            if t.r is not None:
-                t.r.value = std.r
-            t.x.value = None if warm_start is None else np.asarray(warm_start, float).reshape(std.n)
-            t.problem.solve(solver=self._solver, warm_start=warm_start is not None,
-                            **self._options)
-            native = t.problem.status
-            status = _STATUS.get(native, "failed")
-            if (status == "infeasible" and self._solver in UNRELIABLE_INFEASIBILITY
-                    and not certified_infeasible(qp)):
-                status, native = "failed", f"{native}, but Clarabel finds the QP feasible"
-            return make_result(self.name, std, t.x.value, status, native)
-        except Exception as exc:  # noqa: BLE001 - a backend never raises on a well-formed QP
-            return failure(self.name, exc)
+    def _solve(self, qp: QP, std: Standard, warm_start: np.ndarray | None) -> Result:
+        """``warm_start`` is passed on to solvers that use one."""
+        E, e, D, d = std.split()
+        key = (std.n, D.shape[0], E.shape[0], std.r is not None)
+        if key not in self._templates:
+            self._templates[key] = _template(*key)
+        t = self._templates[key]
+        t.F.value, t.q.value = square_root(std.P), std.q
+        if t.D is not None:
+            t.D.value, t.d.value = D, d
+        if t.E is not None:
+            t.E.value, t.e.value = E, e
+        if t.r is not None:
+            t.r.value = std.r
+        t.x.value = None if warm_start is None else np.asarray(warm_start, float).reshape(std.n)
+        t.problem.solve(solver=self._solver, warm_start=warm_start is not None,
+                        **self._options)
+        native = t.problem.status
+        status = _STATUS.get(native, "failed")
+        if (status == "infeasible" and self._solver in UNRELIABLE_INFEASIBILITY
+                and not certified_infeasible(qp)):
+            status, native = "failed", f"{native}, but Clarabel finds the QP feasible"
+        return make_result(self.name, std, t.x.value, status, native)

@@ -18,9 +18,7 @@ import osqp
 
 from vo3d_opt.formulations.problem import QP, Result
 from vo3d_opt.solvers._sparse import dense_csc, triu_csc, triu_index
-from vo3d_opt.solvers import (
-    Backend, Standard, failure, make_result, require_no_cone, screen, standardise,
-)
+from vo3d_opt.solvers import Backend, Standard, make_result
 
 #: Settings of every solver: tight tolerances, polishing, silence.
 SETTINGS = dict(eps_abs=1e-7, eps_rel=1e-7, polishing=True, verbose=False, max_iter=10_000)
@@ -60,18 +58,11 @@ class OsqpBackend(Backend):
     def __init__(self) -> None:
         self._solvers: dict[tuple[int, int], osqp.OSQP] = {}
 
-    def solve(self, qp: QP, warm_start: np.ndarray | None = None) -> Result:
-        """Solve ``qp``; ``warm_start`` (shape (n,)) seeds OSQP's primal iterate."""
-        require_no_cone(self, qp)
-        std = standardise(qp)
-        if (early := screen(std, self.name)) is not None:
-            return early
-        try:
-            if (x := unconstrained_optimum(std)) is not None:
-                return Result(x, "optimal", self.name, "unconstrained optimum is feasible")
-            return self._solve_osqp(std, warm_start)
-        except Exception as exc:  # noqa: BLE001 - a backend never raises on a well-formed QP
-            return failure(self.name, exc)
+    def _solve(self, qp: QP, std: Standard, warm_start: np.ndarray | None) -> Result:
+        """``warm_start`` (shape (n,)) seeds OSQP's primal iterate."""
+        if (x := unconstrained_optimum(std)) is not None:
+            return Result(x, "optimal", self.name, "unconstrained optimum is feasible")
+        return self._solve_osqp(std, warm_start)
 
     def _solve_osqp(self, std: Standard, warm_start: np.ndarray | None) -> Result:
         key = std.C.shape

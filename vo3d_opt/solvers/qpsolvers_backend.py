@@ -13,10 +13,7 @@ import qpsolvers
 import scipy.sparse as sp
 
 from vo3d_opt.formulations.problem import QP, Result
-from vo3d_opt.solvers import (
-    Backend, Standard, certified_infeasible, failure, make_result, require_no_cone, screen,
-    standardise,
-)
+from vo3d_opt.solvers import Backend, Standard, certified_infeasible, make_result
 
 #: Extra options per solver, for answers as tight as the direct backends'. OSQP is left
 #: unpolished: OSQP 1.x prints a line per polished solve without an active set. ProxQP stays
@@ -50,20 +47,13 @@ class QpsolversBackend(Backend):
         self._options = SOLVER_OPTIONS.get(solver, {})
         self._sparse = solver not in qpsolvers.dense_solvers
 
-    def solve(self, qp: QP, warm_start: np.ndarray | None = None) -> Result:
-        """Solve ``qp``; ``warm_start`` is passed on as qpsolvers' ``initvals``."""
-        require_no_cone(self, qp)
-        std = standardise(qp)
-        if (early := screen(std, self.name)) is not None:
-            return early
-        try:
-            init = None if warm_start is None else np.asarray(warm_start, float).reshape(std.n)
-            sol = qpsolvers.solve_problem(to_problem(std, self._sparse), solver=self._solver,
-                                          initvals=init, **self._options)
-            if sol.found:
-                return make_result(self.name, std, sol.x, "optimal")
-        except Exception as exc:  # noqa: BLE001 - a backend never raises on a well-formed QP
-            return failure(self.name, exc)
+    def _solve(self, qp: QP, std: Standard, warm_start: np.ndarray | None) -> Result:
+        """``warm_start`` is passed on as qpsolvers' ``initvals``."""
+        init = None if warm_start is None else np.asarray(warm_start, float).reshape(std.n)
+        sol = qpsolvers.solve_problem(to_problem(std, self._sparse), solver=self._solver,
+                                      initvals=init, **self._options)
+        if sol.found:
+            return make_result(self.name, std, sol.x, "optimal")
         if certified_infeasible(qp):
             return Result(None, "infeasible", self.name, "no solution; Clarabel proves infeasible")
         return Result(None, "failed", self.name, "no solution found, yet QP not proved infeasible")
