@@ -28,7 +28,6 @@ from vo3d_opt.geometry import (
     vo_pyramids,
 )
 from vo3d_opt.geometry.frames import rotation_el_az, rotation_plane
-from vo3d_opt.geometry.sections import base_circle_crossings
 from vo3d_opt.types import Box, Cylinder
 
 REACH = 6.0  # largest own speed of interest (m/s) in these tests
@@ -828,6 +827,7 @@ def test_pyramid_horizon():
 
 
 def test_base_circle_crossings_lie_on_plane_and_circle():
+    """Eqs (14)-(16): the chord angles of cone_sections are where B_vo meets the plane."""
     rng = np.random.default_rng(11)
     n = 30
     r = rng.uniform(1, 10, n)
@@ -835,7 +835,8 @@ def test_base_circle_crossings_lie_on_plane_and_circle():
     v_b = rng.normal(size=(n, 3)) * 2
     cones = vo_cones(np.zeros(3), rel, v_b, r, virtual_sphere=False)
     planes = _planes(rng.normal(size=3), default_phis(15))
-    t1, t2 = base_circle_crossings(cones, planes)
+    chord_t = cone_sections(cones, planes).chord_t
+    t1, t2 = chord_t[..., 0], chord_t[..., 1]
     ok = np.isfinite(t1)
     assert ok.any() and (~ok).any()
     for t in (t1, t2):

@@ -179,7 +179,9 @@ def prepare(
     )
     # A cone that no velocity within the speed limit reaches can neither hold an answer nor
     # constrain one: leave it out of every formulation (and of the exact check, equivalently).
-    cones = cones.subset(cones.min_speed() <= limits.v_max + 1e-6)
+    reachable = cones.min_speed() <= limits.v_max + 1e-6
+    if not reachable.all():
+        cones = cones.subset(reachable)
     return Encounter(
         position=p, v_now=own.velocity, v_pref=np.asarray(v_pref, dtype=float), cones=cones,
         pyramids=vo_pyramids(p, list(obstacles)), limits=limits, dt=dt, options=options,

@@ -6,7 +6,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .frames import rotation_el_az
+from .._jit import jit
 
 #: The paper's smallest virtual-sphere factor (section 3.1.6: tau >= 1.5).
 TAU_MIN = 1.5
@@ -54,13 +54,7 @@ class VOCones:
     def min_speed(self) -> np.ndarray:
         """(n,) the smallest |v| inside each VO: the distance from the velocity origin to the
         (infinite) cone; 0 when A is inside the zone or the origin is in the cone."""
-        u = -self.apex  # the origin seen from the apex
-        L = np.linalg.norm(u, axis=1)
-        cos_b = np.einsum("ni,ni->n", u, self.axis) / np.maximum(L, 1e-12)
-        beta = np.arccos(np.clip(cos_b, -1.0, 1.0))
-        alpha = np.arcsin(self.sin_alpha)
-        d = np.where(beta <= alpha, 0.0, np.where(beta >= alpha + np.pi / 2, L, L * np.sin(beta - alpha)))
-        return np.where(self.inside, 0.0, d)
+        return _min_speed_kernel(self.apex, self.R, self.r_pz, self.d_oi, self.inside)
 
     def subset(self, keep: np.ndarray) -> "VOCones":
         """The cones selected by the boolean or index array ``keep``."""
@@ -118,28 +112,66 @@ def vo_cones(
     p_B = np.atleast_2d(np.asarray(p_B, dtype=float)).reshape(-1, 3)
     V_B = np.atleast_2d(np.asarray(V_B, dtype=float)).reshape(-1, 3)
     r_pz = np.broadcast_to(np.asarray(r_pz, dtype=float), (len(p_B),)).copy()
-    rel = p_B - np.asarray(p_A, dtype=float)
-    d_oi = np.linalg.norm(rel, axis=1)  # eq. (1)
-    safe_d = np.maximum(d_oi, 1e-12)
-    theta_el = np.arcsin(np.clip(rel[:, 2] / safe_d, -1.0, 1.0))  # eq. (1), = atan(dz / dxy)
-    psi_az = np.arctan2(rel[:, 1], rel[:, 0])  # eq. (1)
-    R = rotation_el_az(theta_el, psi_az)
-    inside = d_oi <= r_pz
-    # eq. (2): the tangent circle of the cone on the sphere, at distance d_vo along the axis.
-    dd = np.maximum(d_oi**2 - r_pz**2, 0.0)
-    d_vo = dd / safe_d
-    r_vo = r_pz * np.sqrt(dd) / safe_d
     a = V_B if apex is None else np.atleast_2d(np.asarray(apex, dtype=float)).reshape(-1, 3)
-    tau = np.ones_like(d_oi)
-    if virtual_sphere:
-        if reach is None:
-            tau = np.where(d_oi < 2.0 * r_pz, tau_min, 1.0)
+    mode = -1.0 if not virtual_sphere else (np.nan if reach is None else float(reach))
+    rel, d_oi, theta_el, psi_az, R, d_vo, r_vo, tau = _cone_kernel(
+        np.asarray(p_A, dtype=float), p_B, np.ascontiguousarray(a), r_pz, mode, float(tau_min))
+    return VOCones(rel=rel, apex=a, r_pz=r_pz, d_oi=d_oi, theta_el=theta_el, psi_az=psi_az, R=R,
+                   d_vo=d_vo, r_vo=r_vo, tau=tau, inside=d_oi <= r_pz)
+
+
+@jit
+def _cone_kernel(p_A, p_B, apex, r_pz, reach, tau_min):
+    """Eqs (1), (2), (6) and the virtual-sphere factor for every neighbour. ``reach``: NaN for
+    the paper's rule, negative for no virtual sphere."""
+    n = p_B.shape[0]
+    rel, R = np.empty((n, 3)), np.empty((n, 3, 3))
+    d_oi, theta_el, psi_az = np.empty(n), np.empty(n), np.empty(n)
+    d_vo, r_vo, tau = np.empty(n), np.empty(n), np.empty(n)
+    for i in range(n):
+        for k in range(3):
+            rel[i, k] = p_B[i, k] - p_A[k]
+        d = np.sqrt(rel[i, 0] ** 2 + rel[i, 1] ** 2 + rel[i, 2] ** 2)  # eq. (1)
+        safe_d = max(d, 1e-12)
+        th = np.arcsin(min(max(rel[i, 2] / safe_d, -1.0), 1.0))  # eq. (1), = atan(dz / dxy)
+        ps = np.arctan2(rel[i, 1], rel[i, 0])  # eq. (1)
+        ct, st, cp, sp = np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
+        # eq. (6): columns are the axis, the horizontal side and the 'up' side
+        R[i, 0, 0], R[i, 0, 1], R[i, 0, 2] = cp * ct, -sp, -cp * st
+        R[i, 1, 0], R[i, 1, 1], R[i, 1, 2] = sp * ct, cp, -sp * st
+        R[i, 2, 0], R[i, 2, 1], R[i, 2, 2] = st, 0.0, ct
+        # eq. (2): the tangent circle of the cone on the sphere, at distance d_vo along the axis
+        dd = max(d * d - r_pz[i] ** 2, 0.0)
+        dv, rv = dd / safe_d, r_pz[i] * np.sqrt(dd) / safe_d
+        t = 1.0
+        if d > r_pz[i]:  # never expanded when A is inside the zone
+            if np.isnan(reach):
+                t = tau_min if d < 2.0 * r_pz[i] else 1.0
+            elif reach >= 0.0:
+                # The base must lie beyond every |v| <= reach: axial(v - apex) <= reach + |apex|.
+                a_len = np.sqrt(apex[i, 0] ** 2 + apex[i, 1] ** 2 + apex[i, 2] ** 2)
+                needed = (reach + a_len) / max(dv, 1e-12)
+                t = max(tau_min, needed * 1.01) if needed > 1.0 else 1.0
+        d_oi[i], theta_el[i], psi_az[i] = d, th, ps
+        d_vo[i], r_vo[i], tau[i] = dv * t, rv * t, t
+    return rel, d_oi, theta_el, psi_az, R, d_vo, r_vo, tau
+
+
+@jit
+def _min_speed_kernel(apex, R, r_pz, d_oi, inside):
+    n = apex.shape[0]
+    out = np.zeros(n)
+    for i in range(n):
+        if inside[i]:
+            continue
+        L = np.sqrt(apex[i, 0] ** 2 + apex[i, 1] ** 2 + apex[i, 2] ** 2)
+        cos_b = -(apex[i, 0] * R[i, 0, 0] + apex[i, 1] * R[i, 1, 0] + apex[i, 2] * R[i, 2, 0]) / max(L, 1e-12)
+        beta = np.arccos(min(max(cos_b, -1.0), 1.0))
+        alpha = np.arcsin(min(max(r_pz[i] / max(d_oi[i], 1e-12), 0.0), 1.0))
+        if beta <= alpha:  # the origin is in the cone
+            out[i] = 0.0
+        elif beta >= alpha + np.pi / 2:  # the apex is the nearest point
+            out[i] = L
         else:
-            # The base must lie beyond every |v| <= reach: axial(v - apex) <= reach + |apex|.
-            needed = (reach + np.linalg.norm(a, axis=1)) / np.maximum(d_vo, 1e-12)
-            tau = np.where(needed > 1.0, np.maximum(tau_min, needed * 1.01), 1.0)
-    tau = np.where(inside, 1.0, tau)
-    return VOCones(
-        rel=rel, apex=a, r_pz=r_pz, d_oi=d_oi, theta_el=theta_el, psi_az=psi_az, R=R,
-        d_vo=d_vo * tau, r_vo=r_vo * tau, tau=tau, inside=inside,
-    )
+            out[i] = L * np.sin(beta - alpha)
+    return out

@@ -14,8 +14,30 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._jit import jit
 from .cone import VOCones
 from .pyramid import VOPyramids
+
+
+@jit
+def _closest_approach_kernel(apex: np.ndarray, rel: np.ndarray, v: np.ndarray, horizon: float):
+    """(n, M) closest distance to B's centre over t in [0, horizon] (horizon < 0: none), its
+    time t*, and the closing rate p·u, with u = v - apex the relative velocity."""
+    n, M = apex.shape[0], v.shape[0]
+    closest, t_star, closing = np.empty((n, M)), np.empty((n, M)), np.empty((n, M))
+    for i in range(n):
+        for k in range(M):
+            u0, u1, u2 = v[k, 0] - apex[i, 0], v[k, 1] - apex[i, 1], v[k, 2] - apex[i, 2]
+            uu = u0 * u0 + u1 * u1 + u2 * u2
+            pu = rel[i, 0] * u0 + rel[i, 1] * u1 + rel[i, 2] * u2
+            t = max(pu, 0.0) / max(uu, 1e-300) if uu > 0 else 0.0
+            if horizon >= 0.0:
+                t = min(t, horizon)
+            d0, d1, d2 = rel[i, 0] - u0 * t, rel[i, 1] - u1 * t, rel[i, 2] - u2 * t
+            closest[i, k] = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            t_star[i, k] = t
+            closing[i, k] = pu
+    return closest, t_star, closing
 
 
 def _closest_approach(
@@ -23,15 +45,8 @@ def _closest_approach(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each cone and velocity (n, M): the closest distance of A's relative motion to B's
     centre over t in [0, horizon], the time it happens, and the closing rate (p·u)."""
-    u = np.atleast_2d(np.asarray(v, dtype=float))[None, :, :] - cones.apex[:, None, :]
-    p = cones.rel[:, None, :]
-    uu = np.einsum("nmi,nmi->nm", u, u)
-    pu = np.einsum("nmi,nmi->nm", p, u)
-    t_star = np.where(uu > 0, np.maximum(pu, 0.0) / np.maximum(uu, 1e-300), 0.0)
-    if horizon is not None:
-        t_star = np.minimum(t_star, horizon)
-    closest = np.linalg.norm(p - u * t_star[..., None], axis=-1)
-    return closest, t_star, pu
+    v = np.atleast_2d(np.asarray(v, dtype=float))
+    return _closest_approach_kernel(cones.apex, cones.rel, v, -1.0 if horizon is None else float(horizon))
 
 
 def cone_penetration(cones: VOCones, v: np.ndarray) -> np.ndarray:
@@ -41,31 +56,68 @@ def cone_penetration(cones: VOCones, v: np.ndarray) -> np.ndarray:
     return cones.r_pz[:, None] - closest
 
 
+@jit
+def _in_cones_kernel(apex, rel, r_pz, inside, v, horizon, tol):
+    closest, t_star, closing = _closest_approach_kernel(apex, rel, v, horizon)
+    out = np.empty(closest.shape, dtype=np.bool_)
+    for i in range(closest.shape[0]):
+        for k in range(closest.shape[1]):
+            if inside[i]:  # inside the zone: the VO is what still closes in
+                out[i, k] = closing[i, k] > 0.0
+            else:
+                out[i, k] = closest[i, k] < r_pz[i] + tol and t_star[i, k] > 0.0
+    return out
+
+
 def in_vo_cones(
     cones: VOCones, v: np.ndarray, *, horizon: float | None = None, tol: float = 0.0
 ) -> np.ndarray:
     """Boolean (n, M): velocity m lies in VO cone n. ``tol`` (m) widens (>0) or shrinks (<0)
     the protected sphere, e.g. to accept boundary velocities."""
-    closest, t_star, pu = _closest_approach(cones, v, horizon)
-    hit = (closest < (cones.r_pz + tol)[:, None]) & (t_star > 0)
-    return np.where(cones.inside[:, None], pu > 0, hit)
+    v = np.atleast_2d(np.asarray(v, dtype=float))
+    return _in_cones_kernel(cones.apex, cones.rel, cones.r_pz, cones.inside, v,
+                            -1.0 if horizon is None else float(horizon), float(tol))
+
+
+@jit
+def _entry_time_kernel(frame: np.ndarray, lo: np.ndarray, hi: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Slab test of the ray p_A + v t against each prism [lo, hi] (in its frame): (m, M)."""
+    m, M = frame.shape[0], v.shape[0]
+    out = np.empty((m, M))
+    for j in range(m):
+        for k in range(M):
+            t_enter, t_exit = -np.inf, np.inf
+            for a in range(3):
+                w = frame[j, a, 0] * v[k, 0] + frame[j, a, 1] * v[k, 1] + frame[j, a, 2] * v[k, 2]
+                if w == 0.0:  # a zero component: inside the slab forever or never
+                    if not (lo[j, a] <= 0.0 <= hi[j, a]):
+                        t_enter = np.inf
+                else:
+                    t1, t2 = lo[j, a] / w, hi[j, a] / w
+                    t_enter = max(t_enter, min(t1, t2))
+                    t_exit = min(t_exit, max(t1, t2))
+            t0 = max(t_enter, 0.0)
+            out[j, k] = t0 if t_exit > t0 else np.inf
+    return out
 
 
 def pyramid_entry_time(pyramids: VOPyramids, v: np.ndarray) -> np.ndarray:
     """Time (s) at which the ray p_A + v t enters each prism C_pz (m, M); inf if never."""
     v = np.atleast_2d(np.asarray(v, dtype=float))
-    w = np.einsum("mij,kj->mki", pyramids.frame, v)  # velocities in each prism frame
-    lo, hi = pyramids.lo[:, None, :], pyramids.hi[:, None, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1, t2 = lo / w, hi / w
-    still = w == 0  # a zero component: inside the slab forever or never
-    in_slab = (lo <= 0) & (hi >= 0)
-    t_lo = np.where(still, np.where(in_slab, -np.inf, np.inf), np.minimum(t1, t2))
-    t_hi = np.where(still, np.where(in_slab, np.inf, -np.inf), np.maximum(t1, t2))
-    t_enter = np.max(t_lo, axis=-1)
-    t_exit = np.min(t_hi, axis=-1)
-    hit = t_exit > np.maximum(t_enter, 0.0)
-    return np.where(hit, np.maximum(t_enter, 0.0), np.inf)
+    return _entry_time_kernel(pyramids.frame, pyramids.lo, pyramids.hi, v)
+
+
+@jit
+def _in_pyramids_kernel(frame, lo, hi, inside, v, horizon):
+    t = _entry_time_kernel(frame, lo, hi, v)
+    out = np.empty(t.shape, dtype=np.bool_)
+    for j in range(t.shape[0]):
+        for k in range(t.shape[1]):
+            if inside[j]:  # inside C_pz: a horizontal component towards its centre
+                out[j, k] = frame[j, 0, 0] * v[k, 0] + frame[j, 0, 1] * v[k, 1] + frame[j, 0, 2] * v[k, 2] > 0.0
+            else:
+                out[j, k] = t[j, k] < np.inf if horizon < 0.0 else t[j, k] <= horizon
+    return out
 
 
 def in_vo_pyramids(
@@ -73,7 +125,5 @@ def in_vo_pyramids(
 ) -> np.ndarray:
     """Boolean (m, M): velocity k lies in VO pyramid m (its ray enters C_pz)."""
     v = np.atleast_2d(np.asarray(v, dtype=float))
-    t = pyramid_entry_time(pyramids, v)
-    hit = np.isfinite(t) if horizon is None else t <= horizon
-    toward = np.einsum("mi,ki->mk", pyramids.frame[:, 0, :], v) > 0  # horizontal, to the centre
-    return np.where(pyramids.inside[:, None], toward, hit)
+    return _in_pyramids_kernel(pyramids.frame, pyramids.lo, pyramids.hi, pyramids.inside, v,
+                               -1.0 if horizon is None else float(horizon))

@@ -15,6 +15,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from .._jit import jit
 from ..types import Box, Cylinder
 
 # Corner k of the prism in its frame: bits (far, left, top) of k.
@@ -54,26 +55,30 @@ class VOPyramids:
         return self.corners[:, [0, 2, 6, 4], :]
 
 
-def _footprint_centers(obstacles: Sequence[Cylinder | Box]) -> np.ndarray:
-    return np.array([o.center for o in obstacles], dtype=float).reshape(-1, 2)
-
-
 def vo_pyramids(p_A: np.ndarray, obstacles: Sequence[Cylinder | Box]) -> VOPyramids:
     """Build the VO pyramids of static cylinders and boxes seen from ``p_A``."""
-    p_A = np.asarray(p_A, dtype=float)
-    m = len(obstacles)
-    centers = _footprint_centers(obstacles)
-    L = np.array([o.side for o in obstacles], dtype=float)
-    H = np.array([o.prism_height for o in obstacles], dtype=float)
-    d_xy = centers - p_A[:2]
-    dist = np.linalg.norm(d_xy, axis=1)
-    h = np.where(dist[:, None] > 1e-9, d_xy / np.maximum(dist, 1e-12)[:, None], [1.0, 0.0])
-    frame = np.zeros((m, 3, 3))
-    frame[:, 0, :2] = h
-    frame[:, 1, 0], frame[:, 1, 1] = -h[:, 1], h[:, 0]
-    frame[:, 2, 2] = 1.0
-    lo = np.stack([dist - L / 2, -L / 2, -np.full(m, p_A[2])], axis=1)
-    hi = np.stack([dist + L / 2, L / 2, H - p_A[2]], axis=1)
-    # Turned to face A, the square contains A exactly when A is within its apothem L/2.
-    inside = (dist < L / 2) & (p_A[2] < H)
-    return VOPyramids(frame=frame, lo=lo, hi=hi, L_pz=L, h_pz=H, inside=inside)
+    prisms = np.array([(*o.center, o.side, o.prism_height) for o in obstacles], dtype=float).reshape(-1, 4)
+    frame, lo, hi, inside = _pyramid_kernel(np.asarray(p_A, dtype=float), prisms)
+    return VOPyramids(frame=frame, lo=lo, hi=hi, L_pz=prisms[:, 2].copy(), h_pz=prisms[:, 3].copy(),
+                      inside=inside)
+
+
+@jit
+def _pyramid_kernel(p_A, prisms):
+    """Section 4.1 for prisms (x, y, L_pz, h_pz): C_pz turned square to the line of sight."""
+    m = prisms.shape[0]
+    frame, lo, hi = np.zeros((m, 3, 3)), np.empty((m, 3)), np.empty((m, 3))
+    inside = np.empty(m, dtype=np.bool_)
+    for j in range(m):
+        dx, dy = prisms[j, 0] - p_A[0], prisms[j, 1] - p_A[1]
+        L, H = prisms[j, 2], prisms[j, 3]
+        dist = np.sqrt(dx * dx + dy * dy)
+        hx, hy = (dx / dist, dy / dist) if dist > 1e-9 else (1.0, 0.0)
+        frame[j, 0, 0], frame[j, 0, 1] = hx, hy  # h: horizontal, towards the obstacle
+        frame[j, 1, 0], frame[j, 1, 1] = -hy, hx  # s: horizontal, left
+        frame[j, 2, 2] = 1.0  # z: up
+        lo[j, 0], lo[j, 1], lo[j, 2] = dist - L / 2, -L / 2, -p_A[2]
+        hi[j, 0], hi[j, 1], hi[j, 2] = dist + L / 2, L / 2, H - p_A[2]
+        # Turned to face A, the square contains A exactly when A is within its apothem L/2.
+        inside[j] = dist < L / 2 and p_A[2] < H
+    return frame, lo, hi, inside

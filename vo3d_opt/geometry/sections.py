@@ -24,6 +24,7 @@ from functools import cached_property
 
 import numpy as np
 
+from .._jit import jit
 from .cone import VOCones
 from .frames import AvoidancePlanes
 from .pyramid import BOX_EDGES, VOPyramids
@@ -150,24 +151,134 @@ def _polygon_area(poly: np.ndarray) -> np.ndarray:
     return 0.5 * np.abs(np.sum(_cross(p, np.nan_to_num(nxt)), axis=2))
 
 
-def base_circle_crossings(cones: VOCones, planes: AvoidancePlanes) -> tuple[np.ndarray, np.ndarray]:
-    """Eqs (14)–(16): the angles t1, t2 at which the base circle B_vo meets each plane, (n, P)
-    each (NaN when it does not). z^phi of B_vo(t) is A' + B' cos t + C' sin t = 0."""
-    n_w = planes.normal  # (P, 3)
-    R = cones.R
-    z_apex = cones.apex @ n_w.T  # (n, P)
-    A_ = z_apex + cones.d_vo[:, None] * (R[:, :, 0] @ n_w.T)
-    B_ = cones.r_vo[:, None] * (R[:, :, 1] @ n_w.T)
-    C_ = cones.r_vo[:, None] * (R[:, :, 2] @ n_w.T)
+@jit
+def _crossings(apex, R, d_vo, r_vo, normal):
+    """Eqs (14)–(16) for one cone and one plane normal: (t1, t2), NaN when B_vo misses it."""
+    A_ = d_vo * (R[0, 0] * normal[0] + R[1, 0] * normal[1] + R[2, 0] * normal[2])
+    A_ += apex[0] * normal[0] + apex[1] * normal[1] + apex[2] * normal[2]
+    B_ = r_vo * (R[0, 1] * normal[0] + R[1, 1] * normal[1] + R[2, 1] * normal[2])
+    C_ = r_vo * (R[0, 2] * normal[0] + R[1, 2] * normal[1] + R[2, 2] * normal[2])
     rho = np.hypot(B_, C_)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = -A_ / rho
-    ok = (np.abs(ratio) <= 1.0) & (rho > 0)
-    base = np.arctan2(C_, B_)
-    delta = np.arccos(np.clip(ratio, -1.0, 1.0))
-    t1 = np.where(ok, base - delta, np.nan)
-    t2 = np.where(ok, base + delta, np.nan)
-    return t1, t2
+    ratio = -A_ / rho
+    out = np.full(2, np.nan)
+    if abs(ratio) <= 1.0 and rho > 0:
+        base, delta = np.arctan2(C_, B_), np.arccos(min(max(ratio, -1.0), 1.0))
+        out[0], out[1] = base - delta, base + delta
+    return out
+
+
+@jit
+def _to_plane(v, frame, c, s):
+    """Eq. (8): world vector -> (x^phi, y^phi, z^phi) on the plane with cos/sin phi = c, s."""
+    f0 = frame[0, 0] * v[0] + frame[0, 1] * v[1] + frame[0, 2] * v[2]
+    f1 = frame[1, 0] * v[0] + frame[1, 1] * v[1] + frame[1, 2] * v[2]
+    f2 = frame[2, 0] * v[0] + frame[2, 1] * v[1] + frame[2, 2] * v[2]
+    return f0, c * f1 + s * f2, c * f2 - s * f1
+
+
+@jit
+def _base_point(apex, R, d_vo, r_vo, t):
+    """B_vo(t) of eq. (4) in the world frame."""
+    ct, st = r_vo * np.cos(t), r_vo * np.sin(t)
+    out = np.empty(3)
+    for k in range(3):
+        out[k] = apex[k] + R[k, 0] * d_vo + R[k, 1] * ct + R[k, 2] * st
+    return out
+
+
+@jit
+def _cone_sections_kernel(apex, R, d_vo, r_vo, sin_alpha, rel, inside, frame, phi, t,
+                          tg_range, symmetry_abs, triangle, base_chord):
+    """Section 3.1 one cone and one plane at a time (see cone_sections for the outputs)."""
+    n, P, K = apex.shape[0], phi.shape[0], t.shape[0]
+    kind = np.full((n, P), BLANK, dtype=np.int64)
+    pts = np.full((n, P, K + 3, 2), np.nan)
+    mask = np.zeros((n, P, K + 3), dtype=np.bool_)
+    apex_xy = np.empty((n, P, 2))
+    chord = np.full((n, P, 2, 2), np.nan)
+    chord_t = np.full((n, P, 2), np.nan)
+    H = np.empty((n, P, 2))
+    halfplane = np.empty((n, P, 3))
+    curve = np.full((n, P, K, 2), np.nan)
+    cphi, sphi = np.cos(phi), np.sin(phi)
+    B_world = np.empty((K, 3))
+    for i in range(n):
+        for k in range(K):
+            B_world[k] = _base_point(apex[i], R[i], d_vo[i], r_vo[i], t[k])  # eq. (9) before eq. (8)
+        C_world = apex[i] + d_vo[i] * R[i, :, 0]  # C_vo, eq. (5)
+        a_norm = np.sqrt(apex[i, 0] ** 2 + apex[i, 1] ** 2 + apex[i, 2] ** 2)
+        scale = 1.0 + a_norm + d_vo[i]
+        sa = sin_alpha[i]
+        for p in range(P):
+            c, s = cphi[p], sphi[p]
+            xA, yA, zA = _to_plane(apex[i], frame, c, s)  # eq. (7)
+            apex_xy[i, p, 0], apex_xy[i, p, 1] = xA, yA
+            on_apex = abs(zA) <= 1e-9 * scale  # section 3.1.3: A_vo lies on the plane
+            # Eqs (11)-(12): generator k meets the plane at parameter t_g.
+            any_valid = False
+            for k in range(K):
+                xB, yB, zB = _to_plane(B_world[k], frame, c, s)
+                dz = zB - zA
+                t_g = -zA / dz
+                if tg_range:  # 3.1.1
+                    valid = t_g >= 0.0 and t_g <= 1.0
+                else:  # the original condition z_Bvo != z_A: both nappes, any length
+                    valid = np.isfinite(t_g) and abs(dz) > 1e-12
+                x, y = (xB - xA) * t_g + xA, (yB - yA) * t_g + yA
+                pts[i, p, k, 0], pts[i, p, k, 1] = x, y
+                if valid:
+                    any_valid = True
+                    if not on_apex:
+                        mask[i, p, k] = True
+                        curve[i, p, k, 0], curve[i, p, k, 1] = x, y
+            # Eqs (14)-(17): where the base circle meets the plane.
+            normal = np.array([c * frame[2, 0] - s * frame[1, 0], c * frame[2, 1] - s * frame[1, 1],
+                               c * frame[2, 2] - s * frame[1, 2]])
+            t12 = _crossings(apex[i], R[i], d_vo[i], r_vo[i], normal)
+            chord_ok = np.isfinite(t12[0]) and np.isfinite(t12[1])
+            for j in range(2):
+                if chord_ok:
+                    chord_t[i, p, j] = t12[j]
+                    x, y, _ = _to_plane(_base_point(apex[i], R[i], d_vo[i], r_vo[i], t12[j]), frame, c, s)
+                    chord[i, p, j, 0], chord[i, p, j, 1] = x, y
+                    pts[i, p, K + j, 0], pts[i, p, K + j, 1] = x, y
+                else:
+                    pts[i, p, K + j, 0], pts[i, p, K + j, 1] = 0.0, 0.0
+            pts[i, p, K + 2, 0], pts[i, p, K + 2, 1] = xA, yA
+            # Classification by the angle between the plane and the axis (|n·a| vs sin alpha).
+            na = abs(R[i, 0, 0] * normal[0] + R[i, 1, 0] * normal[1] + R[i, 2, 0] * normal[2])
+            kd = BLANK
+            if any_valid or chord_ok:
+                if na > sa + _ANGLE_TOL:
+                    kd = CIRCLE if na > 1 - _ANGLE_TOL else ELLIPSE
+                elif abs(na - sa) <= _ANGLE_TOL:
+                    kd = PARABOLA
+                elif na < sa - _ANGLE_TOL:
+                    kd = HYPERBOLA
+            if on_apex:
+                kd = POINT if na > sa + _ANGLE_TOL else (LINE if na >= sa - _ANGLE_TOL else TRIANGLE)
+                if kd == TRIANGLE and not triangle:  # the original reduces eq. (12) to A^phi
+                    kd = POINT
+            # Polygon vertices: chord points (3.1.4), and the apex for triangles (3.1.3).
+            use_chord = chord_ok and (base_chord or on_apex) and kd != POINT
+            mask[i, p, K] = mask[i, p, K + 1] = use_chord
+            mask[i, p, K + 2] = kd == TRIANGLE
+            # Eq. (13): the symmetry-line point H.
+            xC, yC, zC = _to_plane(C_world, frame, c, s)
+            dzc = zC - zA
+            if abs(dzc) <= 1e-12 * scale:  # the axis is parallel to the plane
+                H[i, p, 0], H[i, p, 1] = xC, yC
+            else:
+                t_h = -zA / dzc
+                if symmetry_abs:
+                    t_h = abs(t_h)
+                H[i, p, 0], H[i, p, 1] = (xC - xA) * t_h + xA, (yC - yA) * t_h + yA
+            # Inside the protected zone: the VO is the closing half-space (v - apex)·rel > 0.
+            xr, yr, zr = _to_plane(rel[i], frame, c, s)
+            halfplane[i, p, 0], halfplane[i, p, 1] = xr, yr
+            halfplane[i, p, 2] = xA * xr + yA * yr + zA * zr
+            kind[i, p] = INSIDE_CODE if inside[i] else kd
+    return kind, pts, mask, apex_xy, chord, chord_t, H, halfplane, curve
 
 
 def cone_sections(
@@ -181,131 +292,94 @@ def cone_sections(
     unknown = set(corrections) - CORRECTIONS
     if unknown:
         raise ValueError(f"corrections: unknown {sorted(unknown)}; known {sorted(CORRECTIONS)}")
-    n, P = len(cones), len(planes.phi)
     t = np.linspace(0.0, 2.0 * np.pi, n_samples, endpoint=False)
-    A_phi = planes.coords(cones.apex)  # eq. (7), (n, P, 3)
-    B_phi = planes.coords(cones.base_points(t))  # eq. (9), (n, P, K, 3)
-    C_phi = planes.coords(cones.center)
-    zA = A_phi[..., 2]
-    scale = 1.0 + np.linalg.norm(cones.apex, axis=1)[:, None] + cones.d_vo[:, None]
-    on_apex = np.abs(zA) <= 1e-9 * scale  # section 3.1.3: A_vo lies on the plane
-
-    # Eqs (11)–(12): generator t meets the plane at parameter t_g.
-    dz = B_phi[..., 2] - zA[..., None]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_g = -zA[..., None] / dz
-    if "tg_range" in corrections:  # 3.1.1
-        valid = (t_g >= 0.0) & (t_g <= 1.0)
-    else:  # the original condition z_Bvo != z_A: both nappes, any length
-        valid = np.isfinite(t_g) & (np.abs(dz) > 1e-12)
-    with np.errstate(invalid="ignore"):  # t_g is inf/NaN where unused: masked by ``valid``
-        curve = (B_phi[..., :2] - A_phi[:, :, None, :2]) * t_g[..., None] + A_phi[:, :, None, :2]
-
-    # Eqs (14)–(17): where the base circle meets the plane.
-    t1, t2 = base_circle_crossings(cones, planes)
-    chord_t = np.stack([t1, t2], axis=-1)  # (n, P, 2)
-    chord_ok = np.all(np.isfinite(chord_t), axis=-1)
-    chord_pts = _base_points_on_planes(cones, planes, np.nan_to_num(chord_t))
-    chord_pts = np.where(chord_ok[..., None, None], chord_pts, np.nan)
-
-    # Classification by the angle between the plane and the axis (|n·a| vs sin alpha).
-    na = np.abs(cones.axis @ planes.normal.T)  # (n, P)
-    sa = cones.sin_alpha[:, None]
-    cut_any = np.any(valid, axis=-1) | chord_ok
-    kind = np.full((n, P), BLANK)
-    kind = np.where(na > sa + _ANGLE_TOL, np.where(na > 1 - _ANGLE_TOL, CIRCLE, ELLIPSE), kind)
-    kind = np.where(np.abs(na - sa) <= _ANGLE_TOL, PARABOLA, kind)
-    kind = np.where(na < sa - _ANGLE_TOL, HYPERBOLA, kind)
-    kind = np.where(cut_any, kind, BLANK)
-    apex_kind = np.where(na > sa + _ANGLE_TOL, POINT, np.where(na >= sa - _ANGLE_TOL, LINE, TRIANGLE))
-    if "triangle" not in corrections:  # the original reduces eq. (12) to the single point A^phi
-        apex_kind = np.where(apex_kind == TRIANGLE, POINT, apex_kind)
-    kind = np.where(on_apex, apex_kind, kind)
-
-    # Polygon vertices: curve points, chord points (3.1.4), and the apex for triangles (3.1.3).
-    use_curve = valid & ~on_apex[..., None]
-    use_chord = np.broadcast_to(chord_ok[..., None], chord_ok.shape + (2,)).copy()
-    if "base_chord" not in corrections:
-        use_chord &= on_apex[..., None]  # the triangle's own two points (eq. 17) stay
-    use_chord &= (kind != POINT)[..., None]
-    use_apex = (kind == TRIANGLE)[..., None]
-    pts = np.concatenate([curve, np.nan_to_num(chord_pts), A_phi[:, :, None, :2]], axis=2)
-    mask = np.concatenate([use_curve, use_chord, use_apex], axis=2)
-
-    # Eq. (13): the symmetry-line point H.
-    dzc = C_phi[..., 2] - zA
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_h = -zA / dzc
-    if "symmetry_abs" in corrections:
-        t_h = np.abs(t_h)
-    parallel = np.abs(dzc) <= 1e-12 * scale
-    with np.errstate(invalid="ignore"):  # t_h undefined when parallel: replaced just below
-        H = (C_phi[..., :2] - A_phi[..., :2]) * t_h[..., None] + A_phi[..., :2]
-    H = np.where(parallel[..., None], C_phi[..., :2], H)
-
-    # Inside the protected zone: the VO is the closing half-space (v - apex)·rel > 0.
-    rel_p = planes.coords(cones.rel)
-    halfplane = np.concatenate([rel_p[..., :2], (A_phi * rel_p).sum(-1, keepdims=True)], axis=-1)
-    kind = np.where(cones.inside[:, None], INSIDE_CODE, kind)
-
+    kind, pts, mask, apex, chord, chord_t, H, halfplane, curve = _cone_sections_kernel(
+        cones.apex, cones.R, cones.d_vo, cones.r_vo, cones.sin_alpha, cones.rel, cones.inside,
+        planes.frame, planes.phi, t, "tg_range" in corrections, "symmetry_abs" in corrections,
+        "triangle" in corrections, "base_chord" in corrections)
     return Sections(
-        kind=kind, vertices=pts, vertex_mask=mask, apex=A_phi[..., :2], chord=chord_pts, symmetry=H,
-        halfplane=halfplane, vo_lines="vo_lines" in corrections,
-        curve=np.where(use_curve[..., None], curve, np.nan), t=t, chord_t=chord_t,
+        kind=kind, vertices=pts, vertex_mask=mask, apex=apex, chord=chord, symmetry=H,
+        halfplane=halfplane, vo_lines="vo_lines" in corrections, curve=curve, t=t, chord_t=chord_t,
     )
 
 
-def _base_points_on_planes(cones: VOCones, planes: AvoidancePlanes, t: np.ndarray) -> np.ndarray:
-    """B_vo(t) in plane coordinates for per-(cone, plane) angles t (n, P, k) -> (n, P, k, 2)."""
-    body = np.stack(
-        [np.broadcast_to(cones.d_vo[:, None, None], t.shape),
-         cones.r_vo[:, None, None] * np.cos(t), cones.r_vo[:, None, None] * np.sin(t)],
-        axis=-1,
-    )
-    world = body @ cones.R[:, None].transpose(0, 1, 3, 2) + cones.apex[:, None, None, :]
-    # Each plane's own points: rotate about the common axis with that plane's phi.
-    f = world @ planes.frame.T
-    c, s = np.cos(planes.phi)[None, :, None], np.sin(planes.phi)[None, :, None]
-    return np.stack([f[..., 0], c * f[..., 1] + s * f[..., 2]], axis=-1)
+@jit
+def _pyramid_sections_kernel(corners, edges, h_dir, inside, frame, phi):
+    """Section 4.2 one pyramid and one plane at a time (see pyramid_sections)."""
+    m, P, E = corners.shape[0], phi.shape[0], edges.shape[0]
+    kind = np.full((m, P), POINT, dtype=np.int64)
+    chord = np.full((m, P, 2, 2), np.nan)
+    symmetry = np.full((m, P, 2), np.nan)
+    halfplane = np.zeros((m, P, 3))
+    pts = np.empty((E, 2))
+    unit = np.empty((E, 2))
+    crosses = np.zeros(E, dtype=np.bool_)
+    cphi, sphi = np.cos(phi), np.sin(phi)
+    local = np.empty((8, 3))
+    for j in range(m):
+        for p in range(P):
+            c, s = cphi[p], sphi[p]
+            for k in range(8):
+                local[k, 0], local[k, 1], local[k, 2] = _to_plane(corners[j, k], frame, c, s)
+            # C_pz ∩ plane is the convex hull of the points where its edges cross the plane.
+            count, mx, my, sx, sy = 0, 0.0, 0.0, 0.0, 0.0
+            for e in range(E):
+                a, b = edges[e, 0], edges[e, 1]
+                za, zb = local[a, 2], local[b, 2]
+                crosses[e] = za * zb <= 0 and za != zb
+                if crosses[e]:
+                    f = za / (za - zb)
+                    pts[e, 0] = local[a, 0] + f * (local[b, 0] - local[a, 0])
+                    pts[e, 1] = local[a, 1] + f * (local[b, 1] - local[a, 1])
+                    norm = np.hypot(pts[e, 0], pts[e, 1])
+                    unit[e, 0], unit[e, 1] = pts[e, 0] / norm, pts[e, 1] / norm
+                    sx, sy = sx + pts[e, 0], sy + pts[e, 1]
+                    if norm > 0:
+                        mx, my, count = mx + unit[e, 0], my + unit[e, 1], count + 1
+            xh, yh, _ = _to_plane(h_dir[j], frame, c, s)
+            halfplane[j, p, 0], halfplane[j, p, 1] = xh, yh
+            n_cross = np.sum(crosses)
+            if n_cross == 0:
+                kind[j, p] = INSIDE_CODE if inside[j] else POINT
+                continue
+            symmetry[j, p, 0], symmetry[j, p, 1] = sx / n_cross, sy / n_cross
+            # The extreme crossing points seen from the apex (the velocity origin, eq. 19).
+            if count:
+                mx, my = mx / count, my / count
+            lo, hi, a_lo, a_hi, at_apex = -1, -1, np.inf, -np.inf, False
+            for e in range(E):
+                if crosses[e]:
+                    ang = np.arctan2(mx * unit[e, 1] - my * unit[e, 0], mx * unit[e, 0] + my * unit[e, 1])
+                    at_apex |= np.isnan(ang)  # A on the surface of C_pz: no wedge to speak of
+                    if ang < a_lo:
+                        lo, a_lo = e, ang
+                    if ang > a_hi:
+                        hi, a_hi = e, ang
+            if not at_apex and a_hi - a_lo > 1e-9:
+                kind[j, p] = TRIANGLE
+                chord[j, p, 0, 0], chord[j, p, 0, 1] = pts[lo, 0], pts[lo, 1]
+                chord[j, p, 1, 0], chord[j, p, 1, 1] = pts[hi, 0], pts[hi, 1]
+            else:
+                kind[j, p] = LINE
+            if inside[j]:
+                kind[j, p] = INSIDE_CODE
+    return kind, chord, symmetry, halfplane
 
 
 def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
     """Sections of VO pyramids (section 4.2). Every avoidance plane contains the apex (the
     velocity origin, eq. 19), so a section is a triangle (apex and the two extreme points where
-    C_pz's edges meet the plane; with the VO lines, the whole wedge), a line, or the apex point."""
+    C_pz's edges meet the plane; with the VO lines, the whole wedge), a line, or the apex point.
+    Inside C_pz the VO is every velocity with a horizontal component towards its centre."""
     m, P = len(pyramids), len(planes.phi)
-    corners = planes.coords(pyramids.corners)  # (m, P, 8, 3)
-    za = corners[:, :, BOX_EDGES[:, 0], 2]
-    zb = corners[:, :, BOX_EDGES[:, 1], 2]
-    pa = corners[:, :, BOX_EDGES[:, 0], :2]
-    pb = corners[:, :, BOX_EDGES[:, 1], :2]
-    crosses = (za * zb <= 0) & (za != zb)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = za / (za - zb)
-    with np.errstate(invalid="ignore"):  # an edge lying in the plane: masked by ``crosses``
-        pts = pa + s[..., None] * (pb - pa)  # (m, P, 12, 2): C_pz ∩ plane is their convex hull
-    pts = np.where(crosses[..., None], pts, np.nan)
-    unit = pts / np.linalg.norm(pts, axis=-1, keepdims=True)
-    mean_dir = _nanmean(unit, axis=2)
-    ang = np.arctan2(_cross(mean_dir[:, :, None], unit), np.einsum("mpi,mpki->mpk", mean_dir, unit))
-    any_cross = np.any(crosses, axis=-1)
-    lo = np.argmin(np.where(crosses, ang, np.inf), axis=-1)
-    hi = np.argmax(np.where(crosses, ang, -np.inf), axis=-1)
-    p1 = np.take_along_axis(pts, lo[..., None, None], axis=2)[:, :, 0]
-    p2 = np.take_along_axis(pts, hi[..., None, None], axis=2)[:, :, 0]
-    width = np.take_along_axis(ang, hi[..., None], -1)[..., 0] - np.take_along_axis(ang, lo[..., None], -1)[..., 0]
-    kind = np.where(any_cross, np.where(width > 1e-9, TRIANGLE, LINE), POINT)
-    chord = np.where((kind == TRIANGLE)[..., None, None], np.stack([p1, p2], axis=2), np.nan)
-    apex = np.zeros((m, P, 2))
-    vertices = np.concatenate([apex[:, :, None, :], np.nan_to_num(chord)], axis=2)
-    vertex_mask = np.broadcast_to((kind == TRIANGLE)[..., None], vertices.shape[:3])
-    # Inside C_pz: the VO is every velocity with a horizontal component towards its centre.
-    h_p = planes.coords(pyramids.frame[:, 0, :])
-    halfplane = np.concatenate([h_p[..., :2], np.zeros((m, P, 1))], axis=-1)
-    kind = np.where(pyramids.inside[:, None], INSIDE_CODE, kind)
-    symmetry = np.where(any_cross[..., None], _nanmean(pts, axis=2), np.nan)
+    kind, chord, symmetry, halfplane = _pyramid_sections_kernel(
+        pyramids.corners, BOX_EDGES, np.ascontiguousarray(pyramids.frame[:, 0, :]), pyramids.inside,
+        planes.frame, planes.phi)
+    vertices = np.zeros((m, P, 3, 2))
+    vertices[:, :, 1:] = np.nan_to_num(chord)
+    triangle = np.isfinite(chord[:, :, 0, 0])
     return Sections(
-        kind=kind, vertices=vertices, vertex_mask=vertex_mask, apex=apex, chord=chord, symmetry=symmetry,
-        halfplane=halfplane, vo_lines=True,
+        kind=kind, vertices=vertices, vertex_mask=np.broadcast_to(triangle[..., None], (m, P, 3)),
+        apex=np.zeros((m, P, 2)), chord=chord, symmetry=symmetry, halfplane=halfplane, vo_lines=True,
         curve=np.full((m, P, 0, 2), np.nan), t=np.zeros(0), chord_t=np.full((m, P, 2), np.nan),
     )
