@@ -16,10 +16,11 @@ from dataclasses import replace
 import numpy as np
 
 from ..geometry import AvoidancePlanes
-from ..geometry.sections import CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, Sections
+from ..geometry.sections import CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE
 from .common import Encounter, Outcome, Solve, first_safe, least_bad
 from .planes import PlaneSections, decision_planes, plane_sections
 from .problem import QP, Result
+from .._jit import jit
 from .sampled import grid_velocities
 
 CURVED = (CIRCLE, ELLIPSE, PARABOLA, HYPERBOLA)
@@ -29,93 +30,127 @@ ROUNDS = ("near", "left", "right")
 _TIE = 1e-6
 
 
-def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Index of the chosen boundary candidate along the last axis, for every round at once:
-    (len(ROUNDS), ...). "near": the nearest valid one; "left" / "right": the nearest in the
-    upper / lower half of the section (by in-plane y about the candidates' mean)."""
-    count = np.maximum(np.sum(valid, axis=-1, keepdims=True), 1)
-    centre = np.sum(np.where(valid, side_y, 0.0), axis=-1, keepdims=True) / count
-    masks = [valid]
-    for on_side in (valid & (side_y >= centre), valid & (side_y <= centre)):
-        masks.append(np.where(np.any(on_side, axis=-1, keepdims=True), on_side, valid))
-    return np.argmin(np.where(np.stack(masks), dist, np.inf), axis=-1)
+@jit
+def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray, r: int) -> int:
+    """Index of the boundary candidate that round r linearises at: "near" (r = 0) the nearest
+    valid one; "left" / "right" (r = 1, 2) the nearest in the upper / lower half of the section
+    (by in-plane y about the candidates' mean), or the nearest when that half is empty."""
+    count, total = 0, 0.0
+    for k in range(dist.shape[0]):
+        if valid[k]:
+            count, total = count + 1, total + side_y[k]
+    centre = total / max(count, 1)
+    best, best_side, d_best, d_side = 0, -1, np.inf, np.inf
+    for k in range(dist.shape[0]):
+        if not valid[k]:
+            continue
+        if dist[k] < d_best:
+            best, d_best = k, dist[k]
+        on_side = (r == 1 and side_y[k] >= centre) or (r == 2 and side_y[k] <= centre)
+        if on_side and dist[k] < d_side:
+            best_side, d_side = k, dist[k]
+    return best_side if best_side >= 0 else best
 
 
-def _curved_halfplanes(enc: Encounter, ps: PlaneSections, w0: np.ndarray):
-    """Tangent planes of the cones along the chosen generators, restricted to each plane."""
-    sec = ps.cones
-    n, P = sec.kind.shape
-    Q = np.concatenate([sec.curve, sec.chord], axis=2)  # boundary candidates (n, P, K+2, 2)
-    tq = np.concatenate([np.broadcast_to(sec.t, (n, P, len(sec.t))), sec.chord_t], axis=2)
-    valid = np.isfinite(Q[..., 0])
-    with np.errstate(invalid="ignore"):
-        dist = np.linalg.norm(Q - w0, axis=-1)
-    k = _pick(dist, Q[..., 1], valid)  # (R, n, P)
-    t_star = np.take_along_axis(np.nan_to_num(tq)[None], k[..., None], axis=-1)[..., 0]
-    N = enc.cones.outward_normals(t_star.transpose(1, 0, 2)).transpose(1, 0, 2, 3)  # (R, n, P, 3)
-    a = np.stack([N @ ps.planes.e1, np.einsum("rnpi,pi->rnp", N, ps.planes.e2)], axis=-1)
-    b = np.einsum("rnpi,ni->rnp", N, enc.cones.apex)
-    active = np.isin(sec.kind, CURVED) & np.any(valid, axis=-1)
-    return a, b, active
+@jit
+def _triangle_row(apex: np.ndarray, chord: np.ndarray, w0: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
+    """One of the two boundary lines of a triangle (the generators through its apex), every
+    round: the normal points away from the other chord point. False when it is degenerate."""
+    dist, side_y, valid = np.empty(2), np.empty(2), np.empty(2, dtype=np.bool_)
+    for j in range(2):
+        dx, dy = chord[j, 0] - apex[0], chord[j, 1] - apex[1]
+        s = max(((w0[0] - apex[0]) * dx + (w0[1] - apex[1]) * dy) / (dx * dx + dy * dy), 0.0)
+        dist[j] = np.hypot(w0[0] - apex[0] - s * dx, w0[1] - apex[1] - s * dy)
+        valid[j] = np.isfinite(dist[j])
+        side_y[j] = chord[j, 1]
+    if not (valid[0] and valid[1]):
+        return False
+    for r in range(a.shape[0]):
+        i = _pick(dist, side_y, valid, r)
+        dx, dy = chord[i, 0] - apex[0], chord[i, 1] - apex[1]
+        nx, ny = -dy, dx
+        if nx * (chord[1 - i, 0] - apex[0]) + ny * (chord[1 - i, 1] - apex[1]) > 0:  # away from P_j
+            nx, ny = -nx, -ny
+        a[r, 0], a[r, 1], b[r] = nx, ny, nx * apex[0] + ny * apex[1]
+    return True
 
 
-def _triangle_halfplanes(sec: Sections, w0: np.ndarray):
-    """One of the two boundary lines of each triangle (the generators through the apex)."""
-    A = sec.apex[:, :, None, :]  # (k, P, 1, 2)
-    Pts = sec.chord  # (k, P, 2, 2)
-    d = Pts - A
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = np.maximum(np.sum((w0 - A) * d, axis=-1) / np.sum(d * d, axis=-1), 0.0)
-        dist = np.linalg.norm(w0 - A - s[..., None] * d, axis=-1)
-    valid = np.isfinite(dist)
-    i = _pick(np.nan_to_num(dist, nan=np.inf), np.nan_to_num(Pts[..., 1]), valid)  # (R, k, P)
-    d_i = np.take_along_axis(d[None], i[..., None, None], axis=3)[..., 0, :]
-    d_j = np.take_along_axis(d[None], (1 - i)[..., None, None], axis=3)[..., 0, :]
-    normal = np.stack([-d_i[..., 1], d_i[..., 0]], axis=-1)
-    normal = np.where((np.sum(normal * d_j, axis=-1) > 0)[..., None], -normal, normal)  # away from P_j
-    b = np.sum(normal * sec.apex, axis=-1)
-    active = (sec.kind == TRIANGLE) & np.all(valid, axis=-1)
-    return np.nan_to_num(normal), np.nan_to_num(b), active
+@jit
+def _cone_rows(kind, curve, t, chord, chord_t, apex_xy, halfplane, R, sin_alpha, apex, e1, e2, w0,
+               a, b, active):
+    """Every round's half-plane a·w >= b of each cone section on each plane (see select)."""
+    n, P, K = curve.shape[0], curve.shape[1], curve.shape[2]
+    dist, side_y, valid, tq = np.empty(K + 2), np.empty(K + 2), np.empty(K + 2, dtype=np.bool_), np.empty(K + 2)
+    for i in range(n):
+        ca = np.sqrt(1.0 - sin_alpha[i] ** 2)
+        for p in range(P):
+            kd = kind[i, p]
+            if kd == INSIDE_CODE:  # escape: not closing in, every round
+                for r in range(a.shape[0]):
+                    a[r, i, p, 0], a[r, i, p, 1], b[r, i, p] = -halfplane[i, p, 0], -halfplane[i, p, 1], -halfplane[i, p, 2]
+                active[i, p] = True
+            elif kd == TRIANGLE:
+                active[i, p] = _triangle_row(apex_xy[i, p], chord[i, p], w0, a[:, i, p], b[:, i, p])
+            elif kd == CIRCLE or kd == ELLIPSE or kd == PARABOLA or kd == HYPERBOLA:
+                # Boundary candidates: the curve of eq. (12) and the chord points of eq. (17).
+                for k in range(K + 2):
+                    q = curve[i, p, k] if k < K else chord[i, p, k - K]
+                    tq[k] = t[k] if k < K else chord_t[i, p, k - K]
+                    valid[k] = np.isfinite(q[0])
+                    dist[k] = np.hypot(q[0] - w0[0], q[1] - w0[1]) if valid[k] else np.inf
+                    side_y[k] = q[1]
+                active[i, p] = valid.any()
+                if not active[i, p]:
+                    continue
+                for r in range(a.shape[0]):
+                    ts = tq[_pick(dist, side_y, valid, r)]
+                    # The cone's tangent plane along that generator (outward normal N), on P_phi.
+                    nb0, nb1, nb2 = -sin_alpha[i], ca * np.cos(ts), ca * np.sin(ts)
+                    N = R[i, :, 0] * nb0 + R[i, :, 1] * nb1 + R[i, :, 2] * nb2
+                    a[r, i, p, 0] = N[0] * e1[0] + N[1] * e1[1] + N[2] * e1[2]
+                    a[r, i, p, 1] = N[0] * e2[p, 0] + N[1] * e2[p, 1] + N[2] * e2[p, 2]
+                    b[r, i, p] = N[0] * apex[i, 0] + N[1] * apex[i, 1] + N[2] * apex[i, 2]
 
 
-def _inside_halfplanes(sec: Sections):
-    """Escape half-planes when A is inside a protected zone: not closing in (every round)."""
-    R = len(ROUNDS)
-    a = np.broadcast_to(-sec.halfplane[..., :2], (R,) + sec.halfplane.shape[:-1] + (2,))
-    b = np.broadcast_to(-sec.halfplane[..., 2], (R,) + sec.halfplane.shape[:-1])
-    return a, b, sec.kind == INSIDE_CODE
+@jit
+def _pyramid_rows(kind, chord, halfplane, w0, a, b, active):
+    m, P = kind.shape
+    origin = np.zeros(2)  # every pyramid's apex is the velocity origin (eq. 19)
+    for j in range(m):
+        for p in range(P):
+            if kind[j, p] == INSIDE_CODE:
+                for r in range(a.shape[0]):
+                    a[r, j, p, 0], a[r, j, p, 1], b[r, j, p] = -halfplane[j, p, 0], -halfplane[j, p, 1], 0.0
+                active[j, p] = True
+            elif kind[j, p] == TRIANGLE:
+                active[j, p] = _triangle_row(origin, chord[j, p], w0, a[:, j, p], b[:, j, p])
 
 
 def section_halfplanes(enc: Encounter, ps: PlaneSections):
-    """Every round's VO half-planes a·w >= b on every plane: a (R, k, P, 2), b (R, k, P), and
-    which rows apply, active (k, P) (the same in every round)."""
-    w0 = ps.w_pref
-    parts = []
-    if len(enc.cones):
-        parts += [_curved_halfplanes(enc, ps, w0), _triangle_halfplanes(ps.cones, w0),
-                  _inside_halfplanes(ps.cones)]
-    if len(enc.pyramids):
-        parts += [_triangle_halfplanes(ps.pyramids, w0), _inside_halfplanes(ps.pyramids)]
-    if not parts:
-        P, R = len(ps.planes.phi), len(ROUNDS)
-        return np.zeros((R, 0, P, 2)), np.zeros((R, 0, P)), np.zeros((0, P), bool)
-    a = np.concatenate([p[0] for p in parts], axis=1)
-    b = np.concatenate([p[1] for p in parts], axis=1) + enc.options.margin
-    active = np.concatenate([p[2] for p in parts])
-    return a, b, active
+    """Every round's VO half-planes a·w >= b on every plane, one row per VO (cones first, then
+    pyramids): a (R, k, P, 2), b (R, k, P), and which rows apply, active (k, P), the same in
+    every round. A section has one kind, so one row: the tangent line of a curved section, a
+    side of a triangle, or the escape half-plane when A is inside the zone."""
+    n, m, P, R = len(enc.cones), len(enc.pyramids), len(ps.planes.phi), len(ROUNDS)
+    a, b = np.zeros((R, n + m, P, 2)), np.zeros((R, n + m, P))
+    active = np.zeros((n + m, P), dtype=bool)
+    w0, e2 = ps.w_pref, np.ascontiguousarray(ps.planes.e2)
+    if n:
+        c, sec = enc.cones, ps.cones
+        _cone_rows(sec.kind, sec.curve, sec.t, sec.chord, np.nan_to_num(sec.chord_t), sec.apex,
+                   sec.halfplane, c.R, c.sin_alpha, c.apex, ps.planes.e1, e2, w0,
+                   a[:, :n], b[:, :n], active[:n])
+    if m:
+        sec = ps.pyramids
+        _pyramid_rows(sec.kind, sec.chord, sec.halfplane, w0, a[:, n:], b[:, n:], active[n:])
+    a = np.nan_to_num(a)
+    return a, np.nan_to_num(b) + enc.options.margin, active
 
 
 def speed_polygon(radius: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
     """A regular polygon inscribed in the disc |w| <= radius, as G w <= h."""
     ang = (np.arange(sides) + 0.5) * 2 * np.pi / sides
     return np.stack([np.cos(ang), np.sin(ang)], axis=-1), np.full(sides, radius * np.cos(np.pi / sides))
-
-
-def row_owners(enc: Encounter) -> np.ndarray:
-    """The VO (cones first, then pyramids) each row of ``section_halfplanes`` belongs to."""
-    n, m = len(enc.cones), len(enc.pyramids)
-    parts = ([np.arange(n)] * 3 if n else []) + ([n + np.arange(m)] * 2 if m else [])
-    return np.concatenate(parts) if parts else np.zeros(0, dtype=int)
 
 
 class PlaneProblems:
@@ -161,7 +196,7 @@ class PlaneProblems:
         self.a = np.concatenate([self.a, a], axis=1)
         self.b = np.concatenate([self.b, b], axis=1)
         self.active = np.concatenate([self.active, active])
-        self.owner = np.concatenate([self.owner, np.concatenate([ci, n + pi])[row_owners(sub)]])
+        self.owner = np.concatenate([self.owner, ci, n + pi])
         self.computed |= new
 
     def add_round(self, included: np.ndarray) -> list[tuple[float, int, int]]:

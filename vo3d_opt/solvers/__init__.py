@@ -4,7 +4,7 @@
 :class:`~vo3d_opt.formulations.problem.QP` (or whose ``solve_nlp(nlp)`` answers an
 :class:`~vo3d_opt.formulations.problem.NLP`). Accepted names:
 
-- ``"osqp"``, ``"clarabel"``: the solvers' own Python APIs;
+- ``"osqp"``, ``"clarabel"``, ``"daqp"``: the solvers' own Python APIs;
 - ``"cvxpy"`` (cvxpy picks the solver) and ``"cvxpy:<SOLVER>"`` for any installed cvxpy solver
   that accepts a quadratic objective;
 - ``"qpsolvers:<name>"`` for every name in ``qpsolvers.available_solvers``;
@@ -276,7 +276,7 @@ def _casadi_plugins() -> tuple[str, ...]:
 
 @functools.cache
 def _builtin_names() -> tuple[str, ...]:
-    names = [n for n in ("osqp", "clarabel") if _installed(n)]
+    names = [n for n in ("osqp", "clarabel", "daqp") if _installed(n)]
     if cvx := _cvxpy_solvers():
         names += ["cvxpy"] + [f"cvxpy:{s}" for s in sorted(cvx)]
     names += [f"qpsolvers:{s}" for s in _qpsolvers_solvers()]
@@ -321,6 +321,10 @@ def _construct(name: str) -> Backend:
         from vo3d_opt.solvers.clarabel_backend import ClarabelBackend
 
         return ClarabelBackend()
+    if name == "daqp" and _installed("daqp"):
+        from vo3d_opt.solvers.daqp_backend import DaqpBackend
+
+        return DaqpBackend()
     if prefix == "cvxpy" and (solvers := _cvxpy_solvers()) and (suffix in solvers or not suffix):
         from vo3d_opt.solvers.cvxpy_backend import CvxpyBackend
 
