@@ -161,7 +161,7 @@ class VelocitySelector:
         if self.formulation == "sampled":
             return sampled.select(enc)
         # The preferred velocity itself, when safe, is every formulation's optimum.
-        if not enc.inside_any and enc.within_limits(enc.v_pref)[0] and not enc.unsafe(enc.v_pref)[0]:
+        if not enc.inside_any and enc.within_limits(enc.v_pref)[0] and not enc.pref_in.any():
             return Outcome(enc.v_pref.copy(), "optimal", None, {"round": "preferred"})
         solve = _checked(self._qp, "solve")
         if self.formulation == "plane_qp":

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
-from ..geometry import CORRECTIONS, VOCones, VOPyramids, in_vo_cones, in_vo_pyramids, pyramid_entry_time, vo_cones, vo_pyramids
+from ..geometry import CORRECTIONS, VOCones, VOPyramids, in_vos, pyramid_entry_time, vo_cones, vo_pyramids
+from .._jit import jit
 from ..types import AgentState, Box, Cylinder, Limits, Neighbor
 from .problem import QP, NLP, Result
 
@@ -59,9 +61,14 @@ class Encounter:
     dt: float
     options: Options
 
-    @property
+    @cached_property
+    def inside(self) -> np.ndarray:
+        """(n + m,) whether A is inside each zone (cones first, then pyramids)."""
+        return np.concatenate([self.cones.inside, self.pyramids.inside])
+
+    @cached_property
     def inside_any(self) -> bool:
-        return bool(np.any(self.cones.inside) or np.any(self.pyramids.inside))
+        return bool(self.inside.any())
 
     # --- the limits -------------------------------------------------------------------------
     def vz_range(self) -> tuple[float, float]:
@@ -75,7 +82,11 @@ class Encounter:
         return lo, hi
 
     def linear_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Altitude and acceleration limits as G v <= h in 3D."""
+        """Altitude and acceleration limits as G v <= h in 3D (computed once; read-only)."""
+        return self._linear_bounds
+
+    @cached_property
+    def _linear_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self.vz_range()
         G = [np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])]
         h = [hi, -lo]
@@ -86,24 +97,26 @@ class Encounter:
                 e[k] = 1.0
                 G += [e, -e]
                 h += [self.v_now[k] + dv, dv - self.v_now[k]]
-        return np.array(G), np.array(h)
+        G, h = np.array(G), np.array(h)
+        G.setflags(write=False)
+        h.setflags(write=False)
+        return G, h
 
     def within_limits(self, v: np.ndarray) -> np.ndarray:
         """(M,) whether each velocity respects speed, altitude and acceleration limits."""
-        v = np.atleast_2d(v)
-        speed = np.linalg.norm(v, axis=1)
-        ok = (speed <= self.limits.v_max + LIMIT_TOL) & (speed >= self.limits.v_min - LIMIT_TOL)
-        G, h = self.linear_bounds()
-        return ok & np.all(v @ G.T <= h + LIMIT_TOL, axis=1)
+        G, h = self._linear_bounds
+        return _within(np.atleast_2d(np.asarray(v, dtype=float)), self.limits.v_min, self.limits.v_max, G, h, LIMIT_TOL)
 
     # --- safety -----------------------------------------------------------------------------
     def containing(self, v: np.ndarray) -> np.ndarray:
         """(n + m, M): which VOs (cones first, then pyramids) contain each velocity, by the
         exact 3D membership."""
-        v = np.atleast_2d(v)
-        hz = self.options.horizon
-        return np.concatenate([in_vo_cones(self.cones, v, horizon=hz),
-                               in_vo_pyramids(self.pyramids, v, horizon=hz)])
+        return in_vos(self.cones, self.pyramids, v, horizon=self.options.horizon)
+
+    @cached_property
+    def pref_in(self) -> np.ndarray:
+        """(n + m,) which VOs contain the preferred velocity (computed once)."""
+        return self.containing(self.v_pref)[:, 0]
 
     def unsafe(self, v: np.ndarray) -> np.ndarray:
         """(M,) whether each velocity lies in some VO (exact 3D membership)."""
@@ -134,6 +147,18 @@ class Encounter:
 
     def deviation(self, v: np.ndarray) -> np.ndarray:
         return np.linalg.norm(np.atleast_2d(v) - self.v_pref, axis=1)
+
+
+@jit
+def _within(v, v_min, v_max, G, h, tol):
+    out = np.empty(v.shape[0], dtype=np.bool_)
+    for k in range(v.shape[0]):
+        speed = np.sqrt(v[k, 0] ** 2 + v[k, 1] ** 2 + v[k, 2] ** 2)
+        ok = v_min - tol <= speed <= v_max + tol
+        for j in range(G.shape[0]):
+            ok = ok and G[j, 0] * v[k, 0] + G[j, 1] * v[k, 1] + G[j, 2] * v[k, 2] <= h[j] + tol
+        out[k] = ok
+    return out
 
 
 def prepare(

@@ -117,7 +117,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     answer is safe or the QP infeasible (constraint generation, at most one round per VO).
     The safe answer nearest v_pref over the turns wins."""
     tried, failed, attempts, best = [], 0, 0, None
-    start = enc.containing(enc.v_pref)[:, 0] | np.concatenate([enc.cones.inside, enc.pyramids.inside])
+    start = enc.pref_in | enc.inside
     for turn in TURNS if len(enc.cones) else TURNS[:1]:
         included = start.copy()
         while True:

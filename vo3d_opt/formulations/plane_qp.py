@@ -10,15 +10,18 @@ z + v_z dt in [z_min, z_max]. Each plane's QP minimises ||w - w_pref||²; the pl
 deviation wins after the exact 3D check, else the next candidate."""
 from __future__ import annotations
 
+import functools
 import heapq
-from dataclasses import replace
+import math
 
 import numpy as np
 
 from ..geometry import AvoidancePlanes
-from ..geometry.sections import CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE
+from ..geometry.pyramid import BOX_EDGES, prism_corners
+from ..geometry.sections import (CIRCLE, CORRECTIONS, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, generator_angles,
+                                 cone_section_arrays, pyramid_section_arrays)
 from .common import Encounter, Outcome, Solve, first_safe, least_bad
-from .planes import PlaneSections, decision_planes, plane_sections
+from .planes import decision_planes
 from .problem import QP, Result
 from .._jit import jit
 from .sampled import grid_velocities
@@ -126,62 +129,183 @@ def _pyramid_rows(kind, chord, halfplane, w0, a, b, active):
                 active[j, p] = _triangle_row(origin, chord[j, p], w0, a[:, j, p], b[:, j, p])
 
 
-def section_halfplanes(enc: Encounter, ps: PlaneSections):
-    """Every round's VO half-planes a·w >= b on every plane, one row per VO (cones first, then
-    pyramids): a (R, k, P, 2), b (R, k, P), and which rows apply, active (k, P), the same in
-    every round. A section has one kind, so one row: the tangent line of a curved section, a
-    side of a triangle, or the escape half-plane when A is inside the zone."""
-    n, m, P, R = len(enc.cones), len(enc.pyramids), len(ps.planes.phi), len(ROUNDS)
-    a, b = np.zeros((R, n + m, P, 2)), np.zeros((R, n + m, P))
-    active = np.zeros((n + m, P), dtype=bool)
-    w0, e2 = ps.w_pref, np.ascontiguousarray(ps.planes.e2)
-    if n:
-        c, sec = enc.cones, ps.cones
-        _cone_rows(sec.kind, sec.curve, sec.t, sec.chord, np.nan_to_num(sec.chord_t), sec.apex,
-                   sec.halfplane, c.R, c.sin_alpha, c.apex, ps.planes.e1, e2, w0,
-                   a[:, :n], b[:, :n], active[:n])
-    if m:
-        sec = ps.pyramids
-        _pyramid_rows(sec.kind, sec.chord, sec.halfplane, w0, a[:, n:], b[:, n:], active[n:])
-    a = np.nan_to_num(a)
-    return a, np.nan_to_num(b) + enc.options.margin, active
+@jit
+def _fill_rows(ci, pi, apex, R, d_vo, r_vo, sin_alpha, rel, inside, p_frame, p_lo, p_hi, p_inside,
+               frame, phi, e1, e2, t, flags, w0, margin, a, b, active):
+    """Sections (geometry kernels) and every round's half-planes a·w >= b of the cones ``ci``
+    and the pyramids ``pi``, written into their rows (cones first, then pyramids)."""
+    n, P, NR = apex.shape[0], phi.shape[0], a.shape[0]
+    if ci.size:
+        kind, _, _, apex_xy, chord, chord_t, _, hp, curve = cone_section_arrays(
+            apex[ci], R[ci], d_vo[ci], r_vo[ci], sin_alpha[ci], rel[ci], inside[ci], frame, phi, t,
+            flags[0], flags[1], flags[2], flags[3])
+        A, B, act = np.zeros((NR, ci.size, P, 2)), np.zeros((NR, ci.size, P)), np.zeros((ci.size, P), dtype=np.bool_)
+        _cone_rows(kind, curve, t, chord, chord_t, apex_xy, hp, R[ci], sin_alpha[ci], apex[ci], e1, e2, w0, A, B, act)
+        for j in range(ci.size):
+            a[:, ci[j]], b[:, ci[j]], active[ci[j]] = A[:, j], B[:, j] + margin, act[j]
+    if pi.size:
+        kind, chord, _, hp = pyramid_section_arrays(
+            prism_corners(p_frame[pi], p_lo[pi], p_hi[pi]), BOX_EDGES, p_frame[pi][:, 0, :].copy(),
+            p_inside[pi], frame, phi)
+        A, B, act = np.zeros((NR, pi.size, P, 2)), np.zeros((NR, pi.size, P)), np.zeros((pi.size, P), dtype=np.bool_)
+        _pyramid_rows(kind, chord, hp, w0, A, B, act)
+        for j in range(pi.size):
+            a[:, n + pi[j]], b[:, n + pi[j]], active[n + pi[j]] = A[:, j], B[:, j] + margin, act[j]
 
 
+@jit
+def _project2(a1x, a1y, b1, a2x, a2y, b2, wx, wy):
+    """The point nearest w in {a1·x >= b1} ∩ {a2·x >= b2} (a closed-form projection: the
+    answer is w, its projection on one line, or the lines' crossing); NaN when empty."""
+    g1, g2 = a1x * wx + a1y * wy - b1, a2x * wx + a2y * wy - b2
+    if g1 >= 0 and g2 >= 0:
+        return wx, wy
+    n1, n2 = a1x * a1x + a1y * a1y, a2x * a2x + a2y * a2y
+    best, bx, by = np.inf, np.nan, np.nan
+    if g1 < 0 and n1 > 0:  # onto line 1, if that satisfies row 2
+        x, y = wx - g1 / n1 * a1x, wy - g1 / n1 * a1y
+        if a2x * x + a2y * y >= b2 - 1e-12:
+            best, bx, by = g1 * g1 / n1, x, y
+    if g2 < 0 and n2 > 0 and g2 * g2 / n2 < best:  # onto line 2, if that satisfies row 1
+        x, y = wx - g2 / n2 * a2x, wy - g2 / n2 * a2y
+        if a1x * x + a1y * y >= b1 - 1e-12:
+            best, bx, by = g2 * g2 / n2, x, y
+    if best < np.inf:
+        return bx, by
+    det = a1x * a2y - a1y * a2x
+    if abs(det) <= 1e-14:
+        return np.nan, np.nan
+    return (b1 * a2y - b2 * a1y) / det, (a1x * b2 - a2x * b1) / det
+
+
+@jit
+def _bounds(a, b, active, included, G_lim, h_lim, w0, v_max, rounds, planes):
+    """Lower bounds on the deviation of the QPs (rounds[q], planes[q]), inf when infeasible:
+    every pair of their rows (VO half-planes and limits) and the speed disc, each checked in
+    closed form. A QP's feasible set lies inside each pair's, so none of these overestimates."""
+    out = np.zeros(planes.size)
+    k_max = a.shape[1] + G_lim.shape[1]
+    ax, ay, rb = np.empty(k_max), np.empty(k_max), np.empty(k_max)
+    tol = 1e-9 * (1.0 + v_max)
+    wx, wy = w0[0], w0[1]
+    for q in range(planes.size):
+        r, p, k = rounds[q], planes[q], 0
+        for i in range(a.shape[1]):
+            if active[i, p] and included[i]:
+                ax[k], ay[k], rb[k], k = a[r, i, p, 0], a[r, i, p, 1], b[r, i, p], k + 1
+        for j in range(G_lim.shape[1]):  # G w <= h as -G w >= -h
+            ax[k], ay[k], rb[k], k = -G_lim[p, j, 0], -G_lim[p, j, 1], -h_lim[j], k + 1
+        lb = 0.0
+        for i in range(k):
+            nrm = np.sqrt(ax[i] * ax[i] + ay[i] * ay[i])
+            if nrm <= 1e-12:
+                if rb[i] > tol:
+                    lb = np.inf
+                continue
+            dist = rb[i] / nrm  # signed distance of the line from the origin
+            g = ax[i] * wx + ay[i] * wy - rb[i]
+            if dist > v_max + tol:  # the half-plane misses the speed disc
+                lb = np.inf
+                break
+            if g < 0:
+                # Nearest point of the half-plane within the disc: on the line, the foot of the
+                # perpendicular from w0 clamped to the chord the disc cuts.
+                fx, fy = dist / nrm * ax[i], dist / nrm * ay[i]
+                tx, ty = -ay[i] / nrm, ax[i] / nrm
+                half = np.sqrt(max(v_max * v_max - dist * dist, 0.0))
+                s = min(max((wx - fx) * tx + (wy - fy) * ty, -half), half)
+                lb = max(lb, np.sqrt((fx + s * tx - wx) ** 2 + (fy + s * ty - wy) ** 2))
+        for i in range(k):
+            if lb == np.inf:
+                break
+            for j in range(i + 1, k):
+                # the pair's least speed: beyond v_max (or NaN, disjoint) means infeasible
+                ox, oy = _project2(ax[i], ay[i], rb[i], ax[j], ay[j], rb[j], 0.0, 0.0)
+                if not (ox * ox + oy * oy <= (v_max + tol) ** 2):
+                    lb = np.inf
+                    break
+                x, y = _project2(ax[i], ay[i], rb[i], ax[j], ay[j], rb[j], wx, wy)
+                lb = max(lb, np.sqrt((x - wx) ** 2 + (y - wy) ** 2))
+        out[q] = lb
+    return out
+
+
+@jit
+def _gather(a, b, active, included, r, p, G_lim, h_lim, G_speed, h_speed):
+    """The QP rows G w <= h of round r on plane p: its included VO half-planes, the limits
+    and the speed polygon."""
+    k = 0
+    for i in range(a.shape[1]):
+        k += active[i, p] and included[i]
+    m = k + G_lim.shape[1] + G_speed.shape[0]
+    G, h = np.empty((m, 2)), np.empty(m)
+    k = 0
+    for i in range(a.shape[1]):
+        if active[i, p] and included[i]:
+            G[k, 0], G[k, 1], h[k], k = -a[r, i, p, 0], -a[r, i, p, 1], -b[r, i, p], k + 1
+    for j in range(G_lim.shape[1]):
+        G[k, 0], G[k, 1], h[k], k = G_lim[p, j, 0], G_lim[p, j, 1], h_lim[j], k + 1
+    for j in range(G_speed.shape[0]):
+        G[k, 0], G[k, 1], h[k], k = G_speed[j, 0], G_speed[j, 1], h_speed[j], k + 1
+    return G, h
+
+
+#: The plane QPs' Hessian: the objective is ||w - w0||² (read-only, shared).
+_HESSIAN = 2.0 * np.eye(2)
+_HESSIAN.setflags(write=False)
+
+
+@functools.lru_cache(maxsize=32)
 def speed_polygon(radius: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
-    """A regular polygon inscribed in the disc |w| <= radius, as G w <= h."""
+    """A regular polygon inscribed in the disc |w| <= radius, as G w <= h (read-only arrays)."""
     ang = (np.arange(sides) + 0.5) * 2 * np.pi / sides
-    return np.stack([np.cos(ang), np.sin(ang)], axis=-1), np.full(sides, radius * np.cos(np.pi / sides))
+    G, h = np.stack([np.cos(ang), np.sin(ang)], axis=-1), np.full(sides, radius * np.cos(np.pi / sides))
+    G.setflags(write=False)
+    h.setflags(write=False)
+    return G, h
+
+
+@functools.lru_cache(maxsize=8)
+def _all_pairs(rounds: int, planes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every (round, plane) pair as two index arrays, rounds first."""
+    return np.repeat(np.arange(rounds), planes), np.tile(np.arange(planes), rounds)
+
+
+@functools.lru_cache(maxsize=8)
+def _correction_flags(corrections: frozenset[str] | None) -> np.ndarray:
+    """The switches of cone_section_arrays for an Options.corrections value."""
+    corr = CORRECTIONS if corrections is None else corrections
+    return np.array([c in corr for c in ("tg_range", "symmetry_abs", "triangle", "base_chord")])
 
 
 class PlaneProblems:
     """The (round, plane) QPs of one decision, built lazily. A VO's sections and half-planes
-    (every round's, in one vectorised pass) are computed only when the VO joins the QPs: when
-    the preferred velocity or an answer lies in it; a round joins the search only when needed,
-    its bounds for all planes at once; a QP is built only when it is solved."""
+    (every round's, in one compiled pass) are computed only when the VO joins the QPs: when the
+    preferred velocity or an answer lies in it; a round joins the search only when needed, its
+    bounds for all planes at once; a QP is built only when it is solved."""
 
     def __init__(self, enc: Encounter, planes: AvoidancePlanes, has_cones: bool) -> None:
         self.enc, self.planes, self.has_cones = enc, planes, has_cones
         self.v_max = enc.limits.v_max
         self.w0 = np.array([planes.e1 @ enc.v_pref, 0.0])  # v_pref lies in every plane
+        self.q = -2.0 * self.w0  # the objective ||w - w0||² = wᵀw - 2 w0ᵀw + const
+        self.q.setflags(write=False)
         G3, h3 = enc.linear_bounds()
-        E = np.stack([np.broadcast_to(planes.e1, planes.e2.shape), planes.e2], axis=-1)
-        self.G_lim = G3 @ E  # (P, r, 2): altitude and acceleration rows on each plane
+        # The altitude and acceleration rows on each plane, (P, r, 2): G3 @ [e1, e2(phi)].
+        self.G_lim = np.ascontiguousarray((planes.to_plane[:, :2] @ G3.T).transpose(0, 2, 1))
         self.h_lim = h3
         self.G_speed, self.h_speed = (np.zeros((0, 2)), np.zeros(0)) if has_cones else \
             speed_polygon(self.v_max, enc.options.polygon_sides)
-        lim = (self.G_lim @ self.w0 - h3) / np.maximum(np.linalg.norm(self.G_lim, axis=-1), 1e-12)
-        self.base_bound = np.maximum(np.max(lim, axis=1, initial=0.0),
-                                     np.max(self.G_speed @ self.w0 - self.h_speed, initial=0.0))
-        R, P = len(ROUNDS), len(planes.phi)
-        # Half-plane rows of the VOs computed so far: a (R, k, P, 2), b (R, k, P), active (k, P),
-        # and the VO (cones first, then pyramids) each row belongs to.
-        self.a, self.b = np.zeros((R, 0, P, 2)), np.zeros((R, 0, P))
-        self.active, self.owner = np.zeros((0, P), dtype=bool), np.zeros(0, dtype=int)
-        self.computed = np.zeros(len(enc.cones) + len(enc.pyramids), dtype=bool)
-        self.n_rounds = 0
-        inside = np.concatenate([enc.cones.inside, enc.pyramids.inside])
+        R, P, V = len(ROUNDS), len(planes.phi), len(enc.cones) + len(enc.pyramids)
+        # Half-plane rows, one per VO (cones first, then pyramids): a (R, V, P, 2), b (R, V, P),
+        # active (V, P); filled when the VO joins.
+        self.a, self.b = np.zeros((R, V, P, 2)), np.zeros((R, V, P))
+        self.active = np.zeros((V, P), dtype=bool)
+        self.computed = np.zeros(V, dtype=bool)
+        self._t = generator_angles(enc.options.qp_samples)
+        self._flags = _correction_flags(enc.options.corrections)
         #: VOs constrained from the start: those holding v_pref, and the zones A is inside.
-        self.initial = enc.containing(enc.v_pref)[:, 0] | inside
+        self.initial = enc.pref_in | enc.inside
         self.ensure(self.initial)
 
     def ensure(self, vos: np.ndarray) -> None:
@@ -189,50 +313,32 @@ class PlaneProblems:
         new = vos & ~self.computed
         if not new.any():
             return
-        n = len(self.enc.cones)
-        ci, pi = np.flatnonzero(new[:n]), np.flatnonzero(new[n:])
-        sub = replace(self.enc, cones=self.enc.cones.subset(ci), pyramids=self.enc.pyramids.subset(pi))
-        a, b, active = section_halfplanes(sub, plane_sections(sub, sub.options.qp_samples, self.planes))
-        self.a = np.concatenate([self.a, a], axis=1)
-        self.b = np.concatenate([self.b, b], axis=1)
-        self.active = np.concatenate([self.active, active])
-        self.owner = np.concatenate([self.owner, ci, n + pi])
+        n, c, py, pl = len(self.enc.cones), self.enc.cones, self.enc.pyramids, self.planes
+        _fill_rows(np.flatnonzero(new[:n]), np.flatnonzero(new[n:]), c.apex, c.R, c.d_vo, c.r_vo,
+                   c.sin_alpha, c.rel, c.inside, py.frame, py.lo, py.hi, py.inside, pl.frame, pl.phi,
+                   pl.e1, np.ascontiguousarray(pl.e2), self._t, self._flags, self.w0,
+                   self.enc.options.margin, self.a, self.b, self.active)
         self.computed |= new
 
-    def add_round(self, included: np.ndarray) -> list[tuple[float, int, int]]:
-        """Let the next round join: (bound, round, plane) for each plane whose QP is not
-        infeasible by its bound."""
-        r = self.n_rounds
-        self.n_rounds += 1
-        lb = self.bounds(r, included)
-        return [(float(lb[p]), r, int(p)) for p in np.flatnonzero(np.isfinite(lb))]
+    def all_bounds(self, included: np.ndarray) -> list[tuple[float, int, int]]:
+        """(bound, round, plane) for every QP not proved infeasible by its bound."""
+        rounds, planes = _all_pairs(len(ROUNDS), len(self.planes.phi))
+        lb = self.bounds(included, rounds, planes)
+        keep = np.flatnonzero(np.isfinite(lb))
+        return list(zip(lb[keep].tolist(), rounds[keep].tolist(), planes[keep].tolist()))
 
-    def bounds(self, r: int, included: np.ndarray) -> np.ndarray:
-        """(P,) lower bounds on every plane's QP deviation in round r (see ``bound``)."""
-        a, b = self.a[r], self.b[r]
-        act = self.active & included[self.owner][:, None]
-        norm = np.maximum(np.linalg.norm(a, axis=-1), 1e-12)
-        viol = np.where(act, (b - a @ self.w0) / norm, 0.0)
-        lb = np.maximum(self.base_bound, np.max(viol, axis=0, initial=0.0))
-        lb[np.any(act & (b / norm > self.v_max), axis=0)] = np.inf
-        return lb
+    def bounds(self, included: np.ndarray, rounds: np.ndarray, planes: np.ndarray) -> np.ndarray:
+        """Lower bounds on the QP deviations of (rounds[q], planes[q]); inf: infeasible."""
+        return _bounds(self.a, self.b, self.active, included, self.G_lim, self.h_lim, self.w0,
+                       self.v_max, rounds, planes)
 
     def bound(self, r: int, p: int, included: np.ndarray) -> float:
-        """A lower bound on the QP's deviation: the distance from w0 to the farthest violated
-        half-plane; inf when a half-plane misses the whole speed disc (infeasible)."""
-        act = self.active[:, p] & included[self.owner]
-        ap, bp = self.a[r, act, p], self.b[r, act, p]
-        norm = np.maximum(np.linalg.norm(ap, axis=-1), 1e-12)
-        if np.any(bp / norm > self.v_max):
-            return np.inf
-        return float(max(self.base_bound[p], np.max((bp - ap @ self.w0) / norm, initial=0.0)))
+        return float(self.bounds(included, np.array([r]), np.array([p]))[0])
 
     def qp(self, r: int, p: int, included: np.ndarray) -> QP:
-        act = self.active[:, p] & included[self.owner]
-        G = np.vstack([-self.a[r, act, p], self.G_lim[p], self.G_speed])
-        h = np.concatenate([-self.b[r, act, p], self.h_lim, self.h_speed])
-        return QP(P=2.0 * np.eye(2), q=-2.0 * self.w0, G=G, h=h,
-                  soc_radius=self.v_max if self.has_cones else None)
+        G, h = _gather(self.a, self.b, self.active, included, r, p, self.G_lim, self.h_lim,
+                       self.G_speed, self.h_speed)
+        return QP(P=_HESSIAN, q=self.q, G=G, h=h, soc_radius=self.v_max if self.has_cones else None)
 
 
 def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
@@ -245,33 +351,24 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     from the answer never over-constrain it, and are never computed. QPs are solved in order of
     a lower bound on their deviation (the distance to the farthest violated half-plane, which
     only grows as constraints join); the search stops once the best safe answer beats every
-    remaining bound. The nearest-point round has the smallest bound on each plane (the distance
-    from an interior point to any supporting line is at least its distance to the boundary), so
-    the later rounds join the search only while a plane's first bound is below the best answer.
+    remaining bound. The bounds (every pair of rows and the speed disc, in closed form) also
+    prove most infeasible QPs infeasible without solving them.
     A QP identical to one already solved (a round that changes nothing on a plane) is skipped."""
     problems = PlaneProblems(enc, decision_planes(enc), has_cones)
     planes = problems.planes
     # The VOs constrained so far, shared by every plane: one found on one plane usually bites
     # on the next ones too. Queue entries remember how many were in when their bound was made.
     included = problems.initial.copy()
-    queue = [(lb, r, p, p, int(included.sum())) for lb, r, p in problems.add_round(included)]
-    first_bounds = [item[0] for item in queue]
+    n_in = int(included.sum())
+    queue = [(lb, r, p, n_in) for lb, r, p in problems.all_bounds(included)]
     heapq.heapify(queue)
-    best, best_dev, tried, failed, attempts, tie = None, np.inf, [], 0, 0, len(queue)
+    best, best_dev, tried, failed, attempts = None, np.inf, [], 0, 0
     solved: set[tuple[int, bytes, bytes]] = set()
-    while True:
-        done = best_dev - _TIE  # bounds this close to the best answer cannot beat it
-        if not queue or queue[0][0] >= done:
-            if problems.n_rounds < len(ROUNDS) and min(first_bounds, default=np.inf) < done:
-                for lb, r, p in problems.add_round(included):
-                    tie += 1
-                    heapq.heappush(queue, (lb, r, p, tie, int(included.sum())))
-                continue
-            break
-        lb, r, p, _, known = heapq.heappop(queue)
-        if known < included.sum():  # stale bound: VOs joined since; re-queue with the new one
-            tie += 1
-            heapq.heappush(queue, (max(lb, problems.bound(r, p, included)), r, p, tie, int(included.sum())))
+    while queue and queue[0][0] < best_dev - _TIE:  # closer bounds cannot beat the best answer
+        lb, r, p, known = heapq.heappop(queue)
+        if known < n_in:  # stale bound: VOs joined since; re-queue with the new one
+            if np.isfinite(lb := max(lb, problems.bound(r, p, included))):
+                heapq.heappush(queue, (lb, r, p, n_in))
             continue
         qp = problems.qp(r, p, included)
         key = (p, qp.G.tobytes(), qp.h.tobytes())
@@ -285,7 +382,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
             continue
         v = res.x[0] * planes.e1 + res.x[1] * planes.e2[p]
         tried.append(v)
-        dev = enc.deviation(v)[0]
+        dev = math.hypot(res.x[0] - problems.w0[0], res.x[1])  # |v - v_pref|: the plane is isometric
         if dev >= best_dev:
             continue
         entered = enc.containing(v)[:, 0]
@@ -295,8 +392,9 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
         elif not np.all(included[entered]):  # constrain the VOs it entered and solve again
             problems.ensure(entered)
             included |= entered
-            tie += 1
-            heapq.heappush(queue, (problems.bound(r, p, included), r, p, tie, int(included.sum())))
+            n_in = int(included.sum())
+            if np.isfinite(lb := problems.bound(r, p, included)):
+                heapq.heappush(queue, (lb, r, p, n_in))
     if best is not None:
         v, p, mode = best
         return Outcome(v, "optimal", float(planes.phi[p]), {"round": mode, "solved": attempts})

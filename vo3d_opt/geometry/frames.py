@@ -9,11 +9,13 @@ horizontal plane and phi runs from -90° to 90°. Eq. (8) is the rotation that t
 """
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-_Z = np.array([0.0, 0.0, 1.0])
+from .._jit import jit
 
 
 def rotation_el_az(theta_el: np.ndarray, psi_az: np.ndarray) -> np.ndarray:
@@ -94,25 +96,43 @@ class AvoidancePlanes:
 
 def avoidance_frame(direction: np.ndarray) -> np.ndarray:
     """Rows e_x (unit ``direction``), e_y0 (horizontal, left of e_x), e_z0 = e_x × e_y0 (up)."""
-    e_x = np.asarray(direction, dtype=float)
-    norm = np.linalg.norm(e_x)
-    e_x = e_x / norm if norm > 1e-12 else np.array([1.0, 0.0, 0.0])
-    e_y = np.cross(_Z, e_x)
-    if np.linalg.norm(e_y) < 1e-9:  # preferred velocity is vertical: any horizontal side works
-        e_y = np.array([0.0, 1.0, 0.0])
-    e_y = e_y / np.linalg.norm(e_y)
-    return np.stack([e_x, e_y, np.cross(e_x, e_y)])
+    x, y, z = (float(c) for c in direction)
+    norm = math.sqrt(x * x + y * y + z * z)
+    x, y, z = (x / norm, y / norm, z / norm) if norm > 1e-12 else (1.0, 0.0, 0.0)
+    hy = math.hypot(x, y)  # e_y0 = z_world × e_x, normalised
+    ly, my = (-y / hy, x / hy) if hy >= 1e-9 else (0.0, 1.0)  # vertical e_x: any side works
+    return np.array([[x, y, z], [ly, my, 0.0], [-z * my, z * ly, x * my - y * ly]])
 
 
 def avoidance_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
     """The planes P_phi for angles ``phi`` (rad) about the axis ``direction``."""
     phi = np.atleast_1d(np.asarray(phi, dtype=float))
     frame = avoidance_frame(direction)
-    return AvoidancePlanes(phi=phi, frame=frame, to_plane=rotation_plane(phi) @ frame)
+    return AvoidancePlanes(phi=phi, frame=frame, to_plane=_to_plane_rows(frame, phi))
+
+
+@jit
+def _to_plane_rows(frame: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """Eq. (8): R_{P_phi} @ frame for every phi, (P, 3, 3); the rotation only mixes e_y0, e_z0."""
+    out = np.empty((phi.shape[0], 3, 3))
+    for p in range(phi.shape[0]):
+        c, s = np.cos(phi[p]), np.sin(phi[p])
+        for k in range(3):
+            out[p, 0, k] = frame[0, k]
+            out[p, 1, k] = c * frame[1, k] + s * frame[2, k]
+            out[p, 2, k] = c * frame[2, k] - s * frame[1, k]
+    return out
+
+
+@functools.lru_cache(maxsize=16)
+def _phis(step_deg: float) -> np.ndarray:
+    phi = np.deg2rad(np.arange(-90.0, 90.0 + 1e-9, step_deg))
+    phi.setflags(write=False)
+    return phi
 
 
 def default_phis(step_deg: float = 10.0) -> np.ndarray:
     """Plane angles from -90° to 90° every ``step_deg`` (the paper's P_-90 … P_90)."""
     if not (0 < step_deg <= 180):
         raise ValueError("plane_step_deg must be in (0, 180]")
-    return np.deg2rad(np.arange(-90.0, 90.0 + 1e-9, step_deg))
+    return _phis(float(step_deg))

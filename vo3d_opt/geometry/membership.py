@@ -127,3 +127,19 @@ def in_vo_pyramids(
     v = np.atleast_2d(np.asarray(v, dtype=float))
     return _in_pyramids_kernel(pyramids.frame, pyramids.lo, pyramids.hi, pyramids.inside, v,
                                -1.0 if horizon is None else float(horizon))
+
+
+@jit
+def _in_vos_kernel(apex, rel, r_pz, c_inside, frame, lo, hi, p_inside, v, horizon):
+    n = apex.shape[0]
+    out = np.empty((n + frame.shape[0], v.shape[0]), dtype=np.bool_)
+    out[:n] = _in_cones_kernel(apex, rel, r_pz, c_inside, v, horizon, 0.0)
+    out[n:] = _in_pyramids_kernel(frame, lo, hi, p_inside, v, horizon)
+    return out
+
+
+def in_vos(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None) -> np.ndarray:
+    """Boolean (n + m, M): ``in_vo_cones`` stacked on ``in_vo_pyramids``, in one call."""
+    v = np.atleast_2d(np.asarray(v, dtype=float))
+    return _in_vos_kernel(cones.apex, cones.rel, cones.r_pz, cones.inside, pyramids.frame, pyramids.lo,
+                          pyramids.hi, pyramids.inside, v, -1.0 if horizon is None else float(horizon))

@@ -18,8 +18,6 @@ import numpy as np
 from .._jit import jit
 from ..types import Box, Cylinder
 
-# Corner k of the prism in its frame: bits (far, left, top) of k.
-_CORNER_BITS = np.array([[(k >> 0) & 1, (k >> 1) & 1, (k >> 2) & 1] for k in range(8)], dtype=float)
 #: The 12 edges of a box as pairs of corner indices (corners differing in one bit).
 BOX_EDGES = np.array([(a, a | (1 << b)) for a in range(8) for b in range(3) if not a & (1 << b)])
 
@@ -46,13 +44,26 @@ class VOPyramids:
     @property
     def corners(self) -> np.ndarray:
         """The eight corners of C_pz relative to p_A, world frame, (m, 8, 3)."""
-        local = self.lo[:, None, :] + _CORNER_BITS[None] * (self.hi - self.lo)[:, None, :]
-        return np.einsum("mki,mij->mkj", local, self.frame)
+        return prism_corners(self.frame, self.lo, self.hi)
 
     @property
     def near_face(self) -> np.ndarray:
         """The paper's base rectangle B_vo (near face, corners in order), (m, 4, 3)."""
         return self.corners[:, [0, 2, 6, 4], :]
+
+
+@jit
+def prism_corners(frame: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Corner k of each prism (bits far, left, top of k pick hi over lo), world frame (m, 8, 3)."""
+    m = frame.shape[0]
+    out = np.zeros((m, 8, 3))
+    for j in range(m):
+        for k in range(8):
+            for a in range(3):
+                local = hi[j, a] if (k >> a) & 1 else lo[j, a]
+                for c in range(3):
+                    out[j, k, c] += local * frame[j, a, c]
+    return out
 
 
 def vo_pyramids(p_A: np.ndarray, obstacles: Sequence[Cylinder | Box]) -> VOPyramids:

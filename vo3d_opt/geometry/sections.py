@@ -19,6 +19,7 @@ the original formulas of Jenie et al. get wrong; the default applies all of them
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -151,20 +152,26 @@ def _polygon_area(poly: np.ndarray) -> np.ndarray:
     return 0.5 * np.abs(np.sum(_cross(p, np.nan_to_num(nxt)), axis=2))
 
 
+@functools.lru_cache(maxsize=16)
+def generator_angles(n_samples: int) -> np.ndarray:
+    """The generator angles t of eq. (12): n_samples in [0, 2 pi) (read-only)."""
+    t = np.linspace(0.0, 2.0 * np.pi, n_samples, endpoint=False)
+    t.setflags(write=False)
+    return t
+
+
 @jit
-def _crossings(apex, R, d_vo, r_vo, normal):
-    """Eqs (14)–(16) for one cone and one plane normal: (t1, t2), NaN when B_vo misses it."""
-    A_ = d_vo * (R[0, 0] * normal[0] + R[1, 0] * normal[1] + R[2, 0] * normal[2])
-    A_ += apex[0] * normal[0] + apex[1] * normal[1] + apex[2] * normal[2]
-    B_ = r_vo * (R[0, 1] * normal[0] + R[1, 1] * normal[1] + R[2, 1] * normal[2])
-    C_ = r_vo * (R[0, 2] * normal[0] + R[1, 2] * normal[1] + R[2, 2] * normal[2])
+def _crossings(apex, R, d_vo, r_vo, nx, ny, nz):
+    """Eqs (14)–(16) for one cone and the plane with normal n: (t1, t2), NaN when B_vo misses it."""
+    A_ = d_vo * (R[0, 0] * nx + R[1, 0] * ny + R[2, 0] * nz) + apex[0] * nx + apex[1] * ny + apex[2] * nz
+    B_ = r_vo * (R[0, 1] * nx + R[1, 1] * ny + R[2, 1] * nz)
+    C_ = r_vo * (R[0, 2] * nx + R[1, 2] * ny + R[2, 2] * nz)
     rho = np.hypot(B_, C_)
     ratio = -A_ / rho
-    out = np.full(2, np.nan)
     if abs(ratio) <= 1.0 and rho > 0:
         base, delta = np.arctan2(C_, B_), np.arccos(min(max(ratio, -1.0), 1.0))
-        out[0], out[1] = base - delta, base + delta
-    return out
+        return base - delta, base + delta
+    return np.nan, np.nan
 
 
 @jit
@@ -177,17 +184,15 @@ def _to_plane(v, frame, c, s):
 
 
 @jit
-def _base_point(apex, R, d_vo, r_vo, t):
-    """B_vo(t) of eq. (4) in the world frame."""
+def _base_point(apex, R, d_vo, r_vo, t, out):
+    """B_vo(t) of eq. (4) in the world frame, written into ``out`` (3,)."""
     ct, st = r_vo * np.cos(t), r_vo * np.sin(t)
-    out = np.empty(3)
     for k in range(3):
         out[k] = apex[k] + R[k, 0] * d_vo + R[k, 1] * ct + R[k, 2] * st
-    return out
 
 
 @jit
-def _cone_sections_kernel(apex, R, d_vo, r_vo, sin_alpha, rel, inside, frame, phi, t,
+def cone_section_arrays(apex, R, d_vo, r_vo, sin_alpha, rel, inside, frame, phi, t,
                           tg_range, symmetry_abs, triangle, base_chord):
     """Section 3.1 one cone and one plane at a time (see cone_sections for the outputs)."""
     n, P, K = apex.shape[0], phi.shape[0], t.shape[0]
@@ -201,11 +206,12 @@ def _cone_sections_kernel(apex, R, d_vo, r_vo, sin_alpha, rel, inside, frame, ph
     halfplane = np.empty((n, P, 3))
     curve = np.full((n, P, K, 2), np.nan)
     cphi, sphi = np.cos(phi), np.sin(phi)
-    B_world = np.empty((K, 3))
+    B_world, B_chord, C_world = np.empty((K, 3)), np.empty(3), np.empty(3)
     for i in range(n):
         for k in range(K):
-            B_world[k] = _base_point(apex[i], R[i], d_vo[i], r_vo[i], t[k])  # eq. (9) before eq. (8)
-        C_world = apex[i] + d_vo[i] * R[i, :, 0]  # C_vo, eq. (5)
+            _base_point(apex[i], R[i], d_vo[i], r_vo[i], t[k], B_world[k])  # eq. (9) before eq. (8)
+        for k in range(3):
+            C_world[k] = apex[i, k] + d_vo[i] * R[i, k, 0]  # C_vo, eq. (5)
         a_norm = np.sqrt(apex[i, 0] ** 2 + apex[i, 1] ** 2 + apex[i, 2] ** 2)
         scale = 1.0 + a_norm + d_vo[i]
         sa = sin_alpha[i]
@@ -232,21 +238,22 @@ def _cone_sections_kernel(apex, R, d_vo, r_vo, sin_alpha, rel, inside, frame, ph
                         mask[i, p, k] = True
                         curve[i, p, k, 0], curve[i, p, k, 1] = x, y
             # Eqs (14)-(17): where the base circle meets the plane.
-            normal = np.array([c * frame[2, 0] - s * frame[1, 0], c * frame[2, 1] - s * frame[1, 1],
-                               c * frame[2, 2] - s * frame[1, 2]])
-            t12 = _crossings(apex[i], R[i], d_vo[i], r_vo[i], normal)
-            chord_ok = np.isfinite(t12[0]) and np.isfinite(t12[1])
+            nx, ny, nz = (c * frame[2, 0] - s * frame[1, 0], c * frame[2, 1] - s * frame[1, 1],
+                          c * frame[2, 2] - s * frame[1, 2])
+            t1, t2 = _crossings(apex[i], R[i], d_vo[i], r_vo[i], nx, ny, nz)
+            chord_ok = np.isfinite(t1) and np.isfinite(t2)
             for j in range(2):
                 if chord_ok:
-                    chord_t[i, p, j] = t12[j]
-                    x, y, _ = _to_plane(_base_point(apex[i], R[i], d_vo[i], r_vo[i], t12[j]), frame, c, s)
+                    chord_t[i, p, j] = t1 if j == 0 else t2
+                    _base_point(apex[i], R[i], d_vo[i], r_vo[i], chord_t[i, p, j], B_chord)
+                    x, y, _ = _to_plane(B_chord, frame, c, s)
                     chord[i, p, j, 0], chord[i, p, j, 1] = x, y
                     pts[i, p, K + j, 0], pts[i, p, K + j, 1] = x, y
                 else:
                     pts[i, p, K + j, 0], pts[i, p, K + j, 1] = 0.0, 0.0
             pts[i, p, K + 2, 0], pts[i, p, K + 2, 1] = xA, yA
             # Classification by the angle between the plane and the axis (|n·a| vs sin alpha).
-            na = abs(R[i, 0, 0] * normal[0] + R[i, 1, 0] * normal[1] + R[i, 2, 0] * normal[2])
+            na = abs(R[i, 0, 0] * nx + R[i, 1, 0] * ny + R[i, 2, 0] * nz)
             kd = BLANK
             if any_valid or chord_ok:
                 if na > sa + _ANGLE_TOL:
@@ -292,8 +299,8 @@ def cone_sections(
     unknown = set(corrections) - CORRECTIONS
     if unknown:
         raise ValueError(f"corrections: unknown {sorted(unknown)}; known {sorted(CORRECTIONS)}")
-    t = np.linspace(0.0, 2.0 * np.pi, n_samples, endpoint=False)
-    kind, pts, mask, apex, chord, chord_t, H, halfplane, curve = _cone_sections_kernel(
+    t = generator_angles(n_samples)
+    kind, pts, mask, apex, chord, chord_t, H, halfplane, curve = cone_section_arrays(
         cones.apex, cones.R, cones.d_vo, cones.r_vo, cones.sin_alpha, cones.rel, cones.inside,
         planes.frame, planes.phi, t, "tg_range" in corrections, "symmetry_abs" in corrections,
         "triangle" in corrections, "base_chord" in corrections)
@@ -304,7 +311,7 @@ def cone_sections(
 
 
 @jit
-def _pyramid_sections_kernel(corners, edges, h_dir, inside, frame, phi):
+def pyramid_section_arrays(corners, edges, h_dir, inside, frame, phi):
     """Section 4.2 one pyramid and one plane at a time (see pyramid_sections)."""
     m, P, E = corners.shape[0], phi.shape[0], edges.shape[0]
     kind = np.full((m, P), POINT, dtype=np.int64)
@@ -372,7 +379,7 @@ def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
     C_pz's edges meet the plane; with the VO lines, the whole wedge), a line, or the apex point.
     Inside C_pz the VO is every velocity with a horizontal component towards its centre."""
     m, P = len(pyramids), len(planes.phi)
-    kind, chord, symmetry, halfplane = _pyramid_sections_kernel(
+    kind, chord, symmetry, halfplane = pyramid_section_arrays(
         pyramids.corners, BOX_EDGES, np.ascontiguousarray(pyramids.frame[:, 0, :]), pyramids.inside,
         planes.frame, planes.phi)
     vertices = np.zeros((m, P, 3, 2))

@@ -24,6 +24,7 @@ from typing import Literal
 
 import numpy as np
 
+from vo3d_opt._jit import jit
 from vo3d_opt.formulations.problem import NLP, QP, Result
 
 #: Largest constraint violation, relative to 1 + the largest finite right-hand side, that an
@@ -110,14 +111,27 @@ class Standard:
 
         Violations up to :data:`FEAS_TOL` are returned unscaled (an upper bound), to save time.
         """
-        Cx = self.C @ x
-        worst = max((self.l - Cx).max(), (Cx - self.u).max())
-        if self.r is not None:
-            worst = max(worst, float(np.sqrt(x @ x)) - self.r)
-        if worst <= FEAS_TOL:  # the scale only matters for larger violations
-            return float(worst)
-        bounds = np.concatenate([self.l, self.u, [0.0 if self.r is None else self.r]])
-        return float(worst) / (1.0 + np.abs(bounds[np.isfinite(bounds)]).max())
+        return _violation(self.C, self.l, self.u, np.asarray(x, dtype=float), -1.0 if self.r is None else self.r)
+
+
+@jit
+def _violation(C, l, u, x, r):
+    worst = -np.inf
+    for i in range(C.shape[0]):
+        cx = 0.0
+        for j in range(x.shape[0]):
+            cx += C[i, j] * x[j]
+        worst = max(worst, l[i] - cx, cx - u[i])
+    if r >= 0.0:
+        worst = max(worst, np.sqrt(np.sum(x * x)) - r)
+    if worst <= FEAS_TOL:  # the scale only matters for larger violations
+        return worst
+    scale = 0.0 if r < 0.0 else r
+    for i in range(l.shape[0]):
+        for bound in (l[i], u[i]):
+            if np.isfinite(bound):
+                scale = max(scale, abs(bound))
+    return worst / (1.0 + scale)
 
 
 @functools.cache
@@ -155,7 +169,7 @@ def standardise(qp: QP) -> Standard:
 
     Non-finite numbers are kept: see :func:`screen`.
     """
-    q = np.asarray(qp.q, dtype=float).reshape(-1)
+    q = np.array(qp.q, dtype=float).reshape(-1)  # a copy: solvers may want writable buffers
     n = q.shape[0]
     if n == 0:
         raise ValueError("QP.q must have at least one entry")
@@ -168,11 +182,23 @@ def standardise(qp: QP) -> Standard:
     h = _vector(qp.h, G.shape[0], np.inf, "h")
     b = _vector(qp.b, A.shape[0], 0.0, "b")
     lb, ub = _vector(qp.lb, n, -np.inf, "lb"), _vector(qp.ub, n, np.inf, "ub")
-    return Standard(
-        P=0.5 * (P + P.T), q=q, C=np.concatenate([G, A, _eye(n)]),
-        l=np.concatenate([np.full(G.shape[0], -np.inf), b, lb]), u=np.concatenate([h, b, ub]),
-        r=None if qp.soc_radius is None else float(qp.soc_radius),
-        m_ineq=G.shape[0], m_eq=A.shape[0])
+    C, l, u = _rows(G, h, A, b, lb, ub)
+    return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u,
+                    r=None if qp.soc_radius is None else float(qp.soc_radius),
+                    m_ineq=G.shape[0], m_eq=A.shape[0])
+
+
+@jit
+def _rows(G, h, A, b, lb, ub):
+    """C = [G; A; I], l = [-inf; b; lb], u = [h; b; ub]."""
+    mg, ma, n = G.shape[0], A.shape[0], lb.shape[0]
+    C, l, u = np.zeros((mg + ma + n, n)), np.empty(mg + ma + n), np.empty(mg + ma + n)
+    C[:mg], l[:mg], u[:mg] = G, -np.inf, h
+    C[mg:mg + ma], l[mg:mg + ma], u[mg:mg + ma] = A, b, b
+    for j in range(n):
+        C[mg + ma + j, j] = 1.0
+    l[mg + ma:], u[mg + ma:] = lb, ub
+    return C, l, u
 
 
 def screen(std: Standard, solver: str) -> Result | None:
@@ -181,17 +207,34 @@ def screen(std: Standard, solver: str) -> Result | None:
     Infinities are allowed only where they drop a constraint (h = +inf, lb = -inf, ub = +inf).
     Lower bounds above upper bounds, h = -inf and a negative radius are infeasible.
     """
-    finite = bool(np.isfinite(std.P.sum() + std.q.sum() + std.C.sum())) and (
-        std.r is None or np.isfinite(std.r))
-    l, u = std.l, std.u
-    if finite and (l <= u).all() and (l < np.inf).all() and (u > -np.inf).all() and (
-            std.r is None or std.r >= 0):
+    code = _screen(std.P, std.q, std.C, std.l, std.u, np.nan if std.r is None else std.r,
+                   std.r is not None, std.m_ineq, std.m_eq)
+    if code == 0:
         return None
-    if not finite or np.isnan(l).any() or np.isnan(u).any():
+    if code == 1:
         return Result(None, "failed", solver, "problem data contains NaN or a misplaced infinity")
-    if np.isinf(l[std.m_ineq:std.m_ineq + std.m_eq]).any():
+    if code == 2:
         return Result(None, "failed", solver, "b contains an infinity")
     return Result(None, "infeasible", solver, "a bound or a negative radius excludes every point")
+
+
+@jit
+def _screen(P, q, C, l, u, r, has_r, m_ineq, m_eq):
+    """0: fine; 1: NaN or a misplaced infinity; 2: an infinite b; 3: infeasible bounds."""
+    finite = np.isfinite(P.sum() + q.sum() + C.sum()) and (not has_r or np.isfinite(r))
+    if not finite:
+        return 1
+    bad = False
+    for i in range(l.shape[0]):
+        if np.isnan(l[i]) or np.isnan(u[i]):
+            return 1
+        bad |= not (l[i] <= u[i] and l[i] < np.inf and u[i] > -np.inf)
+    if not bad and (not has_r or r >= 0):
+        return 0
+    for i in range(m_ineq, m_ineq + m_eq):
+        if np.isinf(l[i]):
+            return 2
+    return 3
 
 
 def require_no_cone(backend: Backend, qp: QP) -> None:

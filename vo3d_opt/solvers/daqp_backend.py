@@ -11,6 +11,7 @@ from __future__ import annotations
 import daqp
 import numpy as np
 
+from vo3d_opt._jit import jit
 from vo3d_opt.formulations.problem import QP, Result
 from vo3d_opt.solvers import Backend, Standard, make_result
 
@@ -33,11 +34,20 @@ class DaqpBackend(Backend):
 
     def _solve(self, qp: QP, std: Standard, warm_start: np.ndarray | None) -> Result:
         """``warm_start`` is ignored: DAQP warm-starts from an active set, not a point."""
-        n, m = std.n, std.m_ineq + std.m_eq
-        # DAQP wants the simple bounds first: rotate the identity rows to the front.
-        upper = np.minimum(np.concatenate([std.u[m:], std.u[:m]]), INF)
-        lower = np.maximum(np.concatenate([std.l[m:], std.l[:m]]), -INF)
-        sense = np.zeros(n + m, dtype=np.int32)
-        sense[n + std.m_ineq:] = EQUALITY
-        x, _, flag, _ = daqp.solve(std.P, std.q, np.ascontiguousarray(std.C[:m]), upper, lower, sense)
+        upper, lower, sense = _daqp_rows(std.l, std.u, std.n, std.m_ineq, std.m_eq)
+        x, _, flag, _ = daqp.solve(std.P, std.q, std.C[:std.m_ineq + std.m_eq], upper, lower, sense)
         return make_result(self.name, std, x, _STATUS.get(flag, "failed"), _CODES.get(flag, str(flag)))
+
+
+@jit
+def _daqp_rows(l, u, n, m_ineq, m_eq):
+    """DAQP's bounds: the simple bounds (the identity rows, last in Standard) first, clipped to
+    its infinity, and the ``sense`` flags marking equalities immutable."""
+    m = m_ineq + m_eq
+    upper, lower = np.empty(n + m), np.empty(n + m)
+    for i in range(n + m):
+        k = m + i if i < n else i - n
+        upper[i], lower[i] = min(u[k], INF), max(l[k], -INF)
+    sense = np.zeros(n + m, dtype=np.int32)
+    sense[n + m_ineq:] = EQUALITY
+    return upper, lower, sense
