@@ -68,14 +68,17 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="only 9 neighbours x 6 obstacles")
     ap.add_argument("--deviation", action="store_true",
                     help="instead of times: mean |v - v_pref| per formulation (default backends)")
+    ap.add_argument("--solvers", nargs="+", metavar="S",
+                    help="only these QP backends (default: every installed one)")
     ap.add_argument("--fast-path", action="store_true",
                     help="encounters where the preferred velocity is already safe (all behind)")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     rng = np.random.default_rng(7)
     grid = [(9, 6)] if args.quick else [(1, 0), (1, 6), (5, 0), (5, 6), (9, 6), (10, 0), (10, 6), (20, 0), (20, 6)]
-    combos = [("sampled", None)] + [("plane_qp", s) for s in available_qp_solvers()] \
-        + [("cone_qp", s) for s in available_qp_solvers()] + [("nlp", "casadi")]
+    solvers = args.solvers or available_qp_solvers()
+    combos = [("sampled", None)] + [("plane_qp", s) for s in solvers] \
+        + [("cone_qp", s) for s in solvers] + [("nlp", "casadi")]
     print(f"# {platform.processor() or platform.machine()}, {platform.python_implementation()} "
           f"{platform.python_version()}, {time.strftime('%Y-%m-%d')}")
     if args.deviation:

@@ -173,10 +173,10 @@ class VelocitySelector:
 
 def _enforce_limits(enc: Encounter, v: np.ndarray) -> np.ndarray:
     """Last line of the contract: never above v_max, never leaving [z_min, z_max] within dt."""
-    v = np.where(np.isfinite(v), v, 0.0).astype(float)
+    x, y, z = (c if math.isfinite(c) else 0.0 for c in np.asarray(v, dtype=float).tolist())
     lo, hi = enc.vz_range()
-    v[2] = min(max(v[2], lo), hi)
-    speed = np.linalg.norm(v)
+    z = min(max(z, lo), hi)
+    speed = math.sqrt(x * x + y * y + z * z)
     if speed > enc.limits.v_max:
-        v *= enc.limits.v_max / speed
-    return v
+        x, y, z = (c * (enc.limits.v_max / speed) for c in (x, y, z))
+    return np.array([x, y, z])

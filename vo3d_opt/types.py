@@ -7,6 +7,7 @@ message names the field. Vectors are stored as read-only numpy arrays, world fra
 from __future__ import annotations
 
 import math
+from functools import cached_property
 from typing import Annotated, Any
 
 import numpy as np
@@ -60,6 +61,11 @@ class Neighbor(_Model):
     velocity: Vec3 = Field(default_factory=lambda: np.zeros(3))
     r_pz: Positive
 
+    @property
+    def row(self) -> tuple[float, ...]:
+        """(x, y, z, v_x, v_y, v_z, r_pz): what the VO needs, as plain floats."""
+        return (*self.position.tolist(), *self.velocity.tolist(), self.r_pz)
+
 
 class _StaticObstacle(_Model):
     """Shared fields of obstacles standing on the ground (z = 0)."""
@@ -82,6 +88,12 @@ class _StaticObstacle(_Model):
     def prism_height(self) -> float:
         """h_pz: given, or the obstacle height plus the margin."""
         return self.h_pz if self.h_pz is not None else self.height + self.margin
+
+    @cached_property
+    def prism(self) -> tuple[float, float, float, float]:
+        """(x, y, L_pz, h_pz) of the protected prism C_pz, as plain floats (cached: static
+        obstacles are usually the same objects from one control step to the next)."""
+        return (*self.center.tolist(), float(self.side), float(self.prism_height))
 
     @model_validator(mode="after")
     def _prism_covers_obstacle(self):

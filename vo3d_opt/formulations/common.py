@@ -2,6 +2,7 @@
 the limits as linear constraints, the exact safety check, and the least-bad fallback."""
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -172,16 +173,11 @@ def prepare(
 ) -> Encounter:
     """Build the VO cones and pyramids of one decision (geometry layer)."""
     p = own.position
-    speed = np.linalg.norm(v_pref)
+    speed = math.hypot(*v_pref.tolist())
     if speed > limits.v_max:  # the goal velocity beyond reach: aim at the reachable one
         v_pref = v_pref * (limits.v_max / speed)
-    if neighbors:
-        p_B = np.array([nb.position for nb in neighbors])
-        V_B = np.array([nb.velocity for nb in neighbors])
-        r_pz = np.array([nb.r_pz for nb in neighbors])
-    else:
-        p_B = V_B = np.zeros((0, 3))
-        r_pz = np.zeros(0)
+    rows = np.array([nb.row for nb in neighbors], dtype=float).reshape(-1, 7)
+    p_B, V_B, r_pz = rows[:, :3], rows[:, 3:6], rows[:, 6]
     if options.horizon is not None and len(r_pz):
         # With a time horizon, a zone that cannot be reached in time has an empty VO: drop it.
         reach = options.horizon * (limits.v_max + np.linalg.norm(V_B, axis=1))

@@ -58,21 +58,32 @@ def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray, r: int) -> in
 @jit
 def _triangle_row(apex: np.ndarray, chord: np.ndarray, w0: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
     """One of the two boundary lines of a triangle (the generators through its apex), every
-    round: the normal points away from the other chord point. False when it is degenerate."""
-    dist, side_y, valid = np.empty(2), np.empty(2), np.empty(2, dtype=np.bool_)
-    for j in range(2):
-        dx, dy = chord[j, 0] - apex[0], chord[j, 1] - apex[1]
-        s = max(((w0[0] - apex[0]) * dx + (w0[1] - apex[1]) * dy) / (dx * dx + dy * dy), 0.0)
-        dist[j] = np.hypot(w0[0] - apex[0] - s * dx, w0[1] - apex[1] - s * dy)
-        valid[j] = np.isfinite(dist[j])
-        side_y[j] = chord[j, 1]
-    if not (valid[0] and valid[1]):
+    round: the normal points away from the other chord point. False when it is degenerate.
+    With two candidates, "near" takes the nearer side, "left" / "right" the upper / lower one
+    (see _pick)."""
+    d0x, d0y = chord[0, 0] - apex[0], chord[0, 1] - apex[1]
+    d1x, d1y = chord[1, 0] - apex[0], chord[1, 1] - apex[1]
+    wx, wy = w0[0] - apex[0], w0[1] - apex[1]
+    s0 = max((wx * d0x + wy * d0y) / (d0x * d0x + d0y * d0y), 0.0)
+    s1 = max((wx * d1x + wy * d1y) / (d1x * d1x + d1y * d1y), 0.0)
+    dist0, dist1 = np.hypot(wx - s0 * d0x, wy - s0 * d0y), np.hypot(wx - s1 * d1x, wy - s1 * d1y)
+    if not (np.isfinite(dist0) and np.isfinite(dist1)):
         return False
+    centre = 0.5 * (chord[0, 1] + chord[1, 1])
+    near = 0 if dist0 <= dist1 else 1
     for r in range(a.shape[0]):
-        i = _pick(dist, side_y, valid, r)
-        dx, dy = chord[i, 0] - apex[0], chord[i, 1] - apex[1]
+        i = near
+        if r > 0:  # the nearest candidate on the round's side, if there is one
+            on0 = chord[0, 1] >= centre if r == 1 else chord[0, 1] <= centre
+            on1 = chord[1, 1] >= centre if r == 1 else chord[1, 1] <= centre
+            if on0 and on1:
+                i = near
+            elif on0 or on1:
+                i = 0 if on0 else 1
+        dx, dy = (d0x, d0y) if i == 0 else (d1x, d1y)
+        ox, oy = (d1x, d1y) if i == 0 else (d0x, d0y)
         nx, ny = -dy, dx
-        if nx * (chord[1 - i, 0] - apex[0]) + ny * (chord[1 - i, 1] - apex[1]) > 0:  # away from P_j
+        if nx * ox + ny * oy > 0:  # away from the other chord point
             nx, ny = -nx, -ny
         a[r, 0], a[r, 1], b[r] = nx, ny, nx * apex[0] + ny * apex[1]
     return True
@@ -179,54 +190,74 @@ def _project2(a1x, a1y, b1, a2x, a2y, b2, wx, wy):
 
 
 @jit
-def _bounds(a, b, active, included, G_lim, h_lim, w0, v_max, rounds, planes):
-    """Lower bounds on the deviation of the QPs (rounds[q], planes[q]), inf when infeasible:
-    every pair of their rows (VO half-planes and limits) and the speed disc, each checked in
-    closed form. A QP's feasible set lies inside each pair's, so none of these overestimates."""
-    out = np.zeros(planes.size)
-    k_max = a.shape[1] + G_lim.shape[1]
-    ax, ay, rb = np.empty(k_max), np.empty(k_max), np.empty(k_max)
+def _bound(a, b, active, included, G_lim, h_lim, w0, v_max, r, p, ax, ay, rb):
+    """A lower bound on the deviation of the QP of round r on plane p, inf when it is
+    infeasible: every pair of its rows (VO half-planes and limits) and the speed disc, each
+    checked in closed form. The QP's feasible set lies inside each pair's, so none of these
+    overestimates. ``ax, ay, rb`` are scratch rows (at least VOs + limits long)."""
     tol = 1e-9 * (1.0 + v_max)
     wx, wy = w0[0], w0[1]
-    for q in range(planes.size):
-        r, p, k = rounds[q], planes[q], 0
-        for i in range(a.shape[1]):
-            if active[i, p] and included[i]:
-                ax[k], ay[k], rb[k], k = a[r, i, p, 0], a[r, i, p, 1], b[r, i, p], k + 1
-        for j in range(G_lim.shape[1]):  # G w <= h as -G w >= -h
-            ax[k], ay[k], rb[k], k = -G_lim[p, j, 0], -G_lim[p, j, 1], -h_lim[j], k + 1
-        lb = 0.0
-        for i in range(k):
-            nrm = np.sqrt(ax[i] * ax[i] + ay[i] * ay[i])
-            if nrm <= 1e-12:
-                if rb[i] > tol:
-                    lb = np.inf
-                continue
-            dist = rb[i] / nrm  # signed distance of the line from the origin
-            g = ax[i] * wx + ay[i] * wy - rb[i]
-            if dist > v_max + tol:  # the half-plane misses the speed disc
+    k = 0
+    for i in range(a.shape[1]):
+        if active[i, p] and included[i]:
+            ax[k], ay[k], rb[k], k = a[r, i, p, 0], a[r, i, p, 1], b[r, i, p], k + 1
+    for j in range(G_lim.shape[1]):  # G w <= h as -G w >= -h
+        ax[k], ay[k], rb[k], k = -G_lim[p, j, 0], -G_lim[p, j, 1], -h_lim[j], k + 1
+    lb = 0.0
+    for i in range(k):
+        nrm = np.sqrt(ax[i] * ax[i] + ay[i] * ay[i])
+        if nrm <= 1e-12:
+            if rb[i] > tol:
                 lb = np.inf
-                break
-            if g < 0:
-                # Nearest point of the half-plane within the disc: on the line, the foot of the
-                # perpendicular from w0 clamped to the chord the disc cuts.
-                fx, fy = dist / nrm * ax[i], dist / nrm * ay[i]
-                tx, ty = -ay[i] / nrm, ax[i] / nrm
-                half = np.sqrt(max(v_max * v_max - dist * dist, 0.0))
-                s = min(max((wx - fx) * tx + (wy - fy) * ty, -half), half)
-                lb = max(lb, np.sqrt((fx + s * tx - wx) ** 2 + (fy + s * ty - wy) ** 2))
-        for i in range(k):
-            if lb == np.inf:
-                break
-            for j in range(i + 1, k):
+            continue
+        dist = rb[i] / nrm  # signed distance of the line from the origin
+        g = ax[i] * wx + ay[i] * wy - rb[i]
+        if dist > v_max + tol:  # the half-plane misses the speed disc
+            lb = np.inf
+            break
+        if g < 0:
+            # Nearest point of the half-plane within the disc: on the line, the foot of the
+            # perpendicular from w0 clamped to the chord the disc cuts.
+            fx, fy = dist / nrm * ax[i], dist / nrm * ay[i]
+            tx, ty = -ay[i] / nrm, ax[i] / nrm
+            half = np.sqrt(max(v_max * v_max - dist * dist, 0.0))
+            s = min(max((wx - fx) * tx + (wy - fy) * ty, -half), half)
+            lb = max(lb, np.sqrt((fx + s * tx - wx) ** 2 + (fy + s * ty - wy) ** 2))
+    for i in range(k):
+        if lb == np.inf:
+            break
+        for j in range(i + 1, k):
+            if rb[i] > 0 or rb[j] > 0:  # else the origin is in both: the pair meets the disc
                 # the pair's least speed: beyond v_max (or NaN, disjoint) means infeasible
                 ox, oy = _project2(ax[i], ay[i], rb[i], ax[j], ay[j], rb[j], 0.0, 0.0)
                 if not (ox * ox + oy * oy <= (v_max + tol) ** 2):
                     lb = np.inf
                     break
+            if ax[i] * wx + ay[i] * wy < rb[i] or ax[j] * wx + ay[j] * wy < rb[j]:  # w0 cut off
                 x, y = _project2(ax[i], ay[i], rb[i], ax[j], ay[j], rb[j], wx, wy)
                 lb = max(lb, np.sqrt((x - wx) ** 2 + (y - wy) ** 2))
-        out[q] = lb
+    return lb
+
+
+@jit
+def _bounds(a, b, active, included, G_lim, h_lim, w0, v_max, rounds, planes):
+    """``_bound`` of the QPs (rounds[q], planes[q])."""
+    out = np.empty(planes.size)
+    k_max = a.shape[1] + G_lim.shape[1]
+    ax, ay, rb = np.empty(k_max), np.empty(k_max), np.empty(k_max)
+    for q in range(planes.size):
+        out[q] = _bound(a, b, active, included, G_lim, h_lim, w0, v_max, rounds[q], planes[q], ax, ay, rb)
+    return out
+
+
+@jit
+def _rows_on_planes(G3, to_plane):
+    """3D rows G3 (r, 3) on every plane, (P, r, 2): G3 @ [e1, e2(phi)]."""
+    out = np.empty((to_plane.shape[0], G3.shape[0], 2))
+    for p in range(to_plane.shape[0]):
+        for j in range(G3.shape[0]):
+            for c in range(2):
+                out[p, j, c] = G3[j, 0] * to_plane[p, c, 0] + G3[j, 1] * to_plane[p, c, 1] + G3[j, 2] * to_plane[p, c, 2]
     return out
 
 
@@ -287,12 +318,11 @@ class PlaneProblems:
     def __init__(self, enc: Encounter, planes: AvoidancePlanes, has_cones: bool) -> None:
         self.enc, self.planes, self.has_cones = enc, planes, has_cones
         self.v_max = enc.limits.v_max
-        self.w0 = np.array([planes.e1 @ enc.v_pref, 0.0])  # v_pref lies in every plane
+        self.w0 = np.array([float(planes.e1 @ enc.v_pref), 0.0])  # v_pref lies in every plane
         self.q = -2.0 * self.w0  # the objective ||w - w0||² = wᵀw - 2 w0ᵀw + const
         self.q.setflags(write=False)
         G3, h3 = enc.linear_bounds()
-        # The altitude and acceleration rows on each plane, (P, r, 2): G3 @ [e1, e2(phi)].
-        self.G_lim = np.ascontiguousarray((planes.to_plane[:, :2] @ G3.T).transpose(0, 2, 1))
+        self.G_lim = _rows_on_planes(G3, planes.to_plane)
         self.h_lim = h3
         self.G_speed, self.h_speed = (np.zeros((0, 2)), np.zeros(0)) if has_cones else \
             speed_polygon(self.v_max, enc.options.polygon_sides)
@@ -302,6 +332,7 @@ class PlaneProblems:
         self.a, self.b = np.zeros((R, V, P, 2)), np.zeros((R, V, P))
         self.active = np.zeros((V, P), dtype=bool)
         self.computed = np.zeros(V, dtype=bool)
+        self._scratch = np.empty((3, V + len(h3)))
         self._t = generator_angles(enc.options.qp_samples)
         self._flags = _correction_flags(enc.options.corrections)
         #: VOs constrained from the start: those holding v_pref, and the zones A is inside.
@@ -316,16 +347,15 @@ class PlaneProblems:
         n, c, py, pl = len(self.enc.cones), self.enc.cones, self.enc.pyramids, self.planes
         _fill_rows(np.flatnonzero(new[:n]), np.flatnonzero(new[n:]), c.apex, c.R, c.d_vo, c.r_vo,
                    c.sin_alpha, c.rel, c.inside, py.frame, py.lo, py.hi, py.inside, pl.frame, pl.phi,
-                   pl.e1, np.ascontiguousarray(pl.e2), self._t, self._flags, self.w0,
+                   pl.e1, pl.e2, self._t, self._flags, self.w0,
                    self.enc.options.margin, self.a, self.b, self.active)
         self.computed |= new
 
     def all_bounds(self, included: np.ndarray) -> list[tuple[float, int, int]]:
         """(bound, round, plane) for every QP not proved infeasible by its bound."""
         rounds, planes = _all_pairs(len(ROUNDS), len(self.planes.phi))
-        lb = self.bounds(included, rounds, planes)
-        keep = np.flatnonzero(np.isfinite(lb))
-        return list(zip(lb[keep].tolist(), rounds[keep].tolist(), planes[keep].tolist()))
+        lb = self.bounds(included, rounds, planes).tolist()
+        return [(x, r, p) for x, r, p in zip(lb, rounds.tolist(), planes.tolist()) if x < math.inf]
 
     def bounds(self, included: np.ndarray, rounds: np.ndarray, planes: np.ndarray) -> np.ndarray:
         """Lower bounds on the QP deviations of (rounds[q], planes[q]); inf: infeasible."""
@@ -333,7 +363,8 @@ class PlaneProblems:
                        self.v_max, rounds, planes)
 
     def bound(self, r: int, p: int, included: np.ndarray) -> float:
-        return float(self.bounds(included, np.array([r]), np.array([p]))[0])
+        return _bound(self.a, self.b, self.active, included, self.G_lim, self.h_lim, self.w0,
+                      self.v_max, r, p, *self._scratch)
 
     def qp(self, r: int, p: int, included: np.ndarray) -> QP:
         G, h = _gather(self.a, self.b, self.active, included, r, p, self.G_lim, self.h_lim,

@@ -1,6 +1,7 @@
 """The avoidance planes of one decision and the sections of every VO on them."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,8 +32,8 @@ def decision_planes(enc: Encounter) -> AvoidancePlanes:
     """Planes every ``plane_step_deg`` about the preferred direction (or the current heading, or
     world x when both are zero)."""
     direction = enc.v_pref
-    if np.linalg.norm(direction) < 1e-9:
-        direction = enc.v_now if np.linalg.norm(enc.v_now) > 1e-9 else np.array([1.0, 0.0, 0.0])
+    if math.hypot(*direction.tolist()) < 1e-9:
+        direction = enc.v_now if math.hypot(*enc.v_now.tolist()) > 1e-9 else np.array([1.0, 0.0, 0.0])
     return avoidance_planes(direction, default_phis(enc.options.plane_step_deg))
 
 

@@ -3,6 +3,7 @@ sphere of section 3.1.6, vectorised over n neighbours."""
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from functools import cached_property
 
 import numpy as np
 
@@ -37,12 +38,12 @@ class VOCones:
         """Unit symmetry-line direction (n, 3): from A towards B."""
         return self.R[:, :, 0]
 
-    @property
+    @cached_property
     def sin_alpha(self) -> np.ndarray:
         """Sine of the half-angle alpha of the cone: r_pz / d_oi."""
         return np.clip(self.r_pz / np.maximum(self.d_oi, 1e-12), 0.0, 1.0)
 
-    @property
+    @cached_property
     def cos_alpha(self) -> np.ndarray:
         return np.sqrt(1.0 - self.sin_alpha**2)
 
@@ -109,13 +110,12 @@ def vo_cones(
     its finite conic sections are exact for every speed up to ``reach``. Without ``reach`` the
     paper's rule applies: tau = tau_min when A is within 2 r_pz of B.
     """
-    p_B = np.atleast_2d(np.asarray(p_B, dtype=float)).reshape(-1, 3)
-    V_B = np.atleast_2d(np.asarray(V_B, dtype=float)).reshape(-1, 3)
+    p_B = np.ascontiguousarray(p_B, dtype=float).reshape(-1, 3)
     r_pz = np.broadcast_to(np.asarray(r_pz, dtype=float), (len(p_B),)).copy()
-    a = V_B if apex is None else np.atleast_2d(np.asarray(apex, dtype=float)).reshape(-1, 3)
+    a = np.ascontiguousarray(V_B if apex is None else apex, dtype=float).reshape(-1, 3)
     mode = -1.0 if not virtual_sphere else (np.nan if reach is None else float(reach))
     rel, d_oi, theta_el, psi_az, R, d_vo, r_vo, tau = _cone_kernel(
-        np.asarray(p_A, dtype=float), p_B, np.ascontiguousarray(a), r_pz, mode, float(tau_min))
+        np.asarray(p_A, dtype=float), p_B, a, r_pz, mode, float(tau_min))
     return VOCones(rel=rel, apex=a, r_pz=r_pz, d_oi=d_oi, theta_el=theta_el, psi_az=psi_az, R=R,
                    d_vo=d_vo, r_vo=r_vo, tau=tau, inside=d_oi <= r_pz)
 

@@ -63,9 +63,10 @@ class AvoidancePlanes:
     def e1(self) -> np.ndarray:
         return self.frame[0]
 
-    @property
+    @functools.cached_property
     def e2(self) -> np.ndarray:
-        return self.to_plane[:, 1, :]
+        """(P, 3) the in-plane direction e2(phi) of every plane (a contiguous copy)."""
+        return np.ascontiguousarray(self.to_plane[:, 1, :])
 
     @property
     def normal(self) -> np.ndarray:

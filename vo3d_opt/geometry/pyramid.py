@@ -68,7 +68,7 @@ def prism_corners(frame: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarr
 
 def vo_pyramids(p_A: np.ndarray, obstacles: Sequence[Cylinder | Box]) -> VOPyramids:
     """Build the VO pyramids of static cylinders and boxes seen from ``p_A``."""
-    prisms = np.array([(*o.center, o.side, o.prism_height) for o in obstacles], dtype=float).reshape(-1, 4)
+    prisms = np.array([o.prism for o in obstacles], dtype=float).reshape(-1, 4)
     frame, lo, hi, inside = _pyramid_kernel(np.asarray(p_A, dtype=float), prisms)
     return VOPyramids(frame=frame, lo=lo, hi=hi, L_pz=prisms[:, 2].copy(), h_pz=prisms[:, 3].copy(),
                       inside=inside)

@@ -178,14 +178,32 @@ def standardise(qp: QP) -> Standard:
         raise ValueError(f"QP.P must have shape ({n}, {n}), got {P.shape}")
     if (qp.G is None) != (qp.h is None) or (qp.A is None) != (qp.b is None):
         raise ValueError("QP.G and QP.h (and QP.A and QP.b) must be given together")
+    r = None if qp.soc_radius is None else float(qp.soc_radius)
+    if qp.A is None and qp.lb is None and qp.ub is None and isinstance(qp.G, np.ndarray) \
+            and qp.G.dtype == float and qp.G.ndim == 2 and qp.G.shape[1] == n \
+            and isinstance(qp.h, np.ndarray) and qp.h.dtype == float and qp.h.shape == (qp.G.shape[0],):
+        # The formulations' usual problem (inequalities only, float arrays): no conversions.
+        C, l, u = _rows(qp.G, qp.h, _eye(n)[:0], _EMPTY, *_free_bounds(n))
+        return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u, r=r, m_ineq=qp.G.shape[0], m_eq=0)
     G, A = _matrix(qp.G, n, "G"), _matrix(qp.A, n, "A")
     h = _vector(qp.h, G.shape[0], np.inf, "h")
     b = _vector(qp.b, A.shape[0], 0.0, "b")
     lb, ub = _vector(qp.lb, n, -np.inf, "lb"), _vector(qp.ub, n, np.inf, "ub")
     C, l, u = _rows(G, h, A, b, lb, ub)
-    return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u,
-                    r=None if qp.soc_radius is None else float(qp.soc_radius),
-                    m_ineq=G.shape[0], m_eq=A.shape[0])
+    return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u, r=r, m_ineq=G.shape[0], m_eq=A.shape[0])
+
+
+_EMPTY = np.zeros(0)
+_EMPTY.setflags(write=False)
+
+
+@functools.cache
+def _free_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """lb = -inf, ub = +inf for n variables (shared, read-only)."""
+    lb, ub = np.full(n, -np.inf), np.full(n, np.inf)
+    lb.setflags(write=False)
+    ub.setflags(write=False)
+    return lb, ub
 
 
 @jit
