@@ -95,7 +95,7 @@ def test_unknown_name_lists_available() -> None:
 
 def test_every_available_name_resolves_and_is_cached() -> None:
     names = available_solvers()
-    for required in ("osqp", "clarabel", "cvxpy", "casadi", "casadi:ipopt"):
+    for required in ("osqp", "clarabel", "daqp", "cvxpy", "casadi", "casadi:ipopt"):
         assert required in names
     assert "qpsolvers:daqp" in names
     for name in names:

@@ -28,7 +28,7 @@ from .types import AgentState, Box, Cylinder, Limits, Neighbor, check_vector
 
 FORMULATIONS = ("sampled", "plane_qp", "cone_qp", "nlp")
 #: Default QP backend: the fastest on our benchmark (benchmarks/bench_select.py).
-DEFAULT_QP_SOLVER = "clarabel"
+DEFAULT_QP_SOLVER = "daqp"
 DEFAULT_NLP_SOLVER = "casadi"
 
 

@@ -34,25 +34,27 @@ _TIE = 1e-6
 
 
 @jit
-def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray, r: int) -> int:
-    """Index of the boundary candidate that round r linearises at: "near" (r = 0) the nearest
-    valid one; "left" / "right" (r = 1, 2) the nearest in the upper / lower half of the section
-    (by in-plane y about the candidates' mean), or the nearest when that half is empty."""
+def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray) -> tuple[int, int, int]:
+    """The boundary candidate each round linearises at: "near" the nearest valid one; "left"
+    / "right" the nearest in the upper / lower half of the section (by in-plane y about the
+    candidates' mean), or the nearest when that half is empty."""
     count, total = 0, 0.0
     for k in range(dist.shape[0]):
         if valid[k]:
             count, total = count + 1, total + side_y[k]
     centre = total / max(count, 1)
-    best, best_side, d_best, d_side = 0, -1, np.inf, np.inf
+    near, left, right = 0, -1, -1
+    d_near, d_left, d_right = np.inf, np.inf, np.inf
     for k in range(dist.shape[0]):
         if not valid[k]:
             continue
-        if dist[k] < d_best:
-            best, d_best = k, dist[k]
-        on_side = (r == 1 and side_y[k] >= centre) or (r == 2 and side_y[k] <= centre)
-        if on_side and dist[k] < d_side:
-            best_side, d_side = k, dist[k]
-    return best_side if best_side >= 0 else best
+        if dist[k] < d_near:
+            near, d_near = k, dist[k]
+        if side_y[k] >= centre and dist[k] < d_left:
+            left, d_left = k, dist[k]
+        if side_y[k] <= centre and dist[k] < d_right:
+            right, d_right = k, dist[k]
+    return near, (left if left >= 0 else near), (right if right >= 0 else near)
 
 
 @jit
@@ -60,7 +62,7 @@ def _triangle_row(apex: np.ndarray, chord: np.ndarray, w0: np.ndarray, a: np.nda
     """One of the two boundary lines of a triangle (the generators through its apex), every
     round: the normal points away from the other chord point. False when it is degenerate.
     With two candidates, "near" takes the nearer side, "left" / "right" the upper / lower one
-    (see _pick)."""
+    (as _pick does)."""
     d0x, d0y = chord[0, 0] - apex[0], chord[0, 1] - apex[1]
     d1x, d1y = chord[1, 0] - apex[0], chord[1, 1] - apex[1]
     wx, wy = w0[0] - apex[0], w0[1] - apex[1]
@@ -108,22 +110,26 @@ def _cone_rows(kind, curve, t, chord, chord_t, apex_xy, halfplane, R, sin_alpha,
             elif kd == CIRCLE or kd == ELLIPSE or kd == PARABOLA or kd == HYPERBOLA:
                 # Boundary candidates: the curve of eq. (12) and the chord points of eq. (17).
                 for k in range(K + 2):
-                    q = curve[i, p, k] if k < K else chord[i, p, k - K]
+                    qx = curve[i, p, k, 0] if k < K else chord[i, p, k - K, 0]
+                    qy = curve[i, p, k, 1] if k < K else chord[i, p, k - K, 1]
                     tq[k] = t[k] if k < K else chord_t[i, p, k - K]
-                    valid[k] = np.isfinite(q[0])
-                    dist[k] = np.hypot(q[0] - w0[0], q[1] - w0[1]) if valid[k] else np.inf
-                    side_y[k] = q[1]
+                    valid[k] = np.isfinite(qx)
+                    dist[k] = np.hypot(qx - w0[0], qy - w0[1]) if valid[k] else np.inf
+                    side_y[k] = qy
                 active[i, p] = valid.any()
                 if not active[i, p]:
                     continue
+                picks = _pick(dist, side_y, valid)
                 for r in range(a.shape[0]):
-                    ts = tq[_pick(dist, side_y, valid, r)]
+                    ts = tq[picks[r]]
                     # The cone's tangent plane along that generator (outward normal N), on P_phi.
                     nb0, nb1, nb2 = -sin_alpha[i], ca * np.cos(ts), ca * np.sin(ts)
-                    N = R[i, :, 0] * nb0 + R[i, :, 1] * nb1 + R[i, :, 2] * nb2
-                    a[r, i, p, 0] = N[0] * e1[0] + N[1] * e1[1] + N[2] * e1[2]
-                    a[r, i, p, 1] = N[0] * e2[p, 0] + N[1] * e2[p, 1] + N[2] * e2[p, 2]
-                    b[r, i, p] = N[0] * apex[i, 0] + N[1] * apex[i, 1] + N[2] * apex[i, 2]
+                    N0 = R[i, 0, 0] * nb0 + R[i, 0, 1] * nb1 + R[i, 0, 2] * nb2
+                    N1 = R[i, 1, 0] * nb0 + R[i, 1, 1] * nb1 + R[i, 1, 2] * nb2
+                    N2 = R[i, 2, 0] * nb0 + R[i, 2, 1] * nb1 + R[i, 2, 2] * nb2
+                    a[r, i, p, 0] = N0 * e1[0] + N1 * e1[1] + N2 * e1[2]
+                    a[r, i, p, 1] = N0 * e2[p, 0] + N1 * e2[p, 1] + N2 * e2[p, 2]
+                    b[r, i, p] = N0 * apex[i, 0] + N1 * apex[i, 1] + N2 * apex[i, 2]
 
 
 @jit

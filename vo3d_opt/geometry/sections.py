@@ -206,10 +206,12 @@ def cone_section_arrays(apex, R, d_vo, r_vo, sin_alpha, rel, inside, frame, phi,
     halfplane = np.empty((n, P, 3))
     curve = np.full((n, P, K, 2), np.nan)
     cphi, sphi = np.cos(phi), np.sin(phi)
-    B_world, B_chord, C_world = np.empty((K, 3)), np.empty(3), np.empty(3)
+    B_world, B_f, B_chord, C_world = np.empty((K, 3)), np.empty((K, 3)), np.empty(3), np.empty(3)
     for i in range(n):
         for k in range(K):
             _base_point(apex[i], R[i], d_vo[i], r_vo[i], t[k], B_world[k])  # eq. (9) before eq. (8)
+            # in the (e_x, e_y0, e_z0) frame once: each plane then only turns about e_x
+            B_f[k, 0], B_f[k, 1], B_f[k, 2] = _to_plane(B_world[k], frame, 1.0, 0.0)
         for k in range(3):
             C_world[k] = apex[i, k] + d_vo[i] * R[i, k, 0]  # C_vo, eq. (5)
         a_norm = np.sqrt(apex[i, 0] ** 2 + apex[i, 1] ** 2 + apex[i, 2] ** 2)
@@ -223,7 +225,7 @@ def cone_section_arrays(apex, R, d_vo, r_vo, sin_alpha, rel, inside, frame, phi,
             # Eqs (11)-(12): generator k meets the plane at parameter t_g.
             any_valid = False
             for k in range(K):
-                xB, yB, zB = _to_plane(B_world[k], frame, c, s)
+                xB, yB, zB = B_f[k, 0], c * B_f[k, 1] + s * B_f[k, 2], c * B_f[k, 2] - s * B_f[k, 1]
                 dz = zB - zA
                 t_g = -zA / dz
                 if tg_range:  # 3.1.1
