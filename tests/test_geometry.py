@@ -849,3 +849,14 @@ def test_base_circle_crossings_lie_on_plane_and_circle():
     both = (z.min(-1) < -1e-6) & (z.max(-1) > 1e-6)
     assert np.all(ok[both])
     assert not np.any(ok[(z.min(-1) > 1e-6) | (z.max(-1) < -1e-6)])
+
+
+def test_compiled_rotations_match_eqs_6_and_8():
+    """The compiled cone and plane frames are the rotation matrices of eqs (6) and (8)."""
+    rng = np.random.default_rng(5)
+    rel = rng.normal(size=(40, 3)) * 20
+    cones = vo_cones(np.zeros(3), rel, rng.normal(size=(40, 3)), 1.0)
+    assert np.allclose(cones.R, rotation_el_az(cones.theta_el, cones.psi_az), atol=1e-12)
+    for direction in rng.normal(size=(10, 3)):
+        planes = _planes(direction, default_phis(10))
+        assert np.allclose(planes.to_plane, rotation_plane(planes.phi) @ planes.frame, atol=1e-12)

@@ -330,3 +330,19 @@ def test_malformed_shapes_raise() -> None:
     with pytest.raises(ValueError):
         get_backend("clarabel").solve(QP(P=np.eye(2), q=np.zeros(2), G=np.ones((3, 2)),
                                          h=np.ones(2)))
+
+
+@pytest.mark.parametrize("name", QP_NAMES)
+def test_read_only_problem_data_is_accepted(name):
+    """Formulations share read-only arrays (the Hessian, cached polygons): no backend may need
+    to write into them (C solvers' typed buffers do, unless given copies)."""
+    backend = get_backend(name)
+    ang = (np.arange(12) + 0.5) * 2 * np.pi / 12
+    G = np.vstack([[[-1.0, -1.0]], np.stack([np.cos(ang), np.sin(ang)], axis=1)])
+    h = np.concatenate([[-1.0], np.full(12, 3.0)])
+    qp = QP(P=2.0 * np.eye(2), q=np.array([-6.0, 0.0]), G=G, h=h)
+    for arr in (qp.P, qp.q, qp.G, qp.h):
+        arr.setflags(write=False)
+    res = backend.solve(qp)
+    assert res.status == "optimal", res.info
+    assert np.allclose(res.x, get_backend(REFERENCE).solve(qp).x, atol=1e-4)
