@@ -196,11 +196,13 @@ def _project2(a1x, a1y, b1, a2x, a2y, b2, wx, wy):
 
 
 @jit
-def _bound(a, b, active, included, G_lim, h_lim, w0, v_max, r, p, ax, ay, rb):
+def _bound(a, b, active, included, G_lim, h_lim, G_speed, h_speed, w0, v_max, r, p, ax, ay, rb):
     """A lower bound on the deviation of the QP of round r on plane p, inf when it is
     infeasible: every pair of its rows (VO half-planes and limits) and the speed disc, each
-    checked in closed form. The QP's feasible set lies inside each pair's, so none of these
-    overestimates. ``ax, ay, rb`` are scratch rows (at least VOs + limits long)."""
+    checked in closed form; with a speed polygon (G_speed, h_speed), also the polygon edge
+    that the bounding point crosses, paired with each row. The QP's feasible set lies inside
+    each of these sets, so none of them overestimates. ``ax, ay, rb`` are scratch rows (at
+    least VOs + limits long)."""
     tol = 1e-9 * (1.0 + v_max)
     wx, wy = w0[0], w0[1]
     k = 0
@@ -209,7 +211,7 @@ def _bound(a, b, active, included, G_lim, h_lim, w0, v_max, r, p, ax, ay, rb):
             ax[k], ay[k], rb[k], k = a[r, i, p, 0], a[r, i, p, 1], b[r, i, p], k + 1
     for j in range(G_lim.shape[1]):  # G w <= h as -G w >= -h
         ax[k], ay[k], rb[k], k = -G_lim[p, j, 0], -G_lim[p, j, 1], -h_lim[j], k + 1
-    lb = 0.0
+    lb, bx, by = 0.0, wx, wy  # the bound and the point that attains it
     for i in range(k):
         nrm = np.sqrt(ax[i] * ax[i] + ay[i] * ay[i])
         if nrm <= 1e-12:
@@ -228,7 +230,9 @@ def _bound(a, b, active, included, G_lim, h_lim, w0, v_max, r, p, ax, ay, rb):
             tx, ty = -ay[i] / nrm, ax[i] / nrm
             half = np.sqrt(max(v_max * v_max - dist * dist, 0.0))
             s = min(max((wx - fx) * tx + (wy - fy) * ty, -half), half)
-            lb = max(lb, np.sqrt((fx + s * tx - wx) ** 2 + (fy + s * ty - wy) ** 2))
+            d = np.sqrt((fx + s * tx - wx) ** 2 + (fy + s * ty - wy) ** 2)
+            if d > lb:
+                lb, bx, by = d, fx + s * tx, fy + s * ty
     for i in range(k):
         if lb == np.inf:
             break
@@ -241,18 +245,38 @@ def _bound(a, b, active, included, G_lim, h_lim, w0, v_max, r, p, ax, ay, rb):
                     break
             if ax[i] * wx + ay[i] * wy < rb[i] or ax[j] * wx + ay[j] * wy < rb[j]:  # w0 cut off
                 x, y = _project2(ax[i], ay[i], rb[i], ax[j], ay[j], rb[j], wx, wy)
-                lb = max(lb, np.sqrt((x - wx) ** 2 + (y - wy) ** 2))
+                d = np.sqrt((x - wx) ** 2 + (y - wy) ** 2)
+                if d > lb:
+                    lb, bx, by = d, x, y
+    for _ in range(2 if G_speed.shape[0] and lb < np.inf else 0):
+        # The polygon edge the bounding point lies beyond, if any, with each row in turn.
+        e, worst = -1, tol
+        for j in range(G_speed.shape[0]):
+            if G_speed[j, 0] * bx + G_speed[j, 1] * by - h_speed[j] > worst:
+                e, worst = j, G_speed[j, 0] * bx + G_speed[j, 1] * by - h_speed[j]
+        if e < 0:
+            break
+        ex, ey, eb = -G_speed[e, 0], -G_speed[e, 1], -h_speed[e]
+        for i in range(-1, k):
+            ix, iy, ib = (ex, ey, eb) if i < 0 else (ax[i], ay[i], rb[i])  # i = -1: the edge alone
+            x, y = _project2(ix, iy, ib, ex, ey, eb, wx, wy)
+            d = np.sqrt((x - wx) ** 2 + (y - wy) ** 2)
+            if not d <= np.inf:  # NaN: the row and the edge do not meet
+                return np.inf
+            if d > lb:
+                lb, bx, by = d, x, y
     return lb
 
 
 @jit
-def _bounds(a, b, active, included, G_lim, h_lim, w0, v_max, rounds, planes):
+def _bounds(a, b, active, included, G_lim, h_lim, G_speed, h_speed, w0, v_max, rounds, planes):
     """``_bound`` of the QPs (rounds[q], planes[q])."""
     out = np.empty(planes.size)
     k_max = a.shape[1] + G_lim.shape[1]
     ax, ay, rb = np.empty(k_max), np.empty(k_max), np.empty(k_max)
     for q in range(planes.size):
-        out[q] = _bound(a, b, active, included, G_lim, h_lim, w0, v_max, rounds[q], planes[q], ax, ay, rb)
+        out[q] = _bound(a, b, active, included, G_lim, h_lim, G_speed, h_speed, w0, v_max, rounds[q],
+                        planes[q], ax, ay, rb)
     return out
 
 
@@ -365,12 +389,12 @@ class PlaneProblems:
 
     def bounds(self, included: np.ndarray, rounds: np.ndarray, planes: np.ndarray) -> np.ndarray:
         """Lower bounds on the QP deviations of (rounds[q], planes[q]); inf: infeasible."""
-        return _bounds(self.a, self.b, self.active, included, self.G_lim, self.h_lim, self.w0,
-                       self.v_max, rounds, planes)
+        return _bounds(self.a, self.b, self.active, included, self.G_lim, self.h_lim, self.G_speed,
+                       self.h_speed, self.w0, self.v_max, rounds, planes)
 
     def bound(self, r: int, p: int, included: np.ndarray) -> float:
-        return _bound(self.a, self.b, self.active, included, self.G_lim, self.h_lim, self.w0,
-                      self.v_max, r, p, *self._scratch)
+        return _bound(self.a, self.b, self.active, included, self.G_lim, self.h_lim, self.G_speed,
+                      self.h_speed, self.w0, self.v_max, r, p, *self._scratch)
 
     def qp(self, r: int, p: int, included: np.ndarray) -> QP:
         G, h = _gather(self.a, self.b, self.active, included, r, p, self.G_lim, self.h_lim,
@@ -385,12 +409,13 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     every section passed on its left, then on its right (the nearest side is not always best
     once the other sections count). A VO's half-plane joins the QPs when v_pref lies in that VO
     or when a QP's answer does (constraint generation: that QP is re-queued), so sections far
-    from the answer never over-constrain it, and are never computed. QPs are solved in order of
-    a lower bound on their deviation (the distance to the farthest violated half-plane, which
-    only grows as constraints join); the search stops once the best safe answer beats every
-    remaining bound. The bounds (every pair of rows and the speed disc, in closed form) also
-    prove most infeasible QPs infeasible without solving them.
-    A QP identical to one already solved (a round that changes nothing on a plane) is skipped."""
+    from the answer never over-constrain it, and are never computed. Every (round, plane) QP is
+    queued at once and solved in order of a lower bound on its deviation (``_bound``: each row
+    and each pair of rows against the speed disc, in closed form; it only grows as constraints
+    join, and a stale one is recomputed before its QP is solved); the search stops once the
+    best safe answer beats every remaining bound. The bounds also prove most infeasible QPs
+    infeasible without solving them. A QP identical to one already solved (a round that
+    changes nothing on a plane) is skipped."""
     problems = PlaneProblems(enc, decision_planes(enc), has_cones)
     planes = problems.planes
     # The VOs constrained so far, shared by every plane: one found on one plane usually bites
