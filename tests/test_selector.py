@@ -180,6 +180,13 @@ def test_reciprocal_takes_half_the_avoidance():
     dev = exact(kw).deviation
     assert full.status == half.status == "optimal"
     assert dev(half.velocity)[0] < dev(full.velocity)[0]
+    # A neighbour that does not avoid (hovering, static) gets no half share: the reciprocal
+    # selector then keeps clear of its whole VO, like the non-reciprocal one.
+    alone = dict(kw, neighbors=[nb.model_copy(update={"cooperative": False})])
+    own_all = VelocitySelector("plane_qp", reciprocal=True).select(**alone)
+    assert own_all.status == "optimal" and safe(kw, own_all.velocity)
+    assert not safe(kw, half.velocity)  # the half share alone would not be safe
+    assert dev(own_all.velocity)[0] == pytest.approx(dev(full.velocity)[0], abs=1e-3)
 
 
 def test_horizon_ignores_far_threats():

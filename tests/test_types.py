@@ -127,6 +127,7 @@ def test_protected_prism_must_cover_obstacle():
 def test_unknown_field_rejected():
     _raises("foo", lambda: Neighbor(position=(0, 0, 0), r_pz=1.0, foo=1))
     _raises("r_pz", lambda: Neighbor(position=(0, 0, 0)))  # missing
+    _raises("cooperative", lambda: Neighbor(position=(0, 0, 0), r_pz=1.0, cooperative="yes"))
 
 
 # ----------------------------------------------------------------------------- well-formed input

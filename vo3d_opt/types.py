@@ -11,7 +11,7 @@ from functools import cached_property
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PlainSerializer, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PlainSerializer, StrictBool, model_validator
 
 #: Margin (m) added around a static obstacle when L_pz or h_pz is not given (section 4).
 PZ_MARGIN = 2.0
@@ -60,11 +60,15 @@ class Neighbor(_Model):
     position: Vec3
     velocity: Vec3 = Field(default_factory=lambda: np.zeros(3))
     r_pz: Positive
+    #: Whether B avoids A too (another vehicle running a selector). With the ``reciprocal``
+    #: option A takes only half the avoidance of a cooperative neighbour, and all of it for one
+    #: that keeps its velocity whatever A does (a hovering vehicle, a static sphere).
+    cooperative: StrictBool = True
 
     @property
     def row(self) -> tuple[float, ...]:
-        """(x, y, z, v_x, v_y, v_z, r_pz): what the VO needs, as plain floats."""
-        return (*self.position.tolist(), *self.velocity.tolist(), self.r_pz)
+        """(x, y, z, v_x, v_y, v_z, r_pz, cooperative): what the VO needs, as plain floats."""
+        return (*self.position.tolist(), *self.velocity.tolist(), self.r_pz, float(self.cooperative))
 
 
 class _StaticObstacle(_Model):

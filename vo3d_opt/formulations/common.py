@@ -38,7 +38,7 @@ class Options(BaseModel):
     heading_step_deg: _Deg = 10.0  # sampled: polar grid, heading resolution in each plane
     speed_levels: Annotated[int, Field(ge=2, strict=True)] = 9  # sampled: speeds v_min..v_max
     polygon_sides: Annotated[int, Field(ge=3, strict=True)] = 24  # inscribed speed polygon
-    reciprocal: StrictBool = False  # RVO-style: the apex at (V_A + V_B)/2, each takes half
+    reciprocal: StrictBool = False  # RVO-style: apex (V_A + V_B)/2 for cooperative neighbours
     horizon: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None  # s; None: infinite
     corrections: frozenset[Literal[tuple(CORRECTIONS)]] | None = None  # None: all six of 3.1
     n_samples: Annotated[int, Field(ge=8, strict=True)] = 72  # generator samples of eq. (12), sampled
@@ -176,13 +176,13 @@ def prepare(
     speed = math.hypot(*v_pref.tolist())
     if speed > limits.v_max:  # the goal velocity beyond reach: aim at the reachable one
         v_pref = v_pref * (limits.v_max / speed)
-    rows = np.array([nb.row for nb in neighbors], dtype=float).reshape(-1, 7)
-    p_B, V_B, r_pz = rows[:, :3], rows[:, 3:6], rows[:, 6]
+    rows = np.array([nb.row for nb in neighbors], dtype=float).reshape(-1, 8)
+    p_B, V_B, r_pz, cooperative = rows[:, :3], rows[:, 3:6], rows[:, 6], rows[:, 7] > 0
     if options.horizon is not None and len(r_pz):
         # With a time horizon, a zone that cannot be reached in time has an empty VO: drop it.
         reach = options.horizon * (limits.v_max + np.linalg.norm(V_B, axis=1))
         keep = np.linalg.norm(p_B - p, axis=1) - r_pz <= reach
-        p_B, V_B, r_pz = p_B[keep], V_B[keep], r_pz[keep]
+        p_B, V_B, r_pz, cooperative = p_B[keep], V_B[keep], r_pz[keep], cooperative[keep]
     if options.horizon is not None:
         obstacles = [o for o in obstacles
                      if np.linalg.norm(o.center - p[:2]) - o.side / np.sqrt(2) <= options.horizon * limits.v_max]
@@ -193,7 +193,9 @@ def prepare(
         gap = np.linalg.norm(p_B - p, axis=1) - r_pz
         r_pz = np.where(gap > 0, r_pz + np.minimum(options.pz_buffer, BUFFER_GAP_SHARE * gap), r_pz)
     corrections = options.corrections
-    apex = 0.5 * (V_B + own.velocity) if options.reciprocal else None
+    # Reciprocal (RVO): the apex at (V_A + V_B)/2, each of two cooperative vehicles taking half
+    # the avoidance; a neighbour that does not avoid (cooperative=False) keeps the apex V_B.
+    apex = np.where(cooperative[:, None], 0.5 * (V_B + own.velocity), V_B) if options.reciprocal else None
     cones = vo_cones(
         p, p_B, V_B, r_pz, reach=limits.v_max,
         virtual_sphere=corrections is None or "virtual_sphere" in corrections, apex=apex,

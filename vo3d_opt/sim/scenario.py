@@ -304,7 +304,7 @@ class Scenario(_Spec):
 
     def sphere_neighbors(self) -> list[Neighbor]:
         """The ``spheres`` as zero-velocity neighbours (r_pz = radius + margin)."""
-        return [Neighbor(position=s.center, velocity=(0.0, 0.0, 0.0), r_pz=s.r_pz)
+        return [Neighbor(position=s.center, velocity=(0.0, 0.0, 0.0), r_pz=s.r_pz, cooperative=False)
                 for s in self.spheres]
 
     def start_warnings(self) -> list[str]:

@@ -7,18 +7,20 @@ senses in the *same snapshot* of the previous step (so the order of the calls do
 
 * the other vehicles within ``sensing.vehicle_range`` (centre distance), as ``Neighbor`` with
   their current velocity and ``r_pz = max(own r_pz, their r_pz)`` (so each side keeps the larger
-  zone, which is what the metrics count);
+  zone, which is what the metrics count); arrived ones as ``cooperative=False`` (they hover and
+  no longer avoid, so a ``reciprocal`` selector takes all of the avoidance, not half);
 * the obstacles within ``sensing.obstacle_range`` of their nearest point (those with
   ``sensed: false`` are never seen), and the scenario's static spheres within that range as
-  zero-velocity neighbours;
+  zero-velocity, non-cooperative neighbours;
 * a preferred velocity pointing at its goal with speed ``min(v_max, distance / dt)`` (full speed,
   slowing only to land on the goal in the last step);
 * its limits: speed ``(limits.speed[0], min(limits.speed[1], max_speed))`` and the altitude range.
 
 The position is integrated kinematically, ``p += v dt``, with ``v`` the command, or with a
 first-order response ``v += (v_cmd - v) min(1, dt / tau)`` when ``velocity_response_tau`` is
-set. An agent within ``goal_tolerance`` of its goal has arrived: it stops (velocity 0), hovers
-there for the rest of the run, still seen by the others, and no longer decides. The run stops
+set. An agent within ``goal_tolerance`` of its goal has arrived: it stops (velocity 0 from that
+sample on, which is what the others sense next), hovers there for the rest of the run, still
+seen by the others, and no longer decides. The run stops
 when all agents have arrived or after ``max_time``. The simulator never clips the selector's
 answer: the metrics report any limit it breaks.
 """
@@ -219,8 +221,9 @@ class Simulator:
                         if j == i:
                             continue
                         key = (int(j), float(max(r_pz[i], r_pz[j])))
-                        if key not in cache:
-                            cache[key] = Neighbor(position=p[j], velocity=v[j], r_pz=key[1])
+                        if key not in cache:  # an arrived agent hovers: it does not avoid
+                            cache[key] = Neighbor(position=p[j], velocity=v[j], r_pz=key[1],
+                                                  cooperative=not done[j])
                         neighbors.append(cache[key])
                     neighbors.extend(self.spheres[s] for s in np.flatnonzero(sph[i] <= orange))
                     obstacles = [self.bodies[self.sensed_idx[m]]
@@ -243,6 +246,7 @@ class Simulator:
                 vel[k] = v
                 p = p + v * dt
                 done = done | (np.linalg.norm(p - goals, axis=1) <= tol)
+                v[done] = 0.0  # an arrived agent hovers from now on: the others see it still
                 pos[k + 1], arrived[k + 1] = p, done
                 bar.update(1)
         finally:
