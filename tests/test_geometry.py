@@ -399,8 +399,7 @@ def test_cone_sections_agree_with_exact_membership():
     polygon of curve points is the only approximation left in that disc."""
     rng = np.random.default_rng(20240611)
     phis = default_phis(15)
-    total = banded = inside = wrong = 0
-    kinds = set()
+    tally = _Agreement()
     for _ in range(520):
         p_a, p_b, v_b, r, pref = _random_cone_encounter(rng)
         cones = vo_cones(p_a, p_b[None], v_b[None], r, reach=REACH)
@@ -411,16 +410,30 @@ def test_cone_sections_agree_with_exact_membership():
         v = planes.lift(xy).reshape(-1, 3)
         exact = in_vo_cones(cones, v)[0].reshape(got.shape)
         pen = cone_penetration(cones, v)[0].reshape(got.shape)
-        band = np.abs(pen) < 2 * _inscribed_band(cones)[0] + 1e-9 * r
-        total += got.size
-        banded += band.sum()
-        inside += (exact & ~band).sum()
-        wrong += ((got != exact) & ~band).sum()
-        kinds.update(sec.kind_names[0].tolist())
-    assert wrong == 0
-    assert banded < 0.1 * total
-    assert inside > 0.02 * total  # the test has teeth: many velocities are in a VO
-    assert {"blank", "ellipse", "hyperbola"} <= kinds
+        tally.add(sec, got, exact, band=np.abs(pen) < 2 * _inscribed_band(cones)[0] + 1e-9 * r)
+    tally.check({"blank", "ellipse", "hyperbola"})
+
+
+class _Agreement:
+    """Counts of a sections-vs-exact-membership comparison, outside the band of samples too
+    close to the boundary to call."""
+
+    def __init__(self) -> None:
+        self.total = self.banded = self.inside = self.wrong = 0
+        self.kinds: set[str] = set()
+
+    def add(self, sec, got, exact, band) -> None:
+        self.total += got.size
+        self.banded += band.sum()
+        self.inside += (exact & ~band).sum()
+        self.wrong += ((got != exact) & ~band).sum()
+        self.kinds.update(sec.kind_names[0].tolist())
+
+    def check(self, kinds: set[str]) -> None:
+        assert self.wrong == 0
+        assert self.banded < 0.1 * self.total
+        assert self.inside > 0.02 * self.total  # the test has teeth: many velocities are in a VO
+        assert kinds <= self.kinds
 
 
 def _random_obstacle(rng):
@@ -467,8 +480,7 @@ def test_pyramid_sections_agree_with_exact_membership():
     Band: samples whose membership flips under a 1e-6 rad in-plane turn."""
     rng = np.random.default_rng(7)
     phis = default_phis(15)
-    total = banded = inside = wrong = above = 0
-    kinds = set()
+    tally, above = _Agreement(), 0
     for _ in range(520):
         ob = _random_obstacle(rng)
         p_a = _random_outside_position(rng, ob)
@@ -482,17 +494,9 @@ def test_pyramid_sections_agree_with_exact_membership():
         xy = _plane_samples(rng, len(phis), 160)
         got = sec.contains(xy)[0]
         exact, band = _pyramid_boundary(pyr, planes, xy)
-        exact, band = exact[0], band[0]
-        total += got.size
-        banded += band.sum()
-        inside += (exact & ~band).sum()
-        wrong += ((got != exact) & ~band).sum()
-        kinds.update(sec.kind_names[0].tolist())
-    assert wrong == 0
-    assert banded < 0.1 * total
-    assert inside > 0.02 * total
+        tally.add(sec, got, exact[0], band[0])
+    tally.check({"triangle", "point"})
     assert above > 50
-    assert {"triangle", "point"} <= kinds
 
 
 # ----------------------------------------------------------------------------- 3. corrections
