@@ -5,7 +5,8 @@ Encounters: the own UAV at (0, 0, 20) m flying +x at 4 m/s; one neighbour head-o
 the 55 m sensing range, and with obstacles six random cylinders/boxes, one 20 m ahead.
 Prints median and p99 microseconds per call, and plane_qp's speed-up over sampled.
 
-    python benchmarks/bench_select.py [--encounters 40] [--repeat 3] [--quick]
+    python benchmarks/bench_select.py [--encounters 40] [--repeat 3] [--quick] [--solvers S ...]
+                                      [--deviation | --solved] [--fast-path]
 """
 from __future__ import annotations
 
@@ -70,6 +71,8 @@ def main() -> None:
                     help="instead of times: mean |v - v_pref| per formulation (default backends)")
     ap.add_argument("--solvers", nargs="+", metavar="S",
                     help="only these QP backends (default: every installed one)")
+    ap.add_argument("--solved", action="store_true",
+                    help="instead of times: QPs solved per plane_qp decision, on each backend")
     ap.add_argument("--fast-path", action="store_true",
                     help="encounters where the preferred velocity is already safe (all behind)")
     args = ap.parse_args()
@@ -91,6 +94,16 @@ def main() -> None:
                 dev = [np.linalg.norm(sel.select(**kw).velocity - np.asarray(kw["preferred_velocity"]))
                        for kw in cases]
                 print(f"| {n} | {m} | {form} | {np.mean(dev):.2f} | {np.max(dev):.2f} |", flush=True)
+        return
+    if args.solved:
+        print("| neighbours | obstacles | solver | mean QPs solved | median | max |")
+        print("|---:|---:|---|---:|---:|---:|")
+        for n, m in grid:
+            cases = [encounter(rng, n, m, conflict=not args.fast_path) for _ in range(args.encounters)]
+            for solver in solvers:
+                sel = VelocitySelector("plane_qp", solver=solver)
+                k = np.array([sel.select(**kw).info.get("solved", 0) for kw in cases])
+                print(f"| {n} | {m} | {solver} | {k.mean():.2f} | {np.median(k):.0f} | {k.max()} |", flush=True)
         return
     print("| neighbours | obstacles | formulation | solver | median µs | p99 µs | statuses |")
     print("|---:|---:|---|---|---:|---:|---|")
