@@ -48,7 +48,7 @@ import numpy as np
 
 from vo3d_opt.sim import metrics
 from vo3d_opt.sim.scenario import Scenario, load_scenario, scenario_from_dict
-from vo3d_opt.sim.simulator import RunRecord, Simulator
+from vo3d_opt.sim.simulator import RunBuffers, RunRecord, Simulator
 
 FORMULATION = "rvo2-3d"
 STATUS = "rvo2"
@@ -117,13 +117,9 @@ def run_rvo2(scenario: Scenario | str, *, time_horizon: float | None = None,
     rule = Simulator(sc, selector=None)  # only for its preferred-velocity rule
 
     total = sc.n_steps if max_steps is None else min(int(max_steps), sc.n_steps)
-    pos = np.empty((total + 1, n, 3))
-    vel = np.zeros((total, n, 3))
-    pref = np.zeros((total, n, 3))
-    decided = np.zeros((total, n), dtype=bool)
-    statuses = np.full((total, n), "", dtype=object)
-    dtimes = np.full((total, n), np.nan)
-    arrived = np.zeros((total + 1, n), dtype=bool)
+    buf = RunBuffers.empty(total, n)
+    pos, vel, pref, arrived = buf.pos, buf.vel, buf.pref, buf.arrived
+    decided, statuses, dtimes = buf.decided, buf.statuses, buf.dtimes
     step_times = np.zeros(total)
 
     p = np.array([sim.getAgentPosition(i) for i in range(n)], dtype=float)
@@ -166,16 +162,12 @@ def run_rvo2(scenario: Scenario | str, *, time_horizon: float | None = None,
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - t_start
-    s = steps
-    return RunRecord(
-        scenario=sc, formulation=FORMULATION, solver=f"rvo23d {version()}",
-        times=np.arange(s + 1) * dt, positions=pos[: s + 1], velocities=vel[:s],
-        commands=vel[:s].copy(), preferred=pref[:s], decided=decided[:s], statuses=statuses[:s],
-        decision_times=dtimes[:s], solve_times=dtimes[:s].copy(), arrived=arrived[: s + 1],
-        wall_time=wall,
+    buf.cmd[:], buf.stimes[:] = vel, dtimes  # RVO2's command is its velocity; no solve time apart
+    return buf.record(
+        sc, FORMULATION, f"rvo23d {version()}", steps, wall,
         extra={"time_horizon": horizon, "max_neighbors": neighbours,
                "radius": radii.tolist() if len(np.unique(radii)) > 1 else float(radii[0]),
-               "neighbor_dist": vrange, "step_times": step_times[:s]},
+               "neighbor_dist": vrange, "step_times": step_times[:steps]},
     )
 
 

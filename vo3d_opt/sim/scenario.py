@@ -464,7 +464,7 @@ def _semantic_errors(sc: Scenario) -> list[tuple[str, str]]:
                 errs.append((where, str(exc).splitlines()[-1].strip()))
 
     seen: dict[str, int] = {}
-    r_pz, radius = sc.r_pz, sc.radius
+    radius = sc.radius
     for i, a in enumerate(sc.agents):
         where = f"agents[{i}]"
         if a.id in seen:

@@ -120,6 +120,43 @@ class RunRecord:
         )
 
 
+@dataclass
+class RunBuffers:
+    """The arrays a run fills step by step, [step, agent, ...] as in :class:`RunRecord`, for
+    ``total`` steps of ``n`` agents; ``record`` cuts them to the steps actually simulated."""
+
+    pos: np.ndarray
+    vel: np.ndarray
+    cmd: np.ndarray
+    pref: np.ndarray
+    decided: np.ndarray
+    statuses: np.ndarray
+    dtimes: np.ndarray
+    stimes: np.ndarray
+    arrived: np.ndarray
+
+    @classmethod
+    def empty(cls, total: int, n: int) -> "RunBuffers":
+        return cls(pos=np.empty((total + 1, n, 3)), vel=np.zeros((total, n, 3)),
+                   cmd=np.zeros((total, n, 3)), pref=np.zeros((total, n, 3)),
+                   decided=np.zeros((total, n), dtype=bool),
+                   statuses=np.full((total, n), "", dtype=object),
+                   dtimes=np.full((total, n), np.nan), stimes=np.full((total, n), np.nan),
+                   arrived=np.zeros((total + 1, n), dtype=bool))
+
+    def record(self, sc: Scenario, formulation: str, solver: str, steps: int, wall: float,
+               extra: dict[str, Any] | None = None) -> RunRecord:
+        s = steps
+        return RunRecord(
+            scenario=sc, formulation=formulation, solver=solver,
+            times=np.arange(s + 1) * sc.dt, positions=self.pos[: s + 1], velocities=self.vel[:s],
+            commands=self.cmd[:s], preferred=self.pref[:s], decided=self.decided[:s],
+            statuses=self.statuses[:s], decision_times=self.dtimes[:s],
+            solve_times=self.stimes[:s], arrived=self.arrived[: s + 1], wall_time=wall,
+            extra=extra or {},
+        )
+
+
 def make_selector(formulation: str | None = None, solver: str | None = None,
                   options: dict[str, Any] | None = None) -> tuple[Any, str, str]:
     """Build ``vo3d_opt.selector.VelocitySelector``; returns (selector, formulation, solver).
@@ -179,15 +216,9 @@ class Simulator:
         alpha = None if sc.velocity_response_tau is None else min(1.0, dt / sc.velocity_response_tau)
         order = sorted(range(n), key=lambda i: sc.ids[i])
 
-        pos = np.empty((total + 1, n, 3))
-        vel = np.zeros((total, n, 3))
-        cmd = np.zeros((total, n, 3))
-        pref = np.zeros((total, n, 3))
-        decided = np.zeros((total, n), dtype=bool)
-        statuses = np.full((total, n), "", dtype=object)
-        dtimes = np.full((total, n), np.nan)
-        stimes = np.full((total, n), np.nan)
-        arrived = np.zeros((total + 1, n), dtype=bool)
+        buf = RunBuffers.empty(total, n)
+        pos, vel, cmd, pref, arrived = buf.pos, buf.vel, buf.cmd, buf.pref, buf.arrived
+        decided, statuses, dtimes, stimes = buf.decided, buf.statuses, buf.dtimes, buf.stimes
 
         p = sc.starts.copy()
         v = np.zeros((n, 3))
@@ -251,15 +282,7 @@ class Simulator:
                 bar.update(1)
         finally:
             bar.close()
-        wall = time.perf_counter() - t_start
-        s = steps
-        return RunRecord(
-            scenario=sc, formulation=self.formulation, solver=self.solver,
-            times=np.arange(s + 1) * dt, positions=pos[: s + 1], velocities=vel[:s],
-            commands=cmd[:s], preferred=pref[:s], decided=decided[:s], statuses=statuses[:s],
-            decision_times=dtimes[:s], solve_times=stimes[:s], arrived=arrived[: s + 1],
-            wall_time=wall,
-        )
+        return buf.record(sc, self.formulation, self.solver, steps, time.perf_counter() - t_start)
 
 
 def default_selector_options(sc: Scenario) -> dict[str, Any]:
