@@ -71,7 +71,7 @@ from pydantic import (
     ValidationError,
 )
 
-from vo3d_opt.types import PZ_MARGIN, Box, Cylinder, Limits, Neighbor
+from vo3d_opt.types import PZ_MARGIN, Box, Cylinder, Finite, Limits, Neighbor, NonNegative, Positive
 
 
 class ScenarioError(ValueError):
@@ -101,9 +101,6 @@ def _vector(n: int):
 Vec2 = Annotated[tuple[float, float], PlainValidator(_vector(2))]
 Vec3 = Annotated[tuple[float, float, float], PlainValidator(_vector(3))]
 Range = Annotated[tuple[float, float], PlainValidator(_vector(2))]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
-Finite = Annotated[float, Field(allow_inf_nan=False)]
 Text = Annotated[str, Field(min_length=1)]
 
 
