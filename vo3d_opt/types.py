@@ -93,6 +93,13 @@ class _StaticObstacle(_Model):
         """h_pz: given, or the obstacle height plus the margin."""
         return self.h_pz if self.h_pz is not None else self.height + self.margin
 
+    def model_copy(self, *, update: dict[str, Any] | None = None, deep: bool = False):
+        """pydantic's copy, without the cached ``prism`` when fields change."""
+        copy = super().model_copy(update=update, deep=deep)
+        if update:
+            copy.__dict__.pop("prism", None)
+        return copy
+
     @cached_property
     def prism(self) -> tuple[float, float, float, float]:
         """(x, y, L_pz, h_pz) of the protected prism C_pz, as plain floats (cached: static

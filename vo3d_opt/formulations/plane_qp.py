@@ -328,15 +328,20 @@ def speed_polygon(radius: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
 
 @functools.lru_cache(maxsize=8)
 def _all_pairs(rounds: int, planes: int) -> tuple[np.ndarray, np.ndarray]:
-    """Every (round, plane) pair as two index arrays, rounds first."""
-    return np.repeat(np.arange(rounds), planes), np.tile(np.arange(planes), rounds)
+    """Every (round, plane) pair as two index arrays, rounds first (read-only)."""
+    r, p = np.repeat(np.arange(rounds), planes), np.tile(np.arange(planes), rounds)
+    r.setflags(write=False)
+    p.setflags(write=False)
+    return r, p
 
 
 @functools.lru_cache(maxsize=8)
 def _correction_flags(corrections: frozenset[str] | None) -> np.ndarray:
     """The switches of cone_section_arrays for an Options.corrections value."""
     corr = CORRECTIONS if corrections is None else corrections
-    return np.array([c in corr for c in ("tg_range", "symmetry_abs", "triangle", "base_chord")])
+    flags = np.array([c in corr for c in ("tg_range", "symmetry_abs", "triangle", "base_chord")])
+    flags.setflags(write=False)
+    return flags
 
 
 class PlaneProblems:
@@ -407,31 +412,28 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
 
     Rounds: every section linearised at its boundary point nearest the preferred velocity, then
     every section passed on its left, then on its right (the nearest side is not always best
-    once the other sections count). A VO's half-plane joins the QPs when v_pref lies in that VO
-    or when a QP's answer does (constraint generation: that QP is re-queued), so sections far
-    from the answer never over-constrain it, and are never computed. Every (round, plane) QP is
-    queued at once and solved in order of a lower bound on its deviation (``_bound``: each row
-    and each pair of rows against the speed disc, in closed form; it only grows as constraints
-    join, and a stale one is recomputed before its QP is solved); the search stops once the
-    best safe answer beats every remaining bound. The bounds also prove most infeasible QPs
-    infeasible without solving them. A QP identical to one already solved (a round that
-    changes nothing on a plane) is skipped."""
+    once the other sections count). A VO's half-plane joins a QP when v_pref lies in that VO
+    or when that QP's own answer does (constraint generation: the QP is re-queued with it), so
+    sections far from the answer never over-constrain it, and are never computed; each QP's
+    answer is the same whatever order the QPs are solved in. Every (round, plane) QP is queued
+    at once and solved in order of a lower bound on its deviation (``_bound``: each row and
+    each pair of rows against the speed disc or polygon, in closed form; it only grows as
+    constraints join); the search stops once the best safe answer beats every remaining bound,
+    which makes it return what solving every QP would (tests/test_plane_qp.py). The bounds also
+    prove most infeasible QPs infeasible without solving them. A QP identical to one already
+    solved (a round that changes nothing on a plane) is skipped."""
     problems = PlaneProblems(enc, decision_planes(enc), has_cones)
     planes = problems.planes
-    # The VOs constrained so far, shared by every plane: one found on one plane usually bites
-    # on the next ones too. Queue entries remember how many were in when their bound was made.
-    included = problems.initial.copy()
-    n_in = int(included.sum())
-    queue = [(lb, r, p, n_in) for lb, r, p in problems.all_bounds(included)]
+    # Each (round, plane) QP has its own constrained VOs: the initial ones and those its own
+    # answers entered, so its answer does not depend on the order the QPs are solved in.
+    own: dict[tuple[int, int], np.ndarray] = {}
+    queue = problems.all_bounds(problems.initial)
     heapq.heapify(queue)
     best, best_dev, tried, failed, attempts = None, np.inf, [], 0, 0
     solved: set[tuple[int, bytes, bytes]] = set()
     while queue and queue[0][0] < best_dev - _TIE:  # closer bounds cannot beat the best answer
-        lb, r, p, known = heapq.heappop(queue)
-        if known < n_in:  # stale bound: VOs joined since; re-queue with the new one
-            if np.isfinite(lb := max(lb, problems.bound(r, p, included))):
-                heapq.heappush(queue, (lb, r, p, n_in))
-            continue
+        _, r, p = heapq.heappop(queue)
+        included = own.get((r, p), problems.initial)
         qp = problems.qp(r, p, included)
         key = (p, qp.G.tobytes(), qp.h.tobytes())
         if key in solved:
@@ -453,10 +455,9 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
                 best, best_dev = (v, p, ROUNDS[r]), dev
         elif not np.all(included[entered]):  # constrain the VOs it entered and solve again
             problems.ensure(entered)
-            included |= entered
-            n_in = int(included.sum())
+            own[r, p] = included = included | entered
             if np.isfinite(lb := problems.bound(r, p, included)):
-                heapq.heappush(queue, (lb, r, p, n_in))
+                heapq.heappush(queue, (lb, r, p))
     if best is not None:
         v, p, mode = best
         return Outcome(v, "optimal", float(planes.phi[p]), {"round": mode, "solved": attempts})

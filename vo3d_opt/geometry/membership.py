@@ -89,7 +89,9 @@ def _entry_time_kernel(frame: np.ndarray, lo: np.ndarray, hi: np.ndarray, v: np.
             t_enter, t_exit = -np.inf, np.inf
             for a in range(3):
                 w = frame[j, a, 0] * v[k, 0] + frame[j, a, 1] * v[k, 1] + frame[j, a, 2] * v[k, 2]
-                if w == 0.0:  # a zero component: inside the slab forever or never
+                if w != w:  # NaN: no ray to speak of, it enters nothing
+                    t_enter = np.inf
+                elif w == 0.0:  # a zero component: inside the slab forever or never
                     if not (lo[j, a] <= 0.0 <= hi[j, a]):
                         t_enter = np.inf
                 else:
