@@ -1,0 +1,52 @@
+"""Time of the first select() in a fresh process: numba compiles the kernels on a new checkout
+and loads them from its on-disk cache afterwards (README, Speed).
+
+Runs two child processes on the contract's example: one with an empty numba cache directory
+(a new checkout), one with the project's own cache (after the first run).
+
+    python benchmarks/first_call.py
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+
+CHILD = """
+import json, time
+t0 = time.perf_counter()
+from vo3d_opt import AgentState, Cylinder, Limits, Neighbor, VelocitySelector
+t1 = time.perf_counter()
+kw = dict(own=AgentState(position=(0, 0, 20), velocity=(4, 0, 0)), preferred_velocity=(4, 0, 0),
+          neighbors=[Neighbor(position=(30, 0, 20), velocity=(-4, 0, 0), r_pz=10)],
+          obstacles=[Cylinder(center=(15, 1), radius=2, height=30)], limits=Limits(), dt=0.2)
+VelocitySelector().select(**kw)
+t2 = time.perf_counter()
+print(json.dumps({"import_s": t1 - t0, "first_select_s": t2 - t1}))
+"""
+
+
+def run(env: dict[str, str]) -> dict[str, float]:
+    out = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True,
+                         check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    print(f"# {platform.processor() or platform.machine()}, {platform.python_implementation()} "
+          f"{platform.python_version()}, {time.strftime('%Y-%m-%d')}")
+    print("| cache | import s | first select() s |")
+    print("|---|---:|---:|")
+    with tempfile.TemporaryDirectory() as empty:
+        rows = [("empty (new checkout)", run({**os.environ, "NUMBA_CACHE_DIR": empty})),
+                ("warm (numba's on-disk cache)", run(dict(os.environ)))]
+    for name, r in rows:
+        print(f"| {name} | {r['import_s']:.2f} | {r['first_select_s']:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
