@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from ..geometry import AvoidancePlanes
+from ..geometry.cone import outward_normal
 from ..geometry.pyramid import BOX_EDGES, prism_corners
 from ..geometry.sections import (CIRCLE, CORRECTIONS, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, generator_angles,
                                  cone_section_arrays, pyramid_section_arrays)
@@ -98,7 +99,6 @@ def _cone_rows(kind, curve, t, chord, chord_t, apex_xy, halfplane, R, sin_alpha,
     n, P, K = curve.shape[0], curve.shape[1], curve.shape[2]
     dist, side_y, valid, tq = np.empty(K + 2), np.empty(K + 2), np.empty(K + 2, dtype=np.bool_), np.empty(K + 2)
     for i in range(n):
-        ca = np.sqrt(1.0 - sin_alpha[i] ** 2)
         for p in range(P):
             kd = kind[i, p]
             if kd == INSIDE_CODE:  # escape: not closing in, every round
@@ -121,12 +121,8 @@ def _cone_rows(kind, curve, t, chord, chord_t, apex_xy, halfplane, R, sin_alpha,
                     continue
                 picks = _pick(dist, side_y, valid)
                 for r in range(a.shape[0]):
-                    ts = tq[picks[r]]
                     # The cone's tangent plane along that generator (outward normal N), on P_phi.
-                    nb0, nb1, nb2 = -sin_alpha[i], ca * np.cos(ts), ca * np.sin(ts)
-                    N0 = R[i, 0, 0] * nb0 + R[i, 0, 1] * nb1 + R[i, 0, 2] * nb2
-                    N1 = R[i, 1, 0] * nb0 + R[i, 1, 1] * nb1 + R[i, 1, 2] * nb2
-                    N2 = R[i, 2, 0] * nb0 + R[i, 2, 1] * nb1 + R[i, 2, 2] * nb2
+                    N0, N1, N2 = outward_normal(R[i], sin_alpha[i], tq[picks[r]])
                     a[r, i, p, 0] = N0 * e1[0] + N1 * e1[1] + N2 * e1[2]
                     a[r, i, p, 1] = N0 * e2[p, 0] + N1 * e2[p, 1] + N2 * e2[p, 2]
                     b[r, i, p] = N0 * apex[i, 0] + N1 * apex[i, 1] + N2 * apex[i, 2]

@@ -78,17 +78,13 @@ class VOCones:
 
         ``t`` has shape (n, ...); the result (n, ..., 3). The plane through the apex with this
         normal is tangent to the cone along the whole generator: a supporting plane."""
-        sa, ca = self.sin_alpha, self.cos_alpha
-        shape = (len(self),) + (1,) * (t.ndim - 1)
-        body = np.stack(
-            [
-                np.broadcast_to(-sa.reshape(shape), t.shape),
-                ca.reshape(shape) * np.cos(t),
-                ca.reshape(shape) * np.sin(t),
-            ],
-            axis=-1,
-        )
-        return np.einsum("nij,n...j->n...i", self.R, body)
+        t = np.asarray(t, dtype=float)
+        flat = np.ascontiguousarray(t.reshape(len(self), -1))
+        out = np.empty(flat.shape + (3,))
+        for i in range(len(self)):
+            for k in range(flat.shape[1]):
+                out[i, k] = outward_normal(self.R[i], float(self.sin_alpha[i]), float(flat[i, k]))
+        return out.reshape(t.shape + (3,))
 
 
 def vo_cones(
@@ -118,6 +114,16 @@ def vo_cones(
         np.asarray(p_A, dtype=float), p_B, a, r_pz, mode, float(tau_min))
     return VOCones(rel=rel, apex=a, r_pz=r_pz, d_oi=d_oi, theta_el=theta_el, psi_az=psi_az, R=R,
                    d_vo=d_vo, r_vo=r_vo, tau=tau, inside=d_oi <= r_pz)
+
+
+@jit
+def outward_normal(R: np.ndarray, sin_alpha: float, t: float) -> tuple[float, float, float]:
+    """The cone's unit outward normal along the generator through B_vo(t): R_{theta_el|psi_az}
+    (eq. 6) applied to (-sin alpha, cos alpha cos t, cos alpha sin t) in the cone's own frame."""
+    ca = np.sqrt(1.0 - sin_alpha * sin_alpha)
+    b0, b1, b2 = -sin_alpha, ca * np.cos(t), ca * np.sin(t)
+    return (R[0, 0] * b0 + R[0, 1] * b1 + R[0, 2] * b2, R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2,
+            R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2)
 
 
 @jit
