@@ -9,4 +9,5 @@ from __future__ import annotations
 
 import numba
 
-jit = numba.njit(cache=True, error_model="numpy", nogil=True)
+jit = numba.njit(cache=True, error_model="numpy", nogil=True, no_cpython_wrapper=True)
+entry = numba.njit(cache=True, error_model="numpy", nogil=True)

@@ -1,31 +1,86 @@
-"""What every formulation shares: the prepared encounter (VO cones and pyramids of one decision),
-the limits as linear constraints, the exact safety check, and the least-bad fallback."""
+"""What every formulation shares: the options, the VOs of one decision (built by one compiled
+function for the compiled kernel and for the Python formulations alike), the limits as linear
+constraints, the exact safety check and the time to the first intrusion.
+
+Compiled code receives the options as a ``Config`` and the limits as ``Bounds`` (NamedTuples of
+numbers and arrays); the Python formulations wrap the same values in an ``Encounter``.
+"""
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Annotated, Literal
+from typing import Annotated, Literal, NamedTuple
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
-from ..geometry import CORRECTIONS, VOCones, VOPyramids, in_vos, pyramid_entry_time, vo_cones, vo_pyramids
-from .._jit import jit
+from .._jit import entry, jit
+from ..geometry import (CORRECTIONS, AvoidancePlanes, Corrections, VOCones, VOPyramids, build_cones, build_planes,
+                        build_pyramids, default_phis, in_vos)
+from ..geometry.cone import NO_VIRTUAL_SPHERE, TAU_MIN, min_speed
+from ..geometry.membership import NO_HORIZON, closest_approach, entry_time, in_cone, in_pyramid
+from ..geometry.pyramid import prism_rows
+from ..geometry.sections import generator_angles
+from ..solvers import NLP, QP, Result
+from ..status import Status
 from ..types import AgentState, Box, Cylinder, Limits, Neighbor
-from .problem import QP, NLP, Result
 
 #: Tolerance (m/s) on the speed and altitude limits when checking a candidate.
 LIMIT_TOL = 1e-6
 #: With ``pz_buffer``, the planning sphere grows by at most this share of the remaining gap.
 BUFFER_GAP_SHARE = 0.9
+#: Cap on the time to intrusion (s) when comparing least-bad candidates ("never").
+NEVER = 1e9
 
 Solve = Callable[[QP], Result]
 SolveNLP = Callable[[NLP], Result]
 
-
 _Deg = Annotated[float, Field(gt=0, le=180, allow_inf_nan=False)]
+
+
+class Config(NamedTuple):
+    """The options as compiled code reads them (``Options.config``)."""
+
+    reciprocal: bool
+    horizon: float  # s; NO_HORIZON (< 0) for none
+    pz_buffer: float  # m
+    margin: float  # m/s
+    corrections: Corrections
+    phi: np.ndarray  # (P,) avoidance-plane angles, rad
+    cos_phi: np.ndarray  # (P,) their cosines
+    sin_phi: np.ndarray  # (P,) and sines
+    t: np.ndarray  # (K,) the generator angles the rows linearise at (eq. 12)
+    cos_t: np.ndarray  # (K,) their cosines
+    sin_t: np.ndarray  # (K,) and sines
+    speed_levels: int  # the sampled grid: speeds v_min..v_max ...
+    heading_step: float  # ... every this many rad on each plane
+
+
+class Bounds(NamedTuple):
+    """The limits of one decision as compiled code reads them."""
+
+    v_min: float
+    v_max: float
+    z_min: float
+    z_max: float
+    acceleration: float  # m/s² per axis; NaN for none
+    dt: float
+
+    @classmethod
+    def of(cls, limits: Limits, dt: float) -> "Bounds":
+        acc = np.nan if limits.acceleration is None else float(limits.acceleration)
+        return cls(float(limits.v_min), float(limits.v_max), float(limits.z_min), float(limits.z_max), acc, float(dt))
+
+
+class VOs(NamedTuple):
+    """The VO cones and pyramids of one decision (cones first wherever they are numbered
+    together), and the preferred velocity clamped to v_max."""
+
+    cones: VOCones
+    pyramids: VOPyramids
+    v_pref: np.ndarray
 
 
 class Options(BaseModel):
@@ -43,24 +98,232 @@ class Options(BaseModel):
     corrections: frozenset[Literal[tuple(CORRECTIONS)]] | None = None  # None: all six of 3.1
     n_samples: Annotated[int, Field(ge=8, strict=True)] = 72  # generator samples of eq. (12), sampled
     qp_samples: Annotated[int, Field(ge=8, strict=True)] = 36  # the same for plane_qp's tangent points
-    pz_buffer: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0  # m; see prepare
+    pz_buffer: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0  # m; see build_vos
     margin: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1e-3  # m/s; linearised VO
-    # half-spaces are pushed out by this much, so that a solver's answer on the boundary
-    # (within its tolerance) is still strictly outside the VO
+    # half-spaces are pushed out by this much, so that an answer on the boundary (within a
+    # solver's tolerance) is still strictly outside the VO; sampled candidates keep it too
+
+    @cached_property
+    def config(self) -> Config:
+        t, phi = generator_angles(self.qp_samples).copy(), default_phis(self.plane_step_deg).copy()
+        return Config(
+            reciprocal=self.reciprocal, horizon=NO_HORIZON if self.horizon is None else float(self.horizon),
+            pz_buffer=float(self.pz_buffer), margin=float(self.margin),
+            corrections=Corrections.of(self.corrections), phi=phi, cos_phi=np.cos(phi), sin_phi=np.sin(phi),
+            t=t, cos_t=np.cos(t), sin_t=np.sin(t), speed_levels=self.speed_levels,
+            heading_step=math.radians(self.heading_step_deg))
+
+
+# ------------------------------------------------------------------------------- compiled core
+
+
+@jit
+def build_vos(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray,
+              bounds: Bounds, cfg: Config) -> VOs:
+    """The VOs of one decision. ``nbrs`` (n, 8): position, velocity, r_pz, cooperative (1/0);
+    ``prisms`` (m, 4): x, y, L_pz, h_pz of the protected prisms.
+
+    - The preferred velocity beyond reach is aimed at the reachable one (clamped to v_max).
+    - With a horizon, zones that cannot be reached in time have an empty VO: dropped.
+    - ``pz_buffer``: a buffer against the discretisation and the neighbours' own manoeuvres, a
+      larger planning sphere, but never so large that A is 'inside' it while outside the real
+      one (the VO would degenerate to a half-space): at most 90 % of the gap left.
+    - Reciprocal (RVO): the apex at (V_A + V_B)/2, each of two cooperative vehicles taking half
+      the avoidance; a neighbour that does not avoid keeps the apex V_B.
+    - The virtual sphere (3.1.6) is sized for every speed up to v_max.
+    - A cone that no velocity within the speed limit reaches can neither hold an answer nor
+      constrain one: left out of every formulation (and of the exact check, equivalently).
+    """
+    speed = np.sqrt(v_pref[0] ** 2 + v_pref[1] ** 2 + v_pref[2] ** 2)
+    pref = np.empty(3)
+    for k in range(3):
+        pref[k] = v_pref[k] * (bounds.v_max / speed) if speed > bounds.v_max else v_pref[k]
+    # Each neighbour's row for build_cones: p_B, apex, r_pz; kept rows first.
+    rows, n = np.empty((nbrs.shape[0], 7)), 0
+    for i in range(nbrs.shape[0]):
+        d = np.sqrt((nbrs[i, 0] - p[0]) ** 2 + (nbrs[i, 1] - p[1]) ** 2 + (nbrs[i, 2] - p[2]) ** 2)
+        r_pz, v_b = nbrs[i, 6], np.sqrt(nbrs[i, 3] ** 2 + nbrs[i, 4] ** 2 + nbrs[i, 5] ** 2)
+        if cfg.horizon >= 0.0 and d - r_pz > cfg.horizon * (bounds.v_max + v_b):
+            continue
+        cooperative = cfg.reciprocal and nbrs[i, 7] > 0.0
+        for k in range(3):
+            rows[n, k] = nbrs[i, k]
+            rows[n, 3 + k] = 0.5 * (nbrs[i, 3 + k] + v_now[k]) if cooperative else nbrs[i, 3 + k]
+        rows[n, 6] = r_pz + min(cfg.pz_buffer, BUFFER_GAP_SHARE * (d - r_pz)) if cfg.pz_buffer > 0.0 and d > r_pz else r_pz
+        n += 1
+    reach = bounds.v_max if cfg.corrections.virtual_sphere else NO_VIRTUAL_SPHERE
+    cones = build_cones(p, rows[:n, 0:3], rows[:n, 3:6], rows[:n, 6], reach, TAU_MIN)
+    kept = 0
+    for i in range(n):
+        if min_speed(cones, i) <= bounds.v_max + 1e-6:
+            for k in range(7):
+                rows[kept, k] = rows[i, k]
+            kept += 1
+    if kept < n:
+        cones = build_cones(p, rows[:kept, 0:3], rows[:kept, 3:6], rows[:kept, 6], reach, TAU_MIN)
+    near, m = np.empty((prisms.shape[0], 4)), 0
+    for j in range(prisms.shape[0]):
+        dist = np.sqrt((prisms[j, 0] - p[0]) ** 2 + (prisms[j, 1] - p[1]) ** 2)
+        if cfg.horizon < 0.0 or dist - prisms[j, 2] / np.sqrt(2.0) <= cfg.horizon * bounds.v_max:
+            for k in range(4):
+                near[m, k] = prisms[j, k]
+            m += 1
+    return VOs(cones, build_pyramids(p, near[:m]), pref)
+
+
+@entry
+def vz_range(z: float, bounds: Bounds) -> tuple[float, float]:
+    """Vertical speeds that keep z + v_z dt within [z_min, z_max]; out of bounds already: head
+    back at full speed."""
+    lo = max((bounds.z_min - z) / bounds.dt, -bounds.v_max)
+    hi = min((bounds.z_max - z) / bounds.dt, bounds.v_max)
+    if lo > hi:
+        lo = hi = bounds.v_max if z < bounds.z_min else -bounds.v_max
+    return lo, hi
+
+
+@entry
+def limit_rows(p: np.ndarray, v_now: np.ndarray, bounds: Bounds) -> tuple[np.ndarray, np.ndarray]:
+    """The altitude bound (and the acceleration box |v - v_now| <= a·dt per axis) as G v <= h."""
+    rows = 2 if np.isnan(bounds.acceleration) else 8
+    G, h = np.zeros((rows, 3)), np.empty(rows)
+    lo, hi = vz_range(p[2], bounds)
+    G[0, 2], h[0], G[1, 2], h[1] = 1.0, hi, -1.0, -lo
+    if rows == 8:
+        dv = bounds.acceleration * bounds.dt
+        for k in range(3):
+            G[2 + 2 * k, k], h[2 + 2 * k] = 1.0, v_now[k] + dv
+            G[3 + 2 * k, k], h[3 + 2 * k] = -1.0, dv - v_now[k]
+    return G, h
+
+
+@jit
+def within_limits(v: np.ndarray, G: np.ndarray, h: np.ndarray, bounds: Bounds) -> bool:
+    """Speed in [v_min, v_max] and G v <= h, each within LIMIT_TOL."""
+    speed = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+    if not (bounds.v_min - LIMIT_TOL <= speed <= bounds.v_max + LIMIT_TOL):
+        return False
+    for j in range(G.shape[0]):
+        if G[j, 0] * v[0] + G[j, 1] * v[1] + G[j, 2] * v[2] > h[j] + LIMIT_TOL:
+            return False
+    return True
+
+
+@jit
+def containing(vos: VOs, v: np.ndarray, horizon: float, out: np.ndarray) -> bool:
+    """Which VOs (cones first) contain v, by the exact 3D membership, into ``out``; whether any."""
+    n, any_in = vos.cones.d_oi.shape[0], False
+    for i in range(n):
+        out[i] = in_cone(vos.cones, i, v, horizon, 0.0)
+        any_in |= out[i]
+    for j in range(vos.pyramids.L_pz.shape[0]):
+        out[n + j] = in_pyramid(vos.pyramids, j, v, horizon)
+        any_in |= out[n + j]
+    return any_in
+
+
+@jit
+def time_to_intrusion(vos: VOs, v: np.ndarray) -> float:
+    """The earliest time (s) any protected zone would be entered at velocity v (inf: never; 0:
+    inside and closing). The least-bad velocity maximises it."""
+    c, t = vos.cones, np.inf
+    for i in range(c.d_oi.shape[0]):
+        closest, _, pu = closest_approach(c, i, v, NO_HORIZON)
+        if c.inside[i]:
+            if pu > 0:
+                t = 0.0
+            continue
+        u0, u1, u2 = v[0] - c.apex[i, 0], v[1] - c.apex[i, 1], v[2] - c.apex[i, 2]
+        uu = u0 * u0 + u1 * u1 + u2 * u2
+        disc = pu * pu - uu * (c.d_oi[i] ** 2 - c.r_pz[i] ** 2)
+        if disc > 0 and pu > 0 and uu > 0:
+            t = min(t, max((pu - np.sqrt(disc)) / uu, 0.0))
+    py = vos.pyramids
+    for j in range(py.L_pz.shape[0]):
+        if py.inside[j]:
+            h = py.frame[j, 0]
+            if h[0] * v[0] + h[1] * v[1] + h[2] * v[2] > 0:
+                t = 0.0
+        else:
+            t = min(t, entry_time(py, j, v))
+    return t
+
+
+@entry
+def _times_to_intrusion(vos: VOs, v: np.ndarray) -> np.ndarray:
+    out = np.empty(v.shape[0])
+    for k in range(v.shape[0]):
+        out[k] = time_to_intrusion(vos, v[k])
+    return out
+
+
+@entry
+def _all_within(v: np.ndarray, G: np.ndarray, h: np.ndarray, bounds: Bounds) -> np.ndarray:
+    out = np.empty(v.shape[0], dtype=np.bool_)
+    for k in range(v.shape[0]):
+        out[k] = within_limits(v[k], G, h, bounds)
+    return out
+
+
+@jit
+def decision_planes(vos: VOs, v_now: np.ndarray, cfg: Config) -> AvoidancePlanes:
+    """Planes every ``plane_step_deg`` about the preferred direction (or the current heading, or
+    world x when both are zero)."""
+    use_pref = vos.v_pref[0] ** 2 + vos.v_pref[1] ** 2 + vos.v_pref[2] ** 2 >= 1e-18
+    use_now = v_now[0] ** 2 + v_now[1] ** 2 + v_now[2] ** 2 > 1e-18
+    direction = np.zeros(3)
+    for k in range(3):
+        direction[k] = vos.v_pref[k] if use_pref else (v_now[k] if use_now else (1.0 if k == 0 else 0.0))
+    return build_planes(direction, cfg.phi)
+
+
+@entry
+def py_build_vos(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray, bounds: Bounds, cfg: Config) -> VOs:
+    """``build_vos`` for Python callers (compiled code calls ``build_vos``: no Python wrapper)."""
+    return build_vos(p, v_now, v_pref, nbrs, prisms, bounds, cfg)
+
+
+@entry
+def py_decision_planes(vos: VOs, v_now: np.ndarray, cfg: Config) -> AvoidancePlanes:
+    """``decision_planes`` for Python callers (compiled code calls ``decision_planes``: no Python wrapper)."""
+    return decision_planes(vos, v_now, cfg)
+
+
+# ------------------------------------------------------------------------------- Python side
+
+
+def neighbor_rows(neighbors: Sequence[Neighbor]) -> np.ndarray:
+    """(n, 8): position, velocity, r_pz, cooperative (1/0) of each neighbour."""
+    return np.array([nb.row for nb in neighbors], dtype=float).reshape(-1, 8)
 
 
 @dataclass
 class Encounter:
-    """One decision's inputs, with the VO shapes built once."""
+    """One decision's inputs for the Python formulations, with the VO shapes built once."""
 
     position: np.ndarray
     v_now: np.ndarray
-    v_pref: np.ndarray  # clamped to v_max
-    cones: VOCones
-    pyramids: VOPyramids
+    vos: VOs
     limits: Limits
     dt: float
     options: Options
+
+    @property
+    def v_pref(self) -> np.ndarray:
+        """The preferred velocity, clamped to v_max."""
+        return self.vos.v_pref
+
+    @property
+    def cones(self) -> VOCones:
+        return self.vos.cones
+
+    @property
+    def pyramids(self) -> VOPyramids:
+        return self.vos.pyramids
+
+    @cached_property
+    def bounds(self) -> Bounds:
+        return Bounds.of(self.limits, self.dt)
 
     @cached_property
     def inside(self) -> np.ndarray:
@@ -71,44 +334,26 @@ class Encounter:
     def inside_any(self) -> bool:
         return bool(self.inside.any())
 
-    # --- the limits -------------------------------------------------------------------------
     def vz_range(self) -> tuple[float, float]:
         """Vertical speeds that keep z + v_z dt within [z_min, z_max]."""
-        z, lim, vmax = self.position[2], self.limits, self.limits.v_max
-        lo = (lim.z_min - z) / self.dt
-        hi = (lim.z_max - z) / self.dt
-        lo, hi = max(lo, -vmax), min(hi, vmax)
-        if lo > hi:  # out of bounds already: head back at full speed
-            lo = hi = vmax if z < lim.z_min else -vmax
-        return lo, hi
+        return vz_range(float(self.position[2]), self.bounds)
+
+    @cached_property
+    def _linear_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        G, h = limit_rows(self.position, self.v_now, self.bounds)
+        G.setflags(write=False)
+        h.setflags(write=False)
+        return G, h
 
     def linear_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Altitude and acceleration limits as G v <= h in 3D (computed once; read-only)."""
         return self._linear_bounds
 
-    @cached_property
-    def _linear_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        lo, hi = self.vz_range()
-        G = [np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])]
-        h = [hi, -lo]
-        if self.limits.acceleration is not None:
-            dv = self.limits.acceleration * self.dt
-            for k in range(3):
-                e = np.zeros(3)
-                e[k] = 1.0
-                G += [e, -e]
-                h += [self.v_now[k] + dv, dv - self.v_now[k]]
-        G, h = np.array(G), np.array(h)
-        G.setflags(write=False)
-        h.setflags(write=False)
-        return G, h
-
     def within_limits(self, v: np.ndarray) -> np.ndarray:
         """(M,) whether each velocity respects speed, altitude and acceleration limits."""
         G, h = self._linear_bounds
-        return _within(np.atleast_2d(np.asarray(v, dtype=float)), self.limits.v_min, self.limits.v_max, G, h, LIMIT_TOL)
+        return _all_within(np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float))), G, h, self.bounds)
 
-    # --- safety -----------------------------------------------------------------------------
     def containing(self, v: np.ndarray) -> np.ndarray:
         """(n + m, M): which VOs (cones first, then pyramids) contain each velocity, by the
         exact 3D membership."""
@@ -124,42 +369,12 @@ class Encounter:
         return np.any(self.containing(v), axis=0)
 
     def time_to_intrusion(self, v: np.ndarray) -> np.ndarray:
-        """(M,) the earliest time any protected zone would be entered (inf: never; 0: inside and
-        closing). The least-bad velocity maximises it."""
-        v = np.atleast_2d(v)
-        t = np.full(len(v), np.inf)
-        if len(self.cones):
-            c = self.cones
-            u = v[None, :, :] - c.apex[:, None, :]
-            uu = np.einsum("nmi,nmi->nm", u, u)
-            pu = np.einsum("ni,nmi->nm", c.rel, u)
-            disc = pu**2 - uu * (c.d_oi**2 - c.r_pz**2)[:, None]
-            with np.errstate(invalid="ignore", divide="ignore"):
-                t_hit = (pu - np.sqrt(np.maximum(disc, 0.0))) / uu
-            t_hit = np.where((disc > 0) & (pu > 0) & (uu > 0), np.maximum(t_hit, 0.0), np.inf)
-            t_hit = np.where(c.inside[:, None], np.where(pu > 0, 0.0, np.inf), t_hit)
-            t = np.minimum(t, t_hit.min(axis=0))
-        if len(self.pyramids):
-            t_p = pyramid_entry_time(self.pyramids, v)
-            closing = np.einsum("mi,ki->mk", self.pyramids.frame[:, 0, :], v) > 0
-            t_p = np.where(self.pyramids.inside[:, None], np.where(closing, 0.0, np.inf), t_p)
-            t = np.minimum(t, t_p.min(axis=0))
-        return t
+        """(M,) the earliest time any protected zone would be entered (inf: never; 0: inside
+        and closing)."""
+        return _times_to_intrusion(self.vos, np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float))))
 
     def deviation(self, v: np.ndarray) -> np.ndarray:
         return np.linalg.norm(np.atleast_2d(v) - self.v_pref, axis=1)
-
-
-@jit
-def _within(v, v_min, v_max, G, h, tol):
-    out = np.empty(v.shape[0], dtype=np.bool_)
-    for k in range(v.shape[0]):
-        speed = np.sqrt(v[k, 0] ** 2 + v[k, 1] ** 2 + v[k, 2] ** 2)
-        ok = v_min - tol <= speed <= v_max + tol
-        for j in range(G.shape[0]):
-            ok = ok and G[j, 0] * v[k, 0] + G[j, 1] * v[k, 1] + G[j, 2] * v[k, 2] <= h[j] + tol
-        out[k] = ok
-    return out
 
 
 def prepare(
@@ -171,44 +386,12 @@ def prepare(
     dt: float,
     options: Options,
 ) -> Encounter:
-    """Build the VO cones and pyramids of one decision (geometry layer)."""
-    p = own.position
-    speed = math.hypot(*v_pref.tolist())
-    if speed > limits.v_max:  # the goal velocity beyond reach: aim at the reachable one
-        v_pref = v_pref * (limits.v_max / speed)
-    rows = np.array([nb.row for nb in neighbors], dtype=float).reshape(-1, 8)
-    p_B, V_B, r_pz, cooperative = rows[:, :3], rows[:, 3:6], rows[:, 6], rows[:, 7] > 0
-    if options.horizon is not None and len(r_pz):
-        # With a time horizon, a zone that cannot be reached in time has an empty VO: drop it.
-        reach = options.horizon * (limits.v_max + np.linalg.norm(V_B, axis=1))
-        keep = np.linalg.norm(p_B - p, axis=1) - r_pz <= reach
-        p_B, V_B, r_pz, cooperative = p_B[keep], V_B[keep], r_pz[keep], cooperative[keep]
-    if options.horizon is not None:
-        obstacles = [o for o in obstacles
-                     if np.linalg.norm(o.center - p[:2]) - o.side / np.sqrt(2) <= options.horizon * limits.v_max]
-    if options.pz_buffer > 0 and len(r_pz):
-        # A buffer against the discretisation and the neighbours' own manoeuvres: plan with a
-        # larger sphere, but never so large that A is 'inside' it while outside the real one
-        # (the VO would degenerate to a half-space): it takes at most 90 % of the gap left.
-        gap = np.linalg.norm(p_B - p, axis=1) - r_pz
-        r_pz = np.where(gap > 0, r_pz + np.minimum(options.pz_buffer, BUFFER_GAP_SHARE * gap), r_pz)
-    corrections = options.corrections
-    # Reciprocal (RVO): the apex at (V_A + V_B)/2, each of two cooperative vehicles taking half
-    # the avoidance; a neighbour that does not avoid (cooperative=False) keeps the apex V_B.
-    apex = np.where(cooperative[:, None], 0.5 * (V_B + own.velocity), V_B) if options.reciprocal else None
-    cones = vo_cones(
-        p, p_B, V_B, r_pz, reach=limits.v_max,
-        virtual_sphere=corrections is None or "virtual_sphere" in corrections, apex=apex,
-    )
-    # A cone that no velocity within the speed limit reaches can neither hold an answer nor
-    # constrain one: leave it out of every formulation (and of the exact check, equivalently).
-    reachable = cones.min_speed() <= limits.v_max + 1e-6
-    if not reachable.all():
-        cones = cones.subset(reachable)
-    return Encounter(
-        position=p, v_now=own.velocity, v_pref=np.asarray(v_pref, dtype=float), cones=cones,
-        pyramids=vo_pyramids(p, list(obstacles)), limits=limits, dt=dt, options=options,
-    )
+    """Build the VO cones and pyramids of one decision (``build_vos``)."""
+    bounds = Bounds.of(limits, dt)
+    vos = py_build_vos(np.asarray(own.position, dtype=float), np.asarray(own.velocity, dtype=float),
+                    np.asarray(v_pref, dtype=float), neighbor_rows(neighbors), prism_rows(obstacles), bounds,
+                    options.config)
+    return Encounter(position=own.position, v_now=own.velocity, vos=vos, limits=limits, dt=float(dt), options=options)
 
 
 @dataclass
@@ -216,33 +399,6 @@ class Outcome:
     """A formulation's answer before the selector times it."""
 
     velocity: np.ndarray
-    status: str
+    status: Status
     plane: float | None = None  # phi (rad) of the plane the velocity was chosen on
     info: dict = field(default_factory=dict)
-
-
-def first_safe(enc: Encounter, candidates: np.ndarray) -> int | None:
-    """Index of the first candidate (in the given order) that is within the limits and outside
-    every VO by the exact 3D check, or None."""
-    if len(candidates) == 0:
-        return None
-    ok = enc.within_limits(candidates) & ~enc.unsafe(candidates)
-    idx = np.flatnonzero(ok)
-    return int(idx[0]) if len(idx) else None
-
-
-def least_bad(enc: Encounter, candidates: np.ndarray) -> np.ndarray:
-    """Among candidates within the limits, the one whose first protected-zone intrusion comes
-    latest (ties: nearest the preferred velocity). Falls back to a safe stop-like velocity."""
-    extra = np.array([np.zeros(3), enc.v_now])
-    c = np.vstack([candidates.reshape(-1, 3), extra]) if len(candidates) else extra
-    if enc.limits.acceleration is not None:  # few grid points lie in the reachable box: clip
-        dv = enc.limits.acceleration * enc.dt
-        c = np.vstack([c, np.clip(c, enc.v_now - dv, enc.v_now + dv)])
-    c = c[enc.within_limits(c)]
-    if len(c) == 0:  # e.g. v_min > 0 with a zero candidate: the limits' own closest point
-        lo, hi = enc.vz_range()
-        return np.array([0.0, 0.0, min(max(0.0, lo), hi)])
-    t = np.minimum(enc.time_to_intrusion(c), 1e9)
-    key = np.lexsort((enc.deviation(c), -t))
-    return c[key[0]]

@@ -12,11 +12,11 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..geometry.pyramid import VOPyramids
-from .common import Encounter, Outcome, Solve
-from .plane_qp import fallback
-from .planes import decision_planes
-from .problem import QP
+from ..geometry.pyramid import supporting_faces
+from ..solvers import QP
+from ..status import Status
+from .common import Encounter, Outcome, Solve, py_decision_planes
+from .fallback import fallback
 
 
 #: Rounds: the tangent generator nearest v_pref, then turned about each cone's axis by these angles.
@@ -41,26 +41,6 @@ def cone_tangent_halfspaces(enc: Encounter, v0: np.ndarray, turn: float = 0.0):
     N = -c.sin_alpha[:, None] * a + c.cos_alpha[:, None] * e_perp
     N = np.where(c.inside[:, None], -c.rel, N)  # escape: (v - apex)·rel <= 0
     return N, np.sum(N * c.apex, axis=1)
-
-
-def pyramid_face_halfspaces(pyr: VOPyramids, v0: np.ndarray):
-    """For each pyramid the supporting plane through the apex (origin) and two corners of C_pz
-    that v0 is least inside of: N·v >= 0 keeps v out of the pyramid."""
-    corners = pyr.corners  # (m, 8, 3)
-    i, j = np.triu_indices(8, 1)
-    N = np.cross(corners[:, i], corners[:, j])  # (m, 28, 3) candidate planes through the apex
-    N /= np.maximum(np.linalg.norm(N, axis=-1, keepdims=True), 1e-12)
-    side = np.einsum("mfi,mki->mfk", N, corners)
-    # A supporting plane has every corner on one side; orient it so the corners are behind it.
-    outward = np.all(side <= 1e-9, axis=-1)
-    inward = np.all(side >= -1e-9, axis=-1)
-    N = np.where(inward[..., None] & ~outward[..., None], -N, N)
-    supporting = outward | inward
-    score = np.where(supporting, N @ v0, -np.inf)
-    best = np.argmax(score, axis=1)
-    Nb = N[np.arange(len(pyr)), best]
-    Nb = np.where(pyr.inside[:, None], -pyr.frame[:, 0, :], Nb)  # escape: horizontal, outwards
-    return Nb, np.zeros(len(pyr))
 
 
 def fibonacci_directions(k: int) -> np.ndarray:
@@ -89,15 +69,15 @@ def speed_polytope(radius: float, k: int = 64) -> tuple[np.ndarray, np.ndarray]:
 def build_qp(enc: Encounter, has_cones: bool, turn: float = 0.0, included: np.ndarray | None = None) -> QP:
     """The 3D QP with the half-spaces of the ``included`` VOs (cones first, then pyramids;
     all when None)."""
-    n = len(enc.cones)
-    inc = np.ones(n + len(enc.pyramids), dtype=bool) if included is None else included
+    n = enc.cones.n
+    inc = np.ones(n + enc.pyramids.n, dtype=bool) if included is None else included
     rows_G, rows_h = [], []
     if n and inc[:n].any():
         N, b = cone_tangent_halfspaces(enc, enc.v_pref, turn)
         rows_G.append(-N[inc[:n]])
         rows_h.append(-b[inc[:n]] - enc.options.margin)
-    if len(enc.pyramids) and inc[n:].any():
-        N, b = pyramid_face_halfspaces(enc.pyramids, enc.v_pref)
+    if enc.pyramids.n and inc[n:].any():
+        N, b = supporting_faces(enc.pyramids, enc.v_pref)
         rows_G.append(-N[inc[n:]])
         rows_h.append(-b[inc[n:]] - enc.options.margin)
     G3, h3 = enc.linear_bounds()
@@ -118,7 +98,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     The safe answer nearest v_pref over the turns wins."""
     tried, failed, attempts, best = [], 0, 0, None
     start = enc.pref_in | enc.inside
-    for turn in TURNS if len(enc.cones) else TURNS[:1]:
+    for turn in TURNS if enc.cones.n else TURNS[:1]:
         included = start.copy()
         while True:
             res = solve(build_qp(enc, has_cones, turn, included))
@@ -136,5 +116,6 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
                 break
             included |= entered
     if best is not None:
-        return Outcome(best[0], "optimal", None, {"round": f"turn {np.degrees(best[1]):.0f}", "solved": attempts})
-    return fallback(enc, decision_planes(enc), np.array(tried).reshape(-1, 3), failed == attempts)
+        return Outcome(best[0], Status.OPTIMAL, None, {"round": f"turn {np.degrees(best[1]):.0f}", "solved": attempts})
+    return fallback(enc, py_decision_planes(enc.vos, enc.v_now, enc.options.config), np.array(tried).reshape(-1, 3),
+                    failed == attempts)

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import Encounter, Outcome, Solve, SolveNLP, first_safe
-from .cone_qp import pyramid_face_halfspaces
-from . import plane_qp
-from .problem import NLP, QP, ConeConstraint
+from ..geometry.pyramid import supporting_faces
+from ..solvers import NLP, QP, ConeConstraint
+from ..status import Status
+from .common import Encounter, Outcome, SolveNLP
+from .fallback import first_safe
 
 
 #: Metres added to every protected radius in the exact cone constraints.
@@ -26,13 +27,13 @@ def build_nlp(enc: Encounter, start: np.ndarray) -> NLP:
     sin_a = np.minimum((c.r_pz + RADIUS_MARGIN) / np.maximum(c.d_oi, 1e-12), 1.0)
     cos_a = np.sqrt(1.0 - sin_a**2)
     cones = [ConeConstraint(apex=c.apex[i], axis=c.axis[i], cos_alpha=float(cos_a[i]))
-             for i in range(len(c)) if not c.inside[i]]
+             for i in range(c.n) if not c.inside[i]]
     rows_G, rows_h = [], []
     if np.any(c.inside):  # escape half-spaces stay linear
         rows_G.append(c.rel[c.inside])
         rows_h.append(np.sum(c.rel * c.apex, axis=1)[c.inside])
-    if len(enc.pyramids):
-        N, b = pyramid_face_halfspaces(enc.pyramids, start)
+    if enc.pyramids.n:
+        N, b = supporting_faces(enc.pyramids, start)
         rows_G.append(-N)
         rows_h.append(-b - enc.options.margin)
     G3, h3 = enc.linear_bounds()
@@ -43,14 +44,14 @@ def build_nlp(enc: Encounter, start: np.ndarray) -> NLP:
     return NLP(qp=qp, cones=cones, x0=start)
 
 
-def select(enc: Encounter, solve_qp: Solve, qp_has_cones: bool, solve_nlp: SolveNLP) -> Outcome:
-    start = plane_qp.select(enc, solve_qp, qp_has_cones)
-    if start.status != "optimal":
+def select(enc: Encounter, start: Outcome, solve_nlp: SolveNLP) -> Outcome:
+    """Improve ``start`` (plane_qp's decision) with the exact constraints, never worsening it."""
+    if start.status != Status.OPTIMAL:
         return start
     res = solve_nlp(build_nlp(enc, start.velocity))
     if res.ok and res.x.shape == (3,):
         better = enc.deviation(res.x)[0] < enc.deviation(start.velocity)[0] - 1e-9
         if better and first_safe(enc, res.x[None]) is not None:
-            return Outcome(res.x, "optimal", None, {"round": "nlp", "start": start.velocity})
+            return Outcome(res.x, Status.OPTIMAL, None, {"round": "nlp", "start": start.velocity})
     info = dict(start.info, nlp=res.status)
-    return Outcome(start.velocity, "optimal", start.plane, info)
+    return Outcome(start.velocity, Status.OPTIMAL, start.plane, info)

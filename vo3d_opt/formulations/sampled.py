@@ -2,43 +2,40 @@
 
 On every avoidance plane a polar grid of candidate velocities spans the speed range; candidates
 inside a conic section (section 3.1 / 4.2) or outside the limits are dropped, and the one nearest
-the preferred velocity wins, confirmed by the exact 3D check."""
+the preferred velocity wins, confirmed by the exact 3D check and kept at least ``margin`` (m/s)
+away from every VO, as the QPs' rows are: never an answer on a VO's boundary."""
 from __future__ import annotations
 
 import numpy as np
 
-from .common import Encounter, Outcome, first_safe, least_bad
-from ..geometry import AvoidancePlanes
-from .planes import plane_sections
+from ..geometry import AvoidancePlanes, Sections, cone_sections, pyramid_sections
+from ..status import Status
+from .common import Encounter, Outcome, py_decision_planes
+from .fallback import first_safe, py_least_bad, py_polar_grid
 
 
-def polar_grid(enc: Encounter) -> np.ndarray:
-    """(M, 2) in-plane candidates: ``speed_levels`` speeds x headings every ``heading_step_deg``."""
-    o = enc.options
-    speeds = np.linspace(enc.limits.v_min, enc.limits.v_max, o.speed_levels)
-    heading = np.deg2rad(np.arange(0.0, 360.0 - 1e-9, o.heading_step_deg))
-    grid = speeds[:, None, None] * np.stack([np.cos(heading), np.sin(heading)], axis=-1)[None]
-    return np.unique(grid.reshape(-1, 2).round(12), axis=0)
-
-
-def grid_velocities(enc: Encounter, planes: AvoidancePlanes) -> tuple[np.ndarray, np.ndarray]:
-    """Every grid velocity on every plane, (P·M, 3), and its plane index (P·M,)."""
-    grid = polar_grid(enc)
-    P = len(planes.phi)
-    xy = np.broadcast_to(grid, (P,) + grid.shape)
-    plane_idx = np.repeat(np.arange(P), len(grid))
-    return planes.lift(xy).reshape(-1, 3), plane_idx
+def plane_sections(enc: Encounter, planes: AvoidancePlanes) -> tuple[Sections, Sections]:
+    """The conic sections of the decision's cones and pyramids on ``planes``."""
+    return (cone_sections(enc.cones, planes, corrections=enc.options.corrections, n_samples=enc.options.n_samples),
+            pyramid_sections(enc.pyramids, planes))
 
 
 def select(enc: Encounter) -> Outcome:
-    ps = plane_sections(enc)
-    v, plane_idx = grid_velocities(enc, ps.planes)
-    grid = polar_grid(enc)
-    free = ~ps.contains(np.broadcast_to(grid, (len(ps.planes.phi),) + grid.shape)).ravel()
-    order = np.flatnonzero(free)
+    cfg = enc.options.config
+    planes = py_decision_planes(enc.vos, enc.v_now, cfg)
+    grid = py_polar_grid(enc.bounds, cfg)
+    xy = np.ascontiguousarray(np.broadcast_to(grid, (len(planes.phi),) + grid.shape))
+    inside = np.zeros(xy.shape[:2], dtype=bool)
+    for sections in plane_sections(enc, planes):
+        if sections.kind.shape[0]:
+            inside |= np.any(sections.contains(xy), axis=0)
+    v = planes.lift(xy).reshape(-1, 3)
+    order = np.flatnonzero(~inside.ravel())
     order = order[np.argsort(enc.deviation(v[order]), kind="stable")]  # nearest first
-    k = first_safe(enc, v[order])  # within the limits, confirmed by the exact 3D check
+    k = first_safe(enc, v[order])  # within the limits, the exact 3D check, the margin
     if k is not None:
         best = order[k]
-        return Outcome(v[best], "optimal", float(ps.planes.phi[plane_idx[best]]), {"free": len(order)})
-    return Outcome(least_bad(enc, v), "infeasible_min_violation", None, {"free": len(order)})
+        return Outcome(v[best], Status.OPTIMAL, float(planes.phi[best // len(grid)]), {"free": len(order)})
+    G3, h3 = enc.linear_bounds()
+    worst = py_least_bad(enc.vos, planes, np.zeros((0, 3)), enc.position, enc.v_now, G3, h3, enc.bounds, cfg)
+    return Outcome(worst, Status.INFEASIBLE_MIN_VIOLATION, None, {"free": len(order)})

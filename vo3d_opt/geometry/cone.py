@@ -1,20 +1,25 @@
 """VO cones of moving vehicles with spherical protected zones: eqs (1)–(6) and the virtual
-sphere of section 3.1.6, vectorised over n neighbours."""
+sphere of section 3.1.6, for n neighbours at once.
+
+``VOCones`` is a NamedTuple of arrays, so the same value flows through Python and compiled code
+(numba reads its fields by name); ``build_cones`` is the compiled constructor and ``vo_cones``
+its Python front end.
+"""
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import entry, jit
 
 #: The paper's smallest virtual-sphere factor (section 3.1.6: tau >= 1.5).
 TAU_MIN = 1.5
+#: ``reach`` values of build_cones that are not speeds: the paper's rule, or no virtual sphere.
+PAPER_RULE, NO_VIRTUAL_SPHERE = np.nan, -1.0
 
 
-@dataclass(frozen=True)
-class VOCones:
+class VOCones(NamedTuple):
     """n VO cones seen from the avoiding vehicle A. Velocities are in m/s, the cone's length
     d_vo in the same units (the paper draws the collision cone to scale in velocity space)."""
 
@@ -28,22 +33,19 @@ class VOCones:
     d_vo: np.ndarray  # (n,) eq. (2), times tau
     r_vo: np.ndarray  # (n,) eq. (2), times tau
     tau: np.ndarray  # (n,) virtual-sphere factor (section 3.1.6); 1 when not expanded
+    sin_alpha: np.ndarray  # (n,) sine of the half-angle alpha: r_pz / d_oi (1 inside the zone)
     inside: np.ndarray  # (n,) bool: A is already inside B's protected zone (d_oi <= r_pz)
 
-    def __len__(self) -> int:
-        return len(self.d_oi)
+    @property
+    def n(self) -> int:
+        return int(self.d_oi.shape[0])
 
     @property
     def axis(self) -> np.ndarray:
         """Unit symmetry-line direction (n, 3): from A towards B."""
         return self.R[:, :, 0]
 
-    @cached_property
-    def sin_alpha(self) -> np.ndarray:
-        """Sine of the half-angle alpha of the cone: r_pz / d_oi."""
-        return np.clip(self.r_pz / np.maximum(self.d_oi, 1e-12), 0.0, 1.0)
-
-    @cached_property
+    @property
     def cos_alpha(self) -> np.ndarray:
         return np.sqrt(1.0 - self.sin_alpha**2)
 
@@ -52,46 +54,22 @@ class VOCones:
         """C_vo of eq. (5), (n, 3)."""
         return self.apex + self.d_vo[:, None] * self.axis
 
-    def min_speed(self) -> np.ndarray:
-        """(n,) the smallest |v| inside each VO: the distance from the velocity origin to the
-        (infinite) cone; 0 when A is inside the zone or the origin is in the cone."""
-        return _min_speed_kernel(self.apex, self.R, self.r_pz, self.d_oi, self.inside)
-
     def subset(self, keep: np.ndarray) -> "VOCones":
         """The cones selected by the boolean or index array ``keep``."""
-        return VOCones(**{f.name: getattr(self, f.name)[keep] for f in fields(self)})
+        return VOCones(*(np.ascontiguousarray(field[keep]) for field in self))
 
     def base_points(self, t: np.ndarray) -> np.ndarray:
         """B_vo(t) of eq. (4) for angles t (K,), shape (n, K, 3)."""
-        body = np.stack(
-            [
-                np.broadcast_to(self.d_vo[:, None], (len(self), len(t))),
-                self.r_vo[:, None] * np.cos(t),
-                self.r_vo[:, None] * np.sin(t),
-            ],
-            axis=-1,
-        )
+        body = np.stack([np.broadcast_to(self.d_vo[:, None], (self.n, len(t))),
+                         self.r_vo[:, None] * np.cos(t), self.r_vo[:, None] * np.sin(t)], axis=-1)
         return body @ self.R.transpose(0, 2, 1) + self.apex[:, None, :]
-
-    def outward_normals(self, t: np.ndarray) -> np.ndarray:
-        """Unit outward normal of the cone surface along the generator through B_vo(t).
-
-        ``t`` has shape (n, ...); the result (n, ..., 3). The plane through the apex with this
-        normal is tangent to the cone along the whole generator: a supporting plane."""
-        t = np.asarray(t, dtype=float)
-        flat = np.ascontiguousarray(t.reshape(len(self), -1))
-        out = np.empty(flat.shape + (3,))
-        for i in range(len(self)):
-            for k in range(flat.shape[1]):
-                out[i, k] = outward_normal(self.R[i], float(self.sin_alpha[i]), float(flat[i, k]))
-        return out.reshape(t.shape + (3,))
 
 
 def vo_cones(
     p_A: np.ndarray,
     p_B: np.ndarray,
     V_B: np.ndarray,
-    r_pz: np.ndarray,
+    r_pz: np.ndarray | float,
     *,
     reach: float | None = None,
     virtual_sphere: bool = True,
@@ -104,36 +82,37 @@ def vo_cones(
     3.1.6) a cone whose base lies inside that reach is lengthened by the factor
     tau = max(tau_min, needed) (the virtual sphere tau·r_pz at tau·|p_B - p_A|, eq. 18), so that
     its finite conic sections are exact for every speed up to ``reach``. Without ``reach`` the
-    paper's rule applies: tau = tau_min when A is within 2 r_pz of B.
+    paper's rule applies: tau = tau_min when A is within 2 r_pz of B. ``apex`` replaces V_B as
+    the apex (the reciprocal apex (V_A + V_B)/2).
     """
     p_B = np.ascontiguousarray(p_B, dtype=float).reshape(-1, 3)
     r_pz = np.broadcast_to(np.asarray(r_pz, dtype=float), (len(p_B),)).copy()
     a = np.ascontiguousarray(V_B if apex is None else apex, dtype=float).reshape(-1, 3)
-    mode = -1.0 if not virtual_sphere else (np.nan if reach is None else float(reach))
-    rel, d_oi, theta_el, psi_az, R, d_vo, r_vo, tau = _cone_kernel(
-        np.asarray(p_A, dtype=float), p_B, a, r_pz, mode, float(tau_min))
-    return VOCones(rel=rel, apex=a, r_pz=r_pz, d_oi=d_oi, theta_el=theta_el, psi_az=psi_az, R=R,
-                   d_vo=d_vo, r_vo=r_vo, tau=tau, inside=d_oi <= r_pz)
+    mode = NO_VIRTUAL_SPHERE if not virtual_sphere else (PAPER_RULE if reach is None else float(reach))
+    return py_build_cones(np.asarray(p_A, dtype=float), p_B, a, r_pz, mode, float(tau_min))
 
 
 @jit
-def outward_normal(R: np.ndarray, sin_alpha: float, t: float) -> tuple[float, float, float]:
+def outward_normal(R: np.ndarray, sin_alpha: float, cos_t: float, sin_t: float) -> tuple[float, float, float]:
     """The cone's unit outward normal along the generator through B_vo(t): R_{theta_el|psi_az}
-    (eq. 6) applied to (-sin alpha, cos alpha cos t, cos alpha sin t) in the cone's own frame."""
+    (eq. 6) applied to (-sin alpha, cos alpha cos t, cos alpha sin t) in the cone's own frame.
+    The plane through the apex with this normal touches the cone along the whole generator: a
+    supporting plane of the (convex) VO."""
     ca = np.sqrt(1.0 - sin_alpha * sin_alpha)
-    b0, b1, b2 = -sin_alpha, ca * np.cos(t), ca * np.sin(t)
+    b0, b1, b2 = -sin_alpha, ca * cos_t, ca * sin_t
     return (R[0, 0] * b0 + R[0, 1] * b1 + R[0, 2] * b2, R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2,
             R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2)
 
 
 @jit
-def _cone_kernel(p_A, p_B, apex, r_pz, reach, tau_min):
-    """Eqs (1), (2), (6) and the virtual-sphere factor for every neighbour. ``reach``: NaN for
-    the paper's rule, negative for no virtual sphere."""
+def build_cones(p_A: np.ndarray, p_B: np.ndarray, apex: np.ndarray, r_pz: np.ndarray, reach: float,
+                tau_min: float) -> VOCones:
+    """Eqs (1), (2), (6) and the virtual-sphere factor for every neighbour. ``reach``: the
+    largest own speed, PAPER_RULE (NaN) for the paper's rule, NO_VIRTUAL_SPHERE (< 0) for none."""
     n = p_B.shape[0]
     rel, R = np.empty((n, 3)), np.empty((n, 3, 3))
     d_oi, theta_el, psi_az = np.empty(n), np.empty(n), np.empty(n)
-    d_vo, r_vo, tau = np.empty(n), np.empty(n), np.empty(n)
+    d_vo, r_vo, tau, sin_alpha = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     for i in range(n):
         for k in range(3):
             rel[i, k] = p_B[i, k] - p_A[k]
@@ -160,24 +139,30 @@ def _cone_kernel(p_A, p_B, apex, r_pz, reach, tau_min):
                 t = max(tau_min, needed * 1.01) if needed > 1.0 else 1.0
         d_oi[i], theta_el[i], psi_az[i] = d, th, ps
         d_vo[i], r_vo[i], tau[i] = dv * t, rv * t, t
-    return rel, d_oi, theta_el, psi_az, R, d_vo, r_vo, tau
+        sin_alpha[i] = min(max(r_pz[i] / safe_d, 0.0), 1.0)
+    return VOCones(rel, apex.copy(), r_pz.copy(), d_oi, theta_el, psi_az, R, d_vo, r_vo, tau, sin_alpha,
+                   d_oi <= r_pz)
+
+
+@entry
+def py_build_cones(p_A: np.ndarray, p_B: np.ndarray, apex: np.ndarray, r_pz: np.ndarray, reach: float, tau_min: float) -> VOCones:
+    """``build_cones`` for Python callers (compiled code calls ``build_cones``: no Python wrapper)."""
+    return build_cones(p_A, p_B, apex, r_pz, reach, tau_min)
 
 
 @jit
-def _min_speed_kernel(apex, R, r_pz, d_oi, inside):
-    n = apex.shape[0]
-    out = np.zeros(n)
-    for i in range(n):
-        if inside[i]:
-            continue
-        L = np.sqrt(apex[i, 0] ** 2 + apex[i, 1] ** 2 + apex[i, 2] ** 2)
-        cos_b = -(apex[i, 0] * R[i, 0, 0] + apex[i, 1] * R[i, 1, 0] + apex[i, 2] * R[i, 2, 0]) / max(L, 1e-12)
-        beta = np.arccos(min(max(cos_b, -1.0), 1.0))
-        alpha = np.arcsin(min(max(r_pz[i] / max(d_oi[i], 1e-12), 0.0), 1.0))
-        if beta <= alpha:  # the origin is in the cone
-            out[i] = 0.0
-        elif beta >= alpha + np.pi / 2:  # the apex is the nearest point
-            out[i] = L
-        else:
-            out[i] = L * np.sin(beta - alpha)
-    return out
+def min_speed(cones: VOCones, i: int) -> float:
+    """The smallest |v| inside VO cone i: the distance from the velocity origin to the
+    (infinite) cone; 0 when A is inside the zone or the origin is in the cone."""
+    if cones.inside[i]:
+        return 0.0
+    a, R = cones.apex[i], cones.R[i]
+    L = np.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
+    cos_b = -(a[0] * R[0, 0] + a[1] * R[1, 0] + a[2] * R[2, 0]) / max(L, 1e-12)
+    beta = np.arccos(min(max(cos_b, -1.0), 1.0))
+    alpha = np.arcsin(cones.sin_alpha[i])
+    if beta <= alpha:  # the origin is in the cone
+        return 0.0
+    if beta >= alpha + np.pi / 2:  # the apex is the nearest point
+        return L
+    return L * np.sin(beta - alpha)

@@ -10,46 +10,14 @@ horizontal plane and phi runs from -90° to 90°. Eq. (8) is the rotation that t
 from __future__ import annotations
 
 import functools
-import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import entry, jit
 
 
-def rotation_el_az(theta_el: np.ndarray, psi_az: np.ndarray) -> np.ndarray:
-    """R_{theta_el|psi_az} of eq. (6), shape (..., 3, 3): maps cone-body coordinates
-    [along axis, horizontal side, 'up' side] to the world frame."""
-    ct, st = np.cos(theta_el), np.sin(theta_el)
-    cp, sp = np.cos(psi_az), np.sin(psi_az)
-    zero = np.zeros_like(ct)
-    return np.stack(
-        [
-            np.stack([cp * ct, -sp, -cp * st], axis=-1),
-            np.stack([sp * ct, cp, -sp * st], axis=-1),
-            np.stack([st, zero, ct], axis=-1),
-        ],
-        axis=-2,
-    )
-
-
-def rotation_plane(phi: np.ndarray) -> np.ndarray:
-    """R_{P_phi} of eq. (8), shape (..., 3, 3): a rotation by phi about the common x axis."""
-    c, s = np.cos(phi), np.sin(phi)
-    one, zero = np.ones_like(c), np.zeros_like(c)
-    return np.stack(
-        [
-            np.stack([one, zero, zero], axis=-1),
-            np.stack([zero, c, s], axis=-1),
-            np.stack([zero, -s, c], axis=-1),
-        ],
-        axis=-2,
-    )
-
-
-@dataclass(frozen=True)
-class AvoidancePlanes:
+class AvoidancePlanes(NamedTuple):
     """P avoidance planes through the velocity-space origin sharing the axis e1.
 
     ``to_plane`` (P, 3, 3) maps world vectors to plane coordinates (x^phi, y^phi, z^phi);
@@ -63,10 +31,10 @@ class AvoidancePlanes:
     def e1(self) -> np.ndarray:
         return self.frame[0]
 
-    @functools.cached_property
+    @property
     def e2(self) -> np.ndarray:
-        """(P, 3) the in-plane direction e2(phi) of every plane (a contiguous copy)."""
-        return np.ascontiguousarray(self.to_plane[:, 1, :])
+        """(P, 3) the in-plane direction e2(phi) of every plane."""
+        return self.to_plane[:, 1, :]
 
     @property
     def normal(self) -> np.ndarray:
@@ -95,34 +63,46 @@ class AvoidancePlanes:
         return np.einsum("pij,...j->p...i", self.to_plane, v)
 
 
+@entry
 def avoidance_frame(direction: np.ndarray) -> np.ndarray:
     """Rows e_x (unit ``direction``), e_y0 (horizontal, left of e_x), e_z0 = e_x × e_y0 (up)."""
-    x, y, z = (float(c) for c in direction)
-    norm = math.sqrt(x * x + y * y + z * z)
+    x, y, z = direction[0], direction[1], direction[2]
+    norm = np.sqrt(x * x + y * y + z * z)
     x, y, z = (x / norm, y / norm, z / norm) if norm > 1e-12 else (1.0, 0.0, 0.0)
-    hy = math.hypot(x, y)  # e_y0 = z_world × e_x, normalised
+    hy = np.sqrt(x * x + y * y)  # e_y0 = z_world × e_x, normalised
     ly, my = (-y / hy, x / hy) if hy >= 1e-9 else (0.0, 1.0)  # vertical e_x: any side works
-    return np.array([[x, y, z], [ly, my, 0.0], [-z * my, z * ly, x * my - y * ly]])
+    out = np.empty((3, 3))
+    out[0, 0], out[0, 1], out[0, 2] = x, y, z
+    out[1, 0], out[1, 1], out[1, 2] = ly, my, 0.0
+    out[2, 0], out[2, 1], out[2, 2] = -z * my, z * ly, x * my - y * ly
+    return out
+
+
+@jit
+def build_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
+    """The planes P_phi for angles ``phi`` (rad) about the axis ``direction``: eq. (8),
+    R_{P_phi} @ frame for every phi; the rotation only mixes e_y0 and e_z0."""
+    frame = avoidance_frame(direction)
+    to_plane = np.empty((phi.shape[0], 3, 3))
+    for p in range(phi.shape[0]):
+        c, s = np.cos(phi[p]), np.sin(phi[p])
+        for k in range(3):
+            to_plane[p, 0, k] = frame[0, k]
+            to_plane[p, 1, k] = c * frame[1, k] + s * frame[2, k]
+            to_plane[p, 2, k] = c * frame[2, k] - s * frame[1, k]
+    return AvoidancePlanes(phi, frame, to_plane)
+
+
+@entry
+def py_build_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
+    """``build_planes`` for Python callers (compiled code calls ``build_planes``: no Python wrapper)."""
+    return build_planes(direction, phi)
 
 
 def avoidance_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
     """The planes P_phi for angles ``phi`` (rad) about the axis ``direction``."""
-    phi = np.atleast_1d(np.asarray(phi, dtype=float))
-    frame = avoidance_frame(direction)
-    return AvoidancePlanes(phi=phi, frame=frame, to_plane=_to_plane_rows(frame, phi))
-
-
-@jit
-def _to_plane_rows(frame: np.ndarray, phi: np.ndarray) -> np.ndarray:
-    """Eq. (8): R_{P_phi} @ frame for every phi, (P, 3, 3); the rotation only mixes e_y0, e_z0."""
-    out = np.empty((phi.shape[0], 3, 3))
-    for p in range(phi.shape[0]):
-        c, s = np.cos(phi[p]), np.sin(phi[p])
-        for k in range(3):
-            out[p, 0, k] = frame[0, k]
-            out[p, 1, k] = c * frame[1, k] + s * frame[2, k]
-            out[p, 2, k] = c * frame[2, k] - s * frame[1, k]
-    return out
+    return py_build_planes(np.asarray(direction, dtype=float).reshape(3),
+                        np.ascontiguousarray(np.atleast_1d(np.asarray(phi, dtype=float))))
 
 
 @functools.lru_cache(maxsize=16)

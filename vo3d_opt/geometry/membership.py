@@ -9,139 +9,225 @@ obstacle when the ray p_A + v t, t >= 0, enters the protected prism C_pz.
 Inside a protected zone every velocity 'enters' it, so there the VO is defined as the velocities
 that still close in: (v - apex)·(p_B - p_A) > 0 for a sphere, and a horizontal component towards
 the prism's centre for C_pz. Velocities that leave are the escape set.
+
+``clearance`` measures how far outside every VO a velocity is, in m/s (its distance to the VOs
+in velocity space), for candidates that must be strictly outside by a margin.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import entry, jit
 from .cone import VOCones
 from .pyramid import VOPyramids
 
+#: ``horizon`` value meaning "no horizon" in compiled code.
+NO_HORIZON = -1.0
+
 
 @jit
-def _closest_approach_kernel(apex: np.ndarray, rel: np.ndarray, v: np.ndarray, horizon: float):
-    """(n, M) closest distance to B's centre over t in [0, horizon] (horizon < 0: none), its
-    time t*, and the closing rate p·u, with u = v - apex the relative velocity."""
-    n, M = apex.shape[0], v.shape[0]
-    closest, t_star, closing = np.empty((n, M)), np.empty((n, M)), np.empty((n, M))
-    for i in range(n):
-        for k in range(M):
-            u0, u1, u2 = v[k, 0] - apex[i, 0], v[k, 1] - apex[i, 1], v[k, 2] - apex[i, 2]
-            uu = u0 * u0 + u1 * u1 + u2 * u2
-            pu = rel[i, 0] * u0 + rel[i, 1] * u1 + rel[i, 2] * u2
-            t = max(pu, 0.0) / max(uu, 1e-300) if uu > 0 else 0.0
-            if horizon >= 0.0:
-                t = min(t, horizon)
-            d0, d1, d2 = rel[i, 0] - u0 * t, rel[i, 1] - u1 * t, rel[i, 2] - u2 * t
-            closest[i, k] = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            t_star[i, k] = t
-            closing[i, k] = pu
-    return closest, t_star, closing
+def closest_approach(cones: VOCones, i: int, v: np.ndarray, horizon: float) -> tuple[float, float, float]:
+    """(closest distance to B's centre over t in [0, horizon] (horizon < 0: none), its time t*,
+    the closing rate p·u) for velocity v against cone i, u = v - apex the relative velocity."""
+    a, rel = cones.apex[i], cones.rel[i]
+    u0, u1, u2 = v[0] - a[0], v[1] - a[1], v[2] - a[2]
+    uu = u0 * u0 + u1 * u1 + u2 * u2
+    pu = rel[0] * u0 + rel[1] * u1 + rel[2] * u2
+    t = max(pu, 0.0) / max(uu, 1e-300) if uu > 0 else 0.0
+    if horizon >= 0.0:
+        t = min(t, horizon)
+    d0, d1, d2 = rel[0] - u0 * t, rel[1] - u1 * t, rel[2] - u2 * t
+    return np.sqrt(d0 * d0 + d1 * d1 + d2 * d2), t, pu
 
 
-def _closest_approach(
-    cones: VOCones, v: np.ndarray, horizon: float | None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For each cone and velocity (n, M): the closest distance of A's relative motion to B's
-    centre over t in [0, horizon], the time it happens, and the closing rate (p·u)."""
-    v = np.atleast_2d(np.asarray(v, dtype=float))
-    return _closest_approach_kernel(cones.apex, cones.rel, v, -1.0 if horizon is None else float(horizon))
+@jit
+def in_cone(cones: VOCones, i: int, v: np.ndarray, horizon: float, tol: float) -> bool:
+    """Whether v lies in VO cone i (inside the zone: whether it still closes in). ``tol`` (m)
+    widens (> 0) or shrinks (< 0) the protected sphere."""
+    closest, t_star, closing = closest_approach(cones, i, v, horizon)
+    if cones.inside[i]:
+        return closing > 0.0
+    return closest < cones.r_pz[i] + tol and t_star > 0.0
+
+
+@jit
+def entry_time(pyramids: VOPyramids, j: int, v: np.ndarray) -> float:
+    """Slab test: the time (s) the ray p_A + v t enters prism j ([lo, hi] in its frame); inf if
+    never."""
+    frame, lo, hi = pyramids.frame[j], pyramids.lo[j], pyramids.hi[j]
+    t_enter, t_exit = -np.inf, np.inf
+    for a in range(3):
+        w = frame[a, 0] * v[0] + frame[a, 1] * v[1] + frame[a, 2] * v[2]
+        if w != w:  # NaN: no ray to speak of, it enters nothing
+            return np.inf
+        if w == 0.0:  # a zero component: inside the slab forever or never
+            if not (lo[a] <= 0.0 <= hi[a]):
+                return np.inf
+        else:
+            t1, t2 = lo[a] / w, hi[a] / w
+            t_enter = max(t_enter, min(t1, t2))
+            t_exit = min(t_exit, max(t1, t2))
+    t0 = max(t_enter, 0.0)
+    return t0 if t_exit > t0 else np.inf
+
+
+@jit
+def in_pyramid(pyramids: VOPyramids, j: int, v: np.ndarray, horizon: float) -> bool:
+    """Whether v lies in VO pyramid j (inside C_pz: whether it heads towards its centre)."""
+    if pyramids.inside[j]:
+        h = pyramids.frame[j, 0]
+        return h[0] * v[0] + h[1] * v[1] + h[2] * v[2] > 0.0
+    t = entry_time(pyramids, j, v)
+    return t < np.inf if horizon < 0.0 else t <= horizon
+
+
+@entry
+def _in_vos_kernel(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, horizon: float, tol: float) -> np.ndarray:
+    n = cones.d_oi.shape[0]
+    out = np.empty((n + pyramids.L_pz.shape[0], v.shape[0]), dtype=np.bool_)
+    for k in range(v.shape[0]):
+        for i in range(n):
+            out[i, k] = in_cone(cones, i, v[k], horizon, tol)
+        for j in range(pyramids.L_pz.shape[0]):
+            out[n + j, k] = in_pyramid(pyramids, j, v[k], horizon)
+    return out
+
+
+def _velocities(v: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float)))
+
+
+def _horizon(horizon: float | None) -> float:
+    return NO_HORIZON if horizon is None else float(horizon)
+
+
+def _no_pyramids() -> VOPyramids:
+    return VOPyramids(np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0),
+                      np.zeros(0, dtype=bool))
+
+
+def in_vos(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None) -> np.ndarray:
+    """Boolean (n + m, M): velocity k lies in VO cone i (rows 0..n-1) or pyramid j (rows n..)."""
+    return _in_vos_kernel(cones, pyramids, _velocities(v), _horizon(horizon), 0.0)
+
+
+def in_vo_cones(cones: VOCones, v: np.ndarray, *, horizon: float | None = None, tol: float = 0.0) -> np.ndarray:
+    """Boolean (n, M): velocity m lies in VO cone n. ``tol`` (m) widens (>0) or shrinks (<0)
+    the protected sphere, e.g. to accept boundary velocities."""
+    return _in_vos_kernel(cones, _no_pyramids(), _velocities(v), _horizon(horizon), float(tol))
+
+
+def in_vo_pyramids(pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None) -> np.ndarray:
+    """Boolean (m, M): velocity k lies in VO pyramid m (its ray enters C_pz)."""
+    from .cone import vo_cones  # an empty cone set
+
+    empty = vo_cones(np.zeros(3), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    return _in_vos_kernel(empty, pyramids, _velocities(v), _horizon(horizon), 0.0)
+
+
+@entry
+def _penetration_kernel(cones: VOCones, v: np.ndarray) -> np.ndarray:
+    out = np.empty((cones.d_oi.shape[0], v.shape[0]))
+    for i in range(out.shape[0]):
+        for k in range(v.shape[0]):
+            out[i, k] = cones.r_pz[i] - closest_approach(cones, i, v[k], NO_HORIZON)[0]
+    return out
 
 
 def cone_penetration(cones: VOCones, v: np.ndarray) -> np.ndarray:
     """How deep each velocity (M, 3) lies inside each cone (n, M): r_pz minus the closest
     distance that A's relative motion comes to B's centre (> 0 means inside)."""
-    closest, _, _ = _closest_approach(cones, v, None)
-    return cones.r_pz[:, None] - closest
+    return _penetration_kernel(cones, _velocities(v))
 
 
-@jit
-def _in_cones_kernel(apex, rel, r_pz, inside, v, horizon, tol):
-    closest, t_star, closing = _closest_approach_kernel(apex, rel, v, horizon)
-    out = np.empty(closest.shape, dtype=np.bool_)
-    for i in range(closest.shape[0]):
-        for k in range(closest.shape[1]):
-            if inside[i]:  # inside the zone: the VO is what still closes in
-                out[i, k] = closing[i, k] > 0.0
-            else:
-                out[i, k] = closest[i, k] < r_pz[i] + tol and t_star[i, k] > 0.0
-    return out
-
-
-def in_vo_cones(
-    cones: VOCones, v: np.ndarray, *, horizon: float | None = None, tol: float = 0.0
-) -> np.ndarray:
-    """Boolean (n, M): velocity m lies in VO cone n. ``tol`` (m) widens (>0) or shrinks (<0)
-    the protected sphere, e.g. to accept boundary velocities."""
-    v = np.atleast_2d(np.asarray(v, dtype=float))
-    return _in_cones_kernel(cones.apex, cones.rel, cones.r_pz, cones.inside, v,
-                            -1.0 if horizon is None else float(horizon), float(tol))
-
-
-@jit
-def _entry_time_kernel(frame: np.ndarray, lo: np.ndarray, hi: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Slab test of the ray p_A + v t against each prism [lo, hi] (in its frame): (m, M)."""
-    m, M = frame.shape[0], v.shape[0]
-    out = np.empty((m, M))
-    for j in range(m):
-        for k in range(M):
-            t_enter, t_exit = -np.inf, np.inf
-            for a in range(3):
-                w = frame[j, a, 0] * v[k, 0] + frame[j, a, 1] * v[k, 1] + frame[j, a, 2] * v[k, 2]
-                if w != w:  # NaN: no ray to speak of, it enters nothing
-                    t_enter = np.inf
-                elif w == 0.0:  # a zero component: inside the slab forever or never
-                    if not (lo[j, a] <= 0.0 <= hi[j, a]):
-                        t_enter = np.inf
-                else:
-                    t1, t2 = lo[j, a] / w, hi[j, a] / w
-                    t_enter = max(t_enter, min(t1, t2))
-                    t_exit = min(t_exit, max(t1, t2))
-            t0 = max(t_enter, 0.0)
-            out[j, k] = t0 if t_exit > t0 else np.inf
+@entry
+def _entry_times(pyramids: VOPyramids, v: np.ndarray) -> np.ndarray:
+    out = np.empty((pyramids.L_pz.shape[0], v.shape[0]))
+    for j in range(out.shape[0]):
+        for k in range(v.shape[0]):
+            out[j, k] = entry_time(pyramids, j, v[k])
     return out
 
 
 def pyramid_entry_time(pyramids: VOPyramids, v: np.ndarray) -> np.ndarray:
     """Time (s) at which the ray p_A + v t enters each prism C_pz (m, M); inf if never."""
-    v = np.atleast_2d(np.asarray(v, dtype=float))
-    return _entry_time_kernel(pyramids.frame, pyramids.lo, pyramids.hi, v)
+    return _entry_times(pyramids, _velocities(v))
+
+
+# ---------------------------------------------------------------------------------- clearance
+
+#: Steps of the ternary search in ``_zone_clearance`` (shrinks the interval by (2/3)^100).
+_SEARCH_STEPS = 100
 
 
 @jit
-def _in_pyramids_kernel(frame, lo, hi, inside, v, horizon):
-    t = _entry_time_kernel(frame, lo, hi, v)
-    out = np.empty(t.shape, dtype=np.bool_)
-    for j in range(t.shape[0]):
-        for k in range(t.shape[1]):
-            if inside[j]:  # inside C_pz: a horizontal component towards its centre
-                out[j, k] = frame[j, 0, 0] * v[k, 0] + frame[j, 0, 1] * v[k, 1] + frame[j, 0, 2] * v[k, 2] > 0.0
-            else:
-                out[j, k] = t[j, k] < np.inf if horizon < 0.0 else t[j, k] <= horizon
-    return out
-
-
-def in_vo_pyramids(
-    pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None
-) -> np.ndarray:
-    """Boolean (m, M): velocity k lies in VO pyramid m (its ray enters C_pz)."""
-    v = np.atleast_2d(np.asarray(v, dtype=float))
-    return _in_pyramids_kernel(pyramids.frame, pyramids.lo, pyramids.hi, pyramids.inside, v,
-                               -1.0 if horizon is None else float(horizon))
+def _scaled_zone_distance(shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v: np.ndarray,
+                          s: float) -> float:
+    """Distance from v to the zone scaled by s about the apex: for cone k (shape 0) the ball
+    apex + s·B(rel, r_pz), for pyramid k (shape 1) the prism s·C_pz."""
+    if shape == 0:
+        a, rel = cones.apex[k], cones.rel[k]
+        d0, d1, d2 = v[0] - a[0] - s * rel[0], v[1] - a[1] - s * rel[1], v[2] - a[2] - s * rel[2]
+        return max(np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - s * cones.r_pz[k], 0.0)
+    total = 0.0
+    for ax in range(3):
+        f = pyramids.frame[k, ax]
+        x = f[0] * v[0] + f[1] * v[1] + f[2] * v[2]
+        gap = max(s * pyramids.lo[k, ax] - x, x - s * pyramids.hi[k, ax], 0.0)
+        total += gap * gap
+    return np.sqrt(total)
 
 
 @jit
-def _in_vos_kernel(apex, rel, r_pz, c_inside, frame, lo, hi, p_inside, v, horizon):
-    n = apex.shape[0]
-    out = np.empty((n + frame.shape[0], v.shape[0]), dtype=np.bool_)
-    out[:n] = _in_cones_kernel(apex, rel, r_pz, c_inside, v, horizon, 0.0)
-    out[n:] = _in_pyramids_kernel(frame, lo, hi, p_inside, v, horizon)
+def _zone_clearance(shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v: np.ndarray,
+                    horizon: float) -> float:
+    """The distance (m/s) from v to the VO of zone k in velocity space (0 inside it).
+
+    The VO is the union over times t in (0, horizon] of the velocities that put A in the zone at
+    t: apex + Z / t, Z the zone relative to A. With s = 1/t that is the union of the zones
+    scaled by s >= 1/horizon, and the distance to it is min over s of the distance to s·Z,
+    a convex function of s (the scaled zones form a convex cone in (x, s)): a ternary search
+    finds it. Inside the zone the VO is the closing half-space: the escape margin."""
+    if shape == 0 and cones.inside[k]:
+        rel, a = cones.rel[k], cones.apex[k]
+        return -((v[0] - a[0]) * rel[0] + (v[1] - a[1]) * rel[1] + (v[2] - a[2]) * rel[2]) / max(cones.d_oi[k], 1e-12)
+    if shape == 1 and pyramids.inside[k]:
+        h = pyramids.frame[k, 0]
+        return -(h[0] * v[0] + h[1] * v[1] + h[2] * v[2])
+    lo = 1.0 / horizon if horizon > 0.0 else 0.0
+    # Beyond s_max the zone is farther than at lo: s·dist(0, Z) - |v - apex| > f(lo).
+    f_lo = _scaled_zone_distance(shape, cones, pyramids, k, v, lo)
+    reach = _scaled_zone_distance(shape, cones, pyramids, k, np.zeros(3) if shape == 1 else cones.apex[k], 1.0)
+    speed = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2) + (0.0 if shape == 1 else np.sqrt(cones.apex[k, 0] ** 2 + cones.apex[k, 1] ** 2 + cones.apex[k, 2] ** 2))
+    hi = max(lo, (f_lo + speed) / max(reach, 1e-12))
+    for _ in range(_SEARCH_STEPS):
+        m1, m2 = lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0
+        if _scaled_zone_distance(shape, cones, pyramids, k, v, m1) <= _scaled_zone_distance(shape, cones, pyramids, k, v, m2):
+            hi = m2
+        else:
+            lo = m1
+    return min(f_lo, _scaled_zone_distance(shape, cones, pyramids, k, v, 0.5 * (lo + hi)))
+
+
+@jit
+def clearance(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, horizon: float) -> float:
+    """The least distance (m/s) from v to any VO (inf without VOs); <= 0 inside one."""
+    best = np.inf
+    for i in range(cones.d_oi.shape[0]):
+        best = min(best, _zone_clearance(0, cones, pyramids, i, v, horizon))
+    for j in range(pyramids.L_pz.shape[0]):
+        best = min(best, _zone_clearance(1, cones, pyramids, j, v, horizon))
+    return best
+
+
+@entry
+def _clearances(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, horizon: float) -> np.ndarray:
+    out = np.empty(v.shape[0])
+    for k in range(v.shape[0]):
+        out[k] = clearance(cones, pyramids, v[k], horizon)
     return out
 
 
-def in_vos(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None) -> np.ndarray:
-    """Boolean (n + m, M): ``in_vo_cones`` stacked on ``in_vo_pyramids``, in one call."""
-    v = np.atleast_2d(np.asarray(v, dtype=float))
-    return _in_vos_kernel(cones.apex, cones.rel, cones.r_pz, cones.inside, pyramids.frame, pyramids.lo,
-                          pyramids.hi, pyramids.inside, v, -1.0 if horizon is None else float(horizon))
+def clearances(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None) -> np.ndarray:
+    """(M,) the least distance (m/s) from each velocity to any VO (inf without VOs)."""
+    return _clearances(cones, pyramids, _velocities(v), _horizon(horizon))

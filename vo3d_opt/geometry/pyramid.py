@@ -11,19 +11,18 @@ face is seen too and belongs to the obstacle's shadow (see formulations/geometry
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import entry, jit
 from ..types import Box, Cylinder
 
 #: The 12 edges of a box as pairs of corner indices (corners differing in one bit).
 BOX_EDGES = np.array([(a, a | (1 << b)) for a in range(8) for b in range(3) if not a & (1 << b)])
 
 
-@dataclass(frozen=True)
-class VOPyramids:
+class VOPyramids(NamedTuple):
     """m VO pyramids seen from A. ``frame`` rows: h (horizontal, towards the obstacle), s
     (horizontal, left), z (up). The prism is [lo, hi] in frame coordinates relative to p_A."""
 
@@ -34,12 +33,13 @@ class VOPyramids:
     h_pz: np.ndarray  # (m,)
     inside: np.ndarray  # (m,) bool: A already inside C_pz
 
-    def __len__(self) -> int:
-        return len(self.L_pz)
+    @property
+    def n(self) -> int:
+        return int(self.L_pz.shape[0])
 
     def subset(self, keep: np.ndarray) -> "VOPyramids":
         """The pyramids selected by the boolean or index array ``keep``."""
-        return VOPyramids(**{f.name: getattr(self, f.name)[keep] for f in fields(self)})
+        return VOPyramids(*(np.ascontiguousarray(field[keep]) for field in self))
 
     @property
     def corners(self) -> np.ndarray:
@@ -52,7 +52,7 @@ class VOPyramids:
         return self.corners[:, [0, 2, 6, 4], :]
 
 
-@jit
+@entry
 def prism_corners(frame: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Corner k of each prism (bits far, left, top of k pick hi over lo), world frame (m, 8, 3)."""
     m = frame.shape[0]
@@ -66,16 +66,18 @@ def prism_corners(frame: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarr
     return out
 
 
+def prism_rows(obstacles: Sequence[Cylinder | Box]) -> np.ndarray:
+    """(m, 4) the protected prisms (x, y, L_pz, h_pz) of static cylinders and boxes."""
+    return np.array([o.prism for o in obstacles], dtype=float).reshape(-1, 4)
+
+
 def vo_pyramids(p_A: np.ndarray, obstacles: Sequence[Cylinder | Box]) -> VOPyramids:
     """Build the VO pyramids of static cylinders and boxes seen from ``p_A``."""
-    prisms = np.array([o.prism for o in obstacles], dtype=float).reshape(-1, 4)
-    frame, lo, hi, inside = _pyramid_kernel(np.asarray(p_A, dtype=float), prisms)
-    return VOPyramids(frame=frame, lo=lo, hi=hi, L_pz=prisms[:, 2].copy(), h_pz=prisms[:, 3].copy(),
-                      inside=inside)
+    return py_build_pyramids(np.asarray(p_A, dtype=float), prism_rows(obstacles))
 
 
 @jit
-def _pyramid_kernel(p_A, prisms):
+def build_pyramids(p_A: np.ndarray, prisms: np.ndarray) -> VOPyramids:
     """Section 4.1 for prisms (x, y, L_pz, h_pz): C_pz turned square to the line of sight."""
     m = prisms.shape[0]
     frame, lo, hi = np.zeros((m, 3, 3)), np.empty((m, 3)), np.empty((m, 3))
@@ -92,4 +94,30 @@ def _pyramid_kernel(p_A, prisms):
         hi[j, 0], hi[j, 1], hi[j, 2] = dist + L / 2, L / 2, H - p_A[2]
         # Turned to face A, the square contains A exactly when A is within its apothem L/2.
         inside[j] = dist < L / 2 and p_A[2] < H
-    return frame, lo, hi, inside
+    return VOPyramids(frame, lo, hi, prisms[:, 2].copy(), prisms[:, 3].copy(), inside)
+
+
+@entry
+def py_build_pyramids(p_A: np.ndarray, prisms: np.ndarray) -> VOPyramids:
+    """``build_pyramids`` for Python callers (compiled code calls ``build_pyramids``: no Python wrapper)."""
+    return build_pyramids(p_A, prisms)
+
+
+def supporting_faces(pyr: VOPyramids, v0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each pyramid the supporting plane through the apex (origin) and two corners of C_pz
+    that v0 is least inside of: N·v >= 0 keeps v out of the pyramid."""
+    corners = pyr.corners  # (m, 8, 3)
+    i, j = np.triu_indices(8, 1)
+    N = np.cross(corners[:, i], corners[:, j])  # (m, 28, 3) candidate planes through the apex
+    N /= np.maximum(np.linalg.norm(N, axis=-1, keepdims=True), 1e-12)
+    side = np.einsum("mfi,mki->mfk", N, corners)
+    # A supporting plane has every corner on one side; orient it so the corners are behind it.
+    outward = np.all(side <= 1e-9, axis=-1)
+    inward = np.all(side >= -1e-9, axis=-1)
+    N = np.where(inward[..., None] & ~outward[..., None], -N, N)
+    supporting = outward | inward
+    score = np.where(supporting, N @ v0, -np.inf)
+    best = np.argmax(score, axis=1)
+    Nb = N[np.arange(pyr.n), best]
+    Nb = np.where(pyr.inside[:, None], -pyr.frame[:, 0, :], Nb)  # escape: horizontal, outwards
+    return Nb, np.zeros(pyr.n)

@@ -15,8 +15,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from vo3d_opt.formulations.problem import NLP, QP, ConeConstraint, Result
-from vo3d_opt.solvers import Backend, Standard, failure, make_result, screen, standardise
+from vo3d_opt.solvers.base import Backend, Standard, failure, make_result, screen, standardise
+from vo3d_opt.status import Status
+from vo3d_opt.solvers.problem import NLP, QP, ConeConstraint, Result
 
 #: Smoothing of the cone constraint's norm (inside the square root).
 CONE_EPS = 1e-9
@@ -99,9 +100,9 @@ class CasadiBackend(Backend):
         self._plugin = plugin
         self._solvers: dict[tuple[int, int, int], ca.Function] = {}
 
-    def solve(self, qp: QP, warm_start: np.ndarray | None = None) -> Result:
-        """Solve ``qp`` as an NLP without cones, started from ``warm_start``."""
-        return self.solve_nlp(NLP(qp=qp, x0=warm_start))
+    def solve(self, qp: QP) -> Result:
+        """Solve ``qp`` as an NLP without cones, started from zero."""
+        return self.solve_nlp(NLP(qp=qp))
 
     def solve_nlp(self, nlp: NLP) -> Result:
         """Solve ``nlp`` from ``nlp.x0`` (zeros when None)."""
@@ -117,7 +118,7 @@ class CasadiBackend(Backend):
             return early
         cone_data = np.array([[*c.apex, *c.axis, c.cos_alpha] for c in cones], dtype=float)
         if not (np.isfinite(cone_data).all() and np.isfinite(x0).all()):
-            return Result(None, "failed", self.name, "cone data or x0 is not finite")
+            return Result(None, Status.FAILED, self.name, "cone data or x0 is not finite")
         try:
             result = self._run(std, cones, x0)
         except Exception as exc:  # noqa: BLE001 - a backend never raises on a well-formed NLP
@@ -140,12 +141,12 @@ class CasadiBackend(Backend):
         native = str(stats.get("return_status", ""))
         x = np.array(sol["x"], dtype=float).reshape(-1)
         if native in _INFEASIBLE:
-            return Result(None, "infeasible", self.name, native)
+            return Result(None, Status.INFEASIBLE, self.name, native)
         if not stats.get("success", False):
-            return make_result(self.name, std, x, "failed", native)
+            return make_result(self.name, std, x, Status.FAILED, native)
         if not np.isfinite(x).all() or nlp_violation(std, cones, x) > NLP_TOL:
-            return make_result(self.name, std, x, "failed", f"{native}, but x violates constraints")
-        return Result(x, "optimal", self.name, native)
+            return make_result(self.name, std, x, Status.FAILED, f"{native}, but x violates constraints")
+        return Result(x, Status.OPTIMAL, self.name, native)
 
     def _no_worse_than_start(self, std: Standard, cones: list[ConeConstraint], x0: np.ndarray,
                              result: Result) -> Result:
@@ -154,5 +155,5 @@ class CasadiBackend(Backend):
             return result
         if result.ok and objective(std, result.x) <= objective(std, x0) + 1e-9:
             return result
-        return Result(x0.copy(), "failed", self.name,
+        return Result(x0.copy(), Status.FAILED, self.name,
                       f"{result.status} ({result.info}); returning the feasible start x0")

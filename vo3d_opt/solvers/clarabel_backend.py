@@ -11,18 +11,19 @@ from __future__ import annotations
 import clarabel
 import numpy as np
 
-from vo3d_opt.formulations.problem import QP, Result
-from vo3d_opt.solvers import Backend, Standard, make_result
+from vo3d_opt.solvers.base import Backend, Standard, make_result
+from vo3d_opt.status import Status
+from vo3d_opt.solvers.problem import QP, Result
 from vo3d_opt.solvers._sparse import dense_csc, triu_csc, triu_index
 
 #: At most this many persistent solvers (one per structure); the cache is emptied when full.
 MAX_CACHED = 64
 
 _STATUS = {
-    "Solved": "optimal",
-    "AlmostSolved": "optimal",  # kept only if x is feasible
-    "PrimalInfeasible": "infeasible",
-    "AlmostPrimalInfeasible": "infeasible",
+    "Solved": Status.OPTIMAL,
+    "AlmostSolved": Status.OPTIMAL,  # kept only if x is feasible
+    "PrimalInfeasible": Status.INFEASIBLE,
+    "AlmostPrimalInfeasible": Status.INFEASIBLE,
 }
 
 
@@ -62,8 +63,7 @@ class ClarabelBackend(Backend):
     def __init__(self) -> None:
         self._solvers: dict[tuple[int, int, int, int], clarabel.DefaultSolver] = {}
 
-    def _solve(self, qp: QP, std: Standard, warm_start: np.ndarray | None) -> Result:
-        """``warm_start`` is ignored (interior-point)."""
+    def _solve(self, qp: QP, std: Standard) -> Result:
         M, b, sizes = conic_rows(std)
         key = (std.n, *sizes)
         solver = self._solvers.get(key)
@@ -82,4 +82,4 @@ class ClarabelBackend(Backend):
         solver.update(P=std.P[rows, cols], q=std.q, A=M.ravel(order="F"), b=b)
         sol = solver.solve()
         status = str(sol.status)
-        return make_result(self.name, std, sol.x, _STATUS.get(status, "failed"), status)
+        return make_result(self.name, std, sol.x, _STATUS.get(status, Status.FAILED), status)

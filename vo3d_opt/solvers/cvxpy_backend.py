@@ -11,8 +11,10 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from vo3d_opt.formulations.problem import QP, Result
-from vo3d_opt.solvers import Backend, Standard, certified_infeasible, make_result
+from vo3d_opt.solvers.base import Backend, Standard, make_result
+from vo3d_opt.status import Status
+from vo3d_opt.solvers.problem import QP, Result
+from vo3d_opt.solvers.registry import certified_infeasible
 
 #: Extra options per cvxpy solver, for answers as tight as the direct backends'. OSQP is left
 #: unpolished: OSQP 1.x prints a line per polished solve without an active set.
@@ -27,10 +29,10 @@ SOLVER_OPTIONS: dict[str, dict[str, float | int | bool]] = {
 UNRELIABLE_INFEASIBILITY = {"PROXQP"}
 
 _STATUS = {
-    cp.OPTIMAL: "optimal",
-    cp.OPTIMAL_INACCURATE: "optimal",  # kept only if x is feasible
-    cp.INFEASIBLE: "infeasible",
-    cp.INFEASIBLE_INACCURATE: "infeasible",
+    cp.OPTIMAL: Status.OPTIMAL,
+    cp.OPTIMAL_INACCURATE: Status.OPTIMAL,  # kept only if x is feasible
+    cp.INFEASIBLE: Status.INFEASIBLE,
+    cp.INFEASIBLE_INACCURATE: Status.INFEASIBLE,
 }
 
 
@@ -87,8 +89,7 @@ class CvxpyBackend(Backend):
         self._options = SOLVER_OPTIONS.get(solver or "", {})
         self._templates: dict[tuple[int, int, int, bool], _Template] = {}
 
-    def _solve(self, qp: QP, std: Standard, warm_start: np.ndarray | None) -> Result:
-        """``warm_start`` is passed on to solvers that use one."""
+    def _solve(self, qp: QP, std: Standard) -> Result:
         E, e, D, d = std.split()
         key = (std.n, D.shape[0], E.shape[0], std.r is not None)
         if key not in self._templates:
@@ -101,12 +102,10 @@ class CvxpyBackend(Backend):
             t.E.value, t.e.value = E, e
         if t.r is not None:
             t.r.value = std.r
-        t.x.value = None if warm_start is None else np.asarray(warm_start, float).reshape(std.n)
-        t.problem.solve(solver=self._solver, warm_start=warm_start is not None,
-                        **self._options)
+        t.problem.solve(solver=self._solver, **self._options)
         native = t.problem.status
-        status = _STATUS.get(native, "failed")
-        if (status == "infeasible" and self._solver in UNRELIABLE_INFEASIBILITY
+        status = _STATUS.get(native, Status.FAILED)
+        if (status == Status.INFEASIBLE and self._solver in UNRELIABLE_INFEASIBILITY
                 and not certified_infeasible(qp)):
-            status, native = "failed", f"{native}, but Clarabel finds the QP feasible"
+            status, native = Status.FAILED, f"{native}, but Clarabel finds the QP feasible"
         return make_result(self.name, std, t.x.value, status, native)

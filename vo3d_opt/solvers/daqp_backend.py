@@ -11,15 +11,16 @@ from __future__ import annotations
 import daqp
 import numpy as np
 
-from vo3d_opt._jit import jit
-from vo3d_opt.formulations.problem import QP, Result
-from vo3d_opt.solvers import Backend, Standard, make_result
+from vo3d_opt._jit import entry
+from vo3d_opt.solvers.base import Backend, Standard, make_result
+from vo3d_opt.status import Status
+from vo3d_opt.solvers.problem import QP, Result
 
 #: DAQP's infinity: bounds beyond it are clipped to it.
 INF = 1e30
 #: ``sense`` flag of an equality (active and immutable).
 EQUALITY = 5
-_STATUS = {1: "optimal", 2: "optimal", -1: "infeasible"}
+_STATUS = {1: Status.OPTIMAL, 2: Status.OPTIMAL, -1: Status.INFEASIBLE}
 _CODES = {1: "optimal", 2: "soft optimal", -1: "infeasible", -2: "cycling", -3: "unbounded",
           -4: "iteration limit", -5: "nonconvex", -6: "overdetermined initial active set"}
 
@@ -32,14 +33,13 @@ class DaqpBackend(Backend):
     kind = "qp"
     checks_answers = True
 
-    def _solve(self, qp: QP, std: Standard, warm_start: np.ndarray | None) -> Result:
-        """``warm_start`` is ignored: DAQP warm-starts from an active set, not a point."""
+    def _solve(self, qp: QP, std: Standard) -> Result:
         upper, lower, sense = _daqp_rows(std.l, std.u, std.n, std.m_ineq, std.m_eq)
         x, _, flag, _ = daqp.solve(std.P, std.q, std.C[:std.m_ineq + std.m_eq], upper, lower, sense)
-        return make_result(self.name, std, x, _STATUS.get(flag, "failed"), _CODES.get(flag, str(flag)))
+        return make_result(self.name, std, x, _STATUS.get(flag, Status.FAILED), _CODES.get(flag, str(flag)))
 
 
-@jit
+@entry
 def _daqp_rows(l, u, n, m_ineq, m_eq):
     """DAQP's bounds: the simple bounds (the identity rows, last in Standard) first, clipped to
     its infinity, and the ``sense`` flags marking equalities immutable."""

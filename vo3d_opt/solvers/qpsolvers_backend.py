@@ -12,8 +12,10 @@ import numpy as np
 import qpsolvers
 import scipy.sparse as sp
 
-from vo3d_opt.formulations.problem import QP, Result
-from vo3d_opt.solvers import Backend, Standard, certified_infeasible, make_result
+from vo3d_opt.solvers.base import Backend, Standard, make_result
+from vo3d_opt.status import Status
+from vo3d_opt.solvers.problem import QP, Result
+from vo3d_opt.solvers.registry import certified_infeasible
 
 #: Extra options per solver, for answers as tight as the direct backends'. OSQP is left
 #: unpolished: OSQP 1.x prints a line per polished solve without an active set. ProxQP stays
@@ -47,13 +49,11 @@ class QpsolversBackend(Backend):
         self._options = SOLVER_OPTIONS.get(solver, {})
         self._sparse = solver not in qpsolvers.dense_solvers
 
-    def _solve(self, qp: QP, std: Standard, warm_start: np.ndarray | None) -> Result:
-        """``warm_start`` is passed on as qpsolvers' ``initvals``."""
-        init = None if warm_start is None else np.asarray(warm_start, float).reshape(std.n)
+    def _solve(self, qp: QP, std: Standard) -> Result:
         sol = qpsolvers.solve_problem(to_problem(std, self._sparse), solver=self._solver,
-                                      initvals=init, **self._options)
+                                      **self._options)
         if sol.found:
-            return make_result(self.name, std, sol.x, "optimal")
+            return make_result(self.name, std, sol.x, Status.OPTIMAL)
         if certified_infeasible(qp):
-            return Result(None, "infeasible", self.name, "no solution; Clarabel proves infeasible")
-        return Result(None, "failed", self.name, "no solution found, yet QP not proved infeasible")
+            return Result(None, Status.INFEASIBLE, self.name, "no solution; Clarabel proves infeasible")
+        return Result(None, Status.FAILED, self.name, "no solution found, yet QP not proved infeasible")

@@ -1,13 +1,15 @@
-"""The optimisation problems the formulations build and the solver backends answer.
+"""The problems the backends answer, and their answer.
 
-A formulation turns geometry into one of these; a backend (``vo3d_opt.solvers``) turns it into
-an answer. Problems are tiny (2 or 3 variables, tens of constraints), so matrices are dense.
+A formulation builds one of these from the geometry; a backend turns it into a :class:`Result`.
+Problems are tiny (2 or 3 variables, tens of constraints), so matrices are dense.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from vo3d_opt.status import Status
 
 
 @dataclass
@@ -47,7 +49,8 @@ class ConeConstraint:
 
 @dataclass
 class NLP:
-    """The QP's objective and linear constraints plus exact (non-convex) cone constraints."""
+    """The QP's objective and linear constraints plus exact (non-convex) cone constraints,
+    started from ``x0``."""
 
     qp: QP
     cones: list[ConeConstraint] = field(default_factory=list)
@@ -56,13 +59,13 @@ class NLP:
 
 @dataclass
 class Result:
-    """A backend's answer. ``status`` is one of "optimal", "infeasible", "failed"."""
+    """A backend's answer: ``status`` is Status.OPTIMAL, INFEASIBLE or FAILED."""
 
     x: np.ndarray | None
-    status: str
+    status: Status
     solver: str
     info: str = ""
 
     @property
     def ok(self) -> bool:
-        return self.status == "optimal" and self.x is not None and bool(np.all(np.isfinite(self.x)))
+        return self.status == Status.OPTIMAL and self.x is not None and bool(np.all(np.isfinite(self.x)))

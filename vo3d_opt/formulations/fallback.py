@@ -1,0 +1,195 @@
+"""The fallbacks every formulation shares, compiled: the sampled reference's polar grid on the
+avoidance planes (the paper's candidates), the first of them that is safe by the exact check
+with the margin kept, and the least-bad velocity when nothing is safe.
+
+The compiled kernel calls ``grid_search`` and ``least_bad`` directly; the Python formulations
+(``sampled``, ``plane_qp`` on outside backends, ``cone_qp``, ``nlp``) through ``fallback`` and
+``first_safe``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .._jit import entry, jit
+from ..geometry import AvoidancePlanes
+from ..geometry.membership import clearance
+from ..status import Status
+from .common import NEVER, Bounds, Config, Encounter, Outcome, VOs, containing, time_to_intrusion, vz_range, within_limits
+
+
+@jit
+def polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
+    """(M, 2) in-plane candidates: ``speed_levels`` speeds from v_min to v_max, headings every
+    ``heading_step``; speed 0 once, repeated speeds once."""
+    L = cfg.speed_levels
+    H = int(np.ceil(2.0 * np.pi / cfg.heading_step - 1e-9))
+    out = np.empty((L * H, 2))
+    m = 0
+    for a in range(L):
+        s = bounds.v_min + (bounds.v_max - bounds.v_min) * a / (L - 1)
+        if a > 0 and s == bounds.v_min + (bounds.v_max - bounds.v_min) * (a - 1) / (L - 1):
+            continue
+        for k in range(1 if s == 0.0 else H):  # rounded as numpy's round(12) does
+            out[m, 0] = np.rint(s * np.cos(k * cfg.heading_step) * 1e12) / 1e12
+            out[m, 1] = np.rint(s * np.sin(k * cfg.heading_step) * 1e12) / 1e12
+            m += 1
+    return out[:m]
+
+
+@jit
+def _by_value(x: np.ndarray) -> np.ndarray:
+    """Indices that sort x, equal values in their original order (insertion sort: the grid
+    has a few hundred points)."""
+    order = np.empty(x.shape[0], dtype=np.int64)
+    for a in range(x.shape[0]):
+        b = a
+        while b > 0 and x[order[b - 1]] > x[a]:
+            order[b] = order[b - 1]
+            b -= 1
+        order[b] = a
+    return order
+
+
+@jit
+def safe_by_margin(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config,
+                   into: np.ndarray) -> bool:
+    """Within the limits, outside every VO by the exact check, and at least ``margin`` (m/s)
+    from every VO: the same margin the linearised rows keep, so no answer lies on a VO's
+    boundary."""
+    if not within_limits(v, G3, h3, bounds) or containing(vos, v, cfg.horizon, into):
+        return False
+    return clearance(vos.cones, vos.pyramids, v, cfg.horizon) >= cfg.margin * (1.0 - 1e-9)
+
+
+@jit
+def grid_search(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds,
+                cfg: Config) -> tuple[bool, np.ndarray, int]:
+    """The grid velocity nearest the preferred one that ``safe_by_margin`` accepts: (found,
+    velocity, plane index). Grid points equally far from it are tried plane by plane."""
+    grid = polar_grid(bounds, cfg)
+    e1 = planes.to_plane[0, 0]
+    w0 = e1[0] * vos.v_pref[0] + e1[1] * vos.v_pref[1] + e1[2] * vos.v_pref[2]
+    dev = np.empty(grid.shape[0])
+    for g in range(grid.shape[0]):  # |v - v_pref|: the planes are isometric
+        dev[g] = np.sqrt((grid[g, 0] - w0) ** 2 + grid[g, 1] ** 2)
+    order = _by_value(dev)
+    into = np.empty(vos.cones.d_oi.shape[0] + vos.pyramids.L_pz.shape[0], dtype=np.bool_)
+    v = np.empty(3)
+    a = 0
+    while a < order.shape[0]:
+        b = a
+        while b < order.shape[0] and dev[order[b]] <= dev[order[a]] + 1e-12:
+            b += 1
+        for p in range(planes.phi.shape[0]):
+            e2 = planes.to_plane[p, 1]
+            for q in range(a, b):
+                x, y = grid[order[q], 0], grid[order[q], 1]
+                for c in range(3):
+                    v[c] = x * e1[c] + y * e2[c]
+                if safe_by_margin(vos, v, G3, h3, bounds, cfg, into):
+                    return True, v, p
+        a = b
+    return False, v, -1
+
+
+@jit
+def _consider(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, best: np.ndarray,
+              key: np.ndarray) -> None:
+    """Keep v in ``best`` if it is within the limits and its (latest intrusion, least
+    deviation) beats ``key`` = (-time, deviation)."""
+    if not within_limits(v, G3, h3, bounds):
+        return
+    t = -min(time_to_intrusion(vos, v), NEVER)
+    dev = np.sqrt((v[0] - vos.v_pref[0]) ** 2 + (v[1] - vos.v_pref[1]) ** 2 + (v[2] - vos.v_pref[2]) ** 2)
+    if t < key[0] or (t == key[0] and dev < key[1]):
+        best[0], best[1], best[2] = v[0], v[1], v[2]
+        key[0], key[1] = t, dev
+
+
+@jit
+def least_bad(vos: VOs, planes: AvoidancePlanes, tried: np.ndarray, p: np.ndarray, v_now: np.ndarray,
+              G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> np.ndarray:
+    """Among the tried answers (k, 3), the grid on every plane, zero and v_now, within the
+    limits, the velocity whose first protected-zone intrusion comes latest (ties: nearest the
+    preferred velocity). With an acceleration limit each is also tried clipped into the
+    reachable box (few grid points lie in it). None within the limits (e.g. v_min > 0 and
+    zero): the limits' own closest point to hovering."""
+    grid = polar_grid(bounds, cfg)
+    P, M, k = planes.phi.shape[0], grid.shape[0], tried.shape[0]
+    best, key = np.empty(3), np.empty(2)
+    best[0], key[0], key[1] = np.nan, np.inf, np.inf
+    v = np.empty(3)
+    dv = bounds.acceleration * bounds.dt
+    passes = 1 if np.isnan(dv) else 2
+    for pass_ in range(passes):
+        for q in range(k + P * M + 2):
+            for c in range(3):
+                if q < k:
+                    v[c] = tried[q, c]
+                elif q < k + P * M:
+                    pl, g = (q - k) // M, (q - k) % M
+                    v[c] = grid[g, 0] * planes.to_plane[pl, 0, c] + grid[g, 1] * planes.to_plane[pl, 1, c]
+                else:
+                    v[c] = 0.0 if q == k + P * M else v_now[c]
+                if pass_ == 1:
+                    v[c] = min(max(v[c], v_now[c] - dv), v_now[c] + dv)
+            _consider(vos, v, G3, h3, bounds, best, key)
+    if np.isnan(best[0]):
+        lo, hi = vz_range(p[2], bounds)
+        best[0], best[1], best[2] = 0.0, 0.0, min(max(0.0, lo), hi)
+    return best
+
+
+@entry
+def py_polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
+    """``polar_grid`` for Python callers (compiled code calls ``polar_grid``: no Python wrapper)."""
+    return polar_grid(bounds, cfg)
+
+
+@entry
+def py_grid_search(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> tuple[bool, np.ndarray, int]:
+    """``grid_search`` for Python callers (compiled code calls ``grid_search``: no Python wrapper)."""
+    return grid_search(vos, planes, G3, h3, bounds, cfg)
+
+
+@entry
+def py_least_bad(vos: VOs, planes: AvoidancePlanes, tried: np.ndarray, p: np.ndarray, v_now: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> np.ndarray:
+    """``least_bad`` for Python callers (compiled code calls ``least_bad``: no Python wrapper)."""
+    return least_bad(vos, planes, tried, p, v_now, G3, h3, bounds, cfg)
+
+
+@entry
+def _first_safe(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> int:
+    into = np.empty(vos.cones.d_oi.shape[0] + vos.pyramids.L_pz.shape[0], dtype=np.bool_)
+    for k in range(v.shape[0]):
+        if safe_by_margin(vos, v[k], G3, h3, bounds, cfg, into):
+            return k
+    return -1
+
+
+# ------------------------------------------------------------------------------- Python side
+
+
+def first_safe(enc: Encounter, candidates: np.ndarray) -> int | None:
+    """Index of the first candidate (in the given order) that is within the limits, outside
+    every VO by the exact 3D check and at least ``margin`` from every VO, or None."""
+    G3, h3 = enc.linear_bounds()
+    v = np.ascontiguousarray(np.asarray(candidates, dtype=float).reshape(-1, 3))
+    k = _first_safe(enc.vos, v, G3, h3, enc.bounds, enc.options.config)
+    return None if k < 0 else int(k)
+
+
+def fallback(enc: Encounter, planes: AvoidancePlanes, tried: np.ndarray, all_failed: bool) -> Outcome:
+    """No answer passed the exact check: the sampled reference's grid (the exact check and the
+    margin decide, not its sections); if none is safe either, the least-bad velocity. When the
+    backend failed on every problem the status says so whatever the fallback found."""
+    G3, h3 = enc.linear_bounds()
+    cfg = enc.options.config
+    found, v, p = py_grid_search(enc.vos, planes, G3, h3, enc.bounds, cfg)
+    if found:
+        return Outcome(v, Status.SOLVER_FAILED_FALLBACK if all_failed else Status.OPTIMAL, float(planes.phi[p]),
+                       {"round": "sampled"})
+    v = py_least_bad(enc.vos, planes, np.ascontiguousarray(tried, dtype=float).reshape(-1, 3), enc.position,
+                  enc.v_now, G3, h3, enc.bounds, cfg)
+    status = Status.SOLVER_FAILED_FALLBACK if all_failed else Status.INFEASIBLE_MIN_VIOLATION
+    return Outcome(v, status, None, {"round": "least_bad"})

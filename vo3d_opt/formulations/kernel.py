@@ -1,0 +1,293 @@
+"""The default decision in one compiled call: plane_qp on the exact per-plane solver.
+
+Read top to bottom, ``decide`` is the whole algorithm (formulations/plane_qp.md), the way
+RVO2-3D's ``Agent.cc`` reads:
+
+1. the VOs (``build_vos``: cones of eqs 1–6 with the virtual sphere, pyramids of section 4) and
+   the limits as rows (altitude, acceleration);
+2. the preferred velocity itself, when it is within the limits and outside every VO (exact 3D
+   check), is the optimum of every formulation: returned at once;
+3. the avoidance planes about the preferred direction (eq. 8); on each plane and in each
+   linearisation round (near, left, right) one QP: the point nearest the preferred velocity
+   inside the speed disc (or annulus), the altitude rows and one half-plane per VO that holds
+   the preferred velocity or that A is inside (``vo_rows``: the sections of section 3.1 / 4.2
+   linearised), solved exactly (``nearest_in_disc``);
+4. best first: the QP with the least deviation is checked with the exact 3D membership; a safe
+   answer is the decision (every other QP's answer is at least as far: adding constraints only
+   moves an answer away), an answer that enters VOs not yet constrained on that QP adds their
+   rows to it and that QP is solved again (constraint generation, per QP, so an answer never
+   depends on the order the QPs are solved in);
+5. no QP gives a safe answer: the sampled grid with the exact check and the margin, else the
+   least-bad velocity (latest first intrusion);
+6. the status, and the last line of the contract (never above v_max, never leaving the
+   altitude band within dt).
+
+A plane QP costs well under a microsecond, so each QP's exact optimum is its own key in the
+best-first order: no bounds are needed (the Python search for outside backends,
+``plane_qp.py``, uses these exact optima as its lower bounds).
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .._jit import entry, jit
+from ..geometry import AvoidancePlanes
+from ..solvers.exact2d import nearest_in_disc
+from .common import Bounds, Config, VOs, build_vos, containing, decision_planes, limit_rows, vz_range, within_limits
+from .fallback import grid_search, least_bad
+from .rows import ROUNDS, vo_rows
+
+#: How a decision's velocity was found (``KernelOut.round``): the preferred velocity, a QP round,
+#: the sampled grid, the least-bad fallback.
+ROUND_NAMES = ("preferred",) + ROUNDS + ("sampled", "least_bad")
+PREFERRED, SAMPLED, LEAST_BAD = 0, len(ROUNDS) + 1, len(ROUNDS) + 2
+#: ``KernelOut.status`` codes: the order of vo3d_opt.status.DECISION_STATUSES.
+OPTIMAL, INSIDE_PROTECTED_ZONE, INFEASIBLE_MIN_VIOLATION = 0, 1, 2
+
+
+class KernelOut(NamedTuple):
+    """One decision: the velocity (3,) and how it was found."""
+
+    velocity: np.ndarray
+    status: int  # index into DECISION_STATUSES
+    phi: float  # the plane the velocity was chosen on (rad), NaN when none
+    round: int  # index into ROUND_NAMES
+    solved: int  # plane QPs solved
+
+
+class PlaneQPs(NamedTuple):
+    """The (round, plane) QPs of one decision and their rows, filled as VOs join.
+
+    Rows of VO k: G[k, r, p]·w <= h[k, r, p] where active[k, p] (computed[k] once built);
+    QP (r, p) constrains the VOs in included[r, p] plus the limit rows G_lim[p]·w <= h_lim and the
+    speed disc; its exact optimum is sol[r, p] at deviation key[r, p] (inf: infeasible or done)."""
+
+    G: np.ndarray  # (V, R, P, 2)
+    h: np.ndarray  # (V, R, P)
+    active: np.ndarray  # (V, P) bool
+    computed: np.ndarray  # (V,) bool
+    included: np.ndarray  # (R, P, V) bool
+    G_lim: np.ndarray  # (P, L, 2)
+    h_lim: np.ndarray  # (L,)
+    key: np.ndarray  # (R, P)
+    sol: np.ndarray  # (R, P, 2)
+    w0: np.ndarray  # (2,) the preferred velocity in plane coordinates (the same on every plane)
+    rows: np.ndarray  # (V + L, 2) scratch: one QP's rows ...
+    rhs: np.ndarray  # (V + L,) ... their right-hand sides
+    order: np.ndarray  # (V + L,) scratch of the solver
+
+
+@jit
+def plane_qps(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, initial: np.ndarray,
+              cfg: Config) -> PlaneQPs:
+    """The QPs of one decision with the rows of the ``initial`` VOs (those holding the preferred
+    velocity, and the zones A is inside)."""
+    V, R, P, L = initial.shape[0], len(ROUNDS), cfg.phi.shape[0], G3.shape[0]
+    G_lim = np.empty((P, L, 2))
+    for p in range(P):  # the 3D limit rows G3 v <= h3 on P_phi: G3 @ [e1, e2(phi)]
+        for j in range(L):
+            for c in range(2):
+                T = planes.to_plane[p, c]
+                G_lim[p, j, c] = G3[j, 0] * T[0] + G3[j, 1] * T[1] + G3[j, 2] * T[2]
+    e1 = planes.to_plane[0, 0]
+    w0 = np.zeros(2)
+    w0[0] = e1[0] * vos.v_pref[0] + e1[1] * vos.v_pref[1] + e1[2] * vos.v_pref[2]  # v_pref lies in every plane
+    included, key = np.empty((R, P, V), dtype=np.bool_), np.empty((R, P))
+    for r in range(R):
+        for p in range(P):
+            key[r, p] = np.inf
+            for k in range(V):
+                included[r, p, k] = initial[k]
+    qps = PlaneQPs(np.empty((V, R, P, 2)), np.empty((V, R, P)), np.zeros((V, P), dtype=np.bool_),
+                   np.zeros(V, dtype=np.bool_), included, G_lim, h3, key, np.empty((R, P, 2)),
+                   w0, np.empty((V + L, 2)), np.empty(V + L), np.empty(V + L, dtype=np.int64))
+    for k in range(V):
+        if initial[k]:
+            add_rows(qps, vos, planes, cfg, k)
+    return qps
+
+
+@jit
+def add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, k: int) -> None:
+    """Build VO k's rows on every plane and round, once."""
+    if not qps.computed[k]:
+        vo_rows(vos, k, planes.frame, planes.to_plane, cfg, qps.w0, qps.G[k], qps.h[k], qps.active[k])
+        qps.computed[k] = True
+
+
+@jit
+def gather(qps: PlaneQPs, r: int, p: int) -> int:
+    """QP (r, p)'s rows (its VOs', then the limits') into qps.rows / qps.rhs: how many."""
+    m = 0
+    for k in range(qps.included.shape[2]):
+        if qps.included[r, p, k] and qps.active[k, p]:
+            qps.rows[m, 0], qps.rows[m, 1], qps.rhs[m] = qps.G[k, r, p, 0], qps.G[k, r, p, 1], qps.h[k, r, p]
+            m += 1
+    for j in range(qps.h_lim.shape[0]):
+        qps.rows[m, 0], qps.rows[m, 1], qps.rhs[m] = qps.G_lim[p, j, 0], qps.G_lim[p, j, 1], qps.h_lim[j]
+        m += 1
+    return m
+
+
+@jit
+def solve_qp(qps: PlaneQPs, r: int, p: int, bounds: Bounds) -> None:
+    """QP (r, p) solved exactly: its optimum into sol[r, p], its deviation into key[r, p]."""
+    m = gather(qps, r, p)
+    out = qps.sol[r, p]
+    if nearest_in_disc(qps.rows, qps.rhs, m, qps.w0, bounds.v_max, bounds.v_min, qps.order, out):
+        qps.key[r, p] = np.sqrt((out[0] - qps.w0[0]) ** 2 + (out[1] - qps.w0[1]) ** 2)
+    else:
+        qps.key[r, p] = np.inf
+
+
+@jit
+def search(vos: VOs, planes: AvoidancePlanes, qps: PlaneQPs, G3: np.ndarray, h3: np.ndarray, bounds: Bounds,
+           cfg: Config, tried: np.ndarray) -> tuple[int, int, int, int]:
+    """Best-first over the QPs (step 4 of the module docstring): (round, plane) of the answer,
+    or (-1, -1) when no QP gives a safe one; the QPs solved; how many answers went into
+    ``tried`` (each QP answer in solve order, for the least-bad fallback)."""
+    R, P = qps.key.shape
+    into, v = np.empty(qps.included.shape[2], dtype=np.bool_), np.empty(3)
+    solved = n_tried = 0
+    for q in range(R * P + tried.shape[0]):
+        if q < R * P:  # every QP once with its initial rows, then the best first
+            r, p = q // P, q % P
+            if r > 0 and _same_rows(qps, r, p):  # a round that changes nothing on this plane
+                qps.key[r, p] = qps.key[r - 1, p]
+                qps.sol[r, p, 0], qps.sol[r, p, 1] = qps.sol[r - 1, p, 0], qps.sol[r - 1, p, 1]
+                continue
+        else:
+            r, p = _argmin(qps.key)
+            if qps.key[r, p] == np.inf:
+                return -1, -1, solved, n_tried
+            lift(planes, qps.sol[r, p], p, v)
+            if not containing(vos, v, cfg.horizon, into):
+                if within_limits(v, G3, h3, bounds):
+                    return r, p, solved, n_tried
+                qps.key[r, p] = np.inf  # outside the limits within tolerance: this QP gives nothing
+                continue
+            new = False
+            for k in range(into.shape[0]):  # constrain the VOs it entered and solve again
+                if into[k] and not qps.included[r, p, k]:
+                    add_rows(qps, vos, planes, cfg, k)
+                    qps.included[r, p, k] = new = True
+            if not new:  # it entered only VOs it already has rows for (a rounding edge): give up
+                qps.key[r, p] = np.inf
+                continue
+        solve_qp(qps, r, p, bounds)
+        solved += 1
+        if qps.key[r, p] < np.inf:
+            lift(planes, qps.sol[r, p], p, tried[n_tried])
+            n_tried += 1
+    return -1, -1, solved, n_tried
+
+
+@jit
+def _same_rows(qps: PlaneQPs, r: int, p: int) -> bool:
+    """Whether QP (r, p) has the same rows as QP (r - 1, p) (same VOs, same half-planes)."""
+    for k in range(qps.included.shape[2]):
+        if qps.included[r, p, k] != qps.included[r - 1, p, k]:
+            return False
+        if qps.included[r, p, k] and qps.active[k, p] and (
+                qps.G[k, r, p, 0] != qps.G[k, r - 1, p, 0] or qps.G[k, r, p, 1] != qps.G[k, r - 1, p, 1]
+                or qps.h[k, r, p] != qps.h[k, r - 1, p]):
+            return False
+    return True
+
+
+@jit
+def _argmin(key: np.ndarray) -> tuple[int, int]:
+    """The first (r, p) of the least key."""
+    br, bp = 0, 0
+    for r in range(key.shape[0]):
+        for p in range(key.shape[1]):
+            if key[r, p] < key[br, bp]:
+                br, bp = r, p
+    return br, bp
+
+
+@jit
+def lift(planes: AvoidancePlanes, w: np.ndarray, p: int, out: np.ndarray) -> None:
+    """Plane coordinates w on plane p to the world velocity out (3,)."""
+    for c in range(3):
+        out[c] = w[0] * planes.to_plane[p, 0, c] + w[1] * planes.to_plane[p, 1, c]
+
+
+@entry
+def enforce_limits(v: np.ndarray, p: np.ndarray, bounds: Bounds) -> np.ndarray:
+    """The last line of the contract: never above v_max, never leaving [z_min, z_max] within dt
+    (from an in-bounds start); non-finite components become 0."""
+    out = np.empty(3)
+    for c in range(3):
+        out[c] = v[c] if np.isfinite(v[c]) else 0.0
+    lo, hi = vz_range(p[2], bounds)
+    out[2] = min(max(out[2], lo), hi)
+    speed = np.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2)
+    if speed > bounds.v_max:
+        for c in range(3):
+            out[c] *= bounds.v_max / speed
+    return out
+
+
+@entry
+def py_plane_qps(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, initial: np.ndarray, cfg: Config) -> PlaneQPs:
+    """``plane_qps`` for Python callers (compiled code calls ``plane_qps``: no Python wrapper)."""
+    return plane_qps(vos, planes, G3, h3, initial, cfg)
+
+
+@entry
+def py_add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, k: int) -> None:
+    """``add_rows`` for Python callers (compiled code calls ``add_rows``: no Python wrapper)."""
+    return add_rows(qps, vos, planes, cfg, k)
+
+
+@entry
+def py_gather(qps: PlaneQPs, r: int, p: int) -> int:
+    """``gather`` for Python callers (compiled code calls ``gather``: no Python wrapper)."""
+    return gather(qps, r, p)
+
+
+@entry
+def py_solve_qp(qps: PlaneQPs, r: int, p: int, bounds: Bounds) -> None:
+    """``solve_qp`` for Python callers (compiled code calls ``solve_qp``: no Python wrapper)."""
+    return solve_qp(qps, r, p, bounds)
+
+
+@entry
+def py_lift(planes: AvoidancePlanes, w: np.ndarray, p: int, out: np.ndarray) -> None:
+    """``lift`` for Python callers (compiled code calls ``lift``: no Python wrapper)."""
+    return lift(planes, w, p, out)
+
+
+@entry
+def decide(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray,
+           bounds: Bounds, cfg: Config) -> KernelOut:
+    """One decision (the module docstring's steps 1–6). ``nbrs`` (n, 8): position, velocity,
+    r_pz, cooperative (1/0); ``prisms`` (m, 4): x, y, L_pz, h_pz."""
+    vos = build_vos(p, v_now, v_pref, nbrs, prisms, bounds, cfg)  # 1
+    G3, h3 = limit_rows(p, v_now, bounds)
+    n, V = vos.cones.d_oi.shape[0], vos.cones.d_oi.shape[0] + vos.pyramids.L_pz.shape[0]
+    initial = np.empty(V, dtype=np.bool_)
+    pref_in = containing(vos, vos.v_pref, cfg.horizon, initial)
+    status = OPTIMAL
+    for k in range(V):  # the zones A is inside constrain every QP
+        if vos.cones.inside[k] if k < n else vos.pyramids.inside[k - n]:
+            initial[k], status = True, INSIDE_PROTECTED_ZONE
+    if status == OPTIMAL and not pref_in and within_limits(vos.v_pref, G3, h3, bounds):  # 2
+        return KernelOut(enforce_limits(vos.v_pref, p, bounds), OPTIMAL, np.nan, PREFERRED, 0)
+    planes = decision_planes(vos, v_now, cfg)  # 3
+    qps = plane_qps(vos, planes, G3, h3, initial, cfg)
+    R, P = qps.key.shape
+    tried = np.empty((R * P * (V + 1), 3))
+    r, plane, solved, n_tried = search(vos, planes, qps, G3, h3, bounds, cfg, tried)  # 4
+    if r >= 0:
+        v = np.empty(3)
+        lift(planes, qps.sol[r, plane], plane, v)
+        return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], 1 + r, solved)
+    found, v, plane = grid_search(vos, planes, G3, h3, bounds, cfg)  # 5
+    if found:
+        return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], SAMPLED, solved)
+    v = least_bad(vos, planes, tried[:n_tried], p, v_now, G3, h3, bounds, cfg)
+    return KernelOut(enforce_limits(v, p, bounds), INFEASIBLE_MIN_VIOLATION, np.nan, LEAST_BAD, solved)  # 6

@@ -1,0 +1,154 @@
+"""The linearised VO rows of plane_qp, one per VO, plane and round (formulations/plane_qp.md).
+
+On every avoidance plane P_phi the velocity is w = (x, y), v = x e1 + y e2(phi). Each section
+of a VO becomes one half-plane G·w <= h on that plane:
+
+- a conic section (circle, ellipse, parabola, hyperbola): the cone's tangent plane along the
+  generator through a boundary point of the section (the curve points of eq. (12) and the
+  chord points of eq. (17)), restricted to the plane. Round "near" takes the boundary point
+  nearest the preferred velocity, "left" / "right" the nearest in the upper / lower half of
+  the section. A tangent plane supports the (convex) cone, so no point of the half-plane is in
+  the VO, and it is pushed out by ``margin`` (m/s) so that answers are strictly outside;
+- a triangle (the apex on the plane, section 3.1.3, and every pyramid section, eq. 19): one of
+  its two sides through the apex;
+- A inside the zone: the escape half-plane (not closing in), every round.
+
+Blank, point and line sections constrain nothing. The exact solver and every other backend use
+these same rows.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .._jit import jit
+from ..geometry.cone import outward_normal
+from ..geometry.pyramid import prism_corners
+from ..geometry.sections import (CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, Section, cone_base_points,
+                                 cone_section, pyramid_section)
+from .common import Config, VOs
+
+#: Linearisation rounds: nearest boundary point, then every section passed on its left, right.
+ROUNDS = ("near", "left", "right")
+
+
+@jit
+def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray) -> tuple[int, int, int]:
+    """The boundary candidate each round linearises at: "near" the nearest valid one; "left"
+    / "right" the nearest in the upper / lower half of the section (by in-plane y about the
+    candidates' mean), or the nearest when that half is empty."""
+    count, total = 0, 0.0
+    for k in range(dist.shape[0]):
+        if valid[k]:
+            count, total = count + 1, total + side_y[k]
+    centre = total / max(count, 1)
+    near, left, right = 0, -1, -1
+    d_near, d_left, d_right = np.inf, np.inf, np.inf
+    for k in range(dist.shape[0]):
+        if not valid[k]:
+            continue
+        if dist[k] < d_near:
+            near, d_near = k, dist[k]
+        if side_y[k] >= centre and dist[k] < d_left:
+            left, d_left = k, dist[k]
+        if side_y[k] <= centre and dist[k] < d_right:
+            right, d_right = k, dist[k]
+    return near, (left if left >= 0 else near), (right if right >= 0 else near)
+
+
+@jit
+def _triangle_rows(apex: np.ndarray, chord: np.ndarray, w0: np.ndarray, G: np.ndarray, h: np.ndarray) -> bool:
+    """Each round's side of a triangle (the generators through its apex) as G[r]·w <= h[r],
+    normal away from the other chord point; False when degenerate. With two candidates,
+    "near" takes the nearer side, "left" / "right" the upper / lower one (as _pick does)."""
+    d0x, d0y = chord[0, 0] - apex[0], chord[0, 1] - apex[1]
+    d1x, d1y = chord[1, 0] - apex[0], chord[1, 1] - apex[1]
+    wx, wy = w0[0] - apex[0], w0[1] - apex[1]
+    s0 = max((wx * d0x + wy * d0y) / (d0x * d0x + d0y * d0y), 0.0)
+    s1 = max((wx * d1x + wy * d1y) / (d1x * d1x + d1y * d1y), 0.0)
+    dist0, dist1 = np.hypot(wx - s0 * d0x, wy - s0 * d0y), np.hypot(wx - s1 * d1x, wy - s1 * d1y)
+    if not (np.isfinite(dist0) and np.isfinite(dist1)):
+        return False
+    centre = 0.5 * (chord[0, 1] + chord[1, 1])
+    near = 0 if dist0 <= dist1 else 1
+    for r in range(G.shape[0]):
+        i = near
+        if r > 0:  # the nearest candidate on the round's side, if there is one
+            on0 = chord[0, 1] >= centre if r == 1 else chord[0, 1] <= centre
+            on1 = chord[1, 1] >= centre if r == 1 else chord[1, 1] <= centre
+            if on0 and on1:
+                i = near
+            elif on0 or on1:
+                i = 0 if on0 else 1
+        dx, dy = (d0x, d0y) if i == 0 else (d1x, d1y)
+        ox, oy = (d1x, d1y) if i == 0 else (d0x, d0y)
+        nx, ny = dy, -dx  # G·w <= G·apex keeps w on the side away from the other chord point
+        if nx * ox + ny * oy < 0:
+            nx, ny = -nx, -ny
+        G[r, 0], G[r, 1], h[r] = nx, ny, nx * apex[0] + ny * apex[1]
+    return True
+
+
+@jit
+def _curve_rows(vos: VOs, i: int, sec: Section, cfg: Config, w0: np.ndarray, to_plane: np.ndarray,
+                G: np.ndarray, h: np.ndarray, scratch: np.ndarray, valid: np.ndarray) -> bool:
+    """Each round's tangent-plane row of cone i's conic section (see the module docstring);
+    False when the section has no boundary point. ``scratch`` (2, K + 2), ``valid`` (K + 2,)."""
+    K = cfg.t.shape[0]
+    dist, side_y = scratch[0], scratch[1]
+    any_valid = False
+    for k in range(K + 2):  # the curve of eq. (12), then the chord points of eq. (17)
+        qx = sec.curve[k, 0] if k < K else sec.chord[k - K, 0]
+        qy = sec.curve[k, 1] if k < K else sec.chord[k - K, 1]
+        valid[k] = qx == qx  # not NaN
+        any_valid |= valid[k]
+        dist[k] = (qx - w0[0]) ** 2 + (qy - w0[1]) ** 2 if valid[k] else np.inf  # squared: only compared
+        side_y[k] = qy
+    if not any_valid:
+        return False
+    picks = _pick(dist, side_y, valid)
+    c, e1, e2 = vos.cones, to_plane[0], to_plane[1]
+    for r in range(G.shape[0]):
+        # The cone's tangent plane along that generator (outward normal N), on P_phi: N·v >= N·apex.
+        k = picks[r]
+        ct = cfg.cos_t[k] if k < K else sec.chord_cs[k - K, 0]
+        st = cfg.sin_t[k] if k < K else sec.chord_cs[k - K, 1]
+        N0, N1, N2 = outward_normal(c.R[i], c.sin_alpha[i], ct, st)
+        G[r, 0] = -(N0 * e1[0] + N1 * e1[1] + N2 * e1[2])
+        G[r, 1] = -(N0 * e2[0] + N1 * e2[1] + N2 * e2[2])
+        h[r] = -(N0 * c.apex[i, 0] + N1 * c.apex[i, 1] + N2 * c.apex[i, 2])
+    return True
+
+
+@jit
+def vo_rows(vos: VOs, k: int, frame: np.ndarray, to_plane: np.ndarray, cfg: Config, w0: np.ndarray,
+            G: np.ndarray, h: np.ndarray, active: np.ndarray) -> None:
+    """Every round's row of VO k (cones first, then pyramids) on every plane: G[r, p]·w <=
+    h[r, p] where ``active[p]``. G (R, P, 2), h (R, P), active (P,)."""
+    n, K, P = vos.cones.d_oi.shape[0], cfg.cos_t.shape[0], cfg.phi.shape[0]
+    sec = Section(np.empty((K if k < n else 0, 2)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2), np.empty(2),
+                  np.empty(3))
+    base, scratch, valid = np.empty((K, 3)), np.empty((2, K + 2)), np.empty(K + 2, dtype=np.bool_)
+    corners = np.empty((8, 3))
+    if k < n:
+        cone_base_points(vos.cones, k, frame, cfg.cos_t, cfg.sin_t, base)
+    else:
+        corners = prism_corners(vos.pyramids.frame[k - n:k - n + 1], vos.pyramids.lo[k - n:k - n + 1],
+                                vos.pyramids.hi[k - n:k - n + 1])[0]
+    for p in range(P):
+        c, s = cfg.cos_phi[p], cfg.sin_phi[p]
+        if k < n:
+            kind = cone_section(vos.cones, k, base, frame, c, s, cfg.corrections, sec)
+        else:
+            kind = pyramid_section(vos.pyramids, k - n, corners, frame, c, s, sec)
+        if kind == INSIDE_CODE:  # escape: not closing in, every round
+            for r in range(G.shape[0]):
+                G[r, p, 0], G[r, p, 1], h[r, p] = sec.halfplane[0], sec.halfplane[1], sec.halfplane[2]
+            active[p] = True
+        elif kind == TRIANGLE:
+            active[p] = _triangle_rows(sec.apex, sec.chord, w0, G[:, p], h[:, p])
+        elif k < n and (kind == CIRCLE or kind == ELLIPSE or kind == PARABOLA or kind == HYPERBOLA):
+            active[p] = _curve_rows(vos, k, sec, cfg, w0, to_plane[p], G[:, p], h[:, p], scratch, valid)
+        else:
+            active[p] = False
+        for r in range(G.shape[0]):
+            h[r, p] -= cfg.margin  # strictly outside: pushed out by the margin (m/s)
