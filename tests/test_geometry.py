@@ -7,6 +7,7 @@ direction and the plane angle; ``_world`` maps it to the world frame.
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -27,7 +28,7 @@ from vo3d_opt.geometry import (
     vo_cones,
     vo_pyramids,
 )
-from vo3d_opt.geometry.frames import rotation_el_az, rotation_plane
+from vo3d_opt.geometry.cone import outward_normal
 from vo3d_opt.types import Box, Cylinder
 
 REACH = 6.0  # largest own speed of interest (m/s) in these tests
@@ -43,6 +44,36 @@ FRAMES = [
 
 
 # ----------------------------------------------------------------------------- helpers
+
+
+def rotation_el_az(theta_el, psi_az):
+    """R_{theta_el|psi_az} of eq. (6) as the paper writes it (the reference the compiled frames
+    are checked against), shape (..., 3, 3)."""
+    ct, st, cp, sp = np.cos(theta_el), np.sin(theta_el), np.cos(psi_az), np.sin(psi_az)
+    zero = np.zeros_like(ct)
+    return np.stack([np.stack([cp * ct, -sp, -cp * st], -1), np.stack([sp * ct, cp, -sp * st], -1),
+                     np.stack([st, zero, ct], -1)], -2)
+
+
+def rotation_plane(phi):
+    """R_{P_phi} of eq. (8), shape (..., 3, 3)."""
+    c, s = np.cos(phi), np.sin(phi)
+    one, zero = np.ones_like(c), np.zeros_like(c)
+    return np.stack([np.stack([one, zero, zero], -1), np.stack([zero, c, s], -1), np.stack([zero, -s, c], -1)], -2)
+
+
+@numba.njit
+def _normals(R, sin_alpha, t):
+    out = np.empty((R.shape[0], t.shape[0], 3))
+    for i in range(R.shape[0]):
+        for k in range(t.shape[0]):
+            out[i, k, 0], out[i, k, 1], out[i, k, 2] = outward_normal(R[i], sin_alpha[i], np.cos(t[k]), np.sin(t[k]))
+    return out
+
+
+def outward_normals(cones, t):
+    """The compiled outward normal of every cone (n) along generators t (K,): (n, K, 3)."""
+    return _normals(cones.R, cones.sin_alpha, np.asarray(t, dtype=float))
 
 
 def _unit(v):
@@ -72,7 +103,7 @@ def _case(pref, phi, rel, v_b, r_pz=10.0, p_a=(3.0, -7.0, 20.0), **cone_kw):
 def _exact_on_plane(cones, planes, xy, **kw):
     """Exact membership of in-plane velocities xy (P, M, 2) lifted to 3D: (n, P, M)."""
     v = planes.lift(xy).reshape(-1, 3)
-    return in_vo_cones(cones, v, **kw).reshape((len(cones),) + xy.shape[:2])
+    return in_vo_cones(cones, v, **kw).reshape((cones.n,) + xy.shape[:2])
 
 
 def _disc_grid(radius=REACH, m=61):
@@ -184,7 +215,7 @@ def test_cone_quantities_eq_2_to_5():
     dots = np.einsum("nki,nki->nk", B - v_b[:, None], B - (v_b + rel)[:, None])
     assert np.allclose(dots, 0.0, atol=1e-9)
     # outward normals: supporting planes along each generator
-    nrm = c.outward_normals(np.broadcast_to(t, (n, len(t))))
+    nrm = outward_normals(c, t)
     assert np.allclose(np.linalg.norm(nrm, axis=-1), 1.0)
     assert np.allclose(np.einsum("nki,nki->nk", nrm, B - v_b[:, None]), 0.0, atol=1e-9)
     assert np.allclose(np.einsum("nki,ni->nk", nrm, c.axis), -c.sin_alpha[:, None])
@@ -465,7 +496,7 @@ def _random_outside_position(rng, ob):
 
 def _pyramid_boundary(pyr, planes, xy, eps=1e-6):
     """Samples whose exact membership changes when turned by +-eps rad in their plane."""
-    base = in_vo_pyramids(pyr, planes.lift(xy).reshape(-1, 3)).reshape((len(pyr),) + xy.shape[:2])
+    base = in_vo_pyramids(pyr, planes.lift(xy).reshape(-1, 3)).reshape((pyr.n,) + xy.shape[:2])
     perp = np.stack([-xy[..., 1], xy[..., 0]], axis=-1)
     changed = np.zeros_like(base)
     for sign in (1.0, -1.0):

@@ -1,5 +1,6 @@
-"""plane_qp's internals: the closed-form lower bounds that order and prune its QPs must never
-exceed a QP's true optimum, and may call a QP infeasible only when it is."""
+"""plane_qp's search: best first over the (round, plane) QPs with constraint generation per QP
+must return what taking every QP to its own fixpoint returns, on the compiled default path
+(exact2d) and on outside backends (whose QPs the exact optima bound from below)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,89 +9,80 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from encounters import encounters
-from vo3d_opt import AgentState, Cylinder, Limits, Neighbor
+from vo3d_opt import AgentState, Cylinder, Limits, Neighbor, VelocitySelector
 from vo3d_opt.formulations import plane_qp
-from vo3d_opt.formulations.common import Options, prepare
-from vo3d_opt.solvers import get_backend
+from vo3d_opt.formulations.common import Options, prepare, py_decision_planes
+from vo3d_opt.formulations.kernel import py_add_rows, py_gather, py_lift, py_plane_qps
+from vo3d_opt.formulations.rows import ROUNDS
+from vo3d_opt.solvers import QP, get_backend
+from vo3d_opt.status import Status
 
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
 
 
-@settings(max_examples=30, **SETTINGS)
-@given(kw=encounters(), seed=st.integers(0, 2**31), cones=st.booleans())
-def test_bounds_are_lower_bounds_and_prove_only_true_infeasibility(kw, seed, cones):
-    enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"], float), kw["neighbors"],
-                  kw["obstacles"], kw["limits"], kw["dt"], Options(reciprocal=bool(seed % 2)))
-    problems = plane_qp.PlaneProblems(enc, plane_qp.decision_planes(enc), has_cones=cones)
-    problems.ensure(np.ones(len(problems.computed), dtype=bool))  # every VO's rows
-    reference = get_backend("clarabel")
-    rng = np.random.default_rng(seed)
-    P = len(problems.planes.phi)
-    checked = infeasible = 0
-    for r in range(len(plane_qp.ROUNDS)):
-        included = rng.random(len(problems.computed)) < 0.6
-        lb = problems.bounds(included, np.full(P, r), np.arange(P))
-        for p in range(P):
-            assert lb[p] == problems.bound(r, p, included)
-            qp = problems.qp(r, p, included)
-            res = reference.solve(qp)
-            if res.status == "optimal":
-                checked += 1
-                assert lb[p] <= np.linalg.norm(res.x - problems.w0) + 1e-7
-            if not np.isfinite(lb[p]):
-                infeasible += 1
-                assert res.status == "infeasible"
-    assert checked + infeasible > 0
-
-
 def _exhaustive(enc, solve, has_cones):
-    """plane_qp without bounds or ordering: every (round, plane) QP taken to its own fixpoint of
+    """plane_qp without ordering or bounds: every (round, plane) QP taken to its own fixpoint of
     constraint generation; the least deviation among the safe answers within the limits."""
-    problems = plane_qp.PlaneProblems(enc, plane_qp.decision_planes(enc), has_cones)
-    best = np.inf
-    for r in range(len(plane_qp.ROUNDS)):
-        for p in range(len(problems.planes.phi)):
-            included = problems.initial.copy()
+    cfg = enc.options.config
+    planes = py_decision_planes(enc.vos, enc.v_now, cfg)
+    G3, h3 = enc.linear_bounds()
+    qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg)
+    G_speed, h_speed = (np.zeros((0, 2)), np.zeros(0)) if has_cones else plane_qp.speed_polygon(
+        enc.limits.v_max, enc.options.polygon_sides)
+    best, v = np.inf, np.empty(3)
+    for r in range(len(ROUNDS)):
+        for p in range(len(planes.phi)):
             while True:
-                res = solve(problems.qp(r, p, included))
-                if res.status != "optimal":
+                m = py_gather(qps, r, p)
+                res = solve(QP(P=2 * np.eye(2), q=-2 * qps.w0, G=np.vstack([qps.rows[:m], G_speed]),
+                               h=np.concatenate([qps.rhs[:m], h_speed]),
+                               soc_radius=enc.limits.v_max if has_cones else None))
+                if res.status != Status.OPTIMAL:
                     break
-                v = res.x[0] * problems.planes.e1 + res.x[1] * problems.planes.e2[p]
+                py_lift(planes, np.ascontiguousarray(res.x), p, v)
                 entered = enc.containing(v)[:, 0]
                 if not entered.any():
                     if enc.within_limits(v)[0]:
                         best = min(best, float(np.linalg.norm(v - enc.v_pref)))
                     break
-                if np.all(included[entered]):
+                if np.all(qps.included[r, p][entered]):
                     break
-                problems.ensure(entered)
-                included = included | entered
+                for k in np.flatnonzero(entered):
+                    py_add_rows(qps, enc.vos, planes, cfg, int(k), p)
+                qps.included[r, p] |= entered
     return best
 
 
-@settings(max_examples=60, **SETTINGS)
-@given(kw=encounters(), cones=st.booleans())
-def test_search_finds_what_exhaustive_search_finds(kw, cones):
-    """The bounds only prune QPs that cannot do better, and a QP's answer does not depend on the
-    order the QPs are solved in: the best-first search returns the exhaustive optimum."""
+def _conflict(kw):
+    """The encounter with a head-on neighbour added, so that every call has to avoid."""
     v_pref = np.asarray(kw["preferred_velocity"], float)
     u = v_pref / np.linalg.norm(v_pref)
-    head_on = Neighbor(position=kw["own"].position + 25.0 * u, velocity=-u, r_pz=6.0)  # a conflict
-    enc = prepare(kw["own"], v_pref, [head_on, *kw["neighbors"]], kw["obstacles"], kw["limits"],
+    head_on = Neighbor(position=kw["own"].position + 25.0 * u, velocity=-u, r_pz=6.0)
+    return dict(kw, neighbors=[head_on, *kw["neighbors"]])
+
+
+@settings(max_examples=60, **SETTINGS)
+@given(kw=encounters(), solver=st.sampled_from(["exact2d", "clarabel", "daqp"]))
+def test_search_finds_what_exhaustive_search_finds(kw, solver):
+    """Best first, each QP's answer independent of the order: the search returns the
+    exhaustive optimum on every backend (exact2d: the compiled kernel)."""
+    kw = _conflict(kw)
+    enc = prepare(kw["own"], kw["preferred_velocity"], kw["neighbors"], kw["obstacles"], kw["limits"],
                   kw["dt"], Options())
     assert enc.unsafe(enc.v_pref)[0]
-    backend = get_backend("clarabel" if cones else "daqp")
-    expected = _exhaustive(enc, backend.solve, cones)
-    out = plane_qp.select(enc, backend.solve, cones)
+    backend = get_backend(solver)
+    expected = _exhaustive(enc, backend.solve, backend.has_cones)
+    d = VelocitySelector(solver=solver).select(**kw)
     if np.isfinite(expected):
-        assert out.status == "optimal" and out.info["round"] != "sampled"
-        assert np.linalg.norm(out.velocity - enc.v_pref) == pytest.approx(expected, abs=1e-6)
+        assert d.status == Status.OPTIMAL and d.info["round"] in ROUNDS
+        assert np.linalg.norm(d.velocity - enc.v_pref) == pytest.approx(expected, abs=1e-6)
+    else:
+        assert d.info["round"] in ("sampled", "least_bad")
 
 
 def test_an_answer_does_not_depend_on_other_planes():
-    """A found case (review of the bounds): sharing the VOs one plane's answer entered with
-    every plane made another plane's QP infeasible and the answer 1 m/s worse than the
-    exhaustive search's."""
+    """A found case: sharing the VOs one plane's answer entered with every plane made another
+    plane's QP infeasible and the answer 1 m/s worse than the exhaustive search's."""
     own = AgentState(position=[0, 0, 50], velocity=[-5.3796, -0.6570, 2.9143])
     v_pref = np.array([0.77143, -1.60623, -12.04291])
     nbs = [Neighbor(position=p, velocity=v, r_pz=r) for p, v, r in [
@@ -102,9 +94,10 @@ def test_an_answer_does_not_depend_on_other_planes():
     obs = [Cylinder(center=[2.99423, -4.85748], radius=3.58231, height=78.50985),
            Cylinder(center=[-6.09207, -13.14127], radius=1.62802, height=37.96168)]
     limits = Limits(speed=(0.0, 10.0), altitude=(52.42431, 100.0), acceleration=5.0)
+    kw = dict(own=own, preferred_velocity=v_pref, neighbors=nbs, obstacles=obs, limits=limits, dt=0.5)
     enc = prepare(own, v_pref, nbs, obs, limits, 0.5, Options(margin=0.5))
-    for name, cones in (("clarabel", True), ("daqp", False)):
+    for name in ("exact2d", "clarabel", "daqp"):
         backend = get_backend(name)
-        out = plane_qp.select(enc, backend.solve, cones)
-        expected = _exhaustive(enc, backend.solve, cones)
-        assert np.linalg.norm(out.velocity - enc.v_pref) == pytest.approx(expected, abs=1e-6)
+        d = VelocitySelector(solver=name, margin=0.5).select(**kw)
+        expected = _exhaustive(enc, backend.solve, backend.has_cones)
+        assert np.linalg.norm(d.velocity - enc.v_pref) == pytest.approx(expected, abs=1e-6)

@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from encounters import encounters
 from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
 from vo3d_opt.formulations.common import Options, prepare
-from vo3d_opt.formulations.problem import Result
+from vo3d_opt.solvers import Result
 from vo3d_opt.solvers import Backend, available_qp_solvers, register_backend, unregister_backend
 
 QP_SOLVERS = available_qp_solvers()

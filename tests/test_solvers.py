@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vo3d_opt.formulations.problem import NLP, QP, ConeConstraint, Result
+from vo3d_opt.solvers import NLP, QP, ConeConstraint, Result
 from vo3d_opt.solvers import (
     Backend, available_qp_solvers, available_solvers, get_backend, register_backend,
     unregister_backend,

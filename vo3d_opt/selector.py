@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .formulations import cone_qp, kernel, nlp, plane_qp, sampled
-from .formulations.common import Bounds, Encounter, Options, Outcome, neighbor_rows, py_build_vos
+from .formulations.common import Bounds, Encounter, Options, Outcome, bounds_array, neighbor_rows, py_build_vos
 from .geometry.pyramid import prism_rows
 from .solvers import FEAS_TOL, NLP, QP, Backend, Result, available_qp_solvers, available_solvers, get_backend, standardise
 from .status import DECISION_STATUSES, Status
@@ -61,9 +61,9 @@ def _vec3(value, name: str) -> np.ndarray:
 
 def _items(value, cls, name: str) -> list:
     items = [] if value is None else list(value)
-    expected = " or ".join(c.__name__ for c in (cls if isinstance(cls, tuple) else (cls,)))
     for i, item in enumerate(items):
         if not isinstance(item, cls):
+            expected = " or ".join(c.__name__ for c in (cls if isinstance(cls, tuple) else (cls,)))
             raise ValueError(f"{name}[{i}]: expected {expected}, got {type(item).__name__}")
     return items
 
@@ -108,8 +108,8 @@ def warm_up() -> None:
             t0 = time.perf_counter()
             own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
             nbrs = neighbor_rows([Neighbor(position=(10.0, 0.0, 10.0), velocity=(-1.0, 0.0, 0.0), r_pz=3.0)])
-            kernel.decide(own.position, own.velocity, np.array([1.0, 0.0, 0.0]), nbrs, np.zeros((0, 4)),
-                          Bounds.of(Limits(), 0.2), Options().config)
+            kernel.decide(own.position, own.velocity, check_vector((1.0, 0.0, 0.0), 3), nbrs, np.zeros((0, 4)),
+                          bounds_array(Limits(), 0.2), *Options().packed, np.empty(kernel.OUT_SIZE))
             elapsed = time.perf_counter() - t0
         finally:
             notice.cancel()
@@ -189,13 +189,10 @@ class VelocitySelector:
             raise ValueError(f"limits: expected Limits, got {type(limits).__name__}")
         if isinstance(dt, bool) or not (isinstance(dt, numbers.Real) and math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt: must be a positive finite number of seconds, got {dt!r}")
-        bounds, prisms = Bounds.of(limits, dt), prism_rows(obstacles)
+        prisms = prism_rows(obstacles)
         if self._compiled and self._nlp is None:
-            out = kernel.decide(own.position, own.velocity, v_pref, nbrs, prisms, bounds, self.options.config)
-            return Decision(velocity=out.velocity, status=DECISION_STATUSES[out.status],
-                            solve_time=time.perf_counter() - t0, formulation=self.formulation, solver=self.solver,
-                            plane=None if math.isnan(out.phi) else float(out.phi),
-                            info={"round": kernel.ROUND_NAMES[out.round], "solved": out.solved})
+            return self._decide(own.position, own.velocity, v_pref, nbrs, prisms, bounds_array(limits, dt), t0)
+        bounds = Bounds.of(limits, dt)
         vos = py_build_vos(own.position, own.velocity, v_pref, nbrs, prisms, bounds, self.options.config)
         enc = Encounter(position=own.position, v_now=own.velocity, vos=vos, limits=limits, dt=float(dt),
                         options=self.options)
@@ -206,6 +203,16 @@ class VelocitySelector:
         return Decision(velocity=kernel.enforce_limits(np.asarray(out.velocity, dtype=float), own.position, bounds),
                         status=status, solve_time=time.perf_counter() - t0, formulation=self.formulation,
                         solver=self.solver, plane=out.plane, info=out.info)
+
+    def _decide(self, p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray,
+                limits: np.ndarray, t0: float) -> Decision:
+        """The compiled decision and its ``Decision``."""
+        out = np.empty(kernel.OUT_SIZE)
+        kernel.decide(p, v_now, v_pref, nbrs, prisms, limits, *self.options.packed, out)
+        vx, vy, vz, status, phi, rnd, solved = out.tolist()
+        return Decision(velocity=out[:3], status=DECISION_STATUSES[int(status)], solve_time=time.perf_counter() - t0,
+                        formulation=self.formulation, solver=self.solver, plane=None if math.isnan(phi) else phi,
+                        info={"round": kernel.ROUND_NAMES[int(rnd)], "solved": int(solved)})
 
     def _run(self, enc: Encounter, nbrs: np.ndarray, prisms: np.ndarray, bounds: Bounds) -> Outcome:
         if self.formulation == "sampled":
@@ -224,10 +231,9 @@ class VelocitySelector:
     def _plane_qp(self, enc: Encounter, nbrs: np.ndarray, prisms: np.ndarray, bounds: Bounds, solve) -> Outcome:
         if not self._compiled:
             return plane_qp.select(enc, solve, self._qp.has_cones)
-        out = kernel.decide(enc.position, enc.v_now, enc.v_pref, nbrs, prisms, bounds, self.options.config)
-        status = DECISION_STATUSES[out.status]
-        return Outcome(out.velocity, Status.OPTIMAL if status == Status.INSIDE_PROTECTED_ZONE else status,
-                       None if math.isnan(out.phi) else float(out.phi), {"round": kernel.ROUND_NAMES[out.round]})
+        d = self._decide(enc.position, enc.v_now, enc.v_pref, nbrs, prisms, bounds_array(enc.limits, enc.dt), 0.0)
+        status = Status.OPTIMAL if d.status == Status.INSIDE_PROTECTED_ZONE else d.status
+        return Outcome(d.velocity, status, d.plane, d.info)
 
 
 __all__ = ["Decision", "VelocitySelector", "DEFAULT_SOLVERS", "FORMULATIONS", "warm_up"]

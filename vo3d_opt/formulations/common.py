@@ -16,7 +16,7 @@ from typing import Annotated, Literal, NamedTuple
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
-from .._jit import entry, jit
+from .._jit import entry, inline, jit, kernel
 from ..geometry import (CORRECTIONS, AvoidancePlanes, Corrections, VOCones, VOPyramids, build_cones, build_planes,
                         build_pyramids, default_phis, in_vos)
 from ..geometry.cone import NO_VIRTUAL_SPHERE, TAU_MIN, min_speed
@@ -41,7 +41,9 @@ _Deg = Annotated[float, Field(gt=0, le=180, allow_inf_nan=False)]
 
 
 class Config(NamedTuple):
-    """The options as compiled code reads them (``Options.config``)."""
+    """The options as compiled code reads them (``Options.config``). Across the boundary from
+    Python they travel as three arrays (``Options.packed``; ``config_of`` rebuilds this), which
+    numba dispatches much faster than a NamedTuple."""
 
     reciprocal: bool
     horizon: float  # s; NO_HORIZON (< 0) for none
@@ -70,8 +72,13 @@ class Bounds(NamedTuple):
 
     @classmethod
     def of(cls, limits: Limits, dt: float) -> "Bounds":
-        acc = np.nan if limits.acceleration is None else float(limits.acceleration)
-        return cls(float(limits.v_min), float(limits.v_max), float(limits.z_min), float(limits.z_max), acc, float(dt))
+        return cls(*bounds_array(limits, dt).tolist())
+
+
+def bounds_array(limits: Limits, dt: float) -> np.ndarray:
+    """(6,) v_min, v_max, z_min, z_max, acceleration (NaN: none), dt: ``Bounds`` as one array."""
+    acc = np.nan if limits.acceleration is None else limits.acceleration
+    return np.array([limits.speed[0], limits.speed[1], limits.altitude[0], limits.altitude[1], acc, dt], dtype=float)
 
 
 class VOs(NamedTuple):
@@ -104,14 +111,38 @@ class Options(BaseModel):
     # solver's tolerance) is still strictly outside the VO; sampled candidates keep it too
 
     @cached_property
+    def packed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(values, plane table, generator table): the scalars of ``Config`` (correction flags
+        as 0/1), (phi, cos phi, sin phi) of the planes, (t, cos t, sin t) of the generators."""
+        t, phi = generator_angles(self.qp_samples), default_phis(self.plane_step_deg)
+        corr = Corrections.of(self.corrections)
+        values = np.array([self.reciprocal, NO_HORIZON if self.horizon is None else self.horizon, self.pz_buffer,
+                           self.margin, self.speed_levels, math.radians(self.heading_step_deg), *corr], dtype=float)
+        return values, np.stack([phi, np.cos(phi), np.sin(phi)]), np.stack([t, np.cos(t), np.sin(t)])
+
+    @cached_property
     def config(self) -> Config:
-        t, phi = generator_angles(self.qp_samples).copy(), default_phis(self.plane_step_deg).copy()
-        return Config(
-            reciprocal=self.reciprocal, horizon=NO_HORIZON if self.horizon is None else float(self.horizon),
-            pz_buffer=float(self.pz_buffer), margin=float(self.margin),
-            corrections=Corrections.of(self.corrections), phi=phi, cos_phi=np.cos(phi), sin_phi=np.sin(phi),
-            t=t, cos_t=np.cos(t), sin_t=np.sin(t), speed_levels=self.speed_levels,
-            heading_step=math.radians(self.heading_step_deg))
+        return py_config_of(*self.packed)
+
+
+@jit
+def config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray) -> Config:
+    """``Config`` from ``Options.packed``."""
+    corr = Corrections(values[6] > 0, values[7] > 0, values[8] > 0, values[9] > 0, values[10] > 0, values[11] > 0)
+    return Config(values[0] > 0, values[1], values[2], values[3], corr, plane_tab[0], plane_tab[1], plane_tab[2],
+                  gen_tab[0], gen_tab[1], gen_tab[2], int(values[4]), values[5])
+
+
+@jit
+def bounds_of(values: np.ndarray) -> Bounds:
+    """``Bounds`` from ``bounds_array``."""
+    return Bounds(values[0], values[1], values[2], values[3], values[4], values[5])
+
+
+@entry
+def py_config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray) -> Config:
+    """``config_of`` for Python callers."""
+    return config_of(values, plane_tab, gen_tab)
 
 
 # ------------------------------------------------------------------------------- compiled core
@@ -197,7 +228,7 @@ def limit_rows(p: np.ndarray, v_now: np.ndarray, bounds: Bounds) -> tuple[np.nda
     return G, h
 
 
-@jit
+@inline
 def within_limits(v: np.ndarray, G: np.ndarray, h: np.ndarray, bounds: Bounds) -> bool:
     """Speed in [v_min, v_max] and G v <= h, each within LIMIT_TOL."""
     speed = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
@@ -209,7 +240,7 @@ def within_limits(v: np.ndarray, G: np.ndarray, h: np.ndarray, bounds: Bounds) -
     return True
 
 
-@jit
+@kernel
 def containing(vos: VOs, v: np.ndarray, horizon: float, out: np.ndarray) -> bool:
     """Which VOs (cones first) contain v, by the exact 3D membership, into ``out``; whether any."""
     n, any_in = vos.cones.d_oi.shape[0], False
@@ -222,7 +253,7 @@ def containing(vos: VOs, v: np.ndarray, horizon: float, out: np.ndarray) -> bool
     return any_in
 
 
-@jit
+@kernel
 def time_to_intrusion(vos: VOs, v: np.ndarray) -> float:
     """The earliest time (s) any protected zone would be entered at velocity v (inf: never; 0:
     inside and closing). The least-bad velocity maximises it."""

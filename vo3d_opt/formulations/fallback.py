@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._jit import entry, jit
+from .._jit import entry, inline, jit, kernel
 from ..geometry import AvoidancePlanes
 from ..geometry.membership import clearance
 from ..status import Status
@@ -50,7 +50,7 @@ def _by_value(x: np.ndarray) -> np.ndarray:
     return order
 
 
-@jit
+@kernel
 def safe_by_margin(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config,
                    into: np.ndarray) -> bool:
     """Within the limits, outside every VO by the exact check, and at least ``margin`` (m/s)
@@ -92,7 +92,7 @@ def grid_search(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarra
     return False, v, -1
 
 
-@jit
+@inline
 def _consider(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, best: np.ndarray,
               key: np.ndarray) -> None:
     """Keep v in ``best`` if it is within the limits and its (latest intrusion, least

@@ -10,7 +10,7 @@ RVO2-3D's ``Agent.cc`` reads:
 3. the avoidance planes about the preferred direction (eq. 8); on each plane and in each
    linearisation round (near, left, right) one QP: the point nearest the preferred velocity
    inside the speed disc (or annulus), the altitude rows and one half-plane per VO that holds
-   the preferred velocity or that A is inside (``vo_rows``: the sections of section 3.1 / 4.2
+   the preferred velocity or that A is inside (``plane_rows``: the sections of section 3.1 / 4.2
    linearised), solved exactly (``nearest_in_disc``);
 4. best first: the QP with the least deviation is checked with the exact 3D membership; a safe
    answer is the decision (every other QP's answer is at least as far: adding constraints only
@@ -32,12 +32,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import entry, jit
+from .._jit import entry, inline, jit, kernel
 from ..geometry import AvoidancePlanes
 from ..solvers.exact2d import nearest_in_disc
-from .common import Bounds, Config, VOs, build_vos, containing, decision_planes, limit_rows, vz_range, within_limits
+from .common import (Bounds, Config, VOs, bounds_of, build_vos, config_of, containing, decision_planes, limit_rows,
+                     vz_range, within_limits)
 from .fallback import grid_search, least_bad
-from .rows import ROUNDS, vo_rows
+from .rows import ROUNDS, RowWork, plane_rows, row_work, vo_base
 
 #: How a decision's velocity was found (``KernelOut.round``): the preferred velocity, a QP round,
 #: the sampled grid, the least-bad fallback.
@@ -60,14 +61,18 @@ class KernelOut(NamedTuple):
 class PlaneQPs(NamedTuple):
     """The (round, plane) QPs of one decision and their rows, filled as VOs join.
 
-    Rows of VO k: G[k, r, p]·w <= h[k, r, p] where active[k, p] (computed[k] once built);
-    QP (r, p) constrains the VOs in included[r, p] plus the limit rows G_lim[p]·w <= h_lim and the
-    speed disc; its exact optimum is sol[r, p] at deviation key[r, p] (inf: infeasible or done)."""
+    Rows of VO k on plane p: G[k, r, p]·w <= h[k, r, p] where active[k, p], built once a QP on
+    that plane needs them (computed[k, p]) from the VO's points in the planes' frame (base[k],
+    once based[k]). QP (r, p) constrains the VOs in included[r, p] plus the limit rows
+    G_lim[p]·w <= h_lim and the speed disc; its exact optimum is sol[r, p] at deviation
+    key[r, p] (inf: infeasible or done)."""
 
     G: np.ndarray  # (V, R, P, 2)
     h: np.ndarray  # (V, R, P)
     active: np.ndarray  # (V, P) bool
-    computed: np.ndarray  # (V,) bool
+    computed: np.ndarray  # (V, P) bool
+    base: np.ndarray  # (V, K + 3, 3)
+    based: np.ndarray  # (V,) bool
     included: np.ndarray  # (R, P, V) bool
     G_lim: np.ndarray  # (P, L, 2)
     h_lim: np.ndarray  # (L,)
@@ -77,6 +82,9 @@ class PlaneQPs(NamedTuple):
     rows: np.ndarray  # (V + L, 2) scratch: one QP's rows ...
     rhs: np.ndarray  # (V + L,) ... their right-hand sides
     order: np.ndarray  # (V + L,) scratch of the solver
+    into: np.ndarray  # (V,) scratch: the VOs a velocity is in
+    v: np.ndarray  # (3,) scratch: a velocity
+    work: RowWork  # scratch of plane_rows
 
 
 @jit
@@ -101,23 +109,36 @@ def plane_qps(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray,
             for k in range(V):
                 included[r, p, k] = initial[k]
     qps = PlaneQPs(np.empty((V, R, P, 2)), np.empty((V, R, P)), np.zeros((V, P), dtype=np.bool_),
-                   np.zeros(V, dtype=np.bool_), included, G_lim, h3, key, np.empty((R, P, 2)),
-                   w0, np.empty((V + L, 2)), np.empty(V + L), np.empty(V + L, dtype=np.int64))
-    for k in range(V):
-        if initial[k]:
-            add_rows(qps, vos, planes, cfg, k)
+                   np.zeros((V, P), dtype=np.bool_), np.empty((V, cfg.t.shape[0] + 3, 3)), np.zeros(V, dtype=np.bool_),
+                   included, G_lim, h3, key, np.empty((R, P, 2)),
+                   w0, np.empty((V + L, 2)), np.empty(V + L), np.empty(V + L, dtype=np.int64),
+                   np.empty(V, dtype=np.bool_), np.empty(3), row_work(cfg.t.shape[0]))
+    _initial_rows(qps, vos, planes, cfg, initial)
     return qps
 
 
-@jit
-def add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, k: int) -> None:
-    """Build VO k's rows on every plane and round, once."""
-    if not qps.computed[k]:
-        vo_rows(vos, k, planes.frame, planes.to_plane, cfg, qps.w0, qps.G[k], qps.h[k], qps.active[k])
-        qps.computed[k] = True
+@kernel
+def _initial_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, initial: np.ndarray) -> None:
+    for k in range(initial.shape[0]):
+        if initial[k]:
+            for p in range(cfg.phi.shape[0]):
+                add_rows(qps, vos, planes, cfg, k, p)
 
 
-@jit
+@inline
+def add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, k: int, p: int) -> None:
+    """Build VO k's rows on plane p (every round), once."""
+    if qps.computed[k, p]:
+        return
+    if not qps.based[k]:
+        vo_base(vos, k, planes.frame, cfg, qps.base[k])
+        qps.based[k] = True
+    qps.active[k, p] = plane_rows(vos, k, p, qps.base[k], planes, cfg, qps.w0, qps.G[k, :, p], qps.h[k, :, p],
+                                  qps.work)
+    qps.computed[k, p] = True
+
+
+@inline
 def gather(qps: PlaneQPs, r: int, p: int) -> int:
     """QP (r, p)'s rows (its VOs', then the limits') into qps.rows / qps.rhs: how many."""
     m = 0
@@ -131,7 +152,7 @@ def gather(qps: PlaneQPs, r: int, p: int) -> int:
     return m
 
 
-@jit
+@inline
 def solve_qp(qps: PlaneQPs, r: int, p: int, bounds: Bounds) -> None:
     """QP (r, p) solved exactly: its optimum into sol[r, p], its deviation into key[r, p]."""
     m = gather(qps, r, p)
@@ -142,14 +163,14 @@ def solve_qp(qps: PlaneQPs, r: int, p: int, bounds: Bounds) -> None:
         qps.key[r, p] = np.inf
 
 
-@jit
+@kernel
 def search(vos: VOs, planes: AvoidancePlanes, qps: PlaneQPs, G3: np.ndarray, h3: np.ndarray, bounds: Bounds,
            cfg: Config, tried: np.ndarray) -> tuple[int, int, int, int]:
     """Best-first over the QPs (step 4 of the module docstring): (round, plane) of the answer,
     or (-1, -1) when no QP gives a safe one; the QPs solved; how many answers went into
     ``tried`` (each QP answer in solve order, for the least-bad fallback)."""
     R, P = qps.key.shape
-    into, v = np.empty(qps.included.shape[2], dtype=np.bool_), np.empty(3)
+    into, v = qps.into, qps.v
     solved = n_tried = 0
     for q in range(R * P + tried.shape[0]):
         if q < R * P:  # every QP once with its initial rows, then the best first
@@ -171,7 +192,7 @@ def search(vos: VOs, planes: AvoidancePlanes, qps: PlaneQPs, G3: np.ndarray, h3:
             new = False
             for k in range(into.shape[0]):  # constrain the VOs it entered and solve again
                 if into[k] and not qps.included[r, p, k]:
-                    add_rows(qps, vos, planes, cfg, k)
+                    add_rows(qps, vos, planes, cfg, k, p)
                     qps.included[r, p, k] = new = True
             if not new:  # it entered only VOs it already has rows for (a rounding edge): give up
                 qps.key[r, p] = np.inf
@@ -184,7 +205,7 @@ def search(vos: VOs, planes: AvoidancePlanes, qps: PlaneQPs, G3: np.ndarray, h3:
     return -1, -1, solved, n_tried
 
 
-@jit
+@inline
 def _same_rows(qps: PlaneQPs, r: int, p: int) -> bool:
     """Whether QP (r, p) has the same rows as QP (r - 1, p) (same VOs, same half-planes)."""
     for k in range(qps.included.shape[2]):
@@ -197,7 +218,7 @@ def _same_rows(qps: PlaneQPs, r: int, p: int) -> bool:
     return True
 
 
-@jit
+@inline
 def _argmin(key: np.ndarray) -> tuple[int, int]:
     """The first (r, p) of the least key."""
     br, bp = 0, 0
@@ -208,7 +229,7 @@ def _argmin(key: np.ndarray) -> tuple[int, int]:
     return br, bp
 
 
-@jit
+@inline
 def lift(planes: AvoidancePlanes, w: np.ndarray, p: int, out: np.ndarray) -> None:
     """Plane coordinates w on plane p to the world velocity out (3,)."""
     for c in range(3):
@@ -238,9 +259,9 @@ def py_plane_qps(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarr
 
 
 @entry
-def py_add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, k: int) -> None:
+def py_add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, k: int, p: int) -> None:
     """``add_rows`` for Python callers (compiled code calls ``add_rows``: no Python wrapper)."""
-    return add_rows(qps, vos, planes, cfg, k)
+    return add_rows(qps, vos, planes, cfg, k, p)
 
 
 @entry
@@ -261,11 +282,26 @@ def py_lift(planes: AvoidancePlanes, w: np.ndarray, p: int, out: np.ndarray) -> 
     return lift(planes, w, p, out)
 
 
+#: The entries of ``decide``'s output array.
+OUT_SIZE = 7  # velocity (3), status, phi, round, solved
+
+
 @entry
 def decide(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray,
-           bounds: Bounds, cfg: Config) -> KernelOut:
-    """One decision (the module docstring's steps 1–6). ``nbrs`` (n, 8): position, velocity,
-    r_pz, cooperative (1/0); ``prisms`` (m, 4): x, y, L_pz, h_pz."""
+           limits: np.ndarray, options: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray, out: np.ndarray) -> None:
+    """One decision from arrays (the module docstring's steps 1–6), into ``out`` (OUT_SIZE,):
+    the velocity and the fields of ``KernelOut``. ``nbrs`` (n, 8): position, velocity, r_pz,
+    cooperative (1/0); ``prisms`` (m, 4): x, y, L_pz, h_pz; ``limits``: ``bounds_array``; the
+    options as ``Options.packed``. Arrays in, an array out: the cheapest call from Python."""
+    res = decide_one(p, v_now, v_pref, nbrs, prisms, bounds_of(limits), config_of(options, plane_tab, gen_tab))
+    out[0], out[1], out[2] = res.velocity[0], res.velocity[1], res.velocity[2]
+    out[3], out[4], out[5], out[6] = res.status, res.phi, res.round, res.solved
+
+
+@jit
+def decide_one(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray,
+               bounds: Bounds, cfg: Config) -> KernelOut:
+    """``decide`` on the compiled side (``select_many`` calls it for every vehicle)."""
     vos = build_vos(p, v_now, v_pref, nbrs, prisms, bounds, cfg)  # 1
     G3, h3 = limit_rows(p, v_now, bounds)
     n, V = vos.cones.d_oi.shape[0], vos.cones.d_oi.shape[0] + vos.pyramids.L_pz.shape[0]

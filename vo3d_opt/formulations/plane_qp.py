@@ -1,7 +1,7 @@
 """plane_qp on an outside backend (formulations/plane_qp.md).
 
 The default backend, ``exact2d``, runs the whole decision compiled (``kernel.decide``). Every
-other QP backend gets the same QPs, built from the same rows (``rows.vo_rows``), searched the
+other QP backend gets the same QPs, built from the same rows (``rows.plane_rows``), searched the
 same way: best first, with constraint generation per QP. Here each QP's exact optimum over the
 speed disc (``kernel.solve_qp``) serves as its lower bound: the backend's answer is at least as
 far from the preferred velocity (its speed bound is the disc itself or a polygon inside it), so
@@ -82,7 +82,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
                 best, best_dev = (v.copy(), p, ROUNDS[r]), dev
         elif not np.all(qps.included[r, p][entered]):  # constrain the VOs it entered, solve again
             for j in np.flatnonzero(entered):
-                py_add_rows(qps, enc.vos, planes, cfg, j)
+                py_add_rows(qps, enc.vos, planes, cfg, int(j), p)
             qps.included[r, p] |= entered
             py_solve_qp(qps, r, p, bounds)
     if best is not None:

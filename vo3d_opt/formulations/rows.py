@@ -18,20 +18,22 @@ these same rows.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from .._jit import jit
+from .._jit import inline, jit, kernel
 from ..geometry.cone import outward_normal
-from ..geometry.pyramid import prism_corners
 from ..geometry.sections import (CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, Section, cone_base_points,
-                                 cone_section, pyramid_section)
+                                 cone_section, pyramid_base_points, pyramid_section)
+from ..geometry import AvoidancePlanes
 from .common import Config, VOs
 
 #: Linearisation rounds: nearest boundary point, then every section passed on its left, right.
 ROUNDS = ("near", "left", "right")
 
 
-@jit
+@inline
 def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray) -> tuple[int, int, int]:
     """The boundary candidate each round linearises at: "near" the nearest valid one; "left"
     / "right" the nearest in the upper / lower half of the section (by in-plane y about the
@@ -55,7 +57,7 @@ def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray) -> tuple[int,
     return near, (left if left >= 0 else near), (right if right >= 0 else near)
 
 
-@jit
+@inline
 def _triangle_rows(apex: np.ndarray, chord: np.ndarray, w0: np.ndarray, G: np.ndarray, h: np.ndarray) -> bool:
     """Each round's side of a triangle (the generators through its apex) as G[r]·w <= h[r],
     normal away from the other chord point; False when degenerate. With two candidates,
@@ -88,7 +90,7 @@ def _triangle_rows(apex: np.ndarray, chord: np.ndarray, w0: np.ndarray, G: np.nd
     return True
 
 
-@jit
+@inline
 def _curve_rows(vos: VOs, i: int, sec: Section, cfg: Config, w0: np.ndarray, to_plane: np.ndarray,
                 G: np.ndarray, h: np.ndarray, scratch: np.ndarray, valid: np.ndarray) -> bool:
     """Each round's tangent-plane row of cone i's conic section (see the module docstring);
@@ -119,36 +121,51 @@ def _curve_rows(vos: VOs, i: int, sec: Section, cfg: Config, w0: np.ndarray, to_
     return True
 
 
+class RowWork(NamedTuple):
+    """Scratch of ``plane_rows``, allocated once per decision (``row_work``)."""
+
+    sec: Section  # one section at a time
+    scratch: np.ndarray  # (2, K + 2) distances and sides of the boundary candidates
+    valid: np.ndarray  # (K + 2,) which candidates exist
+
+
 @jit
-def vo_rows(vos: VOs, k: int, frame: np.ndarray, to_plane: np.ndarray, cfg: Config, w0: np.ndarray,
-            G: np.ndarray, h: np.ndarray, active: np.ndarray) -> None:
-    """Every round's row of VO k (cones first, then pyramids) on every plane: G[r, p]·w <=
-    h[r, p] where ``active[p]``. G (R, P, 2), h (R, P), active (P,)."""
-    n, K, P = vos.cones.d_oi.shape[0], cfg.cos_t.shape[0], cfg.phi.shape[0]
-    sec = Section(np.empty((K if k < n else 0, 2)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2), np.empty(2),
-                  np.empty(3))
-    base, scratch, valid = np.empty((K, 3)), np.empty((2, K + 2)), np.empty(K + 2, dtype=np.bool_)
-    corners = np.empty((8, 3))
+def row_work(K: int) -> RowWork:
+    return RowWork(Section(np.empty((K, 2)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2), np.empty(2), np.empty(3)),
+                   np.empty((2, K + 2)), np.empty(K + 2, dtype=np.bool_))
+
+
+@inline
+def vo_base(vos: VOs, k: int, frame: np.ndarray, cfg: Config, out: np.ndarray) -> None:
+    """VO k's points in the planes' frame (``cone_base_points`` / ``pyramid_base_points``),
+    computed once per VO: each plane then only turns them (eq. 8). ``out`` (K + 3, 3)."""
+    n = vos.cones.d_oi.shape[0]
     if k < n:
-        cone_base_points(vos.cones, k, frame, cfg.cos_t, cfg.sin_t, base)
+        cone_base_points(vos.cones, k, frame, cfg.cos_t, cfg.sin_t, out)
     else:
-        corners = prism_corners(vos.pyramids.frame[k - n:k - n + 1], vos.pyramids.lo[k - n:k - n + 1],
-                                vos.pyramids.hi[k - n:k - n + 1])[0]
-    for p in range(P):
-        c, s = cfg.cos_phi[p], cfg.sin_phi[p]
-        if k < n:
-            kind = cone_section(vos.cones, k, base, frame, c, s, cfg.corrections, sec)
-        else:
-            kind = pyramid_section(vos.pyramids, k - n, corners, frame, c, s, sec)
-        if kind == INSIDE_CODE:  # escape: not closing in, every round
-            for r in range(G.shape[0]):
-                G[r, p, 0], G[r, p, 1], h[r, p] = sec.halfplane[0], sec.halfplane[1], sec.halfplane[2]
-            active[p] = True
-        elif kind == TRIANGLE:
-            active[p] = _triangle_rows(sec.apex, sec.chord, w0, G[:, p], h[:, p])
-        elif k < n and (kind == CIRCLE or kind == ELLIPSE or kind == PARABOLA or kind == HYPERBOLA):
-            active[p] = _curve_rows(vos, k, sec, cfg, w0, to_plane[p], G[:, p], h[:, p], scratch, valid)
-        else:
-            active[p] = False
+        pyramid_base_points(vos.pyramids, k - n, frame, out)
+
+
+@inline
+def plane_rows(vos: VOs, k: int, p: int, base: np.ndarray, planes: AvoidancePlanes, cfg: Config, w0: np.ndarray,
+               G: np.ndarray, h: np.ndarray, work: RowWork) -> bool:
+    """Every round's row of VO k (cones first, then pyramids) on plane p, G[r]·w <= h[r]
+    (G (R, 2), h (R,)); False when the section constrains nothing. ``base``: ``vo_base``."""
+    n, sec = vos.cones.d_oi.shape[0], work.sec
+    c, s = cfg.cos_phi[p], cfg.sin_phi[p]
+    if k < n:
+        kind = cone_section(vos.cones, k, base, planes.frame, c, s, cfg.corrections, sec)
+    else:
+        kind = pyramid_section(vos.pyramids, k - n, base, c, s, sec)
+    active = False
+    if kind == INSIDE_CODE:  # escape: not closing in, every round
         for r in range(G.shape[0]):
-            h[r, p] -= cfg.margin  # strictly outside: pushed out by the margin (m/s)
+            G[r, 0], G[r, 1], h[r] = sec.halfplane[0], sec.halfplane[1], sec.halfplane[2]
+        active = True
+    elif kind == TRIANGLE:
+        active = _triangle_rows(sec.apex, sec.chord, w0, G, h)
+    elif k < n and (kind == CIRCLE or kind == ELLIPSE or kind == PARABOLA or kind == HYPERBOLA):
+        active = _curve_rows(vos, k, sec, cfg, w0, planes.to_plane[p], G, h, work.scratch, work.valid)
+    for r in range(G.shape[0]):
+        h[r] -= cfg.margin  # strictly outside: pushed out by the margin (m/s)
+    return active

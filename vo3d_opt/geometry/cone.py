@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import entry, jit
+from .._jit import entry, inline, jit, kernel
 
 #: The paper's smallest virtual-sphere factor (section 3.1.6: tau >= 1.5).
 TAU_MIN = 1.5
@@ -92,7 +92,7 @@ def vo_cones(
     return py_build_cones(np.asarray(p_A, dtype=float), p_B, a, r_pz, mode, float(tau_min))
 
 
-@jit
+@inline
 def outward_normal(R: np.ndarray, sin_alpha: float, cos_t: float, sin_t: float) -> tuple[float, float, float]:
     """The cone's unit outward normal along the generator through B_vo(t): R_{theta_el|psi_az}
     (eq. 6) applied to (-sin alpha, cos alpha cos t, cos alpha sin t) in the cone's own frame.
@@ -150,7 +150,7 @@ def py_build_cones(p_A: np.ndarray, p_B: np.ndarray, apex: np.ndarray, r_pz: np.
     return build_cones(p_A, p_B, apex, r_pz, reach, tau_min)
 
 
-@jit
+@kernel
 def min_speed(cones: VOCones, i: int) -> float:
     """The smallest |v| inside VO cone i: the distance from the velocity origin to the
     (infinite) cone; 0 when A is inside the zone or the origin is in the cone."""

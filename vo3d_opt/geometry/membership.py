@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._jit import entry, jit
+from .._jit import entry, inline, kernel
 from .cone import VOCones
 from .pyramid import VOPyramids
 
@@ -25,7 +25,7 @@ from .pyramid import VOPyramids
 NO_HORIZON = -1.0
 
 
-@jit
+@inline
 def closest_approach(cones: VOCones, i: int, v: np.ndarray, horizon: float) -> tuple[float, float, float]:
     """(closest distance to B's centre over t in [0, horizon] (horizon < 0: none), its time t*,
     the closing rate p·u) for velocity v against cone i, u = v - apex the relative velocity."""
@@ -40,7 +40,7 @@ def closest_approach(cones: VOCones, i: int, v: np.ndarray, horizon: float) -> t
     return np.sqrt(d0 * d0 + d1 * d1 + d2 * d2), t, pu
 
 
-@jit
+@inline
 def in_cone(cones: VOCones, i: int, v: np.ndarray, horizon: float, tol: float) -> bool:
     """Whether v lies in VO cone i (inside the zone: whether it still closes in). ``tol`` (m)
     widens (> 0) or shrinks (< 0) the protected sphere."""
@@ -50,7 +50,7 @@ def in_cone(cones: VOCones, i: int, v: np.ndarray, horizon: float, tol: float) -
     return closest < cones.r_pz[i] + tol and t_star > 0.0
 
 
-@jit
+@inline
 def entry_time(pyramids: VOPyramids, j: int, v: np.ndarray) -> float:
     """Slab test: the time (s) the ray p_A + v t enters prism j ([lo, hi] in its frame); inf if
     never."""
@@ -71,7 +71,7 @@ def entry_time(pyramids: VOPyramids, j: int, v: np.ndarray) -> float:
     return t0 if t_exit > t0 else np.inf
 
 
-@jit
+@inline
 def in_pyramid(pyramids: VOPyramids, j: int, v: np.ndarray, horizon: float) -> bool:
     """Whether v lies in VO pyramid j (inside C_pz: whether it heads towards its centre)."""
     if pyramids.inside[j]:
@@ -160,7 +160,7 @@ def pyramid_entry_time(pyramids: VOPyramids, v: np.ndarray) -> np.ndarray:
 _SEARCH_STEPS = 100
 
 
-@jit
+@inline
 def _scaled_zone_distance(shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v: np.ndarray,
                           s: float) -> float:
     """Distance from v to the zone scaled by s about the apex: for cone k (shape 0) the ball
@@ -178,7 +178,19 @@ def _scaled_zone_distance(shape: int, cones: VOCones, pyramids: VOPyramids, k: i
     return np.sqrt(total)
 
 
-@jit
+@inline
+def _reach(shape: int, cones: VOCones, pyramids: VOPyramids, k: int) -> float:
+    """The distance from A to zone k (m): d_oi - r_pz for a sphere, to the prism for C_pz."""
+    if shape == 0:
+        return cones.d_oi[k] - cones.r_pz[k]
+    total = 0.0
+    for ax in range(3):
+        gap = max(pyramids.lo[k, ax], -pyramids.hi[k, ax], 0.0)
+        total += gap * gap
+    return np.sqrt(total)
+
+
+@kernel
 def _zone_clearance(shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v: np.ndarray,
                     horizon: float) -> float:
     """The distance (m/s) from v to the VO of zone k in velocity space (0 inside it).
@@ -197,7 +209,7 @@ def _zone_clearance(shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v:
     lo = 1.0 / horizon if horizon > 0.0 else 0.0
     # Beyond s_max the zone is farther than at lo: s·dist(0, Z) - |v - apex| > f(lo).
     f_lo = _scaled_zone_distance(shape, cones, pyramids, k, v, lo)
-    reach = _scaled_zone_distance(shape, cones, pyramids, k, np.zeros(3) if shape == 1 else cones.apex[k], 1.0)
+    reach = _reach(shape, cones, pyramids, k)
     speed = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2) + (0.0 if shape == 1 else np.sqrt(cones.apex[k, 0] ** 2 + cones.apex[k, 1] ** 2 + cones.apex[k, 2] ** 2))
     hi = max(lo, (f_lo + speed) / max(reach, 1e-12))
     for _ in range(_SEARCH_STEPS):
@@ -209,7 +221,7 @@ def _zone_clearance(shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v:
     return min(f_lo, _scaled_zone_distance(shape, cones, pyramids, k, v, 0.5 * (lo + hi)))
 
 
-@jit
+@kernel
 def clearance(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, horizon: float) -> float:
     """The least distance (m/s) from v to any VO (inf without VOs); <= 0 inside one."""
     best = np.inf

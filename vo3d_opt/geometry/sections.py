@@ -27,10 +27,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import entry, jit
+from .._jit import entry, jit, inline
 from .cone import VOCones
 from .frames import AvoidancePlanes
-from .pyramid import BOX_EDGES, VOPyramids, prism_corners
+from .pyramid import BOX_EDGES, VOPyramids
 
 KINDS = ("blank", "point", "line", "triangle", "circle", "ellipse", "parabola", "hyperbola")
 #: Beyond the paper's eight kinds: A is inside the protected zone, the VO is a half-plane.
@@ -88,7 +88,7 @@ def generator_angles(n_samples: int) -> np.ndarray:
     return t
 
 
-@jit
+@inline
 def _crossings(apex, R, d_vo, r_vo, nx, ny, nz, cs):
     """Eqs (14)–(16) for one cone and the plane with normal n: B_vo(t) meets it where
     A + B cos t + C sin t = 0; the two roots' (cos t, sin t) into ``cs`` (2, 2), solved without
@@ -107,7 +107,7 @@ def _crossings(apex, R, d_vo, r_vo, nx, ny, nz, cs):
     return True
 
 
-@jit
+@inline
 def _to_plane(v, frame, c, s):
     """Eq. (8): world vector -> (x^phi, y^phi, z^phi) on the plane with cos/sin phi = c, s."""
     f0 = frame[0, 0] * v[0] + frame[0, 1] * v[1] + frame[0, 2] * v[2]
@@ -116,38 +116,47 @@ def _to_plane(v, frame, c, s):
     return f0, c * f1 + s * f2, c * f2 - s * f1
 
 
-@jit
-def _base_point(apex, R, d_vo, r_vo, cos_t, sin_t, out):
-    """B_vo(t) of eq. (4) in the world frame, written into ``out`` (3,)."""
-    ct, st = r_vo * cos_t, r_vo * sin_t
-    for k in range(3):
-        out[k] = apex[k] + R[k, 0] * d_vo + R[k, 1] * ct + R[k, 2] * st
+@inline
+def _framed(x, y, z, frame):
+    """A world vector in the planes' (e_x, e_y0, e_z0) frame: every plane then only turns it
+    about e_x (eq. 8)."""
+    return (frame[0, 0] * x + frame[0, 1] * y + frame[0, 2] * z, frame[1, 0] * x + frame[1, 1] * y + frame[1, 2] * z,
+            frame[2, 0] * x + frame[2, 1] * y + frame[2, 2] * z)
 
 
-@jit
+@inline
 def cone_base_points(cones: VOCones, i: int, frame: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
                      out: np.ndarray) -> None:
-    """B_vo(t_k) of eq. (4) for every generator angle, in the planes' (e_x, e_y0, e_z0) frame
-    (K, 3): every plane then only turns them about e_x (eq. 8), which is cheap."""
-    b = np.empty(3)
-    for k in range(cos_t.shape[0]):
-        _base_point(cones.apex[i], cones.R[i], cones.d_vo[i], cones.r_vo[i], cos_t[k], sin_t[k], b)
-        out[k, 0], out[k, 1], out[k, 2] = _to_plane(b, frame, 1.0, 0.0)
+    """B_vo(t_k) of eq. (4) for every generator angle, in the planes' (e_x, e_y0, e_z0) frame,
+    into ``out`` (K + 3, 3); its last three rows are the apex, C_vo (eq. 5) and rel."""
+    a, R, dv, rv = cones.apex[i], cones.R[i], cones.d_vo[i], cones.r_vo[i]
+    K = cos_t.shape[0]
+    for k in range(K):
+        ct, st = rv * cos_t[k], rv * sin_t[k]
+        out[k, 0], out[k, 1], out[k, 2] = _framed(a[0] + R[0, 0] * dv + R[0, 1] * ct + R[0, 2] * st,
+                                                  a[1] + R[1, 0] * dv + R[1, 1] * ct + R[1, 2] * st,
+                                                  a[2] + R[2, 0] * dv + R[2, 1] * ct + R[2, 2] * st, frame)
+    out[K, 0], out[K, 1], out[K, 2] = _framed(a[0], a[1], a[2], frame)
+    out[K + 1, 0], out[K + 1, 1], out[K + 1, 2] = _framed(a[0] + dv * R[0, 0], a[1] + dv * R[1, 0], a[2] + dv * R[2, 0],
+                                                          frame)
+    rel = cones.rel[i]
+    out[K + 2, 0], out[K + 2, 1], out[K + 2, 2] = _framed(rel[0], rel[1], rel[2], frame)
 
 
-@jit
+@inline
 def cone_section(cones: VOCones, i: int, base: np.ndarray, frame: np.ndarray, c: float, s: float,
                  corr: Corrections, sec: Section) -> int:
     """Section 3.1 for cone i on the plane with cos/sin phi = c, s: writes ``sec`` and returns
     the kind. ``base`` is ``cone_base_points`` of the cone."""
+    K = base.shape[0] - 3
     apex, R, d_vo, r_vo = cones.apex[i], cones.R[i], cones.d_vo[i], cones.r_vo[i]
-    xA, yA, zA = _to_plane(apex, frame, c, s)  # eq. (7)
+    xA, yA, zA = base[K, 0], c * base[K, 1] + s * base[K, 2], c * base[K, 2] - s * base[K, 1]  # eq. (7)
     sec.apex[0], sec.apex[1] = xA, yA
     scale = 1.0 + np.sqrt(apex[0] ** 2 + apex[1] ** 2 + apex[2] ** 2) + d_vo
     on_apex = abs(zA) <= 1e-9 * scale  # section 3.1.3: A_vo lies on the plane
     # Eqs (11)-(12): generator k meets the plane at parameter t_g.
     any_valid = False
-    for k in range(base.shape[0]):
+    for k in range(K):
         xB, yB, zB = base[k, 0], c * base[k, 1] + s * base[k, 2], c * base[k, 2] - s * base[k, 1]
         dz = zB - zA
         t_g = -zA / dz
@@ -156,19 +165,20 @@ def cone_section(cones: VOCones, i: int, base: np.ndarray, frame: np.ndarray, c:
         else:  # the original condition z_Bvo != z_A: both nappes, any length
             valid = np.isfinite(t_g) and abs(dz) > 1e-12
         any_valid |= valid
-        if valid and not on_apex:
-            sec.curve[k, 0], sec.curve[k, 1] = (xB - xA) * t_g + xA, (yB - yA) * t_g + yA
-        else:
-            sec.curve[k, 0], sec.curve[k, 1] = np.nan, np.nan
+        keep = valid and not on_apex
+        sec.curve[k, 0] = (xB - xA) * t_g + xA if keep else np.nan
+        sec.curve[k, 1] = (yB - yA) * t_g + yA if keep else np.nan
     # Eqs (14)-(17): where the base circle meets the plane.
     nx, ny, nz = (c * frame[2, 0] - s * frame[1, 0], c * frame[2, 1] - s * frame[1, 1],
                   c * frame[2, 2] - s * frame[1, 2])
     chord_ok = _crossings(apex, R, d_vo, r_vo, nx, ny, nz, sec.chord_cs)
-    b = np.empty(3)
     for j in range(2):
         if chord_ok:
-            _base_point(apex, R, d_vo, r_vo, sec.chord_cs[j, 0], sec.chord_cs[j, 1], b)
-            sec.chord[j, 0], sec.chord[j, 1], _ = _to_plane(b, frame, c, s)
+            ct, st = r_vo * sec.chord_cs[j, 0], r_vo * sec.chord_cs[j, 1]
+            bx, by, bz = _framed(apex[0] + R[0, 0] * d_vo + R[0, 1] * ct + R[0, 2] * st,
+                                 apex[1] + R[1, 0] * d_vo + R[1, 1] * ct + R[1, 2] * st,
+                                 apex[2] + R[2, 0] * d_vo + R[2, 1] * ct + R[2, 2] * st, frame)
+            sec.chord[j, 0], sec.chord[j, 1] = bx, c * by + s * bz
         else:
             sec.chord[j, 0], sec.chord[j, 1] = np.nan, np.nan
             sec.chord_cs[j, 0], sec.chord_cs[j, 1] = np.nan, np.nan
@@ -188,9 +198,7 @@ def cone_section(cones: VOCones, i: int, base: np.ndarray, frame: np.ndarray, c:
         if kind == TRIANGLE and not corr.triangle:  # the original reduces eq. (12) to A^phi
             kind = POINT
     # Eq. (13): the symmetry-line point H, where the axis line meets the plane.
-    for k in range(3):
-        b[k] = apex[k] + d_vo * R[k, 0]  # C_vo, eq. (5)
-    xC, yC, zC = _to_plane(b, frame, c, s)
+    xC, yC, zC = base[K + 1, 0], c * base[K + 1, 1] + s * base[K + 1, 2], c * base[K + 1, 2] - s * base[K + 1, 1]
     dzc = zC - zA
     if abs(dzc) <= 1e-12 * scale:  # the axis is parallel to the plane
         sec.symmetry[0], sec.symmetry[1] = xC, yC
@@ -200,12 +208,12 @@ def cone_section(cones: VOCones, i: int, base: np.ndarray, frame: np.ndarray, c:
             t_h = abs(t_h)
         sec.symmetry[0], sec.symmetry[1] = (xC - xA) * t_h + xA, (yC - yA) * t_h + yA
     # Inside the protected zone: the VO is the closing half-space (v - apex)·rel > 0.
-    xr, yr, zr = _to_plane(cones.rel[i], frame, c, s)
+    xr, yr, zr = base[K + 2, 0], c * base[K + 2, 1] + s * base[K + 2, 2], c * base[K + 2, 2] - s * base[K + 2, 1]
     sec.halfplane[0], sec.halfplane[1], sec.halfplane[2] = xr, yr, xA * xr + yA * yr + zA * zr
     return INSIDE_CODE if cones.inside[i] else kind
 
 
-@jit
+@inline
 def _pseudo_angle(y: float, x: float) -> float:
     """A number in [-2, 2] that grows with atan2(y, x) (the same order, no trigonometry); NaN
     for NaN input."""
@@ -215,60 +223,71 @@ def _pseudo_angle(y: float, x: float) -> float:
     return (2.0 - abs(frac)) if y >= 0.0 else -(2.0 - abs(frac))
 
 
-@jit
-def pyramid_section(pyramids: VOPyramids, j: int, corners: np.ndarray, frame: np.ndarray, c: float,
-                    s: float, sec: Section) -> int:
-    """Section 4.2 for pyramid j (its C_pz corners (8, 3)) on the plane with cos/sin phi = c, s:
-    writes ``sec`` (chord: the two extreme crossing points; apex: the origin) and returns the
-    kind. Every plane contains the pyramid's apex (eq. 19): a triangle, a line or a point."""
-    E = BOX_EDGES.shape[0]
-    local, pts, unit = np.empty((8, 3)), np.empty((E, 2)), np.empty((E, 2))
-    crosses = np.zeros(E, dtype=np.bool_)
+@inline
+def pyramid_base_points(pyramids: VOPyramids, j: int, frame: np.ndarray, out: np.ndarray) -> None:
+    """The eight corners of C_pz (bits far, left, top of k pick hi over lo) in the planes'
+    (e_x, e_y0, e_z0) frame, into ``out`` (9, 3); row 8 is the horizontal direction h towards
+    the obstacle."""
+    F, lo, hi = pyramids.frame[j], pyramids.lo[j], pyramids.hi[j]
+    for k in range(8):
+        a0 = hi[0] if k & 1 else lo[0]
+        a1 = hi[1] if (k >> 1) & 1 else lo[1]
+        a2 = hi[2] if (k >> 2) & 1 else lo[2]
+        out[k, 0], out[k, 1], out[k, 2] = _framed(a0 * F[0, 0] + a1 * F[1, 0] + a2 * F[2, 0],
+                                                  a0 * F[0, 1] + a1 * F[1, 1] + a2 * F[2, 1],
+                                                  a0 * F[0, 2] + a1 * F[1, 2] + a2 * F[2, 2], frame)
+    out[8, 0], out[8, 1], out[8, 2] = _framed(F[0, 0], F[0, 1], F[0, 2], frame)
+
+
+@inline
+def pyramid_section(pyramids: VOPyramids, j: int, base: np.ndarray, c: float, s: float, sec: Section) -> int:
+    """Section 4.2 for pyramid j on the plane with cos/sin phi = c, s: writes ``sec`` (chord:
+    the two extreme points where C_pz's edges cross the plane; apex: the origin) and returns the
+    kind. ``base`` is ``pyramid_base_points`` of the pyramid. Every plane contains the
+    pyramid's apex (eq. 19): a triangle, a line or a point."""
     for a in range(2):
         sec.apex[a], sec.symmetry[a] = 0.0, np.nan
         sec.chord[a, 0], sec.chord[a, 1], sec.chord_cs[a, 0], sec.chord_cs[a, 1] = np.nan, np.nan, np.nan, np.nan
-    for k in range(8):
-        local[k, 0], local[k, 1], local[k, 2] = _to_plane(corners[k], frame, c, s)
-    # C_pz ∩ plane is the convex hull of the points where its edges cross the plane.
-    count, mx, my, sx, sy = 0, 0.0, 0.0, 0.0, 0.0
-    for e in range(E):
-        a, b = BOX_EDGES[e, 0], BOX_EDGES[e, 1]
-        za, zb = local[a, 2], local[b, 2]
-        crosses[e] = za * zb <= 0 and za != zb
-        if crosses[e]:
+    sec.halfplane[0], sec.halfplane[1], sec.halfplane[2] = base[8, 0], c * base[8, 1] + s * base[8, 2], 0.0
+    # C_pz ∩ plane is the convex hull of the points where its edges cross the plane; the
+    # extreme ones seen from the apex (the velocity origin) bound the section.
+    n_cross, at_apex, sx, sy, mx, my = 0, False, 0.0, 0.0, 0.0, 0.0
+    for e in range(BOX_EDGES.shape[0]):  # first pass: the mean direction of the crossings
+        ka, kb = BOX_EDGES[e, 0], BOX_EDGES[e, 1]
+        za, zb = c * base[ka, 2] - s * base[ka, 1], c * base[kb, 2] - s * base[kb, 1]
+        if za * zb <= 0 and za != zb:
             f = za / (za - zb)
-            pts[e, 0] = local[a, 0] + f * (local[b, 0] - local[a, 0])
-            pts[e, 1] = local[a, 1] + f * (local[b, 1] - local[a, 1])
-            norm = np.hypot(pts[e, 0], pts[e, 1])
-            unit[e, 0], unit[e, 1] = pts[e, 0] / norm, pts[e, 1] / norm
-            sx, sy = sx + pts[e, 0], sy + pts[e, 1]
+            x = base[ka, 0] + f * (base[kb, 0] - base[ka, 0])
+            ya, yb = c * base[ka, 1] + s * base[ka, 2], c * base[kb, 1] + s * base[kb, 2]
+            y = ya + f * (yb - ya)
+            norm = np.sqrt(x * x + y * y)
+            n_cross, sx, sy = n_cross + 1, sx + x, sy + y
             if norm > 0:
-                mx, my, count = mx + unit[e, 0], my + unit[e, 1], count + 1
-    xh, yh, _ = _to_plane(pyramids.frame[j, 0], frame, c, s)
-    sec.halfplane[0], sec.halfplane[1], sec.halfplane[2] = xh, yh, 0.0
-    n_cross = 0
-    for e in range(E):
-        n_cross += crosses[e]
+                mx, my = mx + x / norm, my + y / norm
+            else:
+                at_apex = True  # A on the surface of C_pz: no wedge to speak of
     if n_cross == 0:
         return INSIDE_CODE if pyramids.inside[j] else POINT
     sec.symmetry[0], sec.symmetry[1] = sx / n_cross, sy / n_cross
-    # The extreme crossing points seen from the apex (the velocity origin, eq. 19).
-    if count:
-        mx, my = mx / count, my / count
-    lo, hi, a_lo, a_hi, at_apex = -1, -1, np.inf, -np.inf, False
-    for e in range(E):
-        if crosses[e]:
-            ang = _pseudo_angle(mx * unit[e, 1] - my * unit[e, 0], mx * unit[e, 0] + my * unit[e, 1])
-            at_apex |= np.isnan(ang)  # A on the surface of C_pz: no wedge to speak of
+    a_lo, a_hi = np.inf, -np.inf
+    for e in range(BOX_EDGES.shape[0]):  # second pass: the extreme angles about that direction
+        ka, kb = BOX_EDGES[e, 0], BOX_EDGES[e, 1]
+        za, zb = c * base[ka, 2] - s * base[ka, 1], c * base[kb, 2] - s * base[kb, 1]
+        if za * zb <= 0 and za != zb:
+            f = za / (za - zb)
+            x = base[ka, 0] + f * (base[kb, 0] - base[ka, 0])
+            ya, yb = c * base[ka, 1] + s * base[ka, 2], c * base[kb, 1] + s * base[kb, 2]
+            y = ya + f * (yb - ya)
+            ang = _pseudo_angle(mx * y - my * x, mx * x + my * y)
             if ang < a_lo:
-                lo, a_lo = e, ang
+                a_lo, sec.chord[0, 0], sec.chord[0, 1] = ang, x, y
             if ang > a_hi:
-                hi, a_hi = e, ang
-    kind = LINE
-    if not at_apex and a_hi - a_lo > 1e-9:
-        kind = TRIANGLE
-        sec.chord[0, 0], sec.chord[0, 1] = pts[lo, 0], pts[lo, 1]
-        sec.chord[1, 0], sec.chord[1, 1] = pts[hi, 0], pts[hi, 1]
+                a_hi, sec.chord[1, 0], sec.chord[1, 1] = ang, x, y
+    kind = TRIANGLE
+    if at_apex or not a_hi - a_lo > 1e-9:
+        kind = LINE
+        for a in range(2):
+            sec.chord[a, 0], sec.chord[a, 1] = np.nan, np.nan
     return INSIDE_CODE if pyramids.inside[j] else kind
 
 
@@ -345,7 +364,7 @@ def _section_at(out: Sections, i: int, p: int) -> Section:
 @entry
 def _fill_cone_sections(cones: VOCones, planes: AvoidancePlanes, out: Sections) -> None:
     cos_t, sin_t = np.cos(out.t), np.sin(out.t)
-    base = np.empty((out.t.shape[0], 3))
+    base = np.empty((out.t.shape[0] + 3, 3))
     for i in range(cones.d_oi.shape[0]):
         cone_base_points(cones, i, planes.frame, cos_t, sin_t, base)
         for p in range(planes.phi.shape[0]):
@@ -355,11 +374,12 @@ def _fill_cone_sections(cones: VOCones, planes: AvoidancePlanes, out: Sections) 
 
 @entry
 def _fill_pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes, out: Sections) -> None:
-    corners = prism_corners(pyramids.frame, pyramids.lo, pyramids.hi)
+    base = np.empty((9, 3))
     for j in range(pyramids.L_pz.shape[0]):
+        pyramid_base_points(pyramids, j, planes.frame, base)
         for p in range(planes.phi.shape[0]):
-            out.kind[j, p] = pyramid_section(pyramids, j, corners[j], planes.frame, np.cos(planes.phi[p]),
-                                             np.sin(planes.phi[p]), _section_at(out, j, p))
+            out.kind[j, p] = pyramid_section(pyramids, j, base, np.cos(planes.phi[p]), np.sin(planes.phi[p]),
+                                             _section_at(out, j, p))
 
 
 def cone_sections(cones: VOCones, planes: AvoidancePlanes, *, corrections: Iterable[str] | None = None,

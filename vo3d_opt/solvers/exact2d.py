@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vo3d_opt._jit import entry, jit
+from vo3d_opt._jit import entry, inline, kernel
 from vo3d_opt.solvers.base import Backend, Standard, make_result
 from vo3d_opt.solvers.problem import QP, Result
 from vo3d_opt.status import Status
@@ -33,7 +33,7 @@ from vo3d_opt.status import Status
 EPS = 1e-12
 
 
-@jit
+@inline
 def _order(m: int, out: np.ndarray) -> None:
     """A fixed pseudo-random permutation of range(m) (Fisher–Yates with an xorshift): the
     random order of Seidel's algorithm, the same on every call so that answers are
@@ -49,7 +49,7 @@ def _order(m: int, out: np.ndarray) -> None:
         out[k], out[j] = out[j], out[k]
 
 
-@jit
+@inline
 def _on_line(G, h, order, upto, i, w0, r_max, tol, out) -> bool:
     """The point nearest w0 on the line G[i]·w = h[i], inside the disc and the half-planes
     order[:upto]; False when that set is empty."""
@@ -83,7 +83,7 @@ def _on_line(G, h, order, upto, i, w0, r_max, tol, out) -> bool:
     return True
 
 
-@jit
+@inline
 def _on_circle(G, h, m, w0, radius, tol, out) -> bool:
     """The point nearest w0 on the circle ||w|| = radius inside every half-plane; False if none
     (the annulus case: see the module docstring)."""
@@ -116,7 +116,7 @@ def _on_circle(G, h, m, w0, radius, tol, out) -> bool:
     return best < np.inf
 
 
-@entry
+@kernel
 def nearest_in_disc(G: np.ndarray, h: np.ndarray, m: int, w0: np.ndarray, r_max: float,
                     r_min: float, order: np.ndarray, out: np.ndarray) -> bool:
     """The exact optimum of the module's problem over the first ``m`` rows of G w <= h, written
@@ -143,6 +143,13 @@ def nearest_in_disc(G: np.ndarray, h: np.ndarray, m: int, w0: np.ndarray, r_max:
     return True
 
 
+@entry
+def py_nearest_in_disc(G: np.ndarray, h: np.ndarray, m: int, w0: np.ndarray, r_max: float, r_min: float,
+                       order: np.ndarray, out: np.ndarray) -> bool:
+    """``nearest_in_disc`` for Python callers (compiled code calls it directly)."""
+    return nearest_in_disc(G, h, m, w0, r_max, r_min, order, out)
+
+
 class Exact2DBackend(Backend):
     """``exact2d``: 2-variable QPs with an isotropic Hessian P = c·I (c > 0), inequalities,
     bounds and the speed disc as an exact cone; anything else is answered "failed"."""
@@ -161,7 +168,7 @@ class Exact2DBackend(Backend):
         w0 = -std.q / c
         out, order = np.empty(2), np.empty(max(len(d), 1), dtype=np.int64)
         r_max = np.inf if std.r is None else std.r
-        if not nearest_in_disc(np.ascontiguousarray(D), np.ascontiguousarray(d), len(d), w0, r_max, 0.0,
+        if not py_nearest_in_disc(np.ascontiguousarray(D), np.ascontiguousarray(d), len(d), w0, r_max, 0.0,
                                order, out):
             return Result(None, Status.INFEASIBLE, self.name, "the constraints leave no point")
         return make_result(self.name, std, out, Status.OPTIMAL)
