@@ -216,11 +216,26 @@ def test_missing_file_names_the_file(tmp_path):
         load_scenario(path)
 
 
-def test_several_problems_report_the_first_and_count_the_rest(tmp_path):
-    data = mutated(lambda d: (d.update(dt=-1.0), d["defaults"].update(r_pz=-1.0)))
+def test_several_problems_are_all_shown_on_one_line(tmp_path):
+    data = mutated(lambda d: (d.update(dt=-1.0), d["defaults"].update(r_pz=-1.0),
+                              d["agents"][1].update(colour="red")))
+    path = write(tmp_path, data)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    msg = str(info.value)
+    assert "\n" not in msg and "more problem" not in msg, msg
+    assert msg == (f"{path}: dt: input should be greater than 0; defaults.r_pz: input should be "
+                   f"greater than 0; agents[1].colour: unknown key"), msg
+
+
+def test_several_cross_field_problems_are_all_shown(tmp_path):
+    data = mutated(lambda d: (d["agents"][0].update(goal=[-40.0, 0.0, 50.0]),
+                              d["agents"][2].update(id="u0")))
     with pytest.raises(ScenarioError) as info:
         load_scenario(write(tmp_path, data))
-    assert "more problem" in str(info.value) and "\n" not in str(info.value)
+    msg = str(info.value)
+    assert "agents[0].goal: above the altitude ceiling" in msg, msg
+    assert "agents[2].id: duplicate id 'u0'" in msg, msg
 
 
 def test_valid_base_loads_into_types(tmp_path):
