@@ -1,5 +1,8 @@
 """Reading scenario files: YAML, the bundled scenarios by name, and one-line errors.
 
+:func:`load_scenario` logs (``logging``, level WARNING) what is allowed but worth saying:
+``Scenario.warnings()``, e.g. a start inside a protected zone.
+
 Rejected, with one :class:`ScenarioError` line ``FILE: key.path[2].key: problem`` listing every
 problem found (``; `` between them): unreadable files, invalid YAML, duplicate YAML keys, and
 whatever the schema (:mod:`vo3d_opt.sim.scenario.schema`) refuses: unknown or missing keys
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import difflib
 import importlib.resources
+import logging
 import re
 from collections import defaultdict
 from functools import cache
@@ -25,6 +29,9 @@ from pydantic import BaseModel, ValidationError
 
 from vo3d_opt.sim.scenario.schema import OBSTACLE_TAGS, Scenario
 from vo3d_opt.types import describe_error, field_path, one_line
+
+
+log = logging.getLogger(__name__)
 
 
 class ScenarioError(ValueError):
@@ -165,7 +172,10 @@ def load_scenario(path: str | Path) -> Scenario:
     except (OSError, UnicodeDecodeError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise ScenarioError(f"{source}: cannot read: {reason}") from None
-    return scenario_from_dict(_parse(text, source), source)
+    sc = scenario_from_dict(_parse(text, source), source)
+    for warning in sc.warnings():
+        log.warning("%s: %s", sc.name, warning)
+    return sc
 
 
 # ---------------------------------------------------------------------------- bundled files
