@@ -38,7 +38,7 @@ from vo3d_opt.sim.simulator import DEFAULT_FORMULATION, Simulator, scenario_sele
 from vo3d_opt.types import one_line
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
-#: Significant digits of the floats in JSON output (17 would show rounding noise: 31.200000000000003).
+#: Significant digits of the floats in JSON output (17 show rounding noise: 31.200000000000003).
 JSON_DIGITS = 12
 
 log = logging.getLogger("vo3d_opt.cli")
@@ -185,9 +185,9 @@ def _print_summary(summary: dict[str, Any]) -> None:
 def _print_table(rows: list[dict[str, Any]], keys: list[str]) -> None:
     cells = [[_fmt(r.get(k)) for k in keys] for r in rows]
     widths = [max(len(k), *(len(c[n]) for c in cells)) for n, k in enumerate(keys)]
-    print("  ".join(k.ljust(w) for k, w in zip(keys, widths)).rstrip())
+    print("  ".join(k.ljust(w) for k, w in zip(keys, widths, strict=True)).rstrip())
     for c in cells:
-        print("  ".join(v.ljust(w) for v, w in zip(c, widths)).rstrip())
+        print("  ".join(v.ljust(w) for v, w in zip(c, widths, strict=True)).rstrip())
 
 
 def write_outputs(record: Any, summary: dict[str, Any], out: Path) -> list[Path]:
@@ -280,7 +280,7 @@ def cmd_list(args: argparse.Namespace) -> int:
         obstacles = str(len(sc.obstacles)) + (f"+{len(sc.spheres)}s" if sc.spheres else "")
         rows.append((sc.name, str(sc.n_agents), obstacles, _first_sentence(sc.description)))
     if args.json:
-        print(_json([dict(zip(("name", "agents", "obstacles", "description"), r)) for r in rows]))
+        print(_json([dict(zip(("name", "agents", "obstacles", "description"), r, strict=True)) for r in rows]))
         return EXIT_FAIL if bad else EXIT_OK
     if rows:
         w = [max(len(r[n]) for r in rows + [("name", "agents", "obstacles", "")]) for n in range(3)]
@@ -301,9 +301,9 @@ _SOLVER_HELP = (f"osqp | clarabel | daqp | cvxpy[:SOLVER] | qpsolvers:NAME | cas
                 f"formulations and {DEFAULT_NLP_SOLVER} for nlp (sampled uses none)")
 
 
-def _common() -> argparse.ArgumentParser:
+def _common() -> _Parser:
     """The options every subcommand takes (-v / -q)."""
-    p = argparse.ArgumentParser(add_help=False)
+    p = _Parser(add_help=False)
     noise = p.add_mutually_exclusive_group()
     noise.add_argument("-v", "--verbose", dest="verbosity", action="store_const", const=1,
                        default=0, help="log debugging detail on stderr too")

@@ -10,11 +10,12 @@ The same field types and checks validate scenario files (``vo3d_opt.sim.scenario
 embed these models; there, pydantic's structured errors (with the key path) are kept, and
 cross-field problems are located at the field they concern (:func:`raise_problems`).
 """
+
 from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Container, Iterable
+from collections.abc import Container, Iterable, Mapping
 from functools import cached_property
 from typing import Annotated, Any
 
@@ -96,11 +97,17 @@ def raise_problems(title: str, problems: list[tuple[tuple[Any, ...], str, Any]])
     """Raise, from inside a validator, every (location, problem, value) at its own location;
     pydantic prefixes the location of the model being validated. Nothing when empty."""
     if problems:
-        raise ValidationError.from_exception_data(title, [
-            {"type": PydanticCustomError("value_error", "{problem}", {"problem": msg}),
-             "loc": loc, "input": value}
-            for loc, msg, value in problems
-        ])
+        raise ValidationError.from_exception_data(
+            title,
+            [
+                {
+                    "type": PydanticCustomError("value_error", "{problem}", {"problem": msg}),
+                    "loc": loc,
+                    "input": value,
+                }
+                for loc, msg, value in problems
+            ],
+        )
 
 
 # ------------------------------------------------------------------------------------ fields
@@ -207,7 +214,12 @@ class Neighbor(Model):
     @property
     def row(self) -> tuple[float, ...]:
         """(x, y, z, v_x, v_y, v_z, r_pz, cooperative): what the VO needs, as plain floats."""
-        return (*self.position.tolist(), *self.velocity.tolist(), self.r_pz, float(self.cooperative))
+        return (
+            *self.position.tolist(),
+            *self.velocity.tolist(),
+            self.r_pz,
+            float(self.cooperative),
+        )
 
 
 class _StaticObstacle(Model):
@@ -232,7 +244,7 @@ class _StaticObstacle(Model):
         """h_pz: given, or the obstacle height plus the margin."""
         return self.h_pz if self.h_pz is not None else self.height + self.margin
 
-    def model_copy(self, *, update: dict[str, Any] | None = None, deep: bool = False) -> Any:
+    def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False) -> Any:
         """pydantic's copy, without the cached ``prism`` when fields change."""
         copy = super().model_copy(update=update, deep=deep)
         if update:
@@ -250,12 +262,24 @@ class _StaticObstacle(Model):
         # Section 4: h_pz must exceed the obstacle height and L_pz its largest length.
         problems = []
         if self.h_pz is not None and self.h_pz < self.height:
-            problems.append((("h_pz",), f"{self.h_pz:g} is below the obstacle height "
-                                        f"{self.height:g} (section 4: h_pz > height)", self.h_pz))
+            problems.append(
+                (
+                    ("h_pz",),
+                    f"{self.h_pz:g} is below the obstacle height "
+                    f"{self.height:g} (section 4: h_pz > height)",
+                    self.h_pz,
+                )
+            )
         extent = self.footprint_extent()
         if self.L_pz is not None and self.L_pz < extent:
-            problems.append((("L_pz",), f"{self.L_pz:g} is below the obstacle's largest extent "
-                                        f"{extent:.3g} (section 4)", self.L_pz))
+            problems.append(
+                (
+                    ("L_pz",),
+                    f"{self.L_pz:g} is below the obstacle's largest extent "
+                    f"{extent:.3g} (section 4)",
+                    self.L_pz,
+                )
+            )
         raise_problems(type(self).__name__, problems)
         return self
 

@@ -1,6 +1,7 @@
 """Scenario files (contract §2): the schema (:mod:`.schema`, pydantic models built on the public
 types of ``vo3d_opt.types``) and the loader (:mod:`.loader`: YAML, bundled names, one-line
 errors). The format is documented in :mod:`.schema`, what is rejected in :mod:`.loader`."""
+
 from vo3d_opt.sim.scenario.loader import (
     ScenarioError,
     bundled_dir,

@@ -13,6 +13,7 @@ YAML 1.1 (PyYAML) reads ``1e9`` as a string; this loader reads it as YAML 1.2 do
 A name without a directory or ``.yaml`` suffix that is no file is looked up among the bundled
 scenarios (file stem or ``name``); when none matches, the error suggests close names.
 """
+
 from __future__ import annotations
 
 import difflib
@@ -29,7 +30,6 @@ from pydantic import BaseModel, ValidationError
 
 from vo3d_opt.sim.scenario.schema import OBSTACLE_TAGS, Scenario
 from vo3d_opt.types import describe_error, field_path, one_line
-
 
 log = logging.getLogger(__name__)
 
@@ -52,14 +52,17 @@ def _construct_mapping(loader: _Loader, node: yaml.MappingNode, deep: bool = Fal
         key = loader.construct_object(key_node, deep=deep)
         if key in seen:
             raise yaml.constructor.ConstructorError(
-                None, None, f"duplicate key {key!r}", key_node.start_mark)
+                None, None, f"duplicate key {key!r}", key_node.start_mark
+            )
         seen.append(key)
     return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
 
 
 _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 # A copy of the resolver table (add_implicit_resolver would append to SafeLoader's own lists).
-_Loader.yaml_implicit_resolvers = {k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+_Loader.yaml_implicit_resolvers = {
+    k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
 _Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
@@ -104,7 +107,9 @@ def _key_places() -> dict[str, tuple[str, ...]]:
             if where not in places[key]:
                 places[key].append(where)
             for sub in _models_in(info.annotation):
-                walk(sub, f"{where}.{key}".lstrip(".") + ("[]" if _is_list(info.annotation) else ""))
+                walk(
+                    sub, f"{where}.{key}".lstrip(".") + ("[]" if _is_list(info.annotation) else "")
+                )
 
     walk(Scenario, "")
     walk(Options, "selector_options")
@@ -115,8 +120,9 @@ def _unknown_key(loc: tuple[Any, ...]) -> str:
     key = str(loc[-1]) if loc else "?"
     places = _key_places()
     if key in places:
-        where = " and ".join("at the top level of the scenario" if p == "" else f"in {p}"
-                             for p in places[key])
+        where = " and ".join(
+            "at the top level of the scenario" if p == "" else f"in {p}" for p in places[key]
+        )
         return f"unknown key here ({key!r} belongs {where})"
     hint = difflib.get_close_matches(key, sorted(places), n=1)
     return "unknown key" + (f" (did you mean {hint[0]!r}?)" if hint else "")

@@ -56,10 +56,11 @@ whatever appears at the edge of the range is passed before the next decision. A 
 than an agent's protected-zone radius is allowed but reported by :meth:`Scenario.warnings`
 (a vehicle can cross a zone between two decisions).
 """
+
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, ClassVar, Literal, Union
+from typing import Annotated, Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import ConfigDict, Field, PrivateAttr, StrictBool, field_validator, model_validator
@@ -141,7 +142,7 @@ class BoxSpec(_Placed, Box):
 
 #: The ``type`` tags of the obstacle union (pydantic puts them in error locations).
 OBSTACLE_TAGS = frozenset({"cylinder", "box"})
-ObstacleSpec = Annotated[Union[CylinderSpec, BoxSpec], Field(discriminator="type")]
+ObstacleSpec = Annotated[CylinderSpec | BoxSpec, Field(discriminator="type")]
 
 
 class SphereSpec(Spec):
@@ -223,18 +224,32 @@ class Scenario(Spec):
 
     def _cross_checks(self) -> list[Problem]:
         """Problems between keys, each at the key it concerns, in file order."""
-        return (self._timing_problems() + self._step_problems() + self._agent_problems()
-                + self._overlap_problems())
+        return (
+            self._timing_problems()
+            + self._step_problems()
+            + self._agent_problems()
+            + self._overlap_problems()
+        )
 
     def _timing_problems(self) -> list[Problem]:
         out: list[Problem] = []
         if self.max_time < self.dt:
-            out.append((("max_time",), f"{self.max_time:g} s is shorter than one step "
-                                       f"(dt {self.dt:g} s)", self.max_time))
+            out.append(
+                (
+                    ("max_time",),
+                    f"{self.max_time:g} s is shorter than one step (dt {self.dt:g} s)",
+                    self.max_time,
+                )
+            )
         v_lo = self.limits.v_min
         if self.defaults.max_speed < v_lo:
-            out.append((("defaults", "max_speed"), f"{self.defaults.max_speed:g} is below the "
-                                                   f"minimum speed {v_lo:g}", self.defaults.max_speed))
+            out.append(
+                (
+                    ("defaults", "max_speed"),
+                    f"{self.defaults.max_speed:g} is below the minimum speed {v_lo:g}",
+                    self.defaults.max_speed,
+                )
+            )
         return out
 
     def _step_problems(self) -> list[Problem]:
@@ -244,10 +259,17 @@ class Scenario(Spec):
             ranges.append(("vehicle_range", self.sensing.vehicle_range))
         if self.obstacles or self.spheres:
             ranges.append(("obstacle_range", self.sensing.obstacle_range))
-        return [(("dt",), f"one step flies {step:g} m (max_speed x dt), more than "
-                          f"sensing.{key} {value:g} m: what comes into range is passed before "
-                          f"the next decision; shorten dt", self.dt)
-                for key, value in ranges if step > value]
+        return [
+            (
+                ("dt",),
+                f"one step flies {step:g} m (max_speed x dt), more than "
+                f"sensing.{key} {value:g} m: what comes into range is passed before "
+                f"the next decision; shorten dt",
+                self.dt,
+            )
+            for key, value in ranges
+            if step > value
+        ]
 
     def _agent_problems(self) -> list[Problem]:
         out: list[Problem] = []
@@ -256,19 +278,33 @@ class Scenario(Spec):
         v_lo, (z_lo, z_hi) = self.limits.v_min, self.limits.altitude
         for i, a in enumerate(self.agents):
             if a.id in seen:
-                out.append((("agents", i, "id"), f"duplicate id {a.id!r} (also agents[{seen[a.id]}])",
-                            a.id))
+                out.append(
+                    (
+                        ("agents", i, "id"),
+                        f"duplicate id {a.id!r} (also agents[{seen[a.id]}])",
+                        a.id,
+                    )
+                )
             seen.setdefault(a.id, i)
             if a.max_speed is not None and a.max_speed < v_lo:
-                out.append((("agents", i, "max_speed"), f"{a.max_speed:g} is below the minimum "
-                                                        f"speed {v_lo:g}", a.max_speed))
+                out.append(
+                    (
+                        ("agents", i, "max_speed"),
+                        f"{a.max_speed:g} is below the minimum speed {v_lo:g}",
+                        a.max_speed,
+                    )
+                )
             for key in ("start", "goal"):
                 point = getattr(a, key)
                 where = ("agents", i, key)
                 if point[2] < z_lo:
-                    out.append((where, f"below the altitude floor {z_lo:g} (z = {point[2]:g})", point))
+                    out.append(
+                        (where, f"below the altitude floor {z_lo:g} (z = {point[2]:g})", point)
+                    )
                 elif point[2] > z_hi:
-                    out.append((where, f"above the altitude ceiling {z_hi:g} (z = {point[2]:g})", point))
+                    out.append(
+                        (where, f"above the altitude ceiling {z_hi:g} (z = {point[2]:g})", point)
+                    )
                 out += [(where, msg, point) for msg in self._inside_problems(point, radius[i])]
         return out
 
@@ -278,8 +314,10 @@ class Scenario(Spec):
         for k, body in enumerate(self._bodies):
             d = float(body.surface_distance(point))
             if d < radius:
-                out.append(f"inside obstacles[{k}] ({self.obstacles[k].type} at {_fmt(body.center)}; "
-                           f"{d:.3g} m from its surface, vehicle radius {radius:g} m)")
+                out.append(
+                    f"inside obstacles[{k}] ({self.obstacles[k].type} at {_fmt(body.center)}; "
+                    f"{d:.3g} m from its surface, vehicle radius {radius:g} m)"
+                )
         for k, s in enumerate(self.spheres):
             if s.physical and float(sphere_surface_distance(s.center, s.radius, point)) < radius:
                 out.append(f"inside spheres[{k}] (at {_fmt(s.center)})")
@@ -293,8 +331,13 @@ class Scenario(Spec):
                 for j in range(i):
                     d = float(np.linalg.norm(pts[i] - pts[j]))
                     if d < radius[i] + radius[j]:
-                        out.append((("agents", i, key), f"overlaps agents[{j}] "
-                                                        f"({self.agents[j].id}) at {d:.3g} m", pts[i]))
+                        out.append(
+                            (
+                                ("agents", i, key),
+                                f"overlaps agents[{j}] ({self.agents[j].id}) at {d:.3g} m",
+                                pts[i],
+                            )
+                        )
         return out
 
     # -------------------------------------------------------------- convenience accessors
@@ -359,12 +402,16 @@ class Scenario(Spec):
 
     def agent_limits(self, i: int) -> Limits:
         """The ``types.Limits`` handed to agent ``i``'s selector."""
-        return self.limits.model_copy(update={"speed": (self.limits.v_min, float(self.max_speed[i]))})
+        return self.limits.model_copy(
+            update={"speed": (self.limits.v_min, float(self.max_speed[i]))}
+        )
 
     def sphere_neighbors(self) -> list[Neighbor]:
         """The ``spheres`` as zero-velocity neighbours (r_pz = radius + margin)."""
-        return [Neighbor(position=s.center, velocity=(0.0, 0.0, 0.0), r_pz=s.r_pz, cooperative=False)
-                for s in self.spheres]
+        return [
+            Neighbor(position=s.center, velocity=(0.0, 0.0, 0.0), r_pz=s.r_pz, cooperative=False)
+            for s in self.spheres
+        ]
 
     def warnings(self) -> list[str]:
         """What is allowed but worth saying before a run, one line each: starts inside a
@@ -374,9 +421,12 @@ class Scenario(Spec):
     def step_warnings(self) -> list[str]:
         """Agents that fly farther than their protected-zone radius in one step."""
         step = self.max_speed * self.dt
-        return [f"{a.id} flies {step[i]:g} m per step (max_speed x dt), more than its protected-zone "
-                f"radius {self.r_pz[i]:g} m: it can cross a zone between two decisions"
-                for i, a in enumerate(self.agents) if step[i] > self.r_pz[i]]
+        return [
+            f"{a.id} flies {step[i]:g} m per step (max_speed x dt), more than its protected-zone "
+            f"radius {self.r_pz[i]:g} m: it can cross a zone between two decisions"
+            for i, a in enumerate(self.agents)
+            if step[i] > self.r_pz[i]
+        ]
 
     def start_warnings(self) -> list[str]:
         """Starts inside a protected zone (allowed, but worth saying): one line each."""
@@ -387,16 +437,21 @@ class Scenario(Spec):
             for j in range(i + 1, n):
                 d = float(np.linalg.norm(p[i] - p[j]))
                 if d < max(r_pz[i], r_pz[j]):
-                    out.append(f"{ids[i]} and {ids[j]} start {d:.2f} m apart, inside the "
-                               f"protected zone ({max(r_pz[i], r_pz[j]):g} m)")
+                    out.append(
+                        f"{ids[i]} and {ids[j]} start {d:.2f} m apart, inside the "
+                        f"protected zone ({max(r_pz[i], r_pz[j]):g} m)"
+                    )
         for k, body in enumerate(self._bodies):
-            inside = prism_contains(body, p)
-            for i in np.flatnonzero(inside):
-                out.append(f"{ids[i]} starts inside the protected prism of obstacles[{k}]")
+            out += [
+                f"{ids[a]} starts inside the protected prism of obstacles[{k}]"
+                for a in np.flatnonzero(prism_contains(body, p))
+            ]
         for k, s in enumerate(self.spheres):
             d = np.linalg.norm(p - np.asarray(s.center), axis=1)
-            for i in np.flatnonzero(d < s.r_pz):
-                out.append(f"{ids[i]} starts inside the protected zone of spheres[{k}]")
+            out += [
+                f"{ids[a]} starts inside the protected zone of spheres[{k}]"
+                for a in np.flatnonzero(d < s.r_pz)
+            ]
         return out
 
 
@@ -426,6 +481,16 @@ def _fmt(v: Any) -> str:
 
 
 __all__ = [
-    "OBSTACLE_TAGS", "AgentSpec", "BoxSpec", "CylinderSpec", "DefaultsSpec", "ObstacleSpec",
-    "Scenario", "SensingSpec", "SphereSpec", "Spec", "prism_contains", "sphere_surface_distance",
+    "OBSTACLE_TAGS",
+    "AgentSpec",
+    "BoxSpec",
+    "CylinderSpec",
+    "DefaultsSpec",
+    "ObstacleSpec",
+    "Scenario",
+    "SensingSpec",
+    "SphereSpec",
+    "Spec",
+    "prism_contains",
+    "sphere_surface_distance",
 ]
