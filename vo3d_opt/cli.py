@@ -14,6 +14,7 @@ unreadable or invalid scenario, an unknown formulation or solver, or an ``--out`
 cannot be written (checked before the run), 1 when writing the outputs fails after the run (the
 summary is still printed).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -150,14 +151,25 @@ def _stdout_to_stderr() -> Iterator[None]:
 
 
 def _run(sc: Scenario, sel: Any, formulation: str, solver: str) -> tuple[Any, dict[str, Any]]:
-    log.info("running %s (%d agents, %d obstacles) with %s / %s", sc.name, sc.n_agents,
-             len(sc.obstacles), formulation, solver)
+    log.info(
+        "running %s (%d agents, %d obstacles) with %s / %s",
+        sc.name,
+        sc.n_agents,
+        len(sc.obstacles),
+        formulation,
+        solver,
+    )
     progress = None if log.isEnabledFor(logging.INFO) else False  # -q: no progress bar either
     with _stdout_to_stderr():
         record = Simulator(sc, sel, formulation=formulation, solver=solver).run(progress=progress)
     summary = summarize(record)
-    log.info("done: %d steps, %d/%d arrived, %.2f s wall time", summary["steps"],
-             summary["reached"], summary["agents"], record.wall_time)
+    log.info(
+        "done: %d steps, %d/%d arrived, %.2f s wall time",
+        summary["steps"],
+        summary["reached"],
+        summary["agents"],
+        record.wall_time,
+    )
     return record, summary
 
 
@@ -174,8 +186,13 @@ def _fmt(value: Any) -> str:
 
 
 def _print_summary(summary: dict[str, Any]) -> None:
-    keys = list(CONTRACT_KEYS) + ["status_counts", "obstacle_pz_intrusions", "starts_inside_pz",
-                                  "arrival_time_max", "wall_time"]
+    keys = list(CONTRACT_KEYS) + [
+        "status_counts",
+        "obstacle_pz_intrusions",
+        "starts_inside_pz",
+        "arrival_time_max",
+        "wall_time",
+    ]
     width = max(len(k) for k in keys)
     for k in keys:
         if k in summary:
@@ -280,7 +297,14 @@ def cmd_list(args: argparse.Namespace) -> int:
         obstacles = str(len(sc.obstacles)) + (f"+{len(sc.spheres)}s" if sc.spheres else "")
         rows.append((sc.name, str(sc.n_agents), obstacles, _first_sentence(sc.description)))
     if args.json:
-        print(_json([dict(zip(("name", "agents", "obstacles", "description"), r, strict=True)) for r in rows]))
+        print(
+            _json(
+                [
+                    dict(zip(("name", "agents", "obstacles", "description"), r, strict=True))
+                    for r in rows
+                ]
+            )
+        )
         return EXIT_FAIL if bad else EXIT_OK
     if rows:
         w = [max(len(r[n]) for r in rows + [("name", "agents", "obstacles", "")]) for n in range(3)]
@@ -296,63 +320,115 @@ class _Parser(argparse.ArgumentParser):
 
 
 _SCENARIO_HELP = "a scenario YAML file, or the name of a bundled scenario (see `vo3d list`)"
-_SOLVER_HELP = (f"osqp | clarabel | daqp | cvxpy[:SOLVER] | qpsolvers:NAME | casadi[:PLUGIN]; "
-                f"default: the scenario's `solver`, else {DEFAULT_QP_SOLVER} for the QP "
-                f"formulations and {DEFAULT_NLP_SOLVER} for nlp (sampled uses none)")
+_SOLVER_HELP = (
+    f"osqp | clarabel | daqp | cvxpy[:SOLVER] | qpsolvers:NAME | casadi[:PLUGIN]; "
+    f"default: the scenario's `solver`, else {DEFAULT_QP_SOLVER} for the QP "
+    f"formulations and {DEFAULT_NLP_SOLVER} for nlp (sampled uses none)"
+)
 
 
 def _common() -> _Parser:
     """The options every subcommand takes (-v / -q)."""
     p = _Parser(add_help=False)
     noise = p.add_mutually_exclusive_group()
-    noise.add_argument("-v", "--verbose", dest="verbosity", action="store_const", const=1,
-                       default=0, help="log debugging detail on stderr too")
-    noise.add_argument("-q", "--quiet", dest="verbosity", action="store_const", const=-1,
-                       help="log only warnings and errors on stderr (no progress)")
+    noise.add_argument(
+        "-v",
+        "--verbose",
+        dest="verbosity",
+        action="store_const",
+        const=1,
+        default=0,
+        help="log debugging detail on stderr too",
+    )
+    noise.add_argument(
+        "-q",
+        "--quiet",
+        dest="verbosity",
+        action="store_const",
+        const=-1,
+        help="log only warnings and errors on stderr (no progress)",
+    )
     return p
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="vo3d", description="Improved 3D velocity obstacle: multi-UAV simulations.")
-    p.add_argument("--version", action="version", version=f"vo3d {__version__}",
-                   help="print the version and exit")
+    p.add_argument(
+        "--version",
+        action="version",
+        version=f"vo3d {__version__}",
+        help="print the version and exit",
+    )
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     common = [_common()]
 
-    run = sub.add_parser("run", parents=common, help="run one scenario",
-                         description="Run one scenario, every agent deciding for itself.")
+    run = sub.add_parser(
+        "run",
+        parents=common,
+        help="run one scenario",
+        description="Run one scenario, every agent deciding for itself.",
+    )
     run.add_argument("scenario", help=_SCENARIO_HELP)
-    run.add_argument("--formulation", "-f", metavar="F",
-                     help=f"{' | '.join(FORMULATIONS)}; default: the scenario's `formulation`, "
-                          f"else {DEFAULT_FORMULATION}")
+    run.add_argument(
+        "--formulation",
+        "-f",
+        metavar="F",
+        help=f"{' | '.join(FORMULATIONS)}; default: the scenario's `formulation`, "
+        f"else {DEFAULT_FORMULATION}",
+    )
     run.add_argument("--solver", "-s", metavar="S", help=_SOLVER_HELP)
-    run.add_argument("--json", action="store_true",
-                     help="print the summary as one JSON object on stdout (default: a table)")
-    run.add_argument("--out", metavar="DIR",
-                     help="also write trajectories.csv, summary.json and the figures to DIR "
-                          "(created; checked before the run)")
+    run.add_argument(
+        "--json",
+        action="store_true",
+        help="print the summary as one JSON object on stdout (default: a table)",
+    )
+    run.add_argument(
+        "--out",
+        metavar="DIR",
+        help="also write trajectories.csv, summary.json and the figures to DIR "
+        "(created; checked before the run)",
+    )
     run.set_defaults(func=cmd_run)
 
-    cmp_ = sub.add_parser("compare", parents=common,
-                          help="run a scenario with several formulations/solvers",
-                          description="Run a scenario once per formulation x solver (once for "
-                                      "a formulation that uses no solver) and tabulate.")
+    cmp_ = sub.add_parser(
+        "compare",
+        parents=common,
+        help="run a scenario with several formulations/solvers",
+        description="Run a scenario once per formulation x solver (once for "
+        "a formulation that uses no solver) and tabulate.",
+    )
     cmp_.add_argument("scenario", help=_SCENARIO_HELP)
-    cmp_.add_argument("--formulations", nargs="+", metavar="F",
-                      help=f"some of {', '.join(FORMULATIONS)}; default: the scenario's "
-                           f"`formulation`, else {DEFAULT_FORMULATION}")
-    cmp_.add_argument("--solvers", nargs="+", metavar="S",
-                      help="solver names as for `vo3d run --solver`; default: the scenario's "
-                           f"`solver`, else {DEFAULT_QP_SOLVER} (QP) / {DEFAULT_NLP_SOLVER} (nlp)")
-    cmp_.add_argument("--json", action="store_true",
-                      help="print a JSON list of summaries on stdout (default: a table)")
+    cmp_.add_argument(
+        "--formulations",
+        nargs="+",
+        metavar="F",
+        help=f"some of {', '.join(FORMULATIONS)}; default: the scenario's "
+        f"`formulation`, else {DEFAULT_FORMULATION}",
+    )
+    cmp_.add_argument(
+        "--solvers",
+        nargs="+",
+        metavar="S",
+        help="solver names as for `vo3d run --solver`; default: the scenario's "
+        f"`solver`, else {DEFAULT_QP_SOLVER} (QP) / {DEFAULT_NLP_SOLVER} (nlp)",
+    )
+    cmp_.add_argument(
+        "--json",
+        action="store_true",
+        help="print a JSON list of summaries on stdout (default: a table)",
+    )
     cmp_.set_defaults(func=cmd_compare)
 
-    lst = sub.add_parser("list", parents=common, help="list the bundled scenarios",
-                         description="List the bundled scenarios: name, agents, obstacles, "
-                                     "first sentence of the description.")
-    lst.add_argument("--json", action="store_true",
-                     help="print a JSON list on stdout (default: a table)")
+    lst = sub.add_parser(
+        "list",
+        parents=common,
+        help="list the bundled scenarios",
+        description="List the bundled scenarios: name, agents, obstacles, "
+        "first sentence of the description.",
+    )
+    lst.add_argument(
+        "--json", action="store_true", help="print a JSON list on stdout (default: a table)"
+    )
     lst.set_defaults(func=cmd_list)
     return p
 
