@@ -11,13 +11,22 @@ import pytest
 import yaml
 from matplotlib.patches import Circle
 from PIL import Image
-
 from test_cli import SMALL, vo3d
+
 from vo3d_opt.animation import MAX_FRAMES, frame_indices, write_animation
-from vo3d_opt.plots import (figure_obstacle_distance, figure_top_view, figure_trajectories_3d,
-                            parse_zones, plot_obstacle_distance, plot_vehicle_distance,
-                            positions_at, prism_margin, scene_bounds, skipped_plots,
-                            write_plots)
+from vo3d_opt.plots import (
+    figure_obstacle_distance,
+    figure_top_view,
+    figure_trajectories_3d,
+    parse_zones,
+    plot_obstacle_distance,
+    plot_vehicle_distance,
+    positions_at,
+    prism_margin,
+    scene_bounds,
+    skipped_plots,
+    write_plots,
+)
 from vo3d_opt.sim.metrics import nearest_obstacle_distance, nearest_vehicle_distance, summarize
 from vo3d_opt.sim.scenario import scenario_from_dict
 from vo3d_opt.sim.simulator import run_scenario

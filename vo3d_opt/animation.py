@@ -14,16 +14,25 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 from matplotlib.animation import PillowWriter
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import EllipseCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Rectangle
+from PIL import Image
 
-from vo3d_opt.plots import (LEGEND_MAX_AGENTS, OBSTACLE_GREY, PRISM_GREY, _colors, box_corners,
-                            check_dpi, draw_obstacles_2d, key_handles, scene_bounds)
+from vo3d_opt.plots import (
+    LEGEND_MAX_AGENTS,
+    OBSTACLE_GREY,
+    PRISM_GREY,
+    _colors,
+    box_corners,
+    check_dpi,
+    draw_obstacles_2d,
+    key_handles,
+    scene_bounds,
+)
 from vo3d_opt.sim.simulator import RunRecord
 from vo3d_opt.types import Cylinder
 

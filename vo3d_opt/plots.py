@@ -28,17 +28,22 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import BoundaryNorm, ListedColormap
-from matplotlib.ticker import MaxNLocator
-from matplotlib.transforms import Bbox
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Patch, Polygon
+from matplotlib.ticker import MaxNLocator
+from matplotlib.transforms import Bbox
 from mpl_toolkits.mplot3d import proj3d
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-from vo3d_opt.sim.metrics import (Approach, closest_obstacle_approach, closest_vehicle_approach,
-                                  nearest_obstacle_distance, nearest_vehicle_distance,
-                                  physical_obstacle_names)
+from vo3d_opt.sim.metrics import (
+    Approach,
+    closest_obstacle_approach,
+    closest_vehicle_approach,
+    nearest_obstacle_distance,
+    nearest_vehicle_distance,
+    physical_obstacle_names,
+)
 from vo3d_opt.sim.simulator import RunRecord
 from vo3d_opt.types import Box, Cylinder
 
@@ -378,7 +383,8 @@ def box_3d_extent(ax) -> Bbox:
     """Display extent of a 3D axes' box (its eight projected corners) with its axes' ticks and
     labels, as last drawn."""
     renderer = ax.figure.canvas.get_renderer()
-    corners = np.array(np.meshgrid(ax.get_xlim3d(), ax.get_ylim3d(), ax.get_zlim3d())).reshape(3, -1)
+    limits = (ax.get_xlim3d(), ax.get_ylim3d(), ax.get_zlim3d())
+    corners = np.array(np.meshgrid(*limits)).reshape(3, -1)
     xs, ys, _ = proj3d.proj_transform(*corners, ax.get_proj())
     pts = ax.transData.transform(np.column_stack([xs, ys]))
     boxes = [Bbox([pts.min(axis=0), pts.max(axis=0)])]
