@@ -97,6 +97,7 @@ def content_bbox(fig: Figure, pad: float = 0.06) -> Bbox:
     by its box, ticks and labels, not by its whole rectangle, which the projected box fills only
     in part: cropping to it leaves no wide empty margins."""
     fig.draw_without_rendering()
+    fig.set_layout_engine("none")  # keep this layout: another backend must not lay out anew
     renderer = fig.canvas.get_renderer()
     boxes = [a.get_window_extent(renderer) for a in [*fig.legends, *fig.texts]]
     for ax in fig.axes:
