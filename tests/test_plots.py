@@ -144,9 +144,10 @@ def test_dpi_scales_png_pixels(lone, tmp_path):
     assert np.allclose(sizes[1] / sizes[0], 2.0, atol=0.03)
 
 
-@pytest.mark.parametrize("bad, field", [({"fmt": "jpg"}, "fmt"), ({"dpi": 0}, "dpi"),
-                                        ({"dpi": True}, "dpi"), ({"zones": "soon"}, "zones"),
-                                        ({"zones": (-1.0,)}, "zones")])
+@pytest.mark.parametrize("bad, field", [
+    ({"fmt": "jpg"}, "fmt"), ({"dpi": 0}, "dpi"), ({"dpi": True}, "dpi"),
+    ({"zones": "soon"}, "zones"), ({"zones": (-1.0,)}, "zones"), ({"zones": ["5"]}, "zones"),
+])
 def test_bad_figure_options_name_the_field(lone, tmp_path, bad, field):
     with pytest.raises(ValueError, match=field):
         write_plots(lone, tmp_path, **bad)

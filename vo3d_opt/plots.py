@@ -56,7 +56,8 @@ LEGEND_MAX_AGENTS = 12
 #: "closest": the protected spheres of the closest pair at its closest approach.
 DEFAULT_ZONES = "closest"
 
-Zones = str | Sequence[float] | None
+#: 'closest', 'none' / None, times in s, or ZoneSnapshots already worked out.
+Zones = str | Sequence[float] | Sequence["ZoneSnapshot"] | None
 OBSTACLE_GREY, PRISM_GREY = "0.55", "0.35"
 
 
@@ -180,9 +181,11 @@ def parse_zones(text: str) -> str | tuple[float, ...]:
 def zone_snapshots(record: RunRecord, zones: Zones = DEFAULT_ZONES) -> list[ZoneSnapshot]:
     """What ``zones`` asks to draw: None / 'none' nothing; 'closest' the closest vehicle pair
     at its closest approach (a lone vehicle at its closest obstacle approach); times (s) every
-    vehicle at each (held at the last sample after the run's end)."""
+    vehicle at each (held at the last sample after the run's end); snapshots, as they are."""
     if zones is None or zones == "none":
         return []
+    if not isinstance(zones, str) and all(isinstance(z, ZoneSnapshot) for z in zones):
+        return list(zones)  # already worked out (write_plots does it once for all figures)
     if isinstance(zones, str):
         if zones != "closest":
             return zone_snapshots(record, parse_zones(zones))
@@ -199,6 +202,8 @@ def zone_snapshots(record: RunRecord, zones: Zones = DEFAULT_ZONES) -> list[Zone
                              f"protected zone r_pz at the\n{what} (t = {pair.time:.1f} s)")]
     out = []
     for t in zones:
+        if isinstance(t, bool) or not isinstance(t, (int, float, np.floating, np.integer)):
+            raise ValueError(f"zones: {t!r} is not a time in s")
         t = float(t)
         if not (math.isfinite(t) and t >= 0):
             raise ValueError(f"zones: times must be finite and non-negative, got {t!r}")
@@ -211,9 +216,18 @@ def zone_snapshots(record: RunRecord, zones: Zones = DEFAULT_ZONES) -> list[Zone
 # ----------------------------------------------------------------------- legends, colours
 
 
-def _zone_handle() -> Line2D:
-    return Line2D([], [], marker="o", markersize=11, markerfacecolor="none",
-                  markeredgecolor="0.2", linestyle="none", markeredgewidth=0.8)
+#: Outline of the protected spheres of the k-th snapshot (cycled): tells the times apart.
+ZONE_DASHES = [(0, (4, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)), (0, (8, 3))]
+
+
+def zone_dash(k: int) -> tuple:
+    return ZONE_DASHES[k % len(ZONE_DASHES)]
+
+
+def _zone_handle(k: int) -> Line2D:
+    """A vehicle (dot) and the outline of its protected sphere as the k-th snapshot draws it."""
+    return Line2D([], [], color="0.2", linestyle=zone_dash(k), linewidth=0.9, marker="o",
+                  markersize=5, markerfacecolor="0.5", markeredgecolor="k")
 
 
 def key_handles(record: RunRecord, snaps: Sequence[ZoneSnapshot], *, prisms: bool,
@@ -236,8 +250,8 @@ def key_handles(record: RunRecord, snaps: Sequence[ZoneSnapshot], *, prisms: boo
         handles.append(Line2D([], [], marker="o", markersize=9, markerfacecolor="none",
                               markeredgecolor="0.35", linestyle="none"))
         labels.append("static sphere\n(dotted: not physical)")
-    for snap in snaps:
-        handles.append(_zone_handle())
+    for k, snap in enumerate(snaps):
+        handles.append(_zone_handle(k))
         labels.append(snap.label)
     return handles, labels
 
@@ -363,9 +377,10 @@ def figure_trajectories_3d(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -
         ax.plot(p[:, i, 0], p[:, i, 1], p[:, i, 2], color=colors[i], linewidth=1.2)
         ax.scatter(*p[0, i], color=colors[i], marker="o", s=14, depthshade=False)
         ax.scatter(*sc.goals[i], color=colors[i], marker="x", s=22, depthshade=False)
-    for snap in snaps:
+    for k, snap in enumerate(snaps):
         for i, c in zip(snap.agents, snap.positions):
-            _sphere_3d(ax, c, float(sc.r_pz[i]), color=colors[i], linewidth=0.5, alpha=0.55)
+            _sphere_3d(ax, c, float(sc.r_pz[i]), color=colors[i], linewidth=0.5, alpha=0.55,
+                       linestyle=zone_dash(k))
             ax.scatter(*c, color=colors[i], edgecolor="k", s=30, depthshade=False, zorder=5)
     ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]),
            xlabel="x (m)", ylabel="y (m)", zlabel="z (m)")
@@ -448,10 +463,10 @@ def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figur
         ax.plot(p[:, i, 0], p[:, i, 1], color=colors[i], linewidth=1.2)
         ax.plot(*p[0, i, :2], "o", color=colors[i], markersize=4)
         ax.plot(*sc.goals[i, :2], "x", color=colors[i], markersize=6)
-    for snap in snaps:
+    for k, snap in enumerate(snaps):
         for i, c in zip(snap.agents, snap.positions):
             ax.add_patch(Circle(tuple(c[:2]), float(sc.r_pz[i]), fill=False, edgecolor=colors[i],
-                                linewidth=0.9, linestyle=(0, (4, 2))))
+                                linewidth=0.9, linestyle=zone_dash(k)))
             ax.plot(*c[:2], "o", color=colors[i], markeredgecolor="k", markersize=6)
     lo, hi = scene_bounds(record, snaps)
     pad = 0.03 * max(hi[0] - lo[0], hi[1] - lo[1], 1e-3)
@@ -589,7 +604,7 @@ def write_plots(record: RunRecord, out_dir: str | Path, *, fmt: str = "png",
     if fmt not in FORMATS:
         raise ValueError(f"fmt: {fmt!r} is not one of {', '.join(FORMATS)}")
     check_dpi(dpi)
-    zone_snapshots(record, zones)  # bad zones fail before anything is written
+    zones = zone_snapshots(record, zones)  # once for all figures; bad zones fail here
     out = Path(out_dir)
     written = [plot_trajectories_3d(record, out / f"trajectories_3d.{fmt}", dpi=dpi, zones=zones),
                plot_top_view(record, out / f"top_view.{fmt}", dpi=dpi, zones=zones),
