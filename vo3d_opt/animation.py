@@ -6,8 +6,9 @@ Frame rule: every sample when the run has at most ``max_frames`` (150) of them, 
 ``fps`` (10) frames per second, so a replay lasts at most 15 s whatever the run's length. The
 GIF is drawn at a fixed size (about 700 px wide at the default 80 dpi); should it still come out
 above ``max_bytes`` (8 MB), it is drawn again with proportionally fewer frames, so a 1,000-step
-run of many vehicles stays small. Written with matplotlib's ``PillowWriter`` (pillow comes with
-matplotlib).
+run of many vehicles stays small. With more than 12 vehicles each trails only its last 10 s of
+path and the faint paths ahead are left out, so the picture stays readable. Written with
+matplotlib's ``PillowWriter`` (pillow comes with matplotlib).
 """
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ from vo3d_opt.plots import (
     LEGEND_MAX_AGENTS,
     OBSTACLE_GREY,
     PRISM_GREY,
-    _colors,
+    agent_colors,
     box_corners,
     check_dpi,
     draw_obstacles_2d,
@@ -103,7 +104,7 @@ def _figure(record: RunRecord) -> tuple[Figure, dict]:
     top, side = fig.subplots(2, 1, sharex=True, height_ratios=[y_span, z_span])
     fig.subplots_adjust(left=left / w, right=(left + width) / w, bottom=bottom / h,
                         top=1 - top_ / h, hspace=2 * gap / (h - bottom - top_ - gap))
-    colors = _colors(record.n_agents)
+    colors = agent_colors(record.n_agents)
     draw_obstacles_2d(top, record)
     _elevation_obstacles(side, record)
     p = record.positions

@@ -49,7 +49,7 @@ from vo3d_opt.types import Box, Cylinder
 
 #: File formats every figure can be written in (the file's suffix chooses).
 FORMATS = ("png", "pdf", "svg")
-#: Resolution of raster output (PNG, and the GIF's frames scale with it too).
+#: Resolution (dots per inch) of PNG figures; PDF and SVG are vector graphics.
 DEFAULT_DPI = 150
 #: Above this many agents, a colour bar names them instead of a legend.
 LEGEND_MAX_AGENTS = 12
@@ -64,7 +64,8 @@ OBSTACLE_GREY, PRISM_GREY = "0.55", "0.35"
 # ------------------------------------------------------------------------------- helpers
 
 
-def _colors(n: int) -> list:
+def agent_colors(n: int) -> list:
+    """One colour per agent: tab10 / tab20 up to 20 agents, then evenly along turbo."""
     cmap = colormaps["tab10" if n <= 10 else "tab20" if n <= 20 else "turbo"]
     if n <= 20:
         return [cmap(i % cmap.N) for i in range(n)]
@@ -360,7 +361,7 @@ def figure_trajectories_3d(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -
     fig = Figure(figsize=(7.0, 5.2))
     FigureCanvasAgg(fig)
     ax = fig.add_axes((0.0, 0.0, 1.0, 1.0), projection="3d", proj_type="ortho")
-    colors = _colors(record.n_agents)
+    colors = agent_colors(record.n_agents)
     z_top = sc.limits.altitude[1]
     for body, sensed in zip(sc.bodies, sc.sensed):
         h = min(body.height, z_top)
@@ -456,7 +457,7 @@ def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figur
     snaps = zone_snapshots(record, zones)
     fig = new_figure((7.0, 5.6))
     ax = fig.add_subplot()
-    colors = _colors(record.n_agents)
+    colors = agent_colors(record.n_agents)
     draw_obstacles_2d(ax, record)
     p = record.positions
     for i in range(record.n_agents):
@@ -491,7 +492,7 @@ def _distance_figure(record: RunRecord, d: np.ndarray, closest: Approach, other:
     summary's figure, and horizontal reference lines {value: label}."""
     fig = new_figure((7.0, 4.2))
     ax = fig.add_subplot()
-    colors = _colors(record.n_agents)
+    colors = agent_colors(record.n_agents)
     width = 1.0 if record.n_agents <= LEGEND_MAX_AGENTS else 0.6
     for i in range(record.n_agents):
         ax.plot(record.times, d[:, i], color=colors[i], linewidth=width)
