@@ -13,6 +13,7 @@ matplotlib's ``PillowWriter`` (pillow comes with matplotlib).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from matplotlib.animation import PillowWriter
@@ -166,8 +167,12 @@ class _BlitPillowWriter(PillowWriter):
     palette of at most 128 colours fixed by the first frame and no dithering, which keeps the
     GIF small."""
 
+    _frames: list[Image.Image]  # PillowWriter's, filled by grab_frame, written by finish
+    _palette: Image.Image
+
     def grab_frame(self, **savefig_kwargs) -> None:
-        rgb = Image.fromarray(np.asarray(self.fig.canvas.buffer_rgba())[..., :3])
+        canvas = cast(FigureCanvasAgg, self.fig.canvas)
+        rgb = Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3])
         if not self._frames:
             self._palette = rgb.quantize(colors=128, method=Image.Quantize.MEDIANCUT)
         self._frames.append(rgb.quantize(palette=self._palette, dither=Image.Dither.NONE))
@@ -180,7 +185,7 @@ def _render(record: RunRecord, path: Path, frames: np.ndarray, *, fps: int, dpi:
                *(line for panel in moving["trails"] for line in panel)]
     for artist in artists:
         artist.set_animated(True)
-    canvas = fig.canvas
+    canvas = cast(FigureCanvasAgg, fig.canvas)
     p = record.positions
     few = record.n_agents <= LEGEND_MAX_AGENTS
     trail = int(round(TRAIL_SECONDS / record.dt))  # with many vehicles, only their recent path

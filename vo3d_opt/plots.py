@@ -21,6 +21,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from matplotlib import colormaps, rc_context
@@ -33,7 +34,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Patch, Polygon
 from matplotlib.ticker import MaxNLocator
 from matplotlib.transforms import Bbox
-from mpl_toolkits.mplot3d import proj3d
+from mpl_toolkits.mplot3d import Axes3D, proj3d
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from vo3d_opt.sim.metrics import (
@@ -100,8 +101,8 @@ def content_bbox(fig: Figure, pad: float = 0.06) -> Bbox:
     in part: cropping to it leaves no wide empty margins."""
     fig.draw_without_rendering()
     fig.set_layout_engine("none")  # keep this layout: another backend must not lay out anew
-    renderer = fig.canvas.get_renderer()
-    boxes = [a.get_window_extent(renderer) for a in [*fig.legends, *fig.texts]]
+    renderer = cast(FigureCanvasAgg, fig.canvas).get_renderer()
+    boxes: list[Bbox | None] = [a.get_window_extent(renderer) for a in [*fig.legends, *fig.texts]]
     for ax in fig.axes:
         if ax.name != "3d":
             boxes.append(ax.get_tightbbox(renderer))
@@ -122,6 +123,10 @@ def save_figure(fig: Figure, path: str | Path, dpi: int = DEFAULT_DPI) -> Path:
         fig.savefig(path, dpi=check_dpi(dpi), bbox_inches=content_bbox(fig),
                     metadata={"pdf": {"CreationDate": None}, "svg": {"Date": None}}.get(fmt))
     return path
+
+
+def _xy(p: Sequence[float] | np.ndarray) -> tuple[float, float]:
+    return float(p[0]), float(p[1])
 
 
 def box_corners(box: Box) -> np.ndarray:
@@ -186,7 +191,7 @@ def zone_snapshots(record: RunRecord, zones: Zones = DEFAULT_ZONES) -> list[Zone
     if zones is None or zones == "none":
         return []
     if not isinstance(zones, str) and all(isinstance(z, ZoneSnapshot) for z in zones):
-        return list(zones)  # already worked out (write_plots does it once for all figures)
+        return cast(list[ZoneSnapshot], list(zones))  # worked out already (by write_plots)
     if isinstance(zones, str):
         if zones != "closest":
             return zone_snapshots(record, parse_zones(zones))
@@ -263,7 +268,7 @@ def _agent_colorbar(fig: Figure, record: RunRecord, colors: list, **where) -> No
     norm = BoundaryNorm(np.arange(n + 1) - 0.5, n)
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=ListedColormap(colors)), **where)
     ticks = np.unique(np.linspace(0, n - 1, min(n, 8)).round().astype(int))
-    bar.set_ticks(ticks, labels=[record.ids[i] for i in ticks])
+    bar.set_ticks(ticks.tolist(), labels=[record.ids[i] for i in ticks])
     bar.minorticks_off()
     bar.ax.tick_params(labelsize="small")
     bar.set_label(f"agent ({n})", fontsize="small")
@@ -360,7 +365,7 @@ def figure_trajectories_3d(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -
     lo, hi = _equal_limits(*scene_bounds(record, snaps))
     fig = Figure(figsize=(7.0, 5.2))
     FigureCanvasAgg(fig)
-    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0), projection="3d", proj_type="ortho")
+    ax = cast(Axes3D, fig.add_axes((0.0, 0.0, 1.0, 1.0), projection="3d", proj_type="ortho"))
     colors = agent_colors(record.n_agents)
     z_top = sc.limits.altitude[1]
     for body, sensed in zip(sc.bodies, sc.sensed):
@@ -376,13 +381,15 @@ def figure_trajectories_3d(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -
     p = record.positions
     for i in range(record.n_agents):
         ax.plot(p[:, i, 0], p[:, i, 1], p[:, i, 2], color=colors[i], linewidth=1.2)
-        ax.scatter(*p[0, i], color=colors[i], marker="o", s=14, depthshade=False)
-        ax.scatter(*sc.goals[i], color=colors[i], marker="x", s=22, depthshade=False)
+        for point, marker, size in ((p[0, i], "o", 14), (sc.goals[i], "x", 22)):
+            ax.scatter(point[0], point[1], point[2], color=colors[i], marker=marker, s=size,
+                       depthshade=False)
     for k, snap in enumerate(snaps):
         for i, c in zip(snap.agents, snap.positions):
             _sphere_3d(ax, c, float(sc.r_pz[i]), color=colors[i], linewidth=0.5, alpha=0.55,
                        linestyle=zone_dash(k))
-            ax.scatter(*c, color=colors[i], edgecolor="k", s=30, depthshade=False, zorder=5)
+            ax.scatter(c[0], c[1], c[2], color=colors[i], edgecolor="k", s=30, depthshade=False,
+                       zorder=5)
     ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]),
            xlabel="x (m)", ylabel="y (m)", zlabel="z (m)")
     ax.set_box_aspect(tuple(hi - lo))
@@ -440,14 +447,14 @@ def draw_obstacles_2d(ax: Axes, record: RunRecord) -> None:
     for body, sensed in zip(sc.bodies, sc.sensed):
         fc = OBSTACLE_GREY if sensed else "0.82"
         if isinstance(body, Cylinder):
-            ax.add_patch(Circle(tuple(body.center), body.radius, facecolor=fc, edgecolor="0.3"))
+            ax.add_patch(Circle(_xy(body.center), body.radius, facecolor=fc, edgecolor="0.3"))
         else:
             ax.add_patch(Polygon(box_corners(body), closed=True, facecolor=fc, edgecolor="0.3"))
         if sensed:
-            ax.add_patch(Circle(tuple(body.center), body.side / 2.0, fill=False,
+            ax.add_patch(Circle(_xy(body.center), body.side / 2.0, fill=False,
                                 linestyle="--", edgecolor=PRISM_GREY, linewidth=0.9))
     for s in sc.spheres:
-        ax.add_patch(Circle(tuple(s.center[:2]), s.radius, fill=False, edgecolor="0.35",
+        ax.add_patch(Circle(_xy(s.center), s.radius, fill=False, edgecolor="0.35",
                             linestyle="-" if s.physical else ":"))
 
 
@@ -466,7 +473,7 @@ def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figur
         ax.plot(*sc.goals[i, :2], "x", color=colors[i], markersize=6)
     for k, snap in enumerate(snaps):
         for i, c in zip(snap.agents, snap.positions):
-            ax.add_patch(Circle(tuple(c[:2]), float(sc.r_pz[i]), fill=False, edgecolor=colors[i],
+            ax.add_patch(Circle(_xy(c), float(sc.r_pz[i]), fill=False, edgecolor=colors[i],
                                 linewidth=0.9, linestyle=zone_dash(k)))
             ax.plot(*c[:2], "o", color=colors[i], markeredgecolor="k", markersize=6)
     lo, hi = scene_bounds(record, snaps)
