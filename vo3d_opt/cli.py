@@ -2,7 +2,8 @@
 
 * ``vo3d run SCENARIO [--formulation F] [--solver S] [--json] [--out DIR]`` runs one scenario,
   every agent deciding for itself; a table by default, exactly one JSON object on stdout with
-  ``--json``; ``--out DIR`` writes ``trajectories.csv``, ``summary.json`` and the PNG figures.
+  ``--json``; ``--out DIR`` writes ``trajectories.csv``, ``summary.json`` and the figures
+  (``--format png|pdf|svg``, ``--dpi``, ``--zones``), and with ``--animate`` ``animation.gif``.
 * ``vo3d compare SCENARIO --formulations A B --solvers X Y [--json]`` runs every combination and
   prints one row per combination with the summary's columns (a JSON list with ``--json``).
 * ``vo3d list`` lists the bundled scenarios: name, agents, obstacles, first sentence.
@@ -207,20 +208,68 @@ def _print_table(rows: list[dict[str, Any]], keys: list[str]) -> None:
         print("  ".join(v.ljust(w) for v, w in zip(c, widths, strict=True)).rstrip())
 
 
-def write_outputs(record: Any, summary: dict[str, Any], out: Path) -> list[Path]:
-    """trajectories.csv, summary.json and the PNG plots of a run in ``out``; the paths."""
-    from vo3d_opt.plots import write_plots  # matplotlib only when asked for
+def write_outputs(
+    record: Any,
+    summary: dict[str, Any],
+    out: Path,
+    *,
+    plot_options: dict[str, Any] | None = None,
+    animate: bool = False,
+) -> list[Path]:
+    """trajectories.csv, summary.json, the figures (``plot_options``: ``write_plots``'
+    keywords) and with ``animate`` animation.gif of a run in ``out``; the paths."""
+    from vo3d_opt.plots import skipped_plots, write_plots  # matplotlib only when asked for
 
     out.mkdir(parents=True, exist_ok=True)
     written = [write_csv(record, out / "trajectories.csv")]
     path = out / "summary.json"
     path.write_text(json.dumps(_rounded(summary), indent=2, allow_nan=False) + "\n")
     written.append(path)
-    written += write_plots(record, out)
+    written += write_plots(record, out, **(plot_options or {}))
+    for name, why in skipped_plots(record).items():
+        log.info("not drawn: %s (%s)", name, why)
+    if animate:
+        from vo3d_opt.animation import write_animation
+
+        written.append(write_animation(record, out / "animation.gif"))
     return written
 
 
+def _figure_options(args: argparse.Namespace) -> dict[str, Any]:
+    """``write_plots``' keywords from --format, --dpi, --zones; they need --out."""
+    given = {
+        k: v
+        for k, v in (("fmt", args.format), ("dpi", args.dpi), ("zones", args.zones))
+        if v is not None
+    }
+    if not args.out and (given or args.animate):
+        flag = {"fmt": "--format", "dpi": "--dpi", "zones": "--zones"}
+        names = [flag[k] for k in given] + (["--animate"] if args.animate else [])
+        raise _UsageError(f"{', '.join(names)}: figures are written only with --out DIR")
+    return given
+
+
+def _dpi(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 10 <= value <= 2400:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer between 10 and 2400")
+    return value
+
+
+def _zones(text: str) -> Any:
+    from vo3d_opt.plots import parse_zones
+
+    try:
+        return parse_zones(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def cmd_run(args: argparse.Namespace) -> int:
+    plot_options = _figure_options(args)
     sc = _load(args.scenario)
     out = _out_dir(args.out) if args.out else None
     sel, formulation, solver = _selector(sc, args.formulation, args.solver)
@@ -228,7 +277,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     status = EXIT_OK
     if out is not None:
         try:
-            for path in write_outputs(record, summary, out):
+            written = write_outputs(
+                record, summary, out, plot_options=plot_options, animate=args.animate
+            )
+            for path in written:
                 log.info("wrote %s", path)
         except OSError as exc:  # the run is done: still print its summary
             log.error("--out %s: writing failed: %s", out, exc.strerror or exc)
@@ -387,6 +439,25 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help="also write trajectories.csv, summary.json and the figures to DIR "
         "(created; checked before the run)",
+    )
+    run.add_argument(
+        "--format",
+        choices=("png", "pdf", "svg"),
+        help="file format of the figures (default: png)",
+    )
+    run.add_argument("--dpi", type=_dpi, help="resolution of PNG figures (default: 150)")
+    run.add_argument(
+        "--zones",
+        type=_zones,
+        metavar="WHEN",
+        help="vehicles' protected spheres drawn: 'closest' (the closest pair at its "
+        "closest approach; default), 'none', or times in s, e.g. '10,20' "
+        "(every vehicle at each)",
+    )
+    run.add_argument(
+        "--animate",
+        action="store_true",
+        help="also write animation.gif, a replay of the run (at most 150 frames)",
     )
     run.set_defaults(func=cmd_run)
 
