@@ -29,6 +29,8 @@ path is close to straight at the default rate.
 from __future__ import annotations
 
 import math
+import sys
+import types
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, Literal, Mapping
@@ -254,6 +256,28 @@ class _GlobalRNG:
         np.random.set_state(self._saved)
 
 
+def dryden_gust_class() -> type:
+    """RotorPy's ``DrydenGust``. RotorPy 3.0's Dryden modules import torch at their top for the
+    batched (torch) variants only; the numpy ``DrydenGust`` never touches it. Without torch
+    installed (it is not a dependency: a CPU build alone is about 800 MB, and importing it would
+    add seconds to every RotorPy import), a placeholder module stands in for that import alone
+    and is taken out of ``sys.modules`` again at once, so nothing else ever sees it."""
+    try:
+        from rotorpy.wind.dryden_winds import DrydenGust
+        return DrydenGust
+    except ImportError as exc:
+        if exc.name != "torch":
+            raise
+    placeholder = types.ModuleType("torch")
+    placeholder.tensor = lambda *args, **kwargs: None  # the batched classes' default arguments
+    sys.modules["torch"] = placeholder
+    try:
+        from rotorpy.wind.dryden_winds import DrydenGust
+    finally:
+        del sys.modules["torch"]
+    return DrydenGust
+
+
 def make_wind(config: WindConfig | None, dt: float) -> Any:
     """A RotorPy wind object (``update(t, position) -> (3,)``) for one vehicle; ``dt`` is the
     sub-step (Dryden's discretisation)."""
@@ -263,7 +287,7 @@ def make_wind(config: WindConfig | None, dt: float) -> Any:
     if config.type == "constant":
         from rotorpy.wind.default_winds import ConstantWind
         return ConstantWind(*config.velocity.tolist())
-    from rotorpy.wind.dryden_winds import DrydenGust  # imports torch: only when asked for
+    DrydenGust = dryden_gust_class()
     sigma = np.ones(3) if config.sigma is None else np.array(config.sigma)
     return DrydenGust(dt=dt, avg_wind=np.array(config.velocity), sig_wind=sigma,
                       altitude=config.altitude)
