@@ -40,9 +40,9 @@ from pydantic import BaseModel, ConfigDict, model_validator
 
 from vo3d_opt.types import Positive, Vec3
 
-#: Sub-steps per second of the ``rotorpy`` model unless the caller says otherwise: the lowest
-#: measured rate whose step responses match a 1 kHz integration, with a factor 2 of margin
-#: (benchmarks/bench_dynamics.py, formulations/dynamics.md).
+#: Sub-steps per second of the ``rotorpy`` model unless the caller says otherwise: 50 Hz is the
+#: lowest measured rate at which both vehicles are stable and their step responses stay close
+#: to a 1 kHz integration; this is a factor 2 above it (formulations/dynamics.md).
 DEFAULT_SUBSTEP_RATE = 100.0
 
 MODELS = ("kinematic", "first_order", "rotorpy")
