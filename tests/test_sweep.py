@@ -151,6 +151,23 @@ def test_family_encounters_are_valid_and_reachable(name):
             assert not sc.obstacles
 
 
+def test_invalid_encounters_are_recognised():
+    enc = next(e for e in (make_encounter("group", 3, i) for i in range(50))
+               if e.scenario.get("obstacles"))
+    assert encounter_problems(enc.scenario) == []
+    body = enc.load().bodies[0]  # a goal outside the body, inside its protected prism
+    near_prism = json.loads(json.dumps(enc.scenario))
+    near_prism["agents"][0]["goal"] = [body.center[0] + body.side / 2 - 0.5, body.center[1], 5.0]
+    assert any("protected prism" in p for p in encounter_problems(near_prism))
+    crowded = json.loads(json.dumps(enc.scenario))
+    g = crowded["agents"][0]["goal"]
+    crowded["agents"][1]["goal"] = [g[0], g[1], g[2] + 1.0]  # hovering 1 m apart: forced intrusion
+    assert any("apart" in p for p in encounter_problems(crowded))
+    inside = json.loads(json.dumps(enc.scenario))
+    inside["agents"][1]["start"] = list(inside["agents"][0]["start"])
+    assert encounter_problems(inside)  # the loader's own rejection (overlapping starts)
+
+
 def test_family_parameters_follow_their_distributions():
     pair = [make_encounter("pair", 2, i).params for i in range(40)]
     assert all(2.0 <= p[f"speed_{k}"] <= 6.0 and -1.5 <= p[f"climb_{k}"] <= 1.5

@@ -36,11 +36,12 @@ class WarmUp(WorkerPlugin):
 
     name = "vo3d-sweep-warm-up"
 
-    def __init__(self, method: Method) -> None:
+    def __init__(self, method: Method, extra: dict[str, Any] | None = None) -> None:
         self.method = method
+        self.extra = dict(extra or {})
 
     async def setup(self, worker: Any) -> None:
-        await asyncio.get_running_loop().run_in_executor(None, warm, self.method)
+        await asyncio.get_running_loop().run_in_executor(None, warm, self.method, self.extra)
 
 
 @contextlib.contextmanager

@@ -9,8 +9,8 @@ not depend on N.
 A draw is kept only when it is a *valid encounter* (:func:`encounter_problems`): the loader
 accepts it, nobody starts inside a protected zone or prism, and the starts and goals of
 different agents are at least ``SEPARATION`` times the larger protected-zone radius apart (so
-that no intrusion is forced at a start or at a hovering goal), and no goal lies in an
-obstacle's protected prism. Otherwise the next draw from the *same* stream is tried, so the
+that no intrusion is forced at a start or at a hovering goal), and no start or goal lies within
+``PRISM_CLEARANCE`` of an obstacle's protected prism. Otherwise the next draw from the *same* stream is tried, so the
 rejection is deterministic. ``max_time`` leaves every agent twice its straight-line flight time
 plus 30 s.
 
@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from vo3d_opt.sim.scenario import Scenario, ScenarioError, prism_contains, scenario_from_dict
+from vo3d_opt.sim.scenario import Scenario, ScenarioError, scenario_from_dict
 
 #: Starts and goals of two different agents are at least this many times max(r_pz) apart.
 SEPARATION = 1.25
@@ -57,13 +57,15 @@ Generator = Callable[[np.random.Generator], "Draw | None"]
 @dataclass(frozen=True)
 class Family:
     """A named encounter generator. ``obstacle_free``: no encounter has obstacles, so RVO2-3D
-    can fly it (``--method rvo2``)."""
+    can fly it (``--method rvo2``). ``warm_keys``: scenario keys added to the workers' warm-up
+    encounter, so that it runs the same code as the family's (e.g. its ``dynamics``)."""
 
     name: str
     summary: str
     generate: Generator
     obstacle_free: bool
     max_attempts: int = 1000
+    warm_keys: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -85,12 +87,14 @@ class Encounter:
 FAMILIES: dict[str, Family] = {}
 
 
-def register(name: str, summary: str, *, obstacle_free: bool) -> Callable[[Generator], Generator]:
+def register(name: str, summary: str, *, obstacle_free: bool,
+             warm_keys: dict[str, Any] | None = None) -> Callable[[Generator], Generator]:
     """Decorator: register ``rng -> Draw`` as family ``name`` (``summary``: one line for
-    ``vo3d sweep --list``)."""
+    ``vo3d sweep --list``; the rest as in :class:`Family`)."""
 
     def wrap(fn: Generator) -> Generator:
-        FAMILIES[name] = Family(name=name, summary=summary, generate=fn, obstacle_free=obstacle_free)
+        FAMILIES[name] = Family(name=name, summary=summary, generate=fn,
+                                obstacle_free=obstacle_free, warm_keys=dict(warm_keys or {}))
         return fn
 
     return wrap
@@ -163,8 +167,12 @@ def encounter_problems(data: dict[str, Any], source: str = "<encounter>") -> lis
         a, b = np.argwhere(close)[0]
         problems.append(f"points of agents {owner[a]} and {owner[b]} are {d[a, b]:.2f} m apart")
     for k, body in enumerate(sc.bodies):
-        if prism_contains(body, sc.goals).any():
-            problems.append(f"a goal is inside the protected prism of obstacles[{k}]")
+        horizontal = np.linalg.norm(points[:, :2] - np.asarray(body.center), axis=1)
+        near = (horizontal < body.side / 2 + PRISM_CLEARANCE) \
+            & (points[:, 2] < body.prism_height + PRISM_CLEARANCE)
+        if near.any():
+            problems.append(f"a start or goal is within {PRISM_CLEARANCE:g} m of the protected "
+                            f"prism of obstacles[{k}]")
     return problems
 
 
@@ -187,7 +195,8 @@ def _agents(starts: np.ndarray, goals: np.ndarray, r_pz: np.ndarray,
             speeds: np.ndarray) -> list[dict[str, Any]]:
     width = len(str(len(starts) - 1))
     return [{"id": f"u{i:0{width}d}", "start": _r(starts[i]), "goal": _r(goals[i]),
-             "r_pz": _r(r_pz[i]), "max_speed": _r(speeds[i], SPEED_DECIMALS)} for i in range(len(starts))]
+             "r_pz": _r(r_pz[i]), "max_speed": _r(speeds[i], SPEED_DECIMALS)}
+            for i in range(len(starts))]
 
 
 def _base(*, v_max: float, altitude: tuple[float, float], starts: np.ndarray, goals: np.ndarray,
@@ -366,7 +375,8 @@ def group(rng: np.random.Generator) -> Draw | None:
     scenario = _base(v_max=GROUP_SPEED[1], altitude=GROUP_ALTITUDE, starts=starts, goals=goals,
                      r_pz=r_pz, speeds=speeds)
     scenario["obstacles"] = obstacles
-    tall = sum(o["height"] + 2.0 > GROUP_ALTITUDE[1] for o in obstacles)
+    # protected prism (height + 2 m margin) up to the ceiling: it cannot be overflown
+    tall = sum(o["height"] + 2.0 >= GROUP_ALTITUDE[1] for o in obstacles)
     params = {"agents": n, "obstacles": m,
               "cylinders": sum(o["type"] == "cylinder" for o in obstacles),
               "boxes": sum(o["type"] == "box" for o in obstacles),

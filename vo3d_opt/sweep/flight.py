@@ -116,10 +116,11 @@ _WARM = {
 _WARM_OBSTACLE = {"type": "cylinder", "center": [0.0, 12.0], "radius": 1.0, "height": 30.0}
 
 
-def warm(method: Method) -> float:
-    """Fly a 2 s two-UAV encounter (with a cylinder unless RVO2) so that every compiled kernel
-    is loaded; the seconds it took."""
+def warm(method: Method, extra: dict[str, Any] | None = None) -> float:
+    """Fly a 2 s two-UAV encounter (with a cylinder unless RVO2, plus the scenario keys
+    ``extra``) so that every compiled kernel is loaded; the seconds it took."""
     t0 = time.perf_counter()
     data = dict(_WARM) if method.name == "rvo2" else {**_WARM, "obstacles": [_WARM_OBSTACLE]}
+    data.update(extra or {})
     fly(scenario_from_dict(data, source="<warm-up>"), method)
     return time.perf_counter() - t0
