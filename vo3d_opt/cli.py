@@ -7,6 +7,8 @@
 * ``vo3d compare SCENARIO --formulations A B --solvers X Y [--json]`` runs every combination and
   prints one row per combination with the summary's columns (a JSON list with ``--json``).
 * ``vo3d list`` lists the bundled scenarios: name, agents, obstacles, first sentence.
+* ``vo3d sweep FAMILY --n N ...`` runs N random encounters on Dask (contract §6;
+  ``vo3d_opt.sweep``).
 
 SCENARIO is a path or the name of a bundled scenario. Progress and logs go to stderr through
 ``logging`` (``-q``: warnings and errors only, ``-v``: debugging detail too). Exit status: 0 when
@@ -366,6 +368,104 @@ def cmd_list(args: argparse.Namespace) -> int:
     return EXIT_FAIL if bad else EXIT_OK
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from vo3d_opt.sweep import command  # Dask and pandas load only for sweeps
+
+    if args.out and not args.list:
+        _out_dir(args.out)  # a bad --out fails before the sweep, not after it
+    try:
+        return command.main(args, protect_stdout=_stdout_to_stderr)
+    except command.SweepError as exc:
+        raise _UsageError(str(exc)) from None
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def _cpus() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def _add_sweep(sub: Any, common: list[_Parser]) -> None:
+    sw = sub.add_parser(
+        "sweep",
+        parents=common,
+        help="run N random encounters of a family on Dask (contract §6)",
+        description="Run N random encounters of a family on a Dask cluster and report rates with "
+        "95% Clopper-Pearson bounds. Exit status 0 when every encounter ran, 1 when "
+        "some raised or lost their worker (listed in the summary) or writing --out failed, "
+        "2 for bad options.",
+    )
+    sw.add_argument("family", nargs="?", help="encounter family (vo3d sweep --list names them)")
+    sw.add_argument("--list", action="store_true", help="list the families, one line each")
+    sw.add_argument("--n", type=_non_negative_int, metavar="N", help="number of encounters (>= 1)")
+    sw.add_argument(
+        "--seed",
+        type=_non_negative_int,
+        default=0,
+        metavar="S",
+        help="sweep seed (>= 0, default 0); encounter i is drawn from (S, i)",
+    )
+    where = sw.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=_non_negative_int,
+        metavar="K",
+        default=_cpus(),
+        help="local Dask worker processes, one thread each (default: the CPUs)",
+    )
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="use the existing Dask scheduler at ADDRESS (tcp://host:8786)",
+    )
+    sw.add_argument(
+        "--method",
+        choices=("vo3d", "rvo2"),
+        default="vo3d",
+        help="vo3d (default) or rvo2: RVO2-3D, obstacle-free families only",
+    )
+    sw.add_argument(
+        "--formulation",
+        "-f",
+        metavar="F",
+        help=f"{' | '.join(FORMULATIONS)}; default: {DEFAULT_FORMULATION}",
+    )
+    sw.add_argument(
+        "--solver",
+        "-s",
+        metavar="S",
+        help="solver names as for `vo3d run --solver`; default: "
+        f"{DEFAULT_QP_SOLVER} (QP) / {DEFAULT_NLP_SOLVER} (nlp)",
+    )
+    sw.add_argument(
+        "--out",
+        metavar="DIR",
+        help="also write encounters.parquet, summary.json, min_distance.png and "
+        "failures/*.yaml (replayable by vo3d run) to DIR (created; checked before the sweep)",
+    )
+    sw.add_argument(
+        "--json",
+        action="store_true",
+        help="print the summary as one JSON object on stdout (default: a table)",
+    )
+    sw.add_argument(
+        "--in-flight",
+        type=_non_negative_int,
+        metavar="M",
+        help="encounters submitted at once (default 4 per worker, at least 8)",
+    )
+    sw.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    sw.set_defaults(func=cmd_sweep)
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> Any:  # one line on stderr, exit 2 (argparse's status)
         self.exit(EXIT_USAGE, f"{self.prog}: error: {one_line(message)}\n")
@@ -501,6 +601,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--json", action="store_true", help="print a JSON list on stdout (default: a table)"
     )
     lst.set_defaults(func=cmd_list)
+    _add_sweep(sub, common)
     return p
 
 
