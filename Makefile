@@ -1,10 +1,11 @@
-# Two entry points: `make demo` and `make test`. Both create .venv when missing.
+# Entry points: `make demo`, `make test` (and `make lint`). They create .venv when missing.
+# `make notebooks` opens the notebooks in Jupyter Lab.
 PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test install bench clean
+.PHONY: demo test install bench lint clean notebooks notebooks-sync
 
 $(PY):
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) on PATH (or run: make PYTHON=python3 ...)"; exit 2; }
@@ -22,6 +23,25 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider -n 2
+
+# ruff (lint + format check) and mypy, configured in pyproject.toml. The notebooks' .py
+# sources are linted too (their .ipynb twins are excluded in pyproject.toml).
+lint: $(STAMP)
+	$(VENV)/bin/ruff check vo3d_opt setup.py notebooks
+	$(VENV)/bin/ruff format --check vo3d_opt setup.py notebooks
+	$(VENV)/bin/mypy
+
+# Jupyter Lab on the notebooks. Each is a pair, NN_name.py (the source) and NN_name.ipynb;
+# jupytext first brings the older file of each pair up to date, and Jupyter saves both.
+JUPYTER_ARGS ?=
+notebooks: $(STAMP)
+	$(VENV)/bin/jupytext --sync notebooks/[0-9]*.py
+	$(VENV)/bin/jupyter lab $(JUPYTER_ARGS) notebooks
+
+# Each NN_name.ipynb rewritten from its NN_name.py and cleared of outputs: what is committed.
+notebooks-sync: $(STAMP)
+	$(VENV)/bin/jupytext --update --to ipynb notebooks/[0-9]*.py
+	$(VENV)/bin/jupyter nbconvert --log-level WARN --clear-output --inplace notebooks/[0-9]*.ipynb
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_select.py

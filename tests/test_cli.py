@@ -176,3 +176,82 @@ def test_list_shows_every_bundled_scenario():
 def test_usage_errors_exit_2():
     res = vo3d("run")
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
+
+
+# ------------------------------------------------------------------------------ issue 11
+
+
+@pytest.mark.parametrize("kind", ["file", "proc"])
+def test_bad_out_path_exits_2_before_the_run(small, tmp_path, kind):
+    if kind == "file":
+        out = tmp_path / "afile.txt"
+        out.write_text("not a directory")
+    else:
+        out = Path("/proc/x")
+    res = vo3d("run", small, "--json", "--out", out)
+    assert res.returncode == 2 and res.stdout == "", res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"vo3d: --out {out}"), res.stderr
+    assert "running" not in res.stderr  # refused before the simulation
+
+
+def test_compare_runs_a_solverless_formulation_once(small):
+    res = vo3d("compare", small, "--formulations", "sampled", "plane_qp", "--solvers", "osqp",
+               "clarabel", "--json")
+    assert res.returncode == 0, res.stderr
+    rows = json.loads(res.stdout)
+    assert [(r["formulation"], r["solver"]) for r in rows] == [
+        ("sampled", "none"), ("plane_qp", "osqp"), ("plane_qp", "clarabel")]
+
+
+def test_json_floats_carry_no_rounding_noise(tmp_path):
+    # One UAV arriving at step 156: its arrival time 156 x 0.2 is 31.200000000000003 in binary.
+    path = tmp_path / "long.yaml"
+    path.write_text(yaml.safe_dump({
+        "name": "long", "dt": 0.2, "max_time": 40.0, "limits": {"speed": [0.0, 4.0]},
+        "agents": [{"id": "u0", "start": [0.0, 0.0, 20.0], "goal": [125.5, 0.0, 20.0]}],
+    }))
+    res = vo3d("run", path, "--json", "-q")
+    assert res.returncode == 0, res.stderr
+    assert 156 * 0.2 != 31.2 and "31.200000000000003" not in res.stdout
+    summary = json.loads(res.stdout)
+    assert summary["arrival_time_max"] == 31.2 and summary["time"] == 31.2
+    assert all(v == float(f"{v:.12g}") for v in summary.values() if isinstance(v, float))
+
+
+def test_version_and_quiet_and_verbose(small):
+    import vo3d_opt
+
+    res = vo3d("--version")
+    assert res.returncode == 0 and res.stdout.strip() == f"vo3d {vo3d_opt.__version__}"
+    quiet = vo3d("run", "paper-flight-test", "--json", "-q")
+    assert quiet.returncode == 0 and quiet.stderr == "" and json.loads(quiet.stdout)
+    loud = vo3d("list", "-v")
+    assert loud.returncode == 0 and loud.stdout
+
+
+def test_warnings_go_to_stderr_and_quiet_keeps_them(tmp_path):
+    path = tmp_path / "coarse.yaml"
+    path.write_text(yaml.safe_dump({**SMALL, "dt": 2.0}))  # 8 m per step, r_pz 5 m
+    res = vo3d("run", path, "--json", "-q")
+    assert res.returncode == 0, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 2 and all(ln.startswith("warning: cli-small: u") for ln in lines), lines
+    assert json.loads(res.stdout)["scenario"] == "cli-small"
+
+
+def test_every_option_of_every_subcommand_is_described():
+    from vo3d_opt.cli import build_parser
+    from vo3d_opt.selector import DEFAULT_QP_SOLVER
+
+    parser = build_parser()
+    (sub,) = [a for a in parser._actions if a.choices and isinstance(a.choices, dict)]
+    assert set(sub.choices) >= {"run", "compare", "list"}
+    for name, subparser in sub.choices.items():
+        text = vo3d(name, "--help").stdout
+        for action in subparser._actions:
+            assert action.help and action.help.strip(), (name, action.dest)
+            for flag in action.option_strings:
+                assert flag in text, (name, flag)
+    for name in ("run", "compare"):
+        assert f"else {DEFAULT_QP_SOLVER}" in " ".join(vo3d(name, "--help").stdout.split()), name

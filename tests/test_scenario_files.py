@@ -19,6 +19,7 @@ from vo3d_opt.sim.scenario import (
     resolve,
     scenario_from_dict,
 )
+from vo3d_opt.sim.simulator import run_scenario
 from vo3d_opt.types import Box, Cylinder
 
 BASE: dict[str, Any] = {
@@ -178,6 +179,17 @@ MISTAKES = [
                  id="unknown-selector-option"),
     pytest.param(_set("solver", "nosuch"), "solver", "available", id="unknown-solver"),
     pytest.param(_set("formulation", "magic"), "formulation", "plane_qp", id="unknown-formulation"),
+    pytest.param(_set("selector_options", {"formulation": "sampled"}), "selector_options.formulation",
+                 "'formulation' belongs at the top level", id="top-level-key-as-selector-option"),
+    pytest.param(_set("limits.r_pz", 5.0), "limits.r_pz", "belongs in defaults and in agents[]",
+                 id="agent-key-in-limits"),
+    pytest.param(_set("obstacles.0.radius", True), "obstacles[0].radius", "must be a number",
+                 id="bool-for-obstacle-radius"),
+    pytest.param(_set("limits.speed", ["0", "4"]), "limits.speed", "2 numbers",
+                 id="strings-for-speed-range"),
+    pytest.param(_set("dt", 20.0), "dt", "sensing.vehicle_range 55 m", id="step-beyond-sensing"),
+    pytest.param(lambda d: (d.update(dt=5.0), d["sensing"].update(obstacle_range=15.0)), "dt",
+                 "sensing.obstacle_range 15 m", id="step-beyond-obstacle-sensing"),
 ]
 
 
@@ -216,11 +228,26 @@ def test_missing_file_names_the_file(tmp_path):
         load_scenario(path)
 
 
-def test_several_problems_report_the_first_and_count_the_rest(tmp_path):
-    data = mutated(lambda d: (d.update(dt=-1.0), d["defaults"].update(r_pz=-1.0)))
+def test_several_problems_are_all_shown_on_one_line(tmp_path):
+    data = mutated(lambda d: (d.update(dt=-1.0), d["defaults"].update(r_pz=-1.0),
+                              d["agents"][1].update(colour="red")))
+    path = write(tmp_path, data)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    msg = str(info.value)
+    assert "\n" not in msg and "more problem" not in msg, msg
+    assert msg == (f"{path}: dt: input should be greater than 0; defaults.r_pz: input should be "
+                   f"greater than 0; agents[1].colour: unknown key"), msg
+
+
+def test_several_cross_field_problems_are_all_shown(tmp_path):
+    data = mutated(lambda d: (d["agents"][0].update(goal=[-40.0, 0.0, 50.0]),
+                              d["agents"][2].update(id="u0")))
     with pytest.raises(ScenarioError) as info:
         load_scenario(write(tmp_path, data))
-    assert "more problem" in str(info.value) and "\n" not in str(info.value)
+    msg = str(info.value)
+    assert "agents[0].goal: above the altitude ceiling" in msg, msg
+    assert "agents[2].id: duplicate id 'u0'" in msg, msg
 
 
 def test_valid_base_loads_into_types(tmp_path):
@@ -276,6 +303,48 @@ def test_starting_at_the_goal_and_ints_are_fine():
     assert sc.dt == 1.0 and sc.n_steps == 10
 
 
+def test_exponent_without_dot_is_a_number(tmp_path):
+    """YAML 1.1 reads 1e9 as a string; the loader reads YAML 1.2 floats."""
+    text = yaml.safe_dump(mutated(lambda d: d.update(max_time=20.0)), sort_keys=False)
+    text = text.replace("max_time: 20.0", "max_time: 1e9").replace("dt: 0.2", "dt: 2E-1")
+    sc = load_scenario(write(tmp_path, text))
+    assert sc.max_time == 1e9 and sc.dt == 0.2
+    quoted = text.replace("max_time: 1e9", "max_time: '1e9'")
+    with pytest.raises(ScenarioError, match="max_time: must be a number, got '1e9'"):
+        load_scenario(write(tmp_path, quoted))
+    assert yaml.safe_load("x: 1e9") == {"x": "1e9"}  # PyYAML's own loader is left as it was
+
+
+def test_step_longer_than_a_protected_zone_is_reported():
+    sc = scenario_from_dict(mutated(lambda d: d.update(dt=3.0)))  # 12 m per step, r_pz 8 / 10
+    assert sc.start_warnings() == []
+    warnings = sc.warnings()
+    assert len(warnings) == 3 and all("12 m per step" in w for w in warnings), warnings
+    assert scenario_from_dict(BASE).warnings() == []
+
+
+def test_load_scenario_warns_through_logging(tmp_path, caplog):
+    path = write(tmp_path, mutated(lambda d: d.update(dt=3.0)))
+    with caplog.at_level("WARNING", logger="vo3d_opt"):
+        load_scenario(path)
+    assert sum("more than its protected-zone radius" in r.getMessage() for r in caplog.records) == 3
+
+
+def test_bundled_name_loads_and_a_near_miss_suggests_names():
+    assert load_scenario("sphere-swap-16").source == str(bundled_dir() / "sphere-swap-16.yaml")
+    with pytest.raises(ScenarioError) as info:
+        load_scenario("paper-case1")
+    msg = str(info.value)
+    assert msg.startswith("paper-case1: no such file or bundled scenario"), msg
+    assert "paper-case1-ten-uav-crossing" in msg and "vo3d list" in msg and "\n" not in msg, msg
+    assert "sphere-swap-16" in str(pytest.raises(ScenarioError, load_scenario, "sphere-swop-16").value)
+
+
+def test_run_scenario_accepts_bundled_names():
+    rec = run_scenario("paper-flight-test", max_steps=3, progress=False)
+    assert rec.scenario.name == "paper-flight-test" and rec.steps == 3
+
+
 # ------------------------------------------------------------------------------------ bundled
 
 
@@ -290,7 +359,7 @@ def test_every_bundled_file_loads(path):
     sc = load_scenario(path)
     assert sc.name == path.stem, "the file is named after its scenario"
     assert sc.description.strip(), "every bundled scenario says what it is"
-    assert sc.start_warnings() == [], "bundled scenarios start outside every protected zone"
+    assert sc.warnings() == [], "bundled scenarios start outside every protected zone"
     assert resolve(sc.name) == path
 
 

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vo3d_opt.types import PZ_MARGIN, AgentState, Box, Cylinder, Limits, Neighbor
+from vo3d_opt.types import PZ_MARGIN, AgentState, Box, Cylinder, InputError, Limits, Neighbor
 
 BAD_NUMBERS = [math.nan, math.inf, -math.inf]
 
@@ -229,3 +229,71 @@ def test_any_non_finite_entry_rejected(vec, index, bad):
     vec = list(vec)
     vec[index] = bad
     _raises("position", lambda: AgentState(position=vec))
+
+
+# ----------------------------------------------------------------------------- numbers are numbers
+
+NOT_NUMBERS = [True, False, np.bool_(True), "3", "1e3", b"3"]
+
+
+@pytest.mark.parametrize("bad", NOT_NUMBERS, ids=repr)
+def test_booleans_and_strings_are_not_numbers(bad):
+    """What the YAML loader refuses, the Python API refuses too (issue 11: ``r_pz=True`` was
+    1 m, ``radius="3"`` was 3 m)."""
+    _raises("r_pz", lambda: Neighbor(position=(0, 0, 0), r_pz=bad))
+    _raises("radius", lambda: Cylinder(center=(0, 0), radius=bad, height=3.0))
+    _raises("height", lambda: Box(center=(0, 0), size=(1, 1), height=bad))
+    _raises("yaw", lambda: Box(center=(0, 0), size=(1, 1), height=3.0, yaw=bad))
+    _raises("L_pz", lambda: Cylinder(center=(0, 0), radius=1.0, height=3.0, L_pz=bad))
+    _raises("margin", lambda: Box(center=(0, 0), size=(1, 1), height=3.0, margin=bad))
+    _raises("acceleration", lambda: Limits(acceleration=bad))
+    _raises("speed", lambda: Limits(speed=(0.0, bad)))
+    _raises("altitude", lambda: Limits(altitude=(bad, 40.0)))
+    _raises("position", lambda: AgentState(position=(bad, 0.0, 0.0)))
+    _raises("velocity", lambda: Neighbor(position=(0, 0, 0), velocity=[0.0, bad, 0.0], r_pz=1.0))
+    _raises("center", lambda: Cylinder(center=(bad, 0.0), radius=1.0, height=3.0))
+    _raises("size", lambda: Box(center=(0, 0), size=(1.0, bad), height=3.0))
+
+
+@pytest.mark.parametrize("bad", [
+    ("1", "2", "3"), (True, 0, 0), np.array([True, False, True]), np.array(["1", "2", "3"]),
+    np.array([1, "a", 2], dtype=object), [1.0, [2.0], 3.0], "123", 1 + 0j,
+], ids=repr)
+def test_vectors_of_non_numbers_rejected(bad):
+    _raises("position", lambda: AgentState(position=bad))
+    _raises("position", lambda: Neighbor(position=bad, r_pz=1.0))
+
+
+def test_issue_11_examples_rejected_naming_the_field():
+    cases = [
+        ("Neighbor", "r_pz", lambda: Neighbor(position=(0, 0, 0), r_pz=True)),
+        ("AgentState", "position", lambda: AgentState(position=(True, 0, 0))),
+        ("AgentState", "position", lambda: AgentState(position=("1", "2", "3"))),
+        ("Cylinder", "radius", lambda: Cylinder(center=(0, 0), radius="3", height=3.0)),
+        ("Limits", "speed", lambda: Limits(speed=("0", "4"))),
+    ]
+    for model, field, make in cases:
+        with pytest.raises(ValueError) as info:
+            make()
+        assert str(info.value).startswith(f"{model}: {field}: "), info.value
+
+
+def test_errors_are_one_line_naming_every_field():
+    with pytest.raises(InputError) as info:
+        Box(center=(0.0, math.nan), size=(-1.0, 2.0), height=True, colour="red")
+    msg = str(info.value)
+    assert isinstance(info.value, ValueError)
+    assert "\n" not in msg and "http" not in msg and "pydantic" not in msg, msg
+    assert msg.startswith("Box: center: must be finite"), msg
+    assert sorted(path for path, _ in info.value.problems) == ["center", "colour", "height", "size"]
+    assert "colour: unknown field" in msg and "height: must be a number, got True" in msg, msg
+    with pytest.raises(InputError, match=r"^Neighbor: r_pz: missing required field$"):
+        Neighbor(position=(0, 0, 0))
+
+
+def test_cross_field_errors_name_their_field():
+    with pytest.raises(InputError) as info:
+        Box(center=(0, 0), size=(3, 4), height=10.0, L_pz=4.9, h_pz=5.0)
+    assert [p for p, _ in info.value.problems] == ["h_pz", "L_pz"], info.value
+    with pytest.raises(InputError, match=r"^Limits: speed: empty range .*; altitude: empty range"):
+        Limits(speed=(3.0, 1.0), altitude=(5.0, 5.0))

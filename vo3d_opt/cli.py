@@ -2,32 +2,50 @@
 
 * ``vo3d run SCENARIO [--formulation F] [--solver S] [--json] [--out DIR]`` runs one scenario,
   every agent deciding for itself; a table by default, exactly one JSON object on stdout with
-  ``--json``; ``--out DIR`` writes ``trajectories.csv``, ``summary.json`` and the PNG figures.
+  ``--json``; ``--out DIR`` writes ``trajectories.csv``, ``summary.json`` and the figures
+  (``--format png|pdf|svg``, ``--dpi``, ``--zones``), and with ``--animate`` ``animation.gif``.
 * ``vo3d compare SCENARIO --formulations A B --solvers X Y [--json]`` runs every combination and
   prints one row per combination with the summary's columns (a JSON list with ``--json``).
 * ``vo3d list`` lists the bundled scenarios: name, agents, obstacles, first sentence.
+* ``vo3d sweep FAMILY --n N ...`` runs N random encounters on Dask (contract §6;
+  ``vo3d_opt.sweep``).
 
-SCENARIO is a path or the name of a bundled scenario. Progress and logs go to stderr. Exit
-status: 0 when the runs completed (whatever their safety figures), 2 with a one-line message on
-stderr for an unreadable or invalid scenario or an unknown formulation or solver.
+SCENARIO is a path or the name of a bundled scenario. Progress and logs go to stderr through
+``logging`` (``-q``: warnings and errors only, ``-v``: debugging detail too). Exit status: 0 when
+the runs completed (whatever their safety figures), 2 with a one-line message on stderr for an
+unreadable or invalid scenario, an unknown formulation or solver, or an ``--out`` directory that
+cannot be written (checked before the run), 1 when writing the outputs fails after the run (the
+summary is still printed).
 """
+
 from __future__ import annotations
 
 import argparse
 import contextlib
 import ctypes
 import json
+import logging
+import math
 import os
 import re
 import sys
+import tempfile
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
+from vo3d_opt import __version__
+from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FORMULATIONS
 from vo3d_opt.sim.metrics import CONTRACT_KEYS, summarize
-from vo3d_opt.sim.scenario import Scenario, ScenarioError, bundled_files, load_scenario, resolve
-from vo3d_opt.sim.simulator import Simulator, scenario_selector, write_csv
+from vo3d_opt.sim.scenario import Scenario, ScenarioError, bundled_files, load_scenario
+from vo3d_opt.sim.simulator import DEFAULT_FORMULATION, Simulator, scenario_selector, write_csv
+from vo3d_opt.types import one_line
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+#: Significant digits of the floats in JSON output (17 show rounding noise: 31.200000000000003).
+JSON_DIGITS = 12
+
+log = logging.getLogger("vo3d_opt.cli")
 
 TABLE_KEYS = [k for k in CONTRACT_KEYS if k != "scenario"]
 
@@ -36,22 +54,70 @@ class _UsageError(Exception):
     """Bad input: printed as one line on stderr, exit status 2."""
 
 
-def _one_line(text: Any) -> str:
-    return " ".join(str(text).split())
+class _Formatter(logging.Formatter):
+    """Info lines as they are; the others prefixed with their level (errors with ``vo3d:``)."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        msg = record.getMessage()
+        if record.levelno >= logging.ERROR:
+            return f"vo3d: {msg}"
+        if record.levelno == logging.INFO:
+            return msg
+        return f"{record.levelname.lower()}: {msg}"
 
 
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
+def configure_logging(verbosity: int = 0) -> None:
+    """Send the package's log records to stderr: warnings and errors with ``verbosity`` < 0
+    (``-q``), progress too at 0, debugging detail at > 0 (``-v``)."""
+    level = logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG
+    root = logging.getLogger("vo3d_opt")
+    for handler in [h for h in root.handlers if getattr(h, "_vo3d_cli", False)]:
+        root.removeHandler(handler)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_Formatter())
+    handler._vo3d_cli = True  # type: ignore[attr-defined]
+    root.addHandler(handler)
+    root.setLevel(level)
+    root.propagate = False
+
+
+def _json(value: Any) -> str:
+    """One line of JSON with floats cut to ``JSON_DIGITS`` significant digits."""
+    return json.dumps(_rounded(value), allow_nan=False)
+
+
+def _rounded(value: Any) -> Any:
+    if isinstance(value, float) and math.isfinite(value):
+        return float(f"{value:.{JSON_DIGITS}g}")
+    if isinstance(value, dict):
+        return {k: _rounded(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_rounded(v) for v in value]
+    return value
 
 
 def _load(arg: str) -> Scenario:
     try:
-        return load_scenario(resolve(arg))
+        return load_scenario(arg)
     except ScenarioError as exc:
         raise _UsageError(str(exc)) from None
 
 
-def _selector(sc: Scenario, formulation: str | None, solver: str | None):
+def _out_dir(arg: str) -> Path:
+    """The ``--out`` directory, created and tried now: a bad path fails before the run."""
+    path = Path(arg)
+    if path.exists() and not path.is_dir():
+        raise _UsageError(f"--out {arg}: exists and is not a directory")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as exc:
+        raise _UsageError(f"--out {arg}: cannot write there: {exc.strerror or exc}") from None
+    return path
+
+
+def _selector(sc: Scenario, formulation: str | None, solver: str | None) -> tuple[Any, str, str]:
     try:
         return scenario_selector(sc, formulation, solver)
     except (ValueError, TypeError) as exc:
@@ -68,7 +134,7 @@ def _c_flush() -> None:
 
 
 @contextlib.contextmanager
-def _stdout_to_stderr():
+def _stdout_to_stderr() -> Iterator[None]:
     """Send file descriptor 1 to stderr while solvers run: some native solvers print on the
     C-level stdout, which would corrupt the one JSON object stdout must carry."""
     try:
@@ -88,15 +154,25 @@ def _stdout_to_stderr():
 
 
 def _run(sc: Scenario, sel: Any, formulation: str, solver: str) -> tuple[Any, dict[str, Any]]:
-    for warning in sc.start_warnings():
-        _log(f"warning: {warning}")
-    _log(f"running {sc.name} ({sc.n_agents} agents, {len(sc.obstacles)} obstacles) with "
-         f"{formulation} / {solver}")
+    log.info(
+        "running %s (%d agents, %d obstacles) with %s / %s",
+        sc.name,
+        sc.n_agents,
+        len(sc.obstacles),
+        formulation,
+        solver,
+    )
+    progress = None if log.isEnabledFor(logging.INFO) else False  # -q: no progress bar either
     with _stdout_to_stderr():
-        record = Simulator(sc, sel, formulation=formulation, solver=solver).run()
+        record = Simulator(sc, sel, formulation=formulation, solver=solver).run(progress=progress)
     summary = summarize(record)
-    _log(f"done: {summary['steps']} steps, {summary['reached']}/{summary['agents']} arrived, "
-         f"{record.wall_time:.2f} s wall time")
+    log.info(
+        "done: %d steps, %d/%d arrived, %.2f s wall time",
+        summary["steps"],
+        summary["reached"],
+        summary["agents"],
+        record.wall_time,
+    )
     return record, summary
 
 
@@ -113,8 +189,13 @@ def _fmt(value: Any) -> str:
 
 
 def _print_summary(summary: dict[str, Any]) -> None:
-    keys = list(CONTRACT_KEYS) + ["status_counts", "obstacle_pz_intrusions", "starts_inside_pz",
-                                  "arrival_time_max", "wall_time"]
+    keys = list(CONTRACT_KEYS) + [
+        "status_counts",
+        "obstacle_pz_intrusions",
+        "starts_inside_pz",
+        "arrival_time_max",
+        "wall_time",
+    ]
     width = max(len(k) for k in keys)
     for k in keys:
         if k in summary:
@@ -124,50 +205,111 @@ def _print_summary(summary: dict[str, Any]) -> None:
 def _print_table(rows: list[dict[str, Any]], keys: list[str]) -> None:
     cells = [[_fmt(r.get(k)) for k in keys] for r in rows]
     widths = [max(len(k), *(len(c[n]) for c in cells)) for n, k in enumerate(keys)]
-    print("  ".join(k.ljust(w) for k, w in zip(keys, widths)).rstrip())
+    print("  ".join(k.ljust(w) for k, w in zip(keys, widths, strict=True)).rstrip())
     for c in cells:
-        print("  ".join(v.ljust(w) for v, w in zip(c, widths)).rstrip())
+        print("  ".join(v.ljust(w) for v, w in zip(c, widths, strict=True)).rstrip())
 
 
-def write_outputs(record: Any, summary: dict[str, Any], out: Path) -> list[Path]:
-    """trajectories.csv, summary.json and the PNG plots of a run in ``out``; the paths."""
-    from vo3d_opt.plots import write_plots  # matplotlib only when asked for
+def write_outputs(
+    record: Any,
+    summary: dict[str, Any],
+    out: Path,
+    *,
+    plot_options: dict[str, Any] | None = None,
+    animate: bool = False,
+) -> list[Path]:
+    """trajectories.csv, summary.json, the figures (``plot_options``: ``write_plots``'
+    keywords) and with ``animate`` animation.gif of a run in ``out``; the paths."""
+    from vo3d_opt.plots import skipped_plots, write_plots  # matplotlib only when asked for
 
     out.mkdir(parents=True, exist_ok=True)
     written = [write_csv(record, out / "trajectories.csv")]
     path = out / "summary.json"
-    path.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
+    path.write_text(json.dumps(_rounded(summary), indent=2, allow_nan=False) + "\n")
     written.append(path)
-    written += write_plots(record, out)
+    written += write_plots(record, out, **(plot_options or {}))
+    for name, why in skipped_plots(record).items():
+        log.info("not drawn: %s (%s)", name, why)
+    if animate:
+        from vo3d_opt.animation import write_animation
+
+        written.append(write_animation(record, out / "animation.gif"))
     return written
 
 
+def _figure_options(args: argparse.Namespace) -> dict[str, Any]:
+    """``write_plots``' keywords from --format, --dpi, --zones; they need --out."""
+    given = {
+        k: v
+        for k, v in (("fmt", args.format), ("dpi", args.dpi), ("zones", args.zones))
+        if v is not None
+    }
+    if not args.out and (given or args.animate):
+        flag = {"fmt": "--format", "dpi": "--dpi", "zones": "--zones"}
+        names = [flag[k] for k in given] + (["--animate"] if args.animate else [])
+        raise _UsageError(f"{', '.join(names)}: figures are written only with --out DIR")
+    return given
+
+
+def _dpi(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 10 <= value <= 2400:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer between 10 and 2400")
+    return value
+
+
+def _zones(text: str) -> Any:
+    from vo3d_opt.plots import parse_zones
+
+    try:
+        return parse_zones(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def cmd_run(args: argparse.Namespace) -> int:
+    plot_options = _figure_options(args)
     sc = _load(args.scenario)
+    out = _out_dir(args.out) if args.out else None
     sel, formulation, solver = _selector(sc, args.formulation, args.solver)
     record, summary = _run(sc, sel, formulation, solver)
-    if args.out:
-        for path in write_outputs(record, summary, Path(args.out)):
-            _log(f"wrote {path}")
+    status = EXIT_OK
+    if out is not None:
+        try:
+            written = write_outputs(
+                record, summary, out, plot_options=plot_options, animate=args.animate
+            )
+            for path in written:
+                log.info("wrote %s", path)
+        except OSError as exc:  # the run is done: still print its summary
+            log.error("--out %s: writing failed: %s", out, exc.strerror or exc)
+            status = EXIT_FAIL
     if args.json:
-        print(json.dumps(summary, allow_nan=False))
+        print(_json(summary))
     else:
         _print_summary(summary)
-    return EXIT_OK
+    return status
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
     sc = _load(args.scenario)
     formulations = args.formulations or [sc.formulation or "plane_qp"]
     solvers = args.solvers or [sc.solver]
-    built: list[tuple[Any, str, str]] = []
+    built: dict[tuple[str, str], Any] = {}
     failures: dict[tuple[str, str | None], str] = {}
     for f in formulations:
         for s in solvers:
             try:
-                built.append(_selector(sc, f, s))
+                sel, formulation, solver = _selector(sc, f, s)
             except _UsageError as exc:
                 failures[(f, s)] = str(exc)
+                continue
+            if getattr(sel, "solver", solver) is None:  # e.g. sampled: one run, whatever -s
+                solver = "none"
+            built.setdefault((formulation, solver), sel)
     # A name that fails with every partner is unknown: exit 2. A pair that merely does not go
     # together (e.g. an NLP backend for a QP formulation) is skipped with a note.
     for f in formulations:
@@ -177,13 +319,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
         if all((f, s) in failures for f in formulations):
             raise _UsageError(failures[(formulations[0], s)])
     for msg in failures.values():
-        _log(f"skipping {msg}")
+        log.warning("skipping %s", msg)
     rows = []
-    for sel, formulation, solver in built:
+    for (formulation, solver), sel in built.items():
         _, summary = _run(sc, sel, formulation, solver)
         rows.append(summary)
     if args.json:
-        print(json.dumps(rows, allow_nan=False))
+        print(_json(rows))
     else:
         print(f"scenario: {sc.name}")
         _print_table(rows, TABLE_KEYS)
@@ -192,7 +334,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 def _first_sentence(text: str) -> str:
     """Up to the first full stop followed by a capital ("Figs. 13-14" does not end it)."""
-    text = _one_line(text)
+    text = one_line(text)
     match = re.search(r"\.\s+(?=[A-Z])", text)
     return text[: match.start() + 1] if match else text
 
@@ -203,14 +345,20 @@ def cmd_list(args: argparse.Namespace) -> int:
         try:
             sc = load_scenario(path)
         except ScenarioError as exc:
-            _log(str(exc))
+            log.error("%s", exc)
             bad += 1
             continue
         obstacles = str(len(sc.obstacles)) + (f"+{len(sc.spheres)}s" if sc.spheres else "")
         rows.append((sc.name, str(sc.n_agents), obstacles, _first_sentence(sc.description)))
     if args.json:
-        print(json.dumps([dict(zip(("name", "agents", "obstacles", "description"), r))
-                          for r in rows]))
+        print(
+            _json(
+                [
+                    dict(zip(("name", "agents", "obstacles", "description"), r, strict=True))
+                    for r in rows
+                ]
+            )
+        )
         return EXIT_FAIL if bad else EXIT_OK
     if rows:
         w = [max(len(r[n]) for r in rows + [("name", "agents", "obstacles", "")]) for n in range(3)]
@@ -220,46 +368,254 @@ def cmd_list(args: argparse.Namespace) -> int:
     return EXIT_FAIL if bad else EXIT_OK
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from vo3d_opt.sweep import command  # Dask and pandas load only for sweeps
+
+    if args.out and not args.list:
+        _out_dir(args.out)  # a bad --out fails before the sweep, not after it
+    try:
+        return command.main(args, protect_stdout=_stdout_to_stderr)
+    except command.SweepError as exc:
+        raise _UsageError(str(exc)) from None
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def _cpus() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def _add_sweep(sub: Any, common: list[_Parser]) -> None:
+    sw = sub.add_parser(
+        "sweep",
+        parents=common,
+        help="run N random encounters of a family on Dask (contract §6)",
+        description="Run N random encounters of a family on a Dask cluster and report rates with "
+        "95% Clopper-Pearson bounds. Exit status 0 when every encounter ran, 1 when "
+        "some raised or lost their worker (listed in the summary) or writing --out failed, "
+        "2 for bad options.",
+    )
+    sw.add_argument("family", nargs="?", help="encounter family (vo3d sweep --list names them)")
+    sw.add_argument("--list", action="store_true", help="list the families, one line each")
+    sw.add_argument("--n", type=_non_negative_int, metavar="N", help="number of encounters (>= 1)")
+    sw.add_argument(
+        "--seed",
+        type=_non_negative_int,
+        default=0,
+        metavar="S",
+        help="sweep seed (>= 0, default 0); encounter i is drawn from (S, i)",
+    )
+    where = sw.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=_non_negative_int,
+        metavar="K",
+        default=_cpus(),
+        help="local Dask worker processes, one thread each (default: the CPUs)",
+    )
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="use the existing Dask scheduler at ADDRESS (tcp://host:8786)",
+    )
+    sw.add_argument(
+        "--method",
+        choices=("vo3d", "rvo2"),
+        default="vo3d",
+        help="vo3d (default) or rvo2: RVO2-3D, obstacle-free families only",
+    )
+    sw.add_argument(
+        "--formulation",
+        "-f",
+        metavar="F",
+        help=f"{' | '.join(FORMULATIONS)}; default: {DEFAULT_FORMULATION}",
+    )
+    sw.add_argument(
+        "--solver",
+        "-s",
+        metavar="S",
+        help="solver names as for `vo3d run --solver`; default: "
+        f"{DEFAULT_QP_SOLVER} (QP) / {DEFAULT_NLP_SOLVER} (nlp)",
+    )
+    sw.add_argument(
+        "--out",
+        metavar="DIR",
+        help="also write encounters.parquet, summary.json, min_distance.png and "
+        "failures/*.yaml (replayable by vo3d run) to DIR (created; checked before the sweep)",
+    )
+    sw.add_argument(
+        "--json",
+        action="store_true",
+        help="print the summary as one JSON object on stdout (default: a table)",
+    )
+    sw.add_argument(
+        "--in-flight",
+        type=_non_negative_int,
+        metavar="M",
+        help="encounters submitted at once (default 4 per worker, at least 8)",
+    )
+    sw.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    sw.set_defaults(func=cmd_sweep)
+
+
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line on stderr, exit 2 (argparse's status)
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {_one_line(message)}\n")
+    def error(self, message: str) -> Any:  # one line on stderr, exit 2 (argparse's status)
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {one_line(message)}\n")
+
+
+_SCENARIO_HELP = "a scenario YAML file, or the name of a bundled scenario (see `vo3d list`)"
+_SOLVER_HELP = (
+    f"osqp | clarabel | daqp | cvxpy[:SOLVER] | qpsolvers:NAME | casadi[:PLUGIN]; "
+    f"default: the scenario's `solver`, else {DEFAULT_QP_SOLVER} for the QP "
+    f"formulations and {DEFAULT_NLP_SOLVER} for nlp (sampled uses none)"
+)
+
+
+def _common() -> _Parser:
+    """The options every subcommand takes (-v / -q)."""
+    p = _Parser(add_help=False)
+    noise = p.add_mutually_exclusive_group()
+    noise.add_argument(
+        "-v",
+        "--verbose",
+        dest="verbosity",
+        action="store_const",
+        const=1,
+        default=0,
+        help="log debugging detail on stderr too",
+    )
+    noise.add_argument(
+        "-q",
+        "--quiet",
+        dest="verbosity",
+        action="store_const",
+        const=-1,
+        help="log only warnings and errors on stderr (no progress)",
+    )
+    return p
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="vo3d", description="Improved 3D velocity obstacle: multi-UAV simulations.")
+    p.add_argument(
+        "--version",
+        action="version",
+        version=f"vo3d {__version__}",
+        help="print the version and exit",
+    )
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    common = [_common()]
 
-    run = sub.add_parser("run", help="run one scenario")
-    run.add_argument("scenario", help="scenario YAML file or bundled scenario name")
-    run.add_argument("--formulation", "-f", help="sampled | plane_qp (default) | cone_qp | nlp")
-    run.add_argument("--solver", "-s", help="osqp, clarabel, cvxpy[:S], qpsolvers:<name>, casadi")
-    run.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    run.add_argument("--out", metavar="DIR", help="write trajectories.csv, summary.json, PNGs")
+    run = sub.add_parser(
+        "run",
+        parents=common,
+        help="run one scenario",
+        description="Run one scenario, every agent deciding for itself.",
+    )
+    run.add_argument("scenario", help=_SCENARIO_HELP)
+    run.add_argument(
+        "--formulation",
+        "-f",
+        metavar="F",
+        help=f"{' | '.join(FORMULATIONS)}; default: the scenario's `formulation`, "
+        f"else {DEFAULT_FORMULATION}",
+    )
+    run.add_argument("--solver", "-s", metavar="S", help=_SOLVER_HELP)
+    run.add_argument(
+        "--json",
+        action="store_true",
+        help="print the summary as one JSON object on stdout (default: a table)",
+    )
+    run.add_argument(
+        "--out",
+        metavar="DIR",
+        help="also write trajectories.csv, summary.json and the figures to DIR "
+        "(created; checked before the run)",
+    )
+    run.add_argument(
+        "--format",
+        choices=("png", "pdf", "svg"),
+        help="file format of the figures (default: png)",
+    )
+    run.add_argument("--dpi", type=_dpi, help="resolution of PNG figures (default: 150)")
+    run.add_argument(
+        "--zones",
+        type=_zones,
+        metavar="WHEN",
+        help="vehicles' protected spheres drawn: 'closest' (the closest pair at its "
+        "closest approach; default), 'none', or times in s, e.g. '10,20' "
+        "(every vehicle at each)",
+    )
+    run.add_argument(
+        "--animate",
+        action="store_true",
+        help="also write animation.gif, a replay of the run (at most 150 frames)",
+    )
     run.set_defaults(func=cmd_run)
 
-    cmp_ = sub.add_parser("compare", help="run a scenario with several formulations/solvers")
-    cmp_.add_argument("scenario", help="scenario YAML file or bundled scenario name")
-    cmp_.add_argument("--formulations", nargs="+", metavar="F")
-    cmp_.add_argument("--solvers", nargs="+", metavar="S")
-    cmp_.add_argument("--json", action="store_true", help="print a JSON list on stdout")
+    cmp_ = sub.add_parser(
+        "compare",
+        parents=common,
+        help="run a scenario with several formulations/solvers",
+        description="Run a scenario once per formulation x solver (once for "
+        "a formulation that uses no solver) and tabulate.",
+    )
+    cmp_.add_argument("scenario", help=_SCENARIO_HELP)
+    cmp_.add_argument(
+        "--formulations",
+        nargs="+",
+        metavar="F",
+        help=f"some of {', '.join(FORMULATIONS)}; default: the scenario's "
+        f"`formulation`, else {DEFAULT_FORMULATION}",
+    )
+    cmp_.add_argument(
+        "--solvers",
+        nargs="+",
+        metavar="S",
+        help="solver names as for `vo3d run --solver`; default: the scenario's "
+        f"`solver`, else {DEFAULT_QP_SOLVER} (QP) / {DEFAULT_NLP_SOLVER} (nlp)",
+    )
+    cmp_.add_argument(
+        "--json",
+        action="store_true",
+        help="print a JSON list of summaries on stdout (default: a table)",
+    )
     cmp_.set_defaults(func=cmd_compare)
 
-    lst = sub.add_parser("list", help="list the bundled scenarios")
-    lst.add_argument("--json", action="store_true", help="print a JSON list on stdout")
+    lst = sub.add_parser(
+        "list",
+        parents=common,
+        help="list the bundled scenarios",
+        description="List the bundled scenarios: name, agents, obstacles, "
+        "first sentence of the description.",
+    )
+    lst.add_argument(
+        "--json", action="store_true", help="print a JSON list on stdout (default: a table)"
+    )
     lst.set_defaults(func=cmd_list)
+    _add_sweep(sub, common)
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``vo3d``; returns (and, as a script, exits with) the status."""
     args = build_parser().parse_args(argv)
+    configure_logging(args.verbosity)
     try:
         return int(args.func(args))
     except _UsageError as exc:
-        print(f"vo3d: {_one_line(exc)}", file=sys.stderr)
+        log.error("%s", one_line(exc))
         return EXIT_USAGE
     except KeyboardInterrupt:
-        print("vo3d: interrupted", file=sys.stderr)
+        log.error("interrupted")
         return 130
 
 

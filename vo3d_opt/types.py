@@ -1,29 +1,147 @@
 """Public data types of the contract (shared/spec/contracts.md §1), validated with pydantic.
 
-Every malformed value raises ``ValueError`` (pydantic's ``ValidationError`` is one) whose
-message names the field. Vectors are stored as read-only numpy arrays, world frame, SI units
-(m, s, m/s, rad), x and y horizontal and z up.
+Malformed input raises :class:`InputError` (a ``ValueError``) with a one-line message naming
+each bad field: ``Cylinder: radius: must be a number, got '3'``. Numbers are numbers: booleans
+and strings are rejected wherever a number is expected (``True`` is not 1 m, ``"3"`` is not 3);
+numpy scalars and arrays are accepted. Vectors are stored as read-only numpy arrays, world
+frame, SI units (m, s, m/s, rad), x and y horizontal and z up.
+
+The same field types and checks validate scenario files (``vo3d_opt.sim.scenario``), which
+embed these models; there, pydantic's structured errors (with the key path) are kept, and
+cross-field problems are located at the field they concern (:func:`raise_problems`).
 """
+
 from __future__ import annotations
 
 import math
+import numbers
+from collections.abc import Container, Iterable, Mapping
 from functools import cached_property
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PlainSerializer, StrictBool, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    PlainSerializer,
+    PlainValidator,
+    StrictBool,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
 
 #: Margin (m) added around a static obstacle when L_pz or h_pz is not given (section 4).
 PZ_MARGIN = 2.0
 
+# ------------------------------------------------------------------------------------ errors
+
+
+class InputError(ValueError):
+    """Malformed input to a public type. The message is one line, ``Type: field: problem``
+    (problems joined by ``; ``); ``problems`` holds the (field path, problem) pairs."""
+
+    def __init__(self, message: str, problems: list[tuple[str, str]]) -> None:
+        super().__init__(message)
+        self.problems = problems
+
+    @classmethod
+    def from_validation(cls, title: str, exc: ValidationError) -> InputError:
+        problems = [describe_error(err) for err in exc.errors()]
+        text = "; ".join(f"{path}: {msg}" if path else msg for path, msg in problems)
+        return cls(one_line(f"{title}: {text}"), problems)
+
+
+def one_line(text: Any) -> str:
+    """``text`` with every run of whitespace (newlines included) turned into one space."""
+    return " ".join(str(text).split())
+
+
+def short_repr(value: Any, limit: int = 40) -> str:
+    """``repr(value)``, cut to ``limit`` characters."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def field_path(loc: Iterable[Any], skip: Container[Any] = ()) -> str:
+    """pydantic's error location as ``key.path[2].key``; parts in ``skip`` (the tags of a
+    discriminated union, which are no keys of the input) are left out."""
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part not in skip:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+def describe_error(err: Any, skip: Container[Any] = ()) -> tuple[str, str]:
+    """(field path, one-line problem) of one of pydantic's ``ValidationError.errors()``."""
+    path = field_path(err.get("loc", ()), skip)
+    kind = str(err.get("type", ""))
+    if kind == "missing":
+        return path, "missing required field"
+    if kind == "extra_forbidden":
+        return path, "unknown field"
+    msg = str(err.get("msg", "invalid")).removeprefix("Value error, ")
+    msg = msg[:1].lower() + msg[1:]
+    if kind.endswith("_type") or kind.endswith("_parsing"):
+        msg += f", got {short_repr(err.get('input'))}"
+    return path, one_line(msg)
+
+
+def raise_problems(title: str, problems: list[tuple[tuple[Any, ...], str, Any]]) -> None:
+    """Raise, from inside a validator, every (location, problem, value) at its own location;
+    pydantic prefixes the location of the model being validated. Nothing when empty."""
+    if problems:
+        raise ValidationError.from_exception_data(
+            title,
+            [
+                {
+                    "type": PydanticCustomError("value_error", "{problem}", {"problem": msg}),
+                    "loc": loc,
+                    "input": value,
+                }
+                for loc, msg, value in problems
+            ],
+        )
+
+
+# ------------------------------------------------------------------------------------ fields
+
+
+def _is_real(x: Any) -> bool:
+    return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+
+
+def check_number(value: Any) -> Any:
+    """``value`` if pydantic may read it as a number: booleans and strings are refused (a YAML
+    ``yes`` or a quoted ``"3"`` is a mistake, not a number), so are NaN and infinities; numpy
+    scalars become Python ones."""
+    if isinstance(value, (bool, np.bool_, str, bytes)):
+        raise ValueError(f"must be a number, got {short_repr(value)}")
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ValueError(f"must be finite (no NaN or inf), got {value}")
+    return value
+
 
 def check_vector(value: Any, n: int) -> np.ndarray:
     """``value`` as a read-only float array of shape (n,); ValueError if it is not n finite
-    numbers."""
-    try:
+    numbers (booleans and strings are not numbers)."""
+    if isinstance(value, (list, tuple)):
+        if not all(_is_real(x) for x in value):
+            raise ValueError(f"must be {n} numbers, got {short_repr(value)}")
         arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"must be {n} numbers") from exc
+    else:
+        raw = np.asarray(value)
+        if raw.dtype.kind not in "iuf":
+            raise ValueError(f"must be {n} numbers, got {short_repr(value)}")
+        arr = raw.astype(float)
     if arr.shape != (n,):
         raise ValueError(f"must be {n} numbers, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -32,29 +150,57 @@ def check_vector(value: Any, n: int) -> np.ndarray:
     return arr
 
 
-def _vector(n: int):
+def _range(value: Any) -> tuple[float, float]:
+    lo, hi = check_vector(value, 2).tolist()
+    return lo, hi
+
+
+def _vector(n: int):  # noqa: ANN202 - a validator
     return lambda value: check_vector(value, n)
 
 
-Vec2 = Annotated[np.ndarray, BeforeValidator(_vector(2)), PlainSerializer(lambda a: a.tolist())]
-Vec3 = Annotated[np.ndarray, BeforeValidator(_vector(3)), PlainSerializer(lambda a: a.tolist())]
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+def _to_list(a: np.ndarray) -> list[float]:
+    return a.tolist()
 
 
-class _Model(BaseModel):
+Vec2 = Annotated[np.ndarray, BeforeValidator(_vector(2)), PlainSerializer(_to_list)]
+Vec3 = Annotated[np.ndarray, BeforeValidator(_vector(3)), PlainSerializer(_to_list)]
+#: (low, high): two finite numbers; the model checks their order.
+Range = Annotated[tuple[float, float], PlainValidator(_range)]
+Finite = Annotated[float, BeforeValidator(check_number), Field(allow_inf_nan=False)]
+Positive = Annotated[float, BeforeValidator(check_number), Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, BeforeValidator(check_number), Field(ge=0, allow_inf_nan=False)]
+
+
+class Model(BaseModel):
+    """Base of the public types (and of the scenario specs): frozen, unknown fields refused,
+    one-line :class:`InputError` when built directly (``model_validate`` keeps pydantic's
+    structured ``ValidationError``, which the scenario loader formats itself)."""
+
     model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True)
 
+    def __init__(self, /, **data: Any) -> None:
+        try:
+            super().__init__(**data)
+        except ValidationError as exc:
+            raise InputError.from_validation(type(self).__name__, exc) from None
 
-class AgentState(_Model):
+    # Tells pydantic that nested validation need not call this __init__ (it only reformats
+    # errors), so a model inside another one reports its errors with their locations.
+    __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]
+
+
+# ------------------------------------------------------------------------------------ models
+
+
+class AgentState(Model):
     """The avoiding vehicle A: position p_A (m) and current velocity V_A (m/s)."""
 
     position: Vec3
     velocity: Vec3 = Field(default_factory=lambda: np.zeros(3))
 
 
-class Neighbor(_Model):
+class Neighbor(Model):
     """A moving obstacle B seen by A: position p_B, velocity V_B, protected-zone radius r_pz."""
 
     position: Vec3
@@ -68,10 +214,15 @@ class Neighbor(_Model):
     @property
     def row(self) -> tuple[float, ...]:
         """(x, y, z, v_x, v_y, v_z, r_pz, cooperative): what the VO needs, as plain floats."""
-        return (*self.position.tolist(), *self.velocity.tolist(), self.r_pz, float(self.cooperative))
+        return (
+            *self.position.tolist(),
+            *self.velocity.tolist(),
+            self.r_pz,
+            float(self.cooperative),
+        )
 
 
-class _StaticObstacle(_Model):
+class _StaticObstacle(Model):
     """Shared fields of obstacles standing on the ground (z = 0)."""
 
     center: Vec2
@@ -93,7 +244,7 @@ class _StaticObstacle(_Model):
         """h_pz: given, or the obstacle height plus the margin."""
         return self.h_pz if self.h_pz is not None else self.height + self.margin
 
-    def model_copy(self, *, update: dict[str, Any] | None = None, deep: bool = False):
+    def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False) -> Any:
         """pydantic's copy, without the cached ``prism`` when fields change."""
         copy = super().model_copy(update=update, deep=deep)
         if update:
@@ -107,12 +258,29 @@ class _StaticObstacle(_Model):
         return (*self.center.tolist(), float(self.side), float(self.prism_height))
 
     @model_validator(mode="after")
-    def _prism_covers_obstacle(self):
+    def _prism_covers_obstacle(self) -> _StaticObstacle:
         # Section 4: h_pz must exceed the obstacle height and L_pz its largest length.
+        problems = []
         if self.h_pz is not None and self.h_pz < self.height:
-            raise ValueError("h_pz must be at least the obstacle height")
-        if self.L_pz is not None and self.L_pz < self.footprint_extent():
-            raise ValueError("L_pz must be at least the obstacle's largest horizontal extent")
+            problems.append(
+                (
+                    ("h_pz",),
+                    f"{self.h_pz:g} is below the obstacle height "
+                    f"{self.height:g} (section 4: h_pz > height)",
+                    self.h_pz,
+                )
+            )
+        extent = self.footprint_extent()
+        if self.L_pz is not None and self.L_pz < extent:
+            problems.append(
+                (
+                    ("L_pz",),
+                    f"{self.L_pz:g} is below the obstacle's largest extent "
+                    f"{extent:.3g} (section 4)",
+                    self.L_pz,
+                )
+            )
+        raise_problems(type(self).__name__, problems)
         return self
 
 
@@ -138,11 +306,12 @@ class Box(_StaticObstacle):
     size: Vec2
     yaw: Finite = 0.0
 
-    @model_validator(mode="after")
-    def _positive_size(self):
-        if np.any(self.size <= 0):
-            raise ValueError("size: both sides must be positive")
-        return self
+    @field_validator("size")
+    @classmethod
+    def _positive_size(cls, size: np.ndarray) -> np.ndarray:
+        if np.any(size <= 0):
+            raise ValueError("both sides must be positive")
+        return size
 
     def footprint_extent(self) -> float:
         return float(math.hypot(*self.size))  # the diagonal: any orientation of C_pz covers it
@@ -158,23 +327,31 @@ class Box(_StaticObstacle):
         return np.sqrt(np.sum(out**2, axis=-1) + vertical**2)
 
 
-Obstacle = Cylinder | Box
-
-
-class Limits(_Model):
+class Limits(Model):
     """Speed range (m/s), altitude range (m) and an optional per-axis acceleration limit (m/s²)."""
 
-    speed: tuple[NonNegative, Positive] = (0.0, 4.0)
-    altitude: tuple[Finite, Finite] = (0.0, 40.0)
+    speed: Range = (0.0, 4.0)
+    altitude: Range = (0.0, 40.0)
     acceleration: Positive | None = None
 
-    @model_validator(mode="after")
-    def _ranges(self):
-        if self.speed[0] > self.speed[1]:
-            raise ValueError("speed: empty range (v_min > v_max)")
-        if self.altitude[0] >= self.altitude[1]:
-            raise ValueError("altitude: empty range (z_min >= z_max)")
-        return self
+    @field_validator("speed")
+    @classmethod
+    def _speed_range(cls, speed: tuple[float, float]) -> tuple[float, float]:
+        lo, hi = speed
+        if lo < 0:
+            raise ValueError(f"minimum speed {lo:g} is negative")
+        if hi <= 0:
+            raise ValueError(f"maximum speed {hi:g} must be positive")
+        if lo > hi:
+            raise ValueError(f"empty range [{lo:g}, {hi:g}] (v_min > v_max)")
+        return speed
+
+    @field_validator("altitude")
+    @classmethod
+    def _altitude_range(cls, altitude: tuple[float, float]) -> tuple[float, float]:
+        if altitude[0] >= altitude[1]:
+            raise ValueError(f"empty range [{altitude[0]:g}, {altitude[1]:g}] (z_min >= z_max)")
+        return altitude
 
     @property
     def v_min(self) -> float:

@@ -18,6 +18,7 @@ and ``wall_time`` (s).
 from __future__ import annotations
 
 from collections import Counter
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -137,8 +138,71 @@ def nearest_obstacle_distance(record: RunRecord) -> np.ndarray:
     return out
 
 
-def _opt(x: float) -> float | None:
-    return None if not np.isfinite(x) else float(x)
+@dataclass(frozen=True)
+class Approach:
+    """The closest approach of a run, as the summary reports it, and where it happened.
+
+    ``distance`` is exactly the summary's ``min_vehicle_distance`` (or ``min_obstacle_distance``);
+    ``time`` (s) the moment it was reached, between samples when the minimum lies inside a step;
+    ``agent`` the vehicle's index and ``other`` the other vehicle's index, or the obstacle's index
+    in :func:`physical_obstacle_names` order.
+    """
+
+    distance: float
+    time: float
+    agent: int
+    other: int
+
+
+def _closest_time(rel: np.ndarray, times: np.ndarray) -> float:
+    """When the relative position rel (S+1, 3), linear within each step, is shortest."""
+    r0, w = rel[:-1], np.diff(rel, axis=0)
+    ww = np.einsum("sk,sk->s", w, w)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = np.clip(np.where(ww > 0, -np.einsum("sk,sk->s", r0, w) / ww, 0.0), 0.0, 1.0)
+    inner = np.linalg.norm(r0 + f[:, None] * w, axis=-1)
+    k = int(np.argmin(inner)) if inner.size else 0
+    if not inner.size or np.linalg.norm(rel[-1]) < inner[k]:
+        return float(times[-1] if inner.size else times[0])
+    return float(times[k] + f[k] * (times[k + 1] - times[k]))
+
+
+def closest_vehicle_approach(record: RunRecord, pairs: tuple[np.ndarray, ...] | None = None,
+                             ) -> Approach | None:
+    """The closest vehicle pair over the run (continuous, as in the summary); None with fewer
+    than two vehicles. ``pairs``: :func:`pair_min_distances`' answer, when already computed."""
+    ii, jj, dmin = pairs if pairs is not None else pair_min_distances(record.positions)
+    if not dmin.size or not np.isfinite(dmin.min()):
+        return None
+    k = int(np.argmin(dmin))
+    i, j = int(ii[k]), int(jj[k])
+    rel = record.positions[:, i] - record.positions[:, j]
+    return Approach(float(dmin[k]), _closest_time(rel, record.times), i, j)
+
+
+def closest_obstacle_approach(record: RunRecord, odist: np.ndarray | None = None,
+                              ) -> Approach | None:
+    """The closest vehicle-obstacle approach over the run (samples and interior points, as in
+    the summary); None without physical obstacles. ``odist``: :func:`obstacle_min_distances`'
+    distances, when already computed."""
+    if odist is None:
+        odist = obstacle_min_distances(record)[0]
+    if not odist.size or not np.isfinite(odist.min()):
+        return None
+    i, m = (int(x) for x in np.unravel_index(np.argmin(odist), odist.shape))
+    kind, ob = _physical_obstacles(record)[m]
+    pts = _with_subsamples(record.positions[:, i])
+    d = (ob.surface_distance(pts) if kind == "body"
+         else sphere_surface_distance(np.asarray(ob.center, dtype=float), ob.radius, pts))
+    t = _with_subsamples(record.times)[int(np.argmin(d))]
+    return Approach(float(odist[i, m]), float(t), i, m)
+
+
+def physical_obstacle_names(record: RunRecord) -> list[str]:
+    """Names of the obstacles the metrics count, in their order: 'obstacles[k]', 'spheres[k]'."""
+    sc = record.scenario
+    return ([f"obstacles[{k}]" for k in range(len(sc.bodies))]
+            + [f"spheres[{k}]" for k, s in enumerate(sc.spheres) if s.physical])
 
 
 def summarize(record: RunRecord) -> dict[str, Any]:
@@ -148,6 +212,7 @@ def summarize(record: RunRecord) -> dict[str, Any]:
     r_pz, radius = sc.r_pz, sc.radius
 
     ii, jj, dmin = pair_min_distances(record.positions)
+    closest_vehicle = closest_vehicle_approach(record, (ii, jj, dmin))
     pz_limit = np.maximum(r_pz[ii], r_pz[jj])
     vehicle_pz = int(np.count_nonzero(dmin < pz_limit - TOL))
     vehicle_coll = int(np.count_nonzero(dmin < radius[ii] + radius[jj] - TOL))
@@ -155,6 +220,7 @@ def summarize(record: RunRecord) -> dict[str, Any]:
     starts_pz = int(np.count_nonzero(start_d < pz_limit - TOL))
 
     odist, entered = obstacle_min_distances(record)
+    closest_obstacle = closest_obstacle_approach(record, odist)
     obstacle_coll = int(np.count_nonzero(odist < radius[:, None] - TOL))
     obstacle_pz = int(np.count_nonzero(entered))
     if odist.size:
@@ -189,8 +255,8 @@ def summarize(record: RunRecord) -> dict[str, Any]:
         "time": round(steps * record.dt, 9),
         "reached": int(np.count_nonzero(reached_mask)),
         "all_reached": bool(reached_mask.all()),
-        "min_vehicle_distance": _opt(dmin.min()) if dmin.size else None,
-        "min_obstacle_distance": _opt(odist.min()) if odist.size else None,
+        "min_vehicle_distance": closest_vehicle.distance if closest_vehicle else None,
+        "min_obstacle_distance": closest_obstacle.distance if closest_obstacle else None,
         "pz_intrusions": vehicle_pz,
         "collisions": vehicle_coll + obstacle_coll,
         "altitude_violations": altitude_violations,

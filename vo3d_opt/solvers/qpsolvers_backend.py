@@ -24,6 +24,8 @@ SOLVER_OPTIONS: dict[str, dict[str, float | int | bool]] = {
     "osqp": dict(eps_abs=1e-8, eps_rel=1e-8, polishing=False, max_iter=20_000),
     "scs": dict(eps_abs=1e-9, eps_rel=1e-9, max_iters=20_000),
     "proxqp": dict(eps_abs=1e-9),
+    # CVXOPT's defaults (abstol 1e-7, reltol 1e-6, feastol 1e-7) stop up to ~1e-4 away
+    "cvxopt": dict(abstol=1e-9, reltol=1e-9, feastol=1e-9),
 }
 
 

@@ -1,0 +1,295 @@
+"""What a selector can rely on under each vehicle model (formulations/dynamics.md), and what the
+models cost.
+
+For every model (kinematic, first_order with tau 0.5 and 1 s, RotorPy's hummingbird at 4 m/s and
+crazyflie at 1 m/s) and, for RotorPy, every sub-step rate, one vehicle flies these step commands
+through ``vo3d_opt.sim.dynamics`` with 0.2 s control periods, and the sub-step samples give:
+
+* hover -> s:      from rest, command (s, 0, 0);
+* right angle:     settled at (s, 0, 0) for 4 s, then (0, s, 0);
+* reversal:        settled at (s, 0, 0) for 4 s, then (-s, 0, 0);
+* climb:           from rest, command (0, 0, s).
+
+Figures after the step (4 s of flight): the largest speed minus s (overshoot), the largest
+vertical speed of a horizontal manoeuvre (or the largest climb rate minus s), the steady error
+|v_end - command|, the 5 % settling time (last time |v - v_end| > 0.05 s), the velocity change
+reached in one period, the position lag behind the ideal (kinematic) path after one period,
+the cross-track excursion (largest distance off the commanded line) and the altitude excursion.
+A sub-step rate is compared with a 1 kHz integration through the largest velocity difference at
+the period ends of the right-angle manoeuvre. Cost: the time of ``step`` per vehicle per 0.2 s
+period (median over the periods; 5 vehicles at once for RotorPy) as CPU time of this process
+(``time.process_time``; on a shared machine wall time counts the others' load too). Wind:
+hovering in a constant 3 m/s wind, crossing it at s, 20 s of hover in Dryden gusts around 3 m/s
+(sigma 1 and 25), and the standard deviation of the gusts themselves.
+Sensing: ``Sensor.sensed(i)`` for N = 1000. Batched RotorPy vehicles (``BatchedMultirotor``,
+torch) are timed only when torch, torchdiffeq and roma are importable (not project
+dependencies).
+
+    python benchmarks/bench_dynamics.py [--quick] > benchmarks/results_dynamics.md
+"""
+from __future__ import annotations
+
+import argparse
+import platform
+import statistics
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from vo3d_opt.sim.dynamics import DEFAULT_SUBSTEP_RATE, Dynamics, WindConfig, make_dynamics, make_wind
+from vo3d_opt.sim.sensing import Sensor
+
+DT = 0.2
+SETTLE = 4.0   # s of flight before a step from cruise
+AFTER = 4.0    # s of flight after the step
+REFERENCE_RATE = 1000.0
+
+
+@dataclass
+class Flight:
+    """Samples of one vehicle: times (K,), positions and velocities (K, 3), starting at t = 0."""
+
+    t: np.ndarray
+    p: np.ndarray
+    v: np.ndarray
+    t_step: float
+    command: np.ndarray
+    step_cost: list[float]
+
+
+def fly(make: Callable[[], Dynamics], phases: list[tuple[np.ndarray, float]], n: int = 1,
+        start_z: float = 20.0) -> Flight:
+    """Fly ``n`` vehicles through (command, duration) phases; vehicle 0's samples."""
+    dyn = make()
+    start = np.column_stack([np.arange(n) * 10.0, np.zeros(n), np.full(n, start_z)])
+    dyn.reset(start)
+    t, p, v, cost = [0.0], [start[0]], [np.zeros(3)], []
+    now = 0.0
+    for cmd, duration in phases:
+        for _ in range(round(duration / DT)):
+            t0 = time.process_time()
+            out = dyn.step(np.tile(cmd, (n, 1)), DT)
+            cost.append((time.process_time() - t0) / n)
+            t.extend(now + out.sample_times)
+            p.extend(out.sample_positions[:, 0])
+            v.extend(out.sample_velocities[:, 0])
+            now += DT
+    t_step = sum(d for _, d in phases[:-1])
+    return Flight(np.array(t), np.array(p), np.array(v), t_step, phases[-1][0], cost)
+
+
+def manoeuvres(s: float) -> dict[str, list[tuple[np.ndarray, float]]]:
+    x, y, z = np.eye(3) * s
+    return {"hover -> s": [(x, AFTER)], "right angle": [(x, SETTLE), (y, AFTER)],
+            "reversal": [(x, SETTLE), (-x, AFTER)], "climb": [(z, AFTER)]}
+
+
+def at(f: Flight, time_s: float) -> int:
+    return int(np.argmin(np.abs(f.t - time_s)))
+
+
+def figures(f: Flight, s: float) -> dict[str, float]:
+    after = f.t >= f.t_step - 1e-9
+    v, p, t = f.v[after], f.p[after], f.t[after]
+    k0, k1 = at(f, f.t_step), at(f, f.t_step + DT)
+    cmd = f.command
+    vertical = cmd[2] != 0
+    v_end = v[-1]
+    off = np.abs(np.linalg.norm(v - v_end, axis=1)) > 0.05 * s
+    settle = (t[np.flatnonzero(off)[-1]] - f.t_step + (t[1] - t[0])) if off.any() else 0.0
+    ideal = f.p[k0] + cmd * DT
+    rel = p - f.p[k0]
+    unit = cmd / np.linalg.norm(cmd)
+    cross = np.linalg.norm(rel - np.outer(rel @ unit, unit), axis=1)
+    return {
+        "speed overshoot m/s": float(np.linalg.norm(v, axis=1).max() - s),
+        "max abs vz (climb: vz - s) m/s":
+            float(np.abs(v[:, 2]).max() if not vertical else v[:, 2].max() - s),
+        "steady error m/s": float(np.linalg.norm(v_end - cmd)),
+        "settling s": float(settle),
+        "dv in one period m/s": float(np.linalg.norm(f.v[k1] - f.v[k0])),
+        "lag after one period m": float(np.linalg.norm(f.p[k1] - ideal)),
+        "cross-track m": float(cross.max()),
+        "altitude excursion m": float(np.abs(rel[:, 2]).max()) if not vertical else float("nan"),
+    }
+
+
+def period_ends(f: Flight) -> np.ndarray:
+    ends = np.arange(DT, f.t[-1] + 1e-9, DT)
+    return np.array([f.v[at(f, e)] for e in ends])
+
+
+def table(header: list[str], rows: list[list[Any]]) -> str:
+    def cell(x: Any) -> str:
+        if isinstance(x, float):
+            return "–" if np.isnan(x) else f"{x:.3g}"
+        return str(x)
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(cell(x) for x in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def rotorpy(vehicle: str, rate: float, wind: dict | None = None) -> Callable[[], Dynamics]:
+    return lambda: make_dynamics({"model": "rotorpy", "vehicle": vehicle, "substep_rate": rate},
+                                 wind, seed=1)
+
+
+def step_responses(rates: list[float]) -> None:
+    models: list[tuple[str, float, Callable[[], Dynamics]]] = [
+        ("kinematic", 4.0, lambda: make_dynamics()),
+        ("first_order tau 0.5 s", 4.0, lambda: make_dynamics({"model": "first_order", "tau": 0.5})),
+        ("first_order tau 1 s", 4.0, lambda: make_dynamics({"model": "first_order", "tau": 1.0})),
+    ]
+    for vehicle, s in (("hummingbird", 4.0), ("crazyflie", 1.0)):
+        models += [(f"rotorpy {vehicle} {rate:g} Hz", s, rotorpy(vehicle, rate))
+                   for rate in [*rates, REFERENCE_RATE]]
+    # the flight test's speed (paper-flight-test.yaml)
+    models.append(("rotorpy crazyflie 0.3 m/s", 0.3, rotorpy("crazyflie", DEFAULT_SUBSTEP_RATE)))
+    rows, costs, stability = [], [], []
+    refs: dict[str, np.ndarray] = {}
+    for name, s, make in models:
+        flights = {m: fly(make, phases) for m, phases in manoeuvres(s).items()}
+        for m, f in flights.items():
+            fig = figures(f, s)
+            rows.append([name, f"{s:g}", m, *fig.values()])
+            header = list(fig)
+        costs.append([name, statistics.median(c for f in flights.values() for c in f.step_cost) * 1e3])
+        if name.startswith("rotorpy") and name.endswith("Hz"):
+            vehicle = name.split()[1]
+            ends = period_ends(flights["right angle"])
+            if name.endswith(f" {REFERENCE_RATE:g} Hz"):
+                refs[vehicle] = ends
+            else:
+                stability.append((vehicle, name, ends))
+    print("## Step responses (one vehicle, 0.2 s periods)\n")
+    print(table(["model", "s m/s", "manoeuvre", *header], rows))
+    print("\n## Sub-step rate against a 1 kHz integration (right angle)\n")
+    print(table(["model", "largest abs(v - v_1kHz) at period ends, m/s"],
+                [[name, float(np.abs(e - refs[veh]).max())] for veh, name, e in stability]))
+    print("\n## Cost of step() per vehicle per 0.2 s period (one vehicle, median)\n")
+    print(table(["model", "ms"], costs))
+
+
+def rotorpy_cost(rates: list[float], n: int = 5) -> None:
+    rows = []
+    for vehicle, s in (("hummingbird", 4.0), ("crazyflie", 1.0)):
+        for rate in rates:
+            f = fly(rotorpy(vehicle, rate), [(np.array([s, 0.0, 0.0]), 2.0)], n=n)
+            rows.append([vehicle, f"{rate:g}", statistics.median(f.step_cost) * 1e3])
+    print(f"\n## RotorPy cost per vehicle per 0.2 s period, {n} vehicles at once (median)\n")
+    print(table(["vehicle", "sub-steps per s", "ms"], rows))
+
+
+def wind_figures() -> None:
+    rows = []
+    wind = np.array([3.0, 0.0, 0.0])
+    for vehicle, s in (("hummingbird", 4.0), ("crazyflie", 1.0)):
+        const = {"type": "constant", "velocity": wind.tolist()}
+        make = rotorpy(vehicle, DEFAULT_SUBSTEP_RATE, const)
+        hover = fly(make, [(np.zeros(3), 6.0)])
+        rows.append([vehicle, "constant 3 m/s, hover", float(np.linalg.norm(hover.v[-1])),
+                     float(np.linalg.norm(hover.v, axis=1).max()),
+                     float(np.abs(hover.p[:, 2] - hover.p[0, 2]).max())])
+        cross = fly(make, [(np.array([0.0, s, 0.0]), 6.0)])
+        rows.append([vehicle, f"constant 3 m/s, crossing at {s:g} m/s",
+                     float(np.linalg.norm(cross.v[-1] - [0, s, 0])),
+                     float(np.linalg.norm(cross.v - [0, s, 0], axis=1)[cross.t > 3].max()),
+                     float(np.abs(cross.p[:, 2] - cross.p[0, 2]).max())])
+        for sigma in (1.0, 25.0):
+            dryden = {"type": "dryden", "velocity": wind.tolist(), "sigma": [sigma] * 3}
+            gust = fly(rotorpy(vehicle, DEFAULT_SUBSTEP_RATE, dryden), [(np.zeros(3), 20.0)])
+            speed = np.linalg.norm(gust.v, axis=1)
+            rows.append([vehicle, f"Dryden around 3 m/s, sigma {sigma:g}, hover, 20 s",
+                         float(np.sqrt(np.mean(speed ** 2))), float(speed.max()),
+                         float(np.abs(gust.p[:, 2] - gust.p[0, 2]).max())])
+    print(f"\n## Wind ({DEFAULT_SUBSTEP_RATE:g} Hz sub-steps)\n")
+    print(table(["vehicle", "wind, command", "velocity error at the end (RMS for Dryden) m/s",
+                 "largest velocity error m/s", "altitude excursion m"], rows))
+    print(f"\n### RotorPy's Dryden gusts themselves ({DEFAULT_SUBSTEP_RATE:g} Hz samples, 60 s)\n")
+    gust_rows = []
+    for sigma in (1.0, 25.0):
+        np.random.seed(0)
+        wind_model = make_wind(WindConfig(type="dryden", velocity=wind, sigma=[sigma] * 3),
+                               1.0 / DEFAULT_SUBSTEP_RATE)
+        w = np.array([wind_model.update(0.0, np.zeros(3))
+                      for _ in range(round(60 * DEFAULT_SUBSTEP_RATE))])
+        gust_rows.append([f"{sigma:g}", *(float(x) for x in w.std(axis=0)),
+                          float(np.abs(w - wind).max())])
+    print(table(["sigma m/s", "std x m/s", "std y m/s", "std z m/s", "largest gust m/s"], gust_rows))
+
+
+def sensing_cost(n: int = 1000) -> None:
+    sensor = Sensor(n, DT, position_noise=0.5, velocity_noise=0.3, latency=0.4, seed=1)
+    rng = np.random.default_rng(0)
+    p, v = rng.uniform(-100, 100, (n, 3)), rng.uniform(-4, 4, (n, 3))
+    t0 = time.process_time()
+    for _ in range(20):
+        sensor.push(p, v)
+    push = (time.process_time() - t0) / 20
+    times = []
+    for i in range(n):
+        t0 = time.process_time()
+        sensor.sensed(i)
+        times.append(time.process_time() - t0)
+    print(f"\n## Sensing, N = {n}\n")
+    print(table(["call", "µs (median)"], [["push", push * 1e6],
+                                          ["sensed(i)", statistics.median(times) * 1e6]]))
+
+
+def batched_cost(sizes: list[int], rate: float = DEFAULT_SUBSTEP_RATE) -> None:
+    try:
+        import torch
+        from rotorpy.vehicles.hummingbird_params import quad_params
+        from rotorpy.vehicles.multirotor import BatchedMultirotor, BatchedMultirotorParams
+    except ImportError as exc:
+        print(f"\n## Batched RotorPy vehicles: not measured ({exc.name} is not installed)")
+        return
+    torch.set_num_threads(1)
+    rows = []
+    hover = float(np.sqrt(quad_params["mass"] * 9.81 / (4 * quad_params["k_eta"])))
+    for integrator in ("rk4", "dopri5"):
+        for n in sizes:
+            dev = torch.device("cpu")
+            params = BatchedMultirotorParams([quad_params] * n, n, dev)
+            state = {"x": torch.zeros(n, 3).double(), "v": torch.zeros(n, 3).double(),
+                     "q": torch.tensor([[0, 0, 0, 1.0]] * n).double(),
+                     "w": torch.zeros(n, 3).double(), "wind": torch.zeros(n, 3).double(),
+                     "rotor_speeds": torch.full((n, 4), hover).double()}
+            model = BatchedMultirotor(params, n, state, dev, control_abstraction="cmd_vel",
+                                      integrator=integrator)
+            cmd = {"cmd_v": torch.tensor([[4.0, 0.0, 0.0]] * n).double()}
+            periods = 3
+            t0 = time.process_time()
+            for _ in range(round(periods * DT * rate)):
+                state = model.step(state, cmd, 1.0 / rate)
+            per_period = (time.process_time() - t0) / periods
+            rows.append([integrator, n, per_period * 1e3, per_period / n * 1e3])
+    print(f"\n## Batched RotorPy hummingbirds (BatchedMultirotor, torch {torch.__version__}, "
+          f"one thread, {rate:g} Hz)\n")
+    print(table(["integrator", "N", "ms per period", "ms per vehicle per period"], rows))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer sub-step rates")
+    ap.add_argument("--sections", default="steps,cost,wind,sensing,batched",
+                    help="comma-separated subset of steps,cost,wind,sensing,batched")
+    args = ap.parse_args()
+    rates = [50.0, 100.0] if args.quick else [5.0, 10.0, 20.0, 25.0, 40.0, 50.0, 100.0, 200.0]
+    sections = {
+        "steps": lambda: step_responses(rates),
+        "cost": lambda: rotorpy_cost([50.0, 100.0, 200.0]),
+        "wind": wind_figures,
+        "sensing": sensing_cost,
+        "batched": lambda: batched_cost([1, 2, 5, 10, 20, 50]),
+    }
+    print(f"# {platform.processor() or platform.machine()}, {platform.python_implementation()} "
+          f"{platform.python_version()}, {time.strftime('%Y-%m-%d')}\n")
+    for name in args.sections.split(","):
+        sections[name]()
+
+
+if __name__ == "__main__":
+    main()

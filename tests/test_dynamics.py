@@ -1,0 +1,202 @@
+"""Vehicle models of vo3d_opt.sim.dynamics: the simulator's integration bit for bit, and RotorPy
+vehicles that hover, track a velocity step, drift in the wind and repeat themselves for a seed."""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from vo3d_opt.sim.dynamics import (
+    DEFAULT_SUBSTEP_RATE,
+    FirstOrderDynamics,
+    KinematicDynamics,
+    RotorPyDynamics,
+    make_dynamics,
+)
+
+DT = 0.2
+
+
+def simulator_integration(starts, commands, arrive_at, dt, tau):
+    """A copy of ``Simulator.run``'s integration (before the dynamics module): ``arrive_at[k]``
+    marks the agents found arrived after step k; arrived agents are commanded 0 and stop."""
+    alpha = None if tau is None else min(1.0, dt / tau)
+    p, v = starts.copy(), np.zeros_like(starts)
+    done = np.zeros(len(starts), dtype=bool)
+    out_p, out_v = [], []
+    for k, u in enumerate(commands):
+        u = np.where(done[:, None], 0.0, u)
+        v = u.copy() if alpha is None else v + (u - v) * alpha
+        v[done] = 0.0
+        out_v.append(v.copy())
+        p = p + v * dt
+        done = done | arrive_at[k]
+        v[done] = 0.0
+        out_p.append(p.copy())
+    return np.array(out_p), np.array(out_v)
+
+
+@pytest.mark.parametrize("tau", [None, 0.15, 0.5, 1.3])
+def test_kinematic_and_first_order_match_the_simulator_bit_for_bit(tau):
+    rng = np.random.default_rng(7)
+    n, steps = 6, 40
+    starts = rng.uniform(-50, 50, (n, 3))
+    commands = rng.uniform(-4, 4, (steps, n, 3))
+    arrive_at = np.zeros((steps, n), dtype=bool)
+    arrive_at[[5, 17, 30], [1, 3, 4]] = True
+    want_p, want_v = simulator_integration(starts, commands, arrive_at, DT, tau)
+
+    dyn = make_dynamics(None if tau is None else {"model": "first_order", "tau": tau})
+    assert isinstance(dyn, KinematicDynamics if tau is None else FirstOrderDynamics)
+    dyn.reset(starts)
+    held = np.zeros(n, dtype=bool)
+    for k in range(steps):
+        out = dyn.step(np.where(held[:, None], 0.0, commands[k]), DT)
+        assert np.array_equal(out.positions, want_p[k]) and np.array_equal(out.velocities, want_v[k])
+        held |= arrive_at[k]
+        dyn.hold(arrive_at[k])
+    # one straight sample per period: the period's end
+    assert out.sample_positions.shape == (1, n, 3) and out.sample_times.tolist() == [DT]
+
+
+def test_first_order_ignores_commands_of_held_vehicles():
+    dyn = FirstOrderDynamics(0.5)
+    dyn.reset(np.zeros((2, 3)))
+    dyn.step(np.ones((2, 3)), DT)
+    dyn.hold([True, False])
+    p0 = dyn.positions
+    out = dyn.step(np.ones((2, 3)), DT)
+    assert np.array_equal(out.positions[0], p0[0]) and np.all(out.velocities[0] == 0)
+    assert np.all(out.positions[1] > p0[1])
+
+
+@pytest.mark.parametrize("spec, wind, key", [
+    ({"model": "wobbly"}, None, "model"),
+    ({"model": "first_order"}, None, "tau"),
+    ({"model": "first_order", "tau": 0.0}, None, "tau"),
+    ({"model": "kinematic", "tau": 0.5}, None, "tau"),
+    ({"model": "rotorpy", "vehicle": "blimp"}, None, "vehicle"),
+    ({"model": "first_order", "tau": 0.5, "vehicle": "crazyflie"}, None, "vehicle"),
+    ({"model": "rotorpy", "substep_rate": -5}, None, "substep_rate"),
+    ({"model": "rotorpy", "speed": 3}, None, "speed"),
+    ({"model": "kinematic"}, {"type": "constant", "velocity": [1, 0, 0]}, "wind"),
+    ({"model": "rotorpy"}, {"type": "tornado", "velocity": [1, 0, 0]}, "type"),
+    ({"model": "rotorpy"}, {"type": "constant", "velocity": [1, 0]}, "velocity"),
+    ({"model": "rotorpy"}, {"type": "constant", "velocity": [1, 0, float("nan")]}, "velocity"),
+    ({"model": "rotorpy"}, {"type": "constant", "velocity": [1, 0, 0], "sigma": [1, 1, 1]}, "sigma"),
+    ({"model": "rotorpy"}, {"type": "dryden", "velocity": [1, 0, 0], "sigma": [1, -1, 1]}, "sigma"),
+])
+def test_bad_configuration_is_rejected_naming_the_key(spec, wind, key):
+    with pytest.raises(ValueError) as info:
+        make_dynamics(spec, wind)
+    assert key in named_keys(info.value)
+
+
+def named_keys(exc: ValueError) -> set[str]:
+    """The keys an error names: pydantic's field locations and the ``key: problem`` prefixes."""
+    if isinstance(exc, ValidationError):
+        return ({str(e["loc"][0]) for e in exc.errors() if e["loc"]}
+                | {e["msg"].removeprefix("Value error, ").split(":")[0] for e in exc.errors()})
+    return {str(exc).split(":")[0]}
+
+
+def test_bad_arrays_are_rejected_naming_the_argument():
+    dyn = KinematicDynamics()
+    with pytest.raises(ValueError, match="^positions:"):
+        dyn.reset(np.zeros((3, 2)))
+    dyn.reset(np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="^commands:"):
+        dyn.step(np.zeros((2, 3)), DT)
+    with pytest.raises(ValueError, match="^commands:"):
+        dyn.step(np.full((3, 3), np.nan), DT)
+    with pytest.raises(ValueError, match="^dt:"):
+        dyn.step(np.zeros((3, 3)), 0.0)
+    with pytest.raises(ValueError, match="^mask:"):
+        dyn.hold([True])
+
+
+# ------------------------------------------------------------------------------------ RotorPy
+
+
+def fly(dyn, commands, periods):
+    """Step ``periods`` control periods with constant ``commands``; the StepResults."""
+    return [dyn.step(commands, DT) for _ in range(periods)]
+
+
+@pytest.mark.parametrize("vehicle", ["hummingbird", "crazyflie"])
+def test_rotorpy_hover_stays_put(vehicle):
+    dyn = make_dynamics({"model": "rotorpy", "vehicle": vehicle})
+    start = np.array([[1.0, 2.0, 10.0]])
+    dyn.reset(start)
+    outs = fly(dyn, np.zeros((1, 3)), 10)
+    drift = np.linalg.norm(np.concatenate([o.sample_positions for o in outs]) - start, axis=-1)
+    assert drift.max() < 0.01
+    assert np.abs(outs[-1].velocities).max() < 0.01
+
+
+@pytest.mark.parametrize("vehicle, speed", [("hummingbird", 4.0), ("crazyflie", 1.0)])
+def test_rotorpy_velocity_step_converges_to_the_command(vehicle, speed):
+    """Hover, then a step to ``speed`` along y; RotorPy's controller is a P loop on velocity,
+    so the drag leaves a small steady error (about 5 % at these speeds)."""
+    dyn = make_dynamics({"model": "rotorpy", "vehicle": vehicle})
+    dyn.reset(np.array([[0.0, 0.0, 10.0]]))
+    cmd = np.array([[0.0, speed, 0.0]])
+    outs = fly(dyn, cmd, 15)
+    v = outs[-1].velocities[0]
+    assert abs(v[1] - speed) < 0.06 * speed and abs(v[0]) < 0.05 and abs(v[2]) < 0.05
+    # still at the end: the last period's samples agree with it
+    assert np.ptp(outs[-1].sample_velocities[:, 0, 1]) < 0.01
+    # sub-sampled at the default rate, the last sample is the period's end
+    assert outs[-1].sample_positions.shape == (round(DT * DEFAULT_SUBSTEP_RATE), 1, 3)
+    assert np.array_equal(outs[-1].sample_positions[-1], outs[-1].positions)
+    np.testing.assert_allclose(outs[-1].sample_times[-1], DT)
+
+
+def test_rotorpy_wind_pushes_a_vehicle_commanded_to_stay():
+    dyn = make_dynamics({"model": "rotorpy"}, {"type": "constant", "velocity": [3.0, 0.0, 0.0]})
+    dyn.reset(np.array([[0.0, 0.0, 10.0]]))
+    outs = fly(dyn, np.zeros((1, 3)), 15)
+    p, v = outs[-1].positions[0], outs[-1].velocities[0]
+    assert p[0] > 0.1 and v[0] > 0.05  # downwind, and still drifting (a velocity loop only)
+    assert abs(p[1]) < 0.02 and abs(p[2] - 10.0) < 0.05
+
+
+def test_rotorpy_hold_stops_a_vehicle_where_it_is():
+    dyn = RotorPyDynamics("hummingbird")
+    dyn.reset(np.array([[0.0, 0.0, 10.0], [5.0, 0.0, 10.0]]))
+    fly(dyn, np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), 3)
+    dyn.hold([True, False])
+    here = dyn.positions
+    out = fly(dyn, np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), 2)[-1]
+    assert np.array_equal(out.sample_positions[:, 0], np.repeat(here[:1], len(out.sample_times), 0))
+    assert np.all(out.velocities[0] == 0) and out.positions[1, 0] > here[1, 0] + 0.2
+
+
+def dryden_run(seed: int) -> np.ndarray:
+    dyn = make_dynamics({"model": "rotorpy", "vehicle": "crazyflie", "substep_rate": 50},
+                        {"type": "dryden", "velocity": [1.0, 0.0, 0.0]}, seed=seed)
+    dyn.reset(np.array([[0.0, 0.0, 2.0], [3.0, 0.0, 2.0]]))
+    samples = []
+    for _ in range(5):
+        np.random.random(3)  # other users of the global random state do not change the gusts
+        samples.append(dyn.step(np.zeros((2, 3)), DT).sample_positions)
+    return np.concatenate(samples)
+
+
+def test_rotorpy_dryden_gusts_repeat_for_a_seed_and_leave_numpy_alone():
+    np.random.seed(123)
+    a = dryden_run(4)
+    after = np.random.random()
+    np.random.seed(123)
+    np.random.random(3 * 5)
+    assert np.random.random() == after  # the caller's global stream went on undisturbed
+    assert np.array_equal(a, dryden_run(4))
+    b = dryden_run(5)
+    assert not np.array_equal(a, b)
+    torch = sys.modules.get("torch")  # no placeholder left behind for anyone else
+    assert torch is None or hasattr(torch, "__version__")
+    # the gusts move the vehicles, differently from each other
+    drift = a[-1] - np.array([[0.0, 0.0, 2.0], [3.0, 0.0, 2.0]])
+    assert np.abs(drift).max() > 0.005 and not np.allclose(drift[0], drift[1])

@@ -1,0 +1,130 @@
+"""The built wheel works anywhere (issue 11 §1): it carries every module, the bundled scenarios
+(built from the top-level scenarios/ folder), py.typed and the licence; installed in a fresh
+venv, ``vo3d list`` and ``vo3d run`` of a bundled scenario work from outside the repository."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+import zipfile
+from pathlib import Path
+
+import pytest
+
+import vo3d_opt
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Not part of a build: the venv, caches, outputs (copying them would only cost time).
+IGNORE = shutil.ignore_patterns(
+    ".venv",
+    ".git",
+    "build",
+    "dist",
+    "*.egg-info",
+    "__pycache__",
+    "out",
+    ".pytest_cache",
+    ".hypothesis",
+    ".ipynb_checkpoints",
+)
+
+
+def _run(cmd: list[str | Path], **kw) -> subprocess.CompletedProcess:
+    res = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, timeout=600, **kw)
+    assert res.returncode == 0, f"{cmd}\n{res.stdout}\n{res.stderr}"
+    return res
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory) -> Path:
+    """``pip wheel --no-deps .`` on a copy of the source tree (no build/ left in the repo)."""
+    tmp = tmp_path_factory.mktemp("wheel")
+    src = tmp / "src"
+    shutil.copytree(ROOT, src, ignore=IGNORE)
+    _run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            tmp / "dist",
+            src,
+        ]
+    )
+    (whl,) = (tmp / "dist").glob("vo3d_opt-*.whl")
+    return whl
+
+
+def test_wheel_carries_modules_scenarios_and_metadata(wheel):
+    names = set(zipfile.ZipFile(wheel).namelist())
+    modules = {p.relative_to(ROOT).as_posix() for p in (ROOT / "vo3d_opt").rglob("*.py")}
+    assert modules and modules <= names, sorted(modules - names)  # no subpackage forgotten
+    scenarios = {f"vo3d_opt/scenarios/{p.name}" for p in (ROOT / "scenarios").glob("*.yaml")}
+    assert scenarios and scenarios <= names, sorted(scenarios - names)
+    assert "vo3d_opt/py.typed" in names
+    dist_info = f"vo3d_opt-{vo3d_opt.__version__}.dist-info"
+    assert f"{dist_info}/licenses/LICENSE" in names
+    metadata = zipfile.ZipFile(wheel).read(f"{dist_info}/METADATA").decode()
+    assert "License-Expression: MIT" in metadata and f"Version: {vo3d_opt.__version__}" in metadata
+
+
+def test_installed_wheel_runs_bundled_scenarios_outside_the_repo(wheel, tmp_path):
+    # A fresh venv with the wheel only; the dependencies come from this venv's site-packages
+    # (a .pth line), so nothing is downloaded and the repository is not on the path.
+    venv = tmp_path / "venv"
+    _run([sys.executable, "-m", "venv", "--without-pip", venv])
+    python = venv / "bin" / "python"
+    site = Path(
+        _run(
+            [python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"]
+        ).stdout.strip()
+    )
+    (site / "deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    _run([sys.executable, "-m", "pip", "--python", python, "install", "--no-deps", "-q", wheel])
+    work = tmp_path / "elsewhere"
+    work.mkdir()
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env["PYTHONWARNINGS"] = "ignore"
+
+    where = _run(
+        [
+            python,
+            "-c",
+            "import vo3d_opt; from vo3d_opt.sim.scenario import bundled_dir; "
+            "print(vo3d_opt.__file__); print(bundled_dir())",
+        ],
+        cwd=work,
+        env=env,
+    ).stdout
+    assert str(ROOT) not in where and str(venv) in where, where
+
+    vo3d = venv / "bin" / "vo3d"
+    assert (
+        _run([vo3d, "--version"], cwd=work, env=env).stdout.strip()
+        == f"vo3d {vo3d_opt.__version__}"
+    )
+    listed = json.loads(_run([vo3d, "list", "--json"], cwd=work, env=env).stdout)
+    assert {r["name"] for r in listed} == {p.stem for p in (ROOT / "scenarios").glob("*.yaml")}
+    summary = json.loads(
+        _run([vo3d, "run", "paper-flight-test", "--json", "-q"], cwd=work, env=env).stdout
+    )
+    assert summary["scenario"] == "paper-flight-test" and summary["all_reached"]
+    ran = _run(
+        [
+            python,
+            "-c",
+            "from vo3d_opt.sim.simulator import run_scenario; "
+            "print(run_scenario('vertical-encounter', max_steps=2, progress=False).steps)",
+        ],
+        cwd=work,
+        env=env,
+    ).stdout
+    assert ran.strip() == "2"

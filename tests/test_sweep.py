@@ -1,0 +1,354 @@
+"""``vo3d sweep`` (contract §6): families, Dask runs, rates, outputs and replays.
+
+Clusters are small (2 local worker processes) and the encounters short, so the module stays
+well under a minute of wall time beyond the clusters' start.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.stats import binomtest
+
+from vo3d_opt.sim.metrics import CONTRACT_KEYS
+from vo3d_opt.sim.scenario import load_scenario
+from vo3d_opt.sweep import (
+    FAMILIES,
+    TIMING_COLUMNS,
+    Draw,
+    Family,
+    Method,
+    SweepError,
+    SweepResult,
+    clopper_pearson,
+    encounter_problems,
+    make_encounter,
+    run_encounter,
+    run_sweep,
+    upper_bound,
+)
+from vo3d_opt.sweep.families import TIME_FACTOR, TIME_SLACK, encounter_rng
+from vo3d_opt.sweep.output import failed_rows, failure_scenario, write_results
+from vo3d_opt.sweep.runner import rows_equal
+
+SECTION6_KEYS = ("family", "encounters", "seed", "method", "formulation", "solver", "collisions",
+                 "encounters_with_collision", "pz_intrusions", "encounters_with_intrusion",
+                 "not_arrived", "limit_violations", "collision_rate_upper95", "wall_time")
+TIMING_SUMMARY_KEYS = {"decision_time_median_us", "decision_time_p99_us", "decision_time_max_us",
+                       "wall_time"}
+
+
+def vo3d(*args: str | Path) -> subprocess.CompletedProcess:
+    script = Path(sys.executable).with_name("vo3d")
+    cmd = [str(script)] if script.exists() else [sys.executable, "-m", "vo3d_opt.cli"]
+    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
+    return subprocess.run(cmd + [str(a) for a in args], capture_output=True, text=True,
+                          timeout=600, env=env)
+
+
+# ----------------------------------------------------------------- test-only families
+
+
+def _crossing(rng: np.random.Generator, vehicle_range: float) -> Draw:
+    """Two UAVs crossing at right angles at the origin, 18 m out at 4 m/s (a 9 s flight)."""
+    dz = rng.uniform(-0.2, 0.2)
+    scenario = {
+        "dt": 0.2, "max_time": 60.0,
+        "limits": {"speed": [0.0, 4.0], "altitude": [0.0, 40.0]},
+        "sensing": {"vehicle_range": vehicle_range, "obstacle_range": 55.0},
+        "defaults": {"r_pz": 3.0},
+        "agents": [{"id": "a", "start": [-18.0, 0.0, 20.0], "goal": [18.0, 0.0, 20.0]},
+                   {"id": "b", "start": [0.0, -18.0, 20.0 + dz], "goal": [0.0, 18.0, 20.0 + dz]}],
+    }
+    return Draw(params={"dz": float(dz)}, scenario=scenario)
+
+
+def blind_family() -> Family:
+    """Vehicles that sense each other only at 1 m, when their 0.5 m bodies touch: they collide,
+    every time. (The loader rejects a range shorter than one step, 4 m/s x 0.2 s.)"""
+    return Family(name="blind", summary="test", obstacle_free=True,
+                  generate=lambda rng: _crossing(rng, vehicle_range=1.0))
+
+
+FLAKY_P = 0.5
+
+
+def flaky_family() -> Family:
+    """Raises in about half the encounters (when the stream's first number is below 0.5)."""
+    def generate(rng: np.random.Generator) -> Draw:
+        if rng.random() < FLAKY_P:
+            raise RuntimeError("injected failure")
+        return _crossing(rng, vehicle_range=55.0)
+
+    return Family(name="flaky", summary="test", obstacle_free=True, generate=generate)
+
+
+def lethal_family() -> Family:
+    """Kills its worker process in about a third of the encounters."""
+    def generate(rng: np.random.Generator) -> Draw:
+        if rng.random() < 0.3:
+            os._exit(3)
+        return _crossing(rng, vehicle_range=55.0)
+
+    return Family(name="lethal", summary="test", obstacle_free=True, generate=generate)
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """Two local workers; a task whose worker dies is given up at once (no retry)."""
+    import dask
+    from distributed import LocalCluster
+
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}), LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None,
+                      scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}) as c:
+        yield c.scheduler_address
+
+
+# -------------------------------------------------------------------- Clopper–Pearson
+
+
+def test_clopper_pearson_known_values():
+    # closed forms at the ends, the textbook 5/10 interval, and scipy's exact binomtest
+    assert clopper_pearson(0, 10) == (0.0, pytest.approx(1 - 0.025 ** 0.1, rel=1e-9))
+    assert clopper_pearson(10, 10) == (pytest.approx(0.025 ** 0.1, rel=1e-9), 1.0)
+    lo, hi = clopper_pearson(5, 10)
+    assert (lo, hi) == (pytest.approx(0.187086, abs=1e-6), pytest.approx(0.812914, abs=1e-6))
+    for k, n in [(1, 7), (3, 50), (17, 1000), (0, 10_000)]:
+        ci = binomtest(k, n).proportion_ci(method="exact")
+        assert clopper_pearson(k, n) == (pytest.approx(ci.low, rel=1e-9, abs=1e-15),
+                                         pytest.approx(ci.high, rel=1e-9))
+        one_sided = binomtest(k, n, alternative="less").proportion_ci(method="exact")
+        assert upper_bound(k, n) == pytest.approx(one_sided.high, rel=1e-9)
+
+
+def test_zero_events_upper_bound_is_about_three_over_n():
+    for n in (100, 1000, 10_000):
+        assert upper_bound(0, n) == pytest.approx(1 - 0.05 ** (1 / n), rel=1e-9)
+        assert 2.9 / n < upper_bound(0, n) < 3.0 / n
+    with pytest.raises(ValueError):
+        clopper_pearson(3, 2)
+
+
+# --------------------------------------------------------------------------- families
+
+
+@pytest.mark.parametrize("name", sorted(FAMILIES))
+def test_family_encounters_are_valid_and_reachable(name):
+    for index in range(15):
+        enc = make_encounter(name, 11, index)
+        assert encounter_problems(enc.scenario) == []
+        sc = enc.load()
+        assert sc.start_warnings() == []
+        flight = np.linalg.norm(sc.goals - sc.starts, axis=1) / sc.max_speed
+        assert TIME_FACTOR * flight.max() + TIME_SLACK <= sc.max_time + 1e-9
+        if FAMILIES[name].obstacle_free:
+            assert not sc.obstacles
+
+
+def test_invalid_encounters_are_recognised():
+    enc = next(e for e in (make_encounter("group", 3, i) for i in range(50))
+               if e.scenario.get("obstacles"))
+    assert encounter_problems(enc.scenario) == []
+    body = enc.load().bodies[0]  # a goal outside the body, inside its protected prism
+    near_prism = json.loads(json.dumps(enc.scenario))
+    near_prism["agents"][0]["goal"] = [body.center[0] + body.side / 2 - 0.5, body.center[1], 5.0]
+    assert any("protected prism" in p for p in encounter_problems(near_prism))
+    crowded = json.loads(json.dumps(enc.scenario))
+    g = crowded["agents"][0]["goal"]
+    crowded["agents"][1]["goal"] = [g[0], g[1], g[2] + 1.0]  # hovering 1 m apart: forced intrusion
+    assert any("apart" in p for p in encounter_problems(crowded))
+    inside = json.loads(json.dumps(enc.scenario))
+    inside["agents"][1]["start"] = list(inside["agents"][0]["start"])
+    assert encounter_problems(inside)  # the loader's own rejection (overlapping starts)
+
+
+def test_family_parameters_follow_their_distributions():
+    pair = [make_encounter("pair", 2, i).params for i in range(40)]
+    assert all(2.0 <= p[f"speed_{k}"] <= 6.0 and -1.5 <= p[f"climb_{k}"] <= 1.5
+               and 5.0 <= p[f"r_pz_{k}"] <= 12.0 for p in pair for k in (0, 1))
+    assert all(0.0 <= p["miss_over_r_pz"] <= 1.2 for p in pair)
+    group = [make_encounter("group", 2, i) for i in range(40)]
+    assert {len(e.load().agents) for e in group} <= set(range(3, 9))
+    assert {len(e.load().obstacles) for e in group} <= set(range(0, 7))
+    assert len({len(e.load().obstacles) for e in group}) > 3  # it does vary
+    dense = [make_encounter("dense", 2, i).load() for i in range(10)]
+    assert all(10 <= sc.n_agents <= 24 for sc in dense)
+
+
+def test_pair_flies_its_planned_miss_distance_without_avoidance():
+    for index in range(20):
+        enc = make_encounter("pair", 5, index)
+        sc = enc.load()
+        direction = sc.goals - sc.starts
+        v = direction / np.linalg.norm(direction, axis=1, keepdims=True) * sc.max_speed[:, None]
+        dp, dv = sc.starts[0] - sc.starts[1], v[0] - v[1]
+        t = -dp @ dv / (dv @ dv)
+        assert t == pytest.approx(enc.params["t_cpa"], abs=0.05)
+        assert np.linalg.norm(dp + t * dv) == pytest.approx(enc.params["miss_distance"], abs=0.01)
+
+
+def test_an_encounter_is_regenerated_alone_from_seed_and_index():
+    a = make_encounter("group", 7, 12)
+    assert make_encounter("group", 7, 12) == a  # nothing else drawn before it matters
+    assert make_encounter("group", 7, 13).scenario != a.scenario
+    assert make_encounter("group", 8, 12).scenario != a.scenario
+    assert a.scenario["name"] == "group-s7-i12"
+    with pytest.raises(ValueError, match="unknown 'nope'"):
+        make_encounter("nope", 0, 0)
+
+
+# ------------------------------------------------------------------------ Dask sweeps
+
+
+def test_same_results_with_one_and_two_workers(cluster):
+    one = run_sweep("pair", 4, seed=3, workers=1, progress=False)
+    two = run_sweep("pair", 4, seed=3, scheduler=cluster, progress=False)
+    assert one.summary["workers"] == 1 and two.summary["workers"] == 2
+    assert list(one.rows["index"]) == [0, 1, 2, 3] and one.rows["error"].isna().all()
+    assert rows_equal(one.rows, two.rows)
+    assert two.rows["worker"].nunique() == 2  # both workers did take part
+    ignore = {"wall_time", "setup_time", "encounters_per_second", "workers", "scheduler"}
+    assert {k: v for k, v in one.summary.items() if k not in ignore} == \
+        {k: v for k, v in two.summary.items() if k not in ignore}
+    # and the same as encounter 2 alone, in this process
+    alone = pd.DataFrame([run_encounter("pair", 3, 2)])
+    assert rows_equal(alone, one.rows.iloc[[2]])
+
+
+def test_an_encounter_that_raises_is_reported_and_the_sweep_finishes(cluster):
+    n = 8
+    expected = [i for i in range(n) if encounter_rng(0, i).random() < FLAKY_P]
+    assert 0 < len(expected) < n
+    result = run_sweep(flaky_family(), n, seed=0, scheduler=cluster, progress=False)
+    rows = result.rows
+    assert list(rows["index"]) == list(range(n))
+    assert [e["index"] for e in result.summary["errors"]] == expected
+    assert all(e["error"] == "RuntimeError: injected failure" for e in result.summary["errors"])
+    ran = rows[rows["error"].isna()]
+    assert sorted(ran["index"]) == sorted(set(range(n)) - set(expected))
+    assert ran["all_reached"].all()
+    assert result.summary["completed"] == n - len(expected)
+    assert result.summary["rates"]["error"]["events"] == len(expected)
+    assert result.summary["rates"]["collision"]["encounters"] == n - len(expected)
+
+
+def test_a_worker_that_dies_is_reported_and_the_sweep_finishes(cluster):
+    from distributed import Client
+
+    n = 4
+    lethal = [i for i in range(n) if encounter_rng(0, i).random() < 0.3]
+    assert 0 < len(lethal) < n
+    result = run_sweep(lethal_family(), n, seed=0, scheduler=cluster, in_flight=2,
+                       progress=False)
+    with Client(cluster) as client:  # the nanny restarts the worker: leave the cluster whole
+        client.wait_for_workers(2, timeout=120)
+    assert list(result.rows["index"]) == list(range(n))  # none dropped
+    errors = {e["index"]: e["error"] for e in result.summary["errors"]}
+    assert set(lethal) <= set(errors)
+    assert all(msg.startswith("KilledWorker") for msg in errors.values())
+    assert result.rows.loc[~result.rows["index"].isin(errors), "all_reached"].all()
+
+
+def test_bad_options_are_refused_before_any_cluster_starts():
+    with pytest.raises(SweepError, match="--method rvo2: family 'group' has obstacles"):
+        run_sweep("group", 2, method=Method(name="rvo2"))
+    with pytest.raises(SweepError, match="unknown 'nope'"):
+        run_sweep("nope", 2)
+    with pytest.raises(SweepError, match="--n"):
+        run_sweep("pair", 0)
+    with pytest.raises(SweepError, match="solver 'bogus'"):
+        run_sweep("pair", 2, method=Method(solver="bogus"))
+
+
+# ------------------------------------------------------------- outputs and the CLI
+
+
+def test_collisions_are_written_as_scenarios_that_vo3d_run_replays(cluster, tmp_path):
+    result = run_sweep(blind_family(), 2, seed=0, scheduler=cluster, progress=False)
+    assert result.summary["encounters_with_collision"] == 2
+    assert result.summary["collision_rate_upper95"] == pytest.approx(upper_bound(2, 2))
+    written = write_results(result, tmp_path)
+    failures = sorted((tmp_path / "failures").glob("*.yaml"))
+    assert [p.name for p in failures] == ["blind-s0-i0.yaml", "blind-s0-i1.yaml"]
+    assert set(failures) <= set(written) and len(failed_rows(result.rows)) == 2
+    rows = pd.read_parquet(tmp_path / "encounters.parquet")
+    assert rows_equal(rows, result.rows)
+    for path in failures:
+        assert load_scenario(path).name == path.stem
+        replay = vo3d("run", path, "--json")
+        assert replay.returncode == 0, replay.stderr
+        summary = json.loads(replay.stdout)
+        row = rows[rows["scenario"] == path.stem].iloc[0]
+        for key, value in summary.items():
+            if key in TIMING_SUMMARY_KEYS:
+                continue
+            expected = json.loads(row[key]) if key == "status_counts" else row[key]
+            if isinstance(value, float):  # vo3d run's JSON keeps 12 significant digits
+                assert value == pytest.approx(expected, rel=1e-11, abs=0), key
+            else:
+                assert value == expected, key
+
+
+def test_sweep_json_prints_one_object_with_the_contract_keys(cluster, tmp_path):
+    proc = vo3d("sweep", "pair", "--n", "2", "--seed", "5", "--scheduler", cluster, "--json",
+                "--out", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout.strip()
+    assert out.startswith("{") and "\n" not in out
+    summary = json.loads(out)
+    assert set(SECTION6_KEYS) <= set(summary)
+    assert (summary["family"], summary["encounters"], summary["seed"]) == ("pair", 2, 5)
+    assert summary["method"] == "vo3d" and summary["formulation"] == "plane_qp"
+    k = summary["encounters_with_collision"]
+    assert summary["collision_rate_upper95"] == pytest.approx(upper_bound(k, 2))
+    assert json.loads((tmp_path / "summary.json").read_text()) == summary
+    rows = pd.read_parquet(tmp_path / "encounters.parquet")
+    assert list(rows["index"]) == [0, 1] and (rows["family"] == "pair").all()
+    assert {"param_miss_distance", "param_speed_0"} <= set(rows.columns)
+    assert set(CONTRACT_KEYS) <= set(rows.columns)
+    assert (tmp_path / "min_distance.png").stat().st_size > 0
+
+
+def test_sweep_cli_lists_families_and_refuses_rvo2_with_obstacles():
+    listed = vo3d("sweep", "--list")
+    assert listed.returncode == 0, listed.stderr
+    lines = listed.stdout.strip().splitlines()
+    assert [line.split()[0] for line in lines] == list(FAMILIES)
+    assert all(("rvo2 ok" in line) == FAMILIES[line.split()[0]].obstacle_free for line in lines)
+    refused = vo3d("sweep", "group", "--n", "2", "--method", "rvo2")
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert refused.stderr.strip().splitlines()[-1].startswith("vo3d: --method rvo2:")
+
+
+def test_rvo2_flies_the_same_encounters_keeping_the_larger_r_pz_apart():
+    row = run_encounter("pair", 0, 1, Method(name="rvo2"))
+    assert row["error"] is None and row["formulation"] == "rvo2-3d"
+    assert row["scenario"] == run_encounter("pair", 0, 1)["scenario"]
+    assert row["fallbacks"] is None  # RVO2 does not say
+    assert row["min_normalised_distance"] > 0.999  # kept the larger r_pz (to float32 precision)
+    # with RVO2's radius r_pz/2 per agent, the pair of unequal zones would come closer
+    from vo3d_opt.baselines import run_rvo2
+    from vo3d_opt.sweep.flight import normalised_min_distance
+
+    enc = make_encounter("pair", 0, 1)
+    r0, r1 = enc.params["r_pz_0"], enc.params["r_pz_1"]
+    assert abs(r0 - r1) > 0.5
+    per_agent = normalised_min_distance(run_rvo2(enc.load(), progress=False))
+    assert per_agent < (r0 + r1) / 2 / max(r0, r1) + 1e-3 < 0.99
+
+
+def test_formulation_and_solver_pass_through_to_the_runs_and_the_replays():
+    method = Method(formulation="cone_qp", solver="osqp")
+    row = run_encounter("pair", 0, 1, method)
+    assert (row["error"], row["formulation"], row["solver"]) == (None, "cone_qp", "osqp")
+    result = SweepResult(family=FAMILIES["pair"], seed=0, method=method, rows=pd.DataFrame())
+    data = failure_scenario(result, 1)
+    assert (data["formulation"], data["solver"]) == ("cone_qp", "osqp")
+    assert data["agents"] == make_encounter("pair", 0, 1).scenario["agents"]

@@ -1,0 +1,43 @@
+"""Scenario files (contract §2): the schema (:mod:`.schema`, pydantic models built on the public
+types of ``vo3d_opt.types``) and the loader (:mod:`.loader`: YAML, bundled names, one-line
+errors). The format is documented in :mod:`.schema`, what is rejected in :mod:`.loader`."""
+
+from vo3d_opt.sim.scenario.loader import (
+    ScenarioError,
+    bundled_dir,
+    bundled_files,
+    close_names,
+    load_scenario,
+    resolve,
+    scenario_from_dict,
+)
+from vo3d_opt.sim.scenario.schema import (
+    AgentSpec,
+    BoxSpec,
+    CylinderSpec,
+    DefaultsSpec,
+    Scenario,
+    SensingSpec,
+    SphereSpec,
+    prism_contains,
+    sphere_surface_distance,
+)
+
+__all__ = [
+    "AgentSpec",
+    "BoxSpec",
+    "CylinderSpec",
+    "DefaultsSpec",
+    "Scenario",
+    "ScenarioError",
+    "SensingSpec",
+    "SphereSpec",
+    "bundled_dir",
+    "bundled_files",
+    "close_names",
+    "load_scenario",
+    "prism_contains",
+    "resolve",
+    "scenario_from_dict",
+    "sphere_surface_distance",
+]

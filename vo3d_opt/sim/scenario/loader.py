@@ -1,0 +1,238 @@
+"""Reading scenario files: YAML, the bundled scenarios by name, and one-line errors.
+
+:func:`load_scenario` logs (``logging``, level WARNING) what is allowed but worth saying:
+``Scenario.warnings()``, e.g. a start inside a protected zone.
+
+Rejected, with one :class:`ScenarioError` line ``FILE: key.path[2].key: problem`` listing every
+problem found (``; `` between them): unreadable files, invalid YAML, duplicate YAML keys, and
+whatever the schema (:mod:`vo3d_opt.sim.scenario.schema`) refuses: unknown or missing keys
+(with a hint: a close key name, or where a key that is valid elsewhere belongs), wrong types,
+NaN or infinite numbers, impossible values, cross-field problems.
+
+YAML 1.1 (PyYAML) reads ``1e9`` as a string; this loader reads it as YAML 1.2 does, a number.
+A name without a directory or ``.yaml`` suffix that is no file is looked up among the bundled
+scenarios (file stem or ``name``); when none matches, the error suggests close names.
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib.resources
+import logging
+import re
+from collections import defaultdict
+from functools import cache
+from pathlib import Path
+from typing import Annotated, Any, get_args, get_origin
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from vo3d_opt.sim.scenario.schema import OBSTACLE_TAGS, Scenario
+from vo3d_opt.types import describe_error, field_path, one_line
+
+log = logging.getLogger(__name__)
+
+
+class ScenarioError(ValueError):
+    """An unreadable or invalid scenario file; the message is one line: ``file: key: problem``."""
+
+
+# ------------------------------------------------------------------------------------- YAML
+
+
+class _Loader(yaml.SafeLoader):
+    """A SafeLoader that rejects duplicate mapping keys (PyYAML keeps the last silently) and
+    reads YAML 1.2 floats without a dot (``1e9``)."""
+
+
+def _construct_mapping(loader: _Loader, node: yaml.MappingNode, deep: bool = False) -> Any:
+    seen: list[Any] = []
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r}", key_node.start_mark
+            )
+        seen.append(key)
+    return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
+
+
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+# A copy of the resolver table (add_implicit_resolver would append to SafeLoader's own lists).
+_Loader.yaml_implicit_resolvers = {
+    k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
+def _parse(text: str, source: str) -> Any:
+    try:
+        return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        problem = getattr(exc, "problem", None) or str(exc)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        raise ScenarioError(one_line(f"{source}: {where}invalid YAML: {problem}")) from None
+
+
+# ----------------------------------------------------------------------------------- errors
+
+
+def _is_list(annotation: Any) -> bool:
+    origin = get_origin(annotation)
+    return origin is list or (origin is Annotated and _is_list(get_args(annotation)[0]))
+
+
+def _models_in(annotation: Any) -> list[type[BaseModel]]:
+    """The pydantic models an annotation holds (through list, Optional, Union, Annotated)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    return [m for arg in get_args(annotation) for m in _models_in(arg)]
+
+
+@cache
+def _key_places() -> dict[str, tuple[str, ...]]:
+    """Every key of the format and where it is valid ("" for the top level)."""
+    from vo3d_opt.formulations.common import Options
+
+    places: dict[str, list[str]] = defaultdict(list)
+
+    def walk(model: type[BaseModel], where: str) -> None:
+        for key, info in model.model_fields.items():
+            if where not in places[key]:
+                places[key].append(where)
+            for sub in _models_in(info.annotation):
+                walk(
+                    sub, f"{where}.{key}".lstrip(".") + ("[]" if _is_list(info.annotation) else "")
+                )
+
+    walk(Scenario, "")
+    walk(Options, "selector_options")
+    return {k: tuple(v) for k, v in places.items()}
+
+
+def _unknown_key(loc: tuple[Any, ...]) -> str:
+    key = str(loc[-1]) if loc else "?"
+    places = _key_places()
+    if key in places:
+        where = " and ".join(
+            "at the top level of the scenario" if p == "" else f"in {p}" for p in places[key]
+        )
+        return f"unknown key here ({key!r} belongs {where})"
+    hint = difflib.get_close_matches(key, sorted(places), n=1)
+    return "unknown key" + (f" (did you mean {hint[0]!r}?)" if hint else "")
+
+
+def _describe(err: Any) -> tuple[str, str]:
+    """(key path, problem) of one pydantic error, in the words of a file's keys."""
+    loc = tuple(err.get("loc", ()))
+    kind = err.get("type", "")
+    path = field_path(loc, skip=OBSTACLE_TAGS)
+    if kind == "missing":
+        return path, "missing required key"
+    if kind == "extra_forbidden":
+        return path, _unknown_key(loc)
+    if kind == "union_tag_invalid":
+        tag = err.get("ctx", {}).get("tag", "?")
+        expected = " or ".join(repr(t) for t in sorted(OBSTACLE_TAGS))
+        return f"{path}.type", f"unknown obstacle type {tag!r} (expected {expected})"
+    if kind == "union_tag_not_found":
+        return f"{path}.type", "missing required key"
+    return path, describe_error(err, skip=OBSTACLE_TAGS)[1]
+
+
+def _fail(source: str, problems: list[tuple[str, str]]) -> ScenarioError:
+    text = "; ".join(f"{path}: {msg}" if path else msg for path, msg in problems)
+    return ScenarioError(one_line(f"{source}: {text}"))
+
+
+# ---------------------------------------------------------------------------------- loading
+
+
+def scenario_from_dict(data: Any, source: str = "<scenario>") -> Scenario:
+    """Validate already-parsed YAML data; ``source`` names it in error messages."""
+    if not isinstance(data, dict):
+        raise _fail(source, [("", f"must be a YAML mapping of keys, got {type(data).__name__}")])
+    try:
+        sc = Scenario.model_validate(data)
+    except ValidationError as exc:
+        raise _fail(source, [_describe(e) for e in exc.errors()]) from None
+    sc._source = source
+    return sc
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario file, or a bundled scenario by name (see :func:`resolve`);
+    raise :class:`ScenarioError` (one line) if unreadable or invalid."""
+    path = resolve(path)
+    source = str(path)
+    if _is_name(path):
+        raise ScenarioError(f"{source}: no such file or bundled scenario{_suggestion(source)}")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise ScenarioError(f"{source}: cannot read: {reason}") from None
+    sc = scenario_from_dict(_parse(text, source), source)
+    for warning in sc.warnings():
+        log.warning("%s: %s", sc.name, warning)
+    return sc
+
+
+# ---------------------------------------------------------------------------- bundled files
+
+
+def bundled_dir() -> Path:
+    """The bundled scenarios: the package data ``vo3d_opt/scenarios`` of an installed wheel
+    (built from the repository's top-level ``scenarios/``, see pyproject.toml), else that
+    top-level folder itself (a source checkout or an editable install)."""
+    packaged = importlib.resources.files("vo3d_opt") / "scenarios"
+    if packaged.is_dir():
+        return Path(str(packaged))
+    return Path(__file__).resolve().parents[3] / "scenarios"
+
+
+def bundled_files() -> list[Path]:
+    """Every bundled scenario file, sorted by file name."""
+    d = bundled_dir()
+    return sorted(d.glob("*.yaml")) if d.is_dir() else []
+
+
+def _is_name(p: Path) -> bool:
+    return not p.exists() and p.suffix not in (".yaml", ".yml") and len(p.parts) == 1
+
+
+def resolve(arg: str | Path) -> Path:
+    """A scenario argument: an existing path, else a bundled scenario's name or file stem."""
+    p = Path(arg)
+    if not _is_name(p):
+        return p
+    for f in bundled_files():
+        if f.stem == str(arg):
+            return f
+    for f in bundled_files():
+        try:
+            if scenario_from_dict(_parse(f.read_text(encoding="utf-8"), str(f))).name == str(arg):
+                return f
+        except (OSError, ScenarioError):
+            continue
+    return p
+
+
+def close_names(arg: str) -> list[str]:
+    """Bundled scenario names that ``arg`` may have meant: those containing it, else the close
+    ones by spelling."""
+    stems = [f.stem for f in bundled_files()]
+    containing = [s for s in stems if arg and arg in s]
+    return containing[:5] or difflib.get_close_matches(arg, stems, n=3, cutoff=0.5)
+
+
+def _suggestion(name: str) -> str:
+    names = close_names(name)
+    found = f"; bundled scenarios with a close name: {', '.join(names)}" if names else ""
+    return f"{found} (`vo3d list` lists the bundled scenarios)"

@@ -1,0 +1,496 @@
+"""The scenario format (contract §2 and our extensions) as pydantic models.
+
+A scenario file is a YAML mapping::
+
+    name: paper-case1-ten-uav-crossing     # required, unique among the bundled files
+    description: free text                 # optional
+    dt: 0.2                                # required: control and integration period, s
+    max_time: 150.0                        # required: s; the run stops earlier when all arrived
+    goal_tolerance: 1.0                    # m (default 1.0)
+    limits:                                # required; the keys of vo3d_opt.types.Limits
+      speed: [0.0, 4.0]                    # m/s: [v_min, v_max], v_min <= v_max, v_max > 0
+      altitude: [0.0, 40.0]                # m: [z_min, z_max], z_min < z_max
+      acceleration: 3.0                    # optional, m/s², handed to the selector's Limits
+    sensing:                               # default: Table 1 of the paper (55 m both)
+      vehicle_range: 55.0                  # m, centre to centre
+      obstacle_range: 55.0                 # m, to the nearest point of the obstacle
+    defaults:                              # default: r_pz 10, radius 0.5, max_speed 4
+      r_pz: 10.0                           # protected-zone radius, m
+      radius: 0.5                          # physical radius, m (collision counting)
+      max_speed: 4.0                       # m/s
+    agents:                                # required, at least one
+      - {id: u0, start: [40, 0, 20], goal: [-40, 0, 20]}
+      - {id: u1, start: [-40, 0, 20], goal: [40, 0, 20], r_pz: 8.0, radius: 0.3, max_speed: 3}
+    obstacles:                             # optional; the keys of types.Cylinder / types.Box
+      - {type: cylinder, center: [0, 10], radius: 3, height: 30}
+      - {type: box, center: [10, -10], size: [6, 6], height: 25, yaw: 0.3}
+
+Extensions beyond the contract (all optional):
+
+* obstacle keys ``L_pz``, ``h_pz``, ``margin`` (those of ``types.Cylinder`` / ``types.Box``: the
+  side and height of the protected prism C_pz of the paper's section 4, derived from the size
+  plus ``margin`` when omitted) and ``sensed`` (default ``true``). An obstacle with
+  ``sensed: false`` is physical (it counts in the metrics and is drawn) but no agent perceives
+  it; used to fly the original method's sphere approximation around the real cylinders (paper
+  case 3, Fig. 18).
+* ``spheres``: a list of ``{center: [x, y, z], radius: r, margin: m, physical: true}``. Each
+  sphere is given to the selector as a static ``Neighbor`` (velocity 0, r_pz = radius + margin),
+  which is how the original 3D VO of Jenie et al. handles static obstacles. ``physical: false``
+  spheres are seen by the agents but ignored by the metrics (they only approximate another
+  obstacle). ``margin`` defaults to ``types.PZ_MARGIN``.
+* ``velocity_response_tau`` (s): first-order velocity response ``v += (v_cmd - v) * dt / tau``
+  (clamped to a full step when ``dt >= tau``); off (ideal kinematics) when omitted.
+* ``formulation``, ``solver``: defaults for ``vo3d run`` when the command line gives none.
+* ``selector_options``: a mapping passed as extra keyword arguments to ``VelocitySelector``.
+
+One schema: the limits and the obstacles *are* the public types of ``vo3d_opt.types`` (the
+obstacle specs subclass them, adding only the scenario's keys), so the file and the Python API
+take the same fields, numbers (no booleans or strings for numbers) and checks. Every check
+reports at the key it concerns; cross-field checks (:meth:`Scenario._cross_checks`) run once
+every key is valid. To add a key: add a field (a nested ``Spec`` for a group of keys) and, when
+it depends on other keys, a check in ``_cross_checks``.
+
+A step longer than a sensing range (``max_speed · dt`` above ``sensing.vehicle_range`` with two
+or more vehicles, or above ``sensing.obstacle_range`` with obstacles or spheres) is rejected:
+whatever appears at the edge of the range is passed before the next decision. A step longer
+than an agent's protected-zone radius is allowed but reported by :meth:`Scenario.warnings`
+(a vehicle can cross a zone between two decisions).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, ClassVar, Literal
+
+import numpy as np
+from pydantic import ConfigDict, Field, PrivateAttr, StrictBool, field_validator, model_validator
+
+from vo3d_opt.types import (
+    PZ_MARGIN,
+    Box,
+    Cylinder,
+    Limits,
+    Model,
+    Neighbor,
+    NonNegative,
+    Positive,
+    Vec3,
+    raise_problems,
+)
+
+Text = Annotated[str, Field(min_length=1)]
+
+
+class Spec(Model):
+    """Base of the scenario-only groups of keys (frozen, unknown keys refused)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True)
+
+
+class SensingSpec(Spec):
+    """Sensing ranges of Table 1: vehicles by centre distance, obstacles by nearest point."""
+
+    vehicle_range: Positive = 55.0
+    obstacle_range: Positive = 55.0
+
+
+class DefaultsSpec(Spec):
+    """Per-agent parameters unless an agent overrides them (section 5: r_pz = 10 m)."""
+
+    r_pz: Positive = 10.0
+    radius: Positive = 0.5
+    max_speed: Positive = 4.0
+
+
+class AgentSpec(Spec):
+    """One UAV: identifier, start and goal positions (m) and optional parameter overrides."""
+
+    id: Text
+    start: Vec3
+    goal: Vec3
+    r_pz: Positive | None = None
+    radius: Positive | None = None
+    max_speed: Positive | None = None
+
+
+class _Placed:
+    """What a scenario adds to a public obstacle type: its ``type`` tag and ``sensed``."""
+
+    public: ClassVar[type[Cylinder] | type[Box]]
+
+    def body(self) -> Cylinder | Box:
+        """The obstacle as its public type (what the selector and the metrics take)."""
+        cls = self.public
+        return cls.model_construct(**{k: getattr(self, k) for k in cls.model_fields})
+
+
+class CylinderSpec(_Placed, Cylinder):
+    """A vertical cylinder standing on the ground (section 4.1): ``types.Cylinder``'s keys."""
+
+    public: ClassVar[type[Cylinder]] = Cylinder
+    type: Literal["cylinder"]
+    sensed: StrictBool = True
+
+
+class BoxSpec(_Placed, Box):
+    """A (possibly yawed) box standing on the ground (section 4.3): ``types.Box``'s keys."""
+
+    public: ClassVar[type[Box]] = Box
+    type: Literal["box"]
+    sensed: StrictBool = True
+
+
+#: The ``type`` tags of the obstacle union (pydantic puts them in error locations).
+OBSTACLE_TAGS = frozenset({"cylinder", "box"})
+ObstacleSpec = Annotated[CylinderSpec | BoxSpec, Field(discriminator="type")]
+
+
+class SphereSpec(Spec):
+    """A static sphere, seen by the agents as a zero-velocity Neighbor (original 3D VO)."""
+
+    center: Vec3
+    radius: Positive
+    margin: NonNegative = PZ_MARGIN
+    physical: StrictBool = True
+
+    @property
+    def r_pz(self) -> float:
+        return self.radius + self.margin
+
+
+Problem = tuple[tuple[Any, ...], str, Any]
+
+
+class Scenario(Spec):
+    """A validated scenario. Build it with :func:`load_scenario` or :func:`scenario_from_dict`
+    (which name the file in their errors), or ``Scenario.model_validate(data)``."""
+
+    name: Text
+    description: str = ""
+    dt: Positive
+    max_time: Positive
+    goal_tolerance: Positive = 1.0
+    limits: Limits
+    sensing: SensingSpec = SensingSpec()
+    defaults: DefaultsSpec = DefaultsSpec()
+    agents: Annotated[list[AgentSpec], Field(min_length=1)]
+    obstacles: list[ObstacleSpec] = []
+    spheres: list[SphereSpec] = []
+    velocity_response_tau: Positive | None = None
+    formulation: Text | None = None
+    solver: Text | None = None
+    selector_options: dict[str, Any] = {}
+
+    _source: str = PrivateAttr(default="<scenario>")
+    _bodies: list[Cylinder | Box] = PrivateAttr(default_factory=list)
+
+    def model_post_init(self, __context: Any) -> None:
+        self._bodies = [spec.body() for spec in self.obstacles]
+
+    # ---------------------------------------------------------------- selector keys, checked now
+
+    @field_validator("formulation")
+    @classmethod
+    def _known_formulation(cls, name: str | None) -> str | None:
+        from vo3d_opt.selector import FORMULATIONS  # late: loading a file needs no solver
+
+        if name is not None and name not in FORMULATIONS:
+            raise ValueError(f"unknown {name!r} (expected one of {', '.join(FORMULATIONS)})")
+        return name
+
+    @field_validator("solver")
+    @classmethod
+    def _known_solver(cls, name: str | None) -> str | None:
+        from vo3d_opt.solvers import get_backend
+
+        if name is not None:
+            get_backend(name)  # ValueError listing the available ones
+        return name
+
+    @field_validator("selector_options")
+    @classmethod
+    def _known_options(cls, options: dict[str, Any]) -> dict[str, Any]:
+        from vo3d_opt.formulations.common import Options
+
+        Options.model_validate(options)  # its errors keep their key paths under this key
+        return options
+
+    # ---------------------------------------------------------------------- cross-field checks
+
+    @model_validator(mode="after")
+    def _cross_field(self) -> Scenario:
+        raise_problems("Scenario", self._cross_checks())
+        return self
+
+    def _cross_checks(self) -> list[Problem]:
+        """Problems between keys, each at the key it concerns, in file order."""
+        return (
+            self._timing_problems()
+            + self._step_problems()
+            + self._agent_problems()
+            + self._overlap_problems()
+        )
+
+    def _timing_problems(self) -> list[Problem]:
+        out: list[Problem] = []
+        if self.max_time < self.dt:
+            out.append(
+                (
+                    ("max_time",),
+                    f"{self.max_time:g} s is shorter than one step (dt {self.dt:g} s)",
+                    self.max_time,
+                )
+            )
+        v_lo = self.limits.v_min
+        if self.defaults.max_speed < v_lo:
+            out.append(
+                (
+                    ("defaults", "max_speed"),
+                    f"{self.defaults.max_speed:g} is below the minimum speed {v_lo:g}",
+                    self.defaults.max_speed,
+                )
+            )
+        return out
+
+    def _step_problems(self) -> list[Problem]:
+        step = float(np.max(self.max_speed)) * self.dt
+        ranges = []
+        if self.n_agents > 1:
+            ranges.append(("vehicle_range", self.sensing.vehicle_range))
+        if self.obstacles or self.spheres:
+            ranges.append(("obstacle_range", self.sensing.obstacle_range))
+        return [
+            (
+                ("dt",),
+                f"one step flies {step:g} m (max_speed x dt), more than "
+                f"sensing.{key} {value:g} m: what comes into range is passed before "
+                f"the next decision; shorten dt",
+                self.dt,
+            )
+            for key, value in ranges
+            if step > value
+        ]
+
+    def _agent_problems(self) -> list[Problem]:
+        out: list[Problem] = []
+        seen: dict[str, int] = {}
+        radius = self.radius
+        v_lo, (z_lo, z_hi) = self.limits.v_min, self.limits.altitude
+        for i, a in enumerate(self.agents):
+            if a.id in seen:
+                out.append(
+                    (
+                        ("agents", i, "id"),
+                        f"duplicate id {a.id!r} (also agents[{seen[a.id]}])",
+                        a.id,
+                    )
+                )
+            seen.setdefault(a.id, i)
+            if a.max_speed is not None and a.max_speed < v_lo:
+                out.append(
+                    (
+                        ("agents", i, "max_speed"),
+                        f"{a.max_speed:g} is below the minimum speed {v_lo:g}",
+                        a.max_speed,
+                    )
+                )
+            for key in ("start", "goal"):
+                point = getattr(a, key)
+                where = ("agents", i, key)
+                if point[2] < z_lo:
+                    out.append(
+                        (where, f"below the altitude floor {z_lo:g} (z = {point[2]:g})", point)
+                    )
+                elif point[2] > z_hi:
+                    out.append(
+                        (where, f"above the altitude ceiling {z_hi:g} (z = {point[2]:g})", point)
+                    )
+                out += [(where, msg, point) for msg in self._inside_problems(point, radius[i])]
+        return out
+
+    def _inside_problems(self, point: np.ndarray, radius: float) -> list[str]:
+        """A vehicle of this radius at ``point`` overlapping an obstacle or a physical sphere."""
+        out = []
+        for k, body in enumerate(self._bodies):
+            d = float(body.surface_distance(point))
+            if d < radius:
+                out.append(
+                    f"inside obstacles[{k}] ({self.obstacles[k].type} at {_fmt(body.center)}; "
+                    f"{d:.3g} m from its surface, vehicle radius {radius:g} m)"
+                )
+        for k, s in enumerate(self.spheres):
+            if s.physical and float(sphere_surface_distance(s.center, s.radius, point)) < radius:
+                out.append(f"inside spheres[{k}] (at {_fmt(s.center)})")
+        return out
+
+    def _overlap_problems(self) -> list[Problem]:
+        out: list[Problem] = []
+        radius = self.radius
+        for key, pts in (("start", self.starts), ("goal", self.goals)):
+            for i in range(len(pts)):
+                for j in range(i):
+                    d = float(np.linalg.norm(pts[i] - pts[j]))
+                    if d < radius[i] + radius[j]:
+                        out.append(
+                            (
+                                ("agents", i, key),
+                                f"overlaps agents[{j}] ({self.agents[j].id}) at {d:.3g} m",
+                                pts[i],
+                            )
+                        )
+        return out
+
+    # -------------------------------------------------------------- convenience accessors
+
+    @property
+    def source(self) -> str:
+        """The file the scenario was read from (``<scenario>`` when built in memory)."""
+        return self._source
+
+    @property
+    def bodies(self) -> list[Cylinder | Box]:
+        """Every obstacle as a ``types.Cylinder`` / ``types.Box``, in file order."""
+        return list(self._bodies)
+
+    @property
+    def sensed(self) -> np.ndarray:
+        """Boolean mask over ``bodies``: which obstacles the agents perceive."""
+        return np.array([o.sensed for o in self.obstacles], dtype=bool)
+
+    @property
+    def n_agents(self) -> int:
+        return len(self.agents)
+
+    @property
+    def ids(self) -> list[str]:
+        return [a.id for a in self.agents]
+
+    def _per_agent(self, key: str) -> np.ndarray:
+        default = getattr(self.defaults, key)
+        return np.array(
+            [getattr(a, key) if getattr(a, key) is not None else default for a in self.agents],
+            dtype=float,
+        )
+
+    @property
+    def starts(self) -> np.ndarray:
+        return np.array([a.start for a in self.agents], dtype=float).reshape(-1, 3)
+
+    @property
+    def goals(self) -> np.ndarray:
+        return np.array([a.goal for a in self.agents], dtype=float).reshape(-1, 3)
+
+    @property
+    def r_pz(self) -> np.ndarray:
+        """Protected-zone radius per agent, m."""
+        return self._per_agent("r_pz")
+
+    @property
+    def radius(self) -> np.ndarray:
+        """Physical radius per agent, m."""
+        return self._per_agent("radius")
+
+    @property
+    def max_speed(self) -> np.ndarray:
+        """Speed bound per agent: min(limits.speed[1], the agent's max_speed), m/s."""
+        return np.minimum(self._per_agent("max_speed"), self.limits.v_max)
+
+    @property
+    def n_steps(self) -> int:
+        """Most control periods the run may take (max_time / dt, rounded up)."""
+        return max(1, int(math.ceil(self.max_time / self.dt - 1e-9)))
+
+    def agent_limits(self, i: int) -> Limits:
+        """The ``types.Limits`` handed to agent ``i``'s selector."""
+        return self.limits.model_copy(
+            update={"speed": (self.limits.v_min, float(self.max_speed[i]))}
+        )
+
+    def sphere_neighbors(self) -> list[Neighbor]:
+        """The ``spheres`` as zero-velocity neighbours (r_pz = radius + margin)."""
+        return [
+            Neighbor(position=s.center, velocity=(0.0, 0.0, 0.0), r_pz=s.r_pz, cooperative=False)
+            for s in self.spheres
+        ]
+
+    def warnings(self) -> list[str]:
+        """What is allowed but worth saying before a run, one line each: starts inside a
+        protected zone, steps longer than a protected-zone radius."""
+        return self.start_warnings() + self.step_warnings()
+
+    def step_warnings(self) -> list[str]:
+        """Agents that fly farther than their protected-zone radius in one step."""
+        step = self.max_speed * self.dt
+        return [
+            f"{a.id} flies {step[i]:g} m per step (max_speed x dt), more than its protected-zone "
+            f"radius {self.r_pz[i]:g} m: it can cross a zone between two decisions"
+            for i, a in enumerate(self.agents)
+            if step[i] > self.r_pz[i]
+        ]
+
+    def start_warnings(self) -> list[str]:
+        """Starts inside a protected zone (allowed, but worth saying): one line each."""
+        out: list[str] = []
+        p, r_pz, ids = self.starts, self.r_pz, self.ids
+        n = len(ids)
+        for i in range(n):
+            for j in range(i + 1, n):
+                d = float(np.linalg.norm(p[i] - p[j]))
+                if d < max(r_pz[i], r_pz[j]):
+                    out.append(
+                        f"{ids[i]} and {ids[j]} start {d:.2f} m apart, inside the "
+                        f"protected zone ({max(r_pz[i], r_pz[j]):g} m)"
+                    )
+        for k, body in enumerate(self._bodies):
+            out += [
+                f"{ids[a]} starts inside the protected prism of obstacles[{k}]"
+                for a in np.flatnonzero(prism_contains(body, p))
+            ]
+        for k, s in enumerate(self.spheres):
+            d = np.linalg.norm(p - np.asarray(s.center), axis=1)
+            out += [
+                f"{ids[a]} starts inside the protected zone of spheres[{k}]"
+                for a in np.flatnonzero(d < s.r_pz)
+            ]
+        return out
+
+
+# ------------------------------------------------------------------------------ geometry
+
+
+def prism_contains(body: Cylinder | Box, points: np.ndarray) -> np.ndarray:
+    """Whether points (..., 3) lie inside the obstacle's protected prism C_pz.
+
+    Section 4.1: the square prism turns so that a side faces the vehicle, so in the horizontal
+    plane the vehicle is inside exactly when its distance to the obstacle's axis is below
+    L_pz / 2; vertically the prism spans [0, h_pz].
+    """
+    p = np.asarray(points, dtype=float)
+    horizontal = np.linalg.norm(p[..., :2] - np.asarray(body.center), axis=-1)
+    return (horizontal < body.side / 2.0) & (p[..., 2] < body.prism_height) & (p[..., 2] >= 0.0)
+
+
+def sphere_surface_distance(center: np.ndarray, radius: float, points: np.ndarray) -> np.ndarray:
+    """Distance (m) from points (..., 3) to a sphere's surface (0 inside)."""
+    p = np.asarray(points, dtype=float)
+    return np.maximum(np.linalg.norm(p - np.asarray(center, dtype=float), axis=-1) - radius, 0.0)
+
+
+def _fmt(v: Any) -> str:
+    return "(" + ", ".join(f"{float(x):g}" for x in v) + ")"
+
+
+__all__ = [
+    "OBSTACLE_TAGS",
+    "AgentSpec",
+    "BoxSpec",
+    "CylinderSpec",
+    "DefaultsSpec",
+    "ObstacleSpec",
+    "Scenario",
+    "SensingSpec",
+    "SphereSpec",
+    "Spec",
+    "prism_contains",
+    "sphere_surface_distance",
+]

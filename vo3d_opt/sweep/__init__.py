@@ -1,0 +1,31 @@
+"""Monte Carlo sweeps of random encounters on Dask (``vo3d sweep``, contract §6).
+
+The last layer: it uses the simulator, the scenario loader, the selector (through the
+simulator), the metrics and the RVO2-3D baseline; nothing but the CLI imports it.
+
+* :mod:`.families`: the registry of encounter families (``pair``, ``group``, ``dense``) and
+  :func:`make_encounter`, which regenerates any encounter from (family, seed, index);
+* :mod:`.flight`: :func:`run_encounter`, one encounter flown where it is called;
+* :mod:`.runner`: :func:`run_sweep`, N encounters on Dask (:mod:`.cluster` is the Dask side);
+* :mod:`.stats`: Clopper–Pearson bounds and the sweep's summary;
+* :mod:`.output`: ``encounters.parquet``, ``summary.json``, plots and replayable failures.
+"""
+from vo3d_opt.sweep.families import (
+    FAMILIES,
+    Draw,
+    Encounter,
+    Family,
+    encounter_problems,
+    get_family,
+    make_encounter,
+    register,
+)
+from vo3d_opt.sweep.flight import TIMING_COLUMNS, Method, run_encounter
+from vo3d_opt.sweep.runner import SweepError, SweepResult, run_sweep
+from vo3d_opt.sweep.stats import clopper_pearson, event_rate, upper_bound
+
+__all__ = [
+    "FAMILIES", "Draw", "Encounter", "Family", "Method", "SweepError", "SweepResult",
+    "TIMING_COLUMNS", "clopper_pearson", "encounter_problems", "event_rate", "get_family",
+    "make_encounter", "register", "run_encounter", "run_sweep", "upper_bound",
+]

@@ -1,0 +1,121 @@
+"""The Dask side of a sweep: the client (a local cluster or an existing scheduler), the warm-up
+plugin and the bounded submission loop.
+
+Every encounter is one task (:func:`~vo3d_opt.sweep.flight.run_encounter`); at most
+``in_flight`` are on the cluster at a time, more are submitted as others complete (collected
+with ``as_completed``). A task whose workers died (``KilledWorker`` after the scheduler's
+allowed failures) or that failed in any other way becomes a row with its ``error``: no
+encounter is dropped and the loop goes on.
+"""
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Iterator
+from itertools import islice
+from typing import Any
+
+from distributed import Client, LocalCluster, WorkerPlugin, as_completed
+from tqdm import tqdm
+
+from vo3d_opt.sweep.families import Family
+from vo3d_opt.sweep.flight import Method, one_line, run_encounter, warm
+
+CONNECT_TIMEOUT = 20.0  # s, to reach a --scheduler and to see its first worker
+
+
+class ConnectError(OSError):
+    """The scheduler at the given address cannot be reached or has no worker."""
+
+
+class WarmUp(WorkerPlugin):
+    """Runs :func:`~vo3d_opt.sweep.flight.warm` on every worker when registered and on every
+    worker that joins later (e.g. restarted after a death), in a thread so that the worker
+    keeps answering the scheduler while numba loads its cache."""
+
+    name = "vo3d-sweep-warm-up"
+
+    def __init__(self, method: Method, extra: dict[str, Any] | None = None) -> None:
+        self.method = method
+        self.extra = dict(extra or {})
+
+    async def setup(self, worker: Any) -> None:
+        await asyncio.get_running_loop().run_in_executor(None, warm, self.method, self.extra)
+
+
+@contextlib.contextmanager
+def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> Iterator[Client]:
+    """A client of the scheduler at ``scheduler``, or of a new local cluster of ``workers``
+    processes with one thread each (closed on exit), its HTTP server on a free local port."""
+    import dask
+
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ConnectError(f"cannot connect to {scheduler}: {one_line(exc)}") from None
+        try:
+            try:
+                client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+            except TimeoutError:
+                raise ConnectError(f"{scheduler} has no worker") from None
+            yield client
+        finally:
+            client.close()
+        return
+    with dask.config.set({"distributed.scheduler.allowed-failures": allowed_failures}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=logging.ERROR,
+                               scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+    try:
+        with Client(cluster) as client:
+            yield client
+    finally:
+        cluster.close()
+
+
+def _error_row(fam: Family, seed: int, index: int, method: Method,
+               exc: BaseException) -> dict[str, Any]:
+    return {"family": fam.name, "seed": seed, "index": index, "method": method.name,
+            "error": one_line(exc), "worker": None}
+
+
+def _tally(counts: dict[str, int], row: dict[str, Any]) -> None:
+    counts["errors"] += row.get("error") is not None
+    counts["collisions"] += (row.get("collisions") or 0) > 0
+    counts["intrusions"] += ((row.get("pz_intrusions") or 0)
+                             + (row.get("obstacle_pz_intrusions") or 0)) > 0
+
+
+def submit_all(client: Client, fam: Family, seed: int, n: int, method: Method, in_flight: int,
+               bar: tqdm) -> list[dict[str, Any]]:
+    """Every encounter's row (in completion order), at most ``in_flight`` tasks at a time."""
+    pending = iter(range(n))
+    index_of: dict[str, int] = {}
+    done = as_completed()
+    rows: list[dict[str, Any]] = []
+    counts = {"collisions": 0, "intrusions": 0, "errors": 0}
+
+    def submit(i: int) -> None:
+        fut = client.submit(run_encounter, fam, seed, i, method, pure=False)
+        index_of[fut.key] = i
+        done.add(fut)
+
+    for i in islice(pending, in_flight):
+        submit(i)
+    for fut in done:
+        i = index_of.pop(fut.key)
+        try:
+            row = fut.result()
+        except Exception as exc:  # noqa: BLE001 - KilledWorker, lost scheduler, ...
+            row = _error_row(fam, seed, i, method, exc)
+        fut.release()
+        rows.append(row)
+        nxt = next(pending, None)
+        if nxt is not None:
+            submit(nxt)
+        _tally(counts, row)
+        bar.set_postfix(counts, refresh=False)
+        bar.update(1)
+    return rows

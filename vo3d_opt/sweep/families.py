@@ -1,0 +1,427 @@
+"""Families of random encounters: generators of contract §2 scenario dicts.
+
+Each family draws one encounter from stated parameter distributions (written out per family
+below and in ``scenarios/README.md``, "Sweep families"). Encounter ``index`` of a sweep with
+``seed`` uses its own stream, ``numpy.random.default_rng(SeedSequence([seed, index]))``, so any
+single encounter is regenerated alone by :func:`make_encounter` and the first N encounters do
+not depend on N.
+
+A draw is kept only when it is a *valid encounter* (:func:`encounter_problems`): the loader
+accepts it, nobody starts inside a protected zone or prism, and the starts and goals of
+different agents are at least ``SEPARATION`` times the larger protected-zone radius apart (so
+that no intrusion is forced at a start or at a hovering goal), and no start or goal lies within
+``PRISM_CLEARANCE`` of an obstacle's protected prism. Otherwise the next draw from the *same* stream is tried, so the
+rejection is deterministic. ``max_time`` leaves every agent twice its straight-line flight time
+plus 30 s.
+
+A family is a function ``rng -> Draw`` registered with :func:`register`; a family built on
+another one (e.g. a ``group`` plus scenario keys) calls that one's function and edits the dict.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from vo3d_opt.sim.scenario import Scenario, ScenarioError, scenario_from_dict
+
+#: Starts and goals of two different agents are at least this many times max(r_pz) apart.
+SEPARATION = 1.25
+#: Starts and goals keep this much horizontal clearance (m) from every protected prism.
+PRISM_CLEARANCE = 2.0
+#: max_time = TIME_FACTOR * (longest straight flight time) + TIME_SLACK.
+TIME_FACTOR, TIME_SLACK = 2.0, 30.0
+DT = 0.2
+#: Decimals (mm) to which positions and sizes are rounded: readable, exactly replayable YAML.
+DECIMALS = 3
+#: Speeds keep more (a mm/s error would move a vehicle by cm over a flight).
+SPEED_DECIMALS = 6
+
+
+@dataclass(frozen=True)
+class Draw:
+    """One draw of a family: its parameters (scalars, the parquet columns ``param_*``) and the
+    scenario dict (contract §2, without ``name`` and ``description``, which the sweep sets)."""
+
+    params: dict[str, float | int | str]
+    scenario: dict[str, Any]
+
+
+#: A family's draw function; None means "this draw failed, draw again" (from the same stream).
+Generator = Callable[[np.random.Generator], "Draw | None"]
+
+
+@dataclass(frozen=True)
+class Family:
+    """A named encounter generator. ``obstacle_free``: no encounter has obstacles, so RVO2-3D
+    can fly it (``--method rvo2``). ``warm_keys``: scenario keys added to the workers' warm-up
+    encounter, so that it runs the same code as the family's (e.g. its ``dynamics``)."""
+
+    name: str
+    summary: str
+    generate: Generator
+    obstacle_free: bool
+    max_attempts: int = 1000
+    warm_keys: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Encounter:
+    """Encounter ``index`` of ``family`` with ``seed``: its parameters, the scenario dict (with
+    name and description) and the draws it took (rejected ones included)."""
+
+    family: str
+    seed: int
+    index: int
+    attempts: int
+    params: dict[str, float | int | str]
+    scenario: dict[str, Any] = field(repr=False)
+
+    def load(self) -> Scenario:
+        return scenario_from_dict(self.scenario, source=self.scenario["name"])
+
+
+FAMILIES: dict[str, Family] = {}
+
+
+def register(name: str, summary: str, *, obstacle_free: bool,
+             warm_keys: dict[str, Any] | None = None) -> Callable[[Generator], Generator]:
+    """Decorator: register ``rng -> Draw`` as family ``name`` (``summary``: one line for
+    ``vo3d sweep --list``; the rest as in :class:`Family`)."""
+
+    def wrap(fn: Generator) -> Generator:
+        FAMILIES[name] = Family(name=name, summary=summary, generate=fn,
+                                obstacle_free=obstacle_free, warm_keys=dict(warm_keys or {}))
+        return fn
+
+    return wrap
+
+
+def get_family(name: str | Family) -> Family:
+    """The registered family ``name`` (a :class:`Family` is returned as is); ``ValueError``
+    naming the known ones otherwise."""
+    if isinstance(name, Family):
+        return name
+    try:
+        return FAMILIES[name]
+    except KeyError:
+        raise ValueError(f"family: unknown {name!r} (expected one of {', '.join(FAMILIES)})") \
+            from None
+
+
+def encounter_rng(seed: int, index: int) -> np.random.Generator:
+    """The random stream of encounter ``index`` of a sweep with ``seed`` (both >= 0)."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), int(index)]))
+
+
+def encounter_name(family: str, seed: int, index: int) -> str:
+    return f"{family}-s{seed}-i{index}"
+
+
+def make_encounter(family: str | Family, seed: int, index: int) -> Encounter:
+    """Draw encounter ``index`` of ``family`` with ``seed``, retrying until it is valid.
+
+    ``RuntimeError`` if ``max_attempts`` draws were all invalid (a family that cannot be met).
+    """
+    fam = get_family(family)
+    if int(seed) < 0 or int(index) < 0:
+        raise ValueError(f"seed and index must be >= 0, got seed={seed}, index={index}")
+    rng = encounter_rng(seed, index)
+    name = encounter_name(fam.name, seed, index)
+    last: list[str] = []
+    for attempt in range(1, fam.max_attempts + 1):
+        draw = fam.generate(rng)
+        if draw is None:
+            last = ["the generator rejected its own draw"]
+            continue
+        data = {"name": name,
+                "description": f"Encounter {index} of the '{fam.name}' sweep family with seed "
+                               f"{seed} (regenerate: vo3d_opt.sweep.make_encounter("
+                               f"'{fam.name}', {seed}, {index})).",
+                **draw.scenario}
+        last = encounter_problems(data, name)
+        if not last:
+            return Encounter(family=fam.name, seed=int(seed), index=int(index), attempts=attempt,
+                             params=dict(draw.params), scenario=data)
+    raise RuntimeError(f"{name}: no valid encounter in {fam.max_attempts} draws "
+                       f"(last problem: {last[0]})")
+
+
+def encounter_problems(data: dict[str, Any], source: str = "<encounter>") -> list[str]:
+    """Why ``data`` is not a valid sweep encounter (empty list: it is); see the module doc."""
+    try:
+        sc = scenario_from_dict(data, source=source)
+    except ScenarioError as exc:
+        return [str(exc)]
+    problems = sc.start_warnings()
+    points = np.concatenate([sc.starts, sc.goals])
+    owner = np.tile(np.arange(sc.n_agents), 2)
+    r_pz = np.tile(sc.r_pz, 2)
+    d = np.linalg.norm(points[:, None] - points[None, :], axis=-1)
+    need = SEPARATION * np.maximum(r_pz[:, None], r_pz[None, :])
+    close = (d < need) & (owner[:, None] != owner[None, :])
+    if close.any():
+        a, b = np.argwhere(close)[0]
+        problems.append(f"points of agents {owner[a]} and {owner[b]} are {d[a, b]:.2f} m apart")
+    for k, body in enumerate(sc.bodies):
+        horizontal = np.linalg.norm(points[:, :2] - np.asarray(body.center), axis=1)
+        near = (horizontal < body.side / 2 + PRISM_CLEARANCE) \
+            & (points[:, 2] < body.prism_height + PRISM_CLEARANCE)
+        if near.any():
+            problems.append(f"a start or goal is within {PRISM_CLEARANCE:g} m of the protected "
+                            f"prism of obstacles[{k}]")
+    return problems
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _r(x: Any, decimals: int = DECIMALS) -> Any:
+    """Round numbers (and lists of them) to ``decimals``, as plain Python floats."""
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return [_r(v, decimals) for v in x]
+    return round(float(x), decimals)
+
+
+def _max_time(starts: np.ndarray, goals: np.ndarray, speeds: np.ndarray) -> float:
+    flight = np.linalg.norm(goals - starts, axis=1) / speeds
+    return float(math.ceil(TIME_FACTOR * flight.max() + TIME_SLACK))
+
+
+def _agents(starts: np.ndarray, goals: np.ndarray, r_pz: np.ndarray,
+            speeds: np.ndarray) -> list[dict[str, Any]]:
+    width = len(str(len(starts) - 1))
+    return [{"id": f"u{i:0{width}d}", "start": _r(starts[i]), "goal": _r(goals[i]),
+             "r_pz": _r(r_pz[i]), "max_speed": _r(speeds[i], SPEED_DECIMALS)}
+            for i in range(len(starts))]
+
+
+def _base(*, v_max: float, altitude: tuple[float, float], starts: np.ndarray, goals: np.ndarray,
+          r_pz: np.ndarray, speeds: np.ndarray) -> dict[str, Any]:
+    """The scenario keys every family shares (Table 1 sensing, radius 0.5 m, dt 0.2 s)."""
+    return {
+        "dt": DT,
+        "max_time": _max_time(starts, goals, speeds),
+        "goal_tolerance": 1.0,
+        "limits": {"speed": [0.0, float(v_max)], "altitude": [float(altitude[0]), float(altitude[1])]},
+        "sensing": {"vehicle_range": 55.0, "obstacle_range": 55.0},
+        "defaults": {"r_pz": 10.0, "radius": 0.5, "max_speed": float(v_max)},
+        "agents": _agents(starts, goals, r_pz, speeds),
+    }
+
+
+def _place(sample: Callable[[], np.ndarray], taken: list[np.ndarray], min_dist: float, *,
+           accept: Callable[[np.ndarray], bool] = lambda p: True, tries: int = 200
+           ) -> np.ndarray | None:
+    """A point from ``sample()`` at least ``min_dist`` from every point in ``taken`` and
+    ``accept``-ed (None after ``tries`` failures: the caller then rejects its whole draw)."""
+    for _ in range(tries):
+        p = sample()
+        if accept(p) and all(np.linalg.norm(p - q) >= min_dist for q in taken):
+            return p
+    return None
+
+
+def _unit_perpendicular(u: np.ndarray, angle: float) -> np.ndarray:
+    """The unit vector at ``angle`` around the axis ``u`` in the plane perpendicular to it."""
+    u = u / np.linalg.norm(u)
+    helper = np.array([0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    e1 = np.cross(u, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(u, e1)
+    return math.cos(angle) * e1 + math.sin(angle) * e2
+
+
+# ------------------------------------------------------------------------------- pair
+
+PAIR_SPEED = (2.0, 6.0)          # m/s, each UAV's cruise (= max) speed, uniform
+PAIR_CLIMB = (-1.5, 1.5)         # m/s, each UAV's climb rate, uniform
+PAIR_R_PZ = (5.0, 12.0)          # m, each UAV's protected-zone radius, uniform
+PAIR_MISS = (0.0, 1.2)           # planned miss distance / max(r_pz), uniform
+PAIR_T_CPA = (20.0, 40.0)        # s from the start to the planned closest approach, uniform
+PAIR_T_AFTER = (10.0, 30.0)      # s flown past it before the goal, uniform per UAV
+PAIR_CPA_ALTITUDE = 100.0        # m; altitude range [0, 200] m
+
+
+@register("pair", "two UAVs on a random 3D crossing: headings, speeds 2-6 m/s, climb rates "
+                  "+-1.5 m/s, r_pz 5-12 m, planned miss distance 0-1.2 r_pz", obstacle_free=True)
+def pair(rng: np.random.Generator) -> Draw:
+    """Two UAVs flying straight at constant velocity would pass each other at a planned miss
+    distance ``m`` at time ``t_cpa``: each UAV ``k`` has speed ``v_k``, climb rate ``c_k``,
+    horizontal heading ``psi_k`` (``psi_1`` uniform, ``psi_2 = psi_1 + crossing angle``,
+    uniform in [-180, 180] deg) and protected zone ``r_pz_k``; at ``t_cpa`` they are at ``C -+
+    m/2 n`` (``C`` = (0, 0, 100 m), ``n`` perpendicular to their relative velocity at a uniform
+    angle around it); start = that point - ``v t_cpa``, goal = that point + ``v t_after_k``.
+    Without avoidance they fly exactly this (the preferred velocity points at the goal at the
+    agent's max speed)."""
+    v = rng.uniform(*PAIR_SPEED, 2)
+    climb = rng.uniform(*PAIR_CLIMB, 2)
+    r_pz = rng.uniform(*PAIR_R_PZ, 2)
+    psi1 = rng.uniform(-math.pi, math.pi)
+    crossing = rng.uniform(-math.pi, math.pi)
+    miss_ratio = rng.uniform(*PAIR_MISS)
+    miss_angle = rng.uniform(0.0, 2.0 * math.pi)
+    t_cpa = rng.uniform(*PAIR_T_CPA)
+    t_after = rng.uniform(*PAIR_T_AFTER, 2)
+
+    horiz = np.sqrt(v ** 2 - climb ** 2)
+    psi = np.array([psi1, psi1 + crossing])
+    vel = np.stack([horiz * np.cos(psi), horiz * np.sin(psi), climb], axis=1)
+    miss = miss_ratio * float(r_pz.max())
+    n = _unit_perpendicular(vel[0] - vel[1], miss_angle)
+    cpa = np.array([0.0, 0.0, PAIR_CPA_ALTITUDE]) + np.outer([-0.5, 0.5], miss * n)
+    starts = cpa - vel * t_cpa
+    goals = cpa + vel * t_after[:, None]
+    scenario = _base(v_max=PAIR_SPEED[1], altitude=(0.0, 2.0 * PAIR_CPA_ALTITUDE), starts=starts,
+                     goals=goals, r_pz=r_pz, speeds=v)
+    params = {"speed_0": v[0], "speed_1": v[1], "climb_0": climb[0], "climb_1": climb[1],
+              "r_pz_0": r_pz[0], "r_pz_1": r_pz[1], "crossing_deg": math.degrees(crossing),
+              "miss_distance": miss, "miss_over_r_pz": miss_ratio, "t_cpa": t_cpa}
+    return Draw(params={k: float(x) for k, x in params.items()}, scenario=scenario)
+
+
+# ------------------------------------------------------------------------------ group
+
+GROUP_AGENTS = (3, 8)            # UAVs, uniform integer
+GROUP_OBSTACLES = (0, 6)         # obstacles, uniform integer; half cylinders, half boxes
+GROUP_RING = 60.0                # m: starts and goals on this circle around the origin
+GROUP_FIELD = 35.0               # m: obstacle centres uniform in [-35, 35]^2
+GROUP_CYLINDER_RADIUS = (1.0, 5.0)
+GROUP_BOX_SIDE = (2.0, 10.0)     # each side, uniform; yaw uniform
+GROUP_HEIGHT = (20.0, 80.0)      # m; the ceiling is 40 m, so about 2/3 cannot be overflown
+GROUP_GAP = 10.0                 # m, at least, between two obstacles' protected prisms
+GROUP_R_PZ = (5.0, 10.0)
+GROUP_SPEED = (2.0, 5.0)
+GROUP_ALTITUDE = (0.0, 40.0)
+GROUP_Z = (5.0, 35.0)            # start and goal altitudes, uniform
+GROUP_TURN = math.radians(60.0)  # goal heading = start heading + 180 deg +- this, uniform
+
+
+def _obstacle(rng: np.random.Generator) -> dict[str, Any]:
+    centre = rng.uniform(-GROUP_FIELD, GROUP_FIELD, 2)
+    height = rng.uniform(*GROUP_HEIGHT)
+    if rng.random() < 0.5:
+        return {"type": "cylinder", "center": _r(centre), "radius": _r(rng.uniform(*GROUP_CYLINDER_RADIUS)),
+                "height": _r(height)}
+    return {"type": "box", "center": _r(centre), "size": _r(rng.uniform(*GROUP_BOX_SIDE, 2)),
+            "height": _r(height), "yaw": _r(rng.uniform(-math.pi, math.pi))}
+
+
+def _prism_half_side(ob: dict[str, Any], margin: float = 2.0) -> float:
+    """L_pz / 2 as the loader derives it (the obstacle's largest extent plus the margin)."""
+    extent = 2.0 * ob["radius"] if ob["type"] == "cylinder" else math.hypot(*ob["size"])
+    return extent / 2.0 + margin
+
+
+def _obstacles(rng: np.random.Generator, count: int) -> list[dict[str, Any]] | None:
+    out: list[dict[str, Any]] = []
+    for _ in range(count):
+        for _ in range(200):
+            ob = _obstacle(rng)
+            c = np.asarray(ob["center"])
+            if all(np.linalg.norm(c - np.asarray(o["center"])) >= _prism_half_side(ob)
+                   + _prism_half_side(o) + GROUP_GAP for o in out):
+                out.append(ob)
+                break
+        else:
+            return None
+    return out
+
+
+def _ring_points(rng: np.random.Generator, n: int, r_pz: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Starts on the ring at uniform headings, goals across it, all SEPARATION * r_pz apart."""
+    taken: list[np.ndarray] = []
+    starts, goals = np.zeros((n, 3)), np.zeros((n, 3))
+    need = SEPARATION * float(r_pz.max())
+    for i in range(n):
+        def at(heading: float) -> np.ndarray:
+            return np.array([GROUP_RING * math.cos(heading), GROUP_RING * math.sin(heading),
+                             rng.uniform(*GROUP_Z)])
+
+        s = _place(lambda: at(rng.uniform(-math.pi, math.pi)), taken, need)
+        if s is None:
+            return None
+        heading = math.atan2(s[1], s[0])
+        g = _place(lambda: at(heading + math.pi + rng.uniform(-GROUP_TURN, GROUP_TURN)),
+                   taken + [s], need)
+        if g is None:
+            return None
+        starts[i], goals[i] = s, g
+        taken += [s, g]
+    return starts, goals
+
+
+@register("group", "3-8 UAVs crossing a 60 m circle among 0-6 tall cylinders and boxes "
+                   "(r_pz 5-10 m, 2-5 m/s, ceiling 40 m)", obstacle_free=False)
+def group(rng: np.random.Generator) -> Draw | None:
+    """``n`` UAVs (uniform 3-8) start on a circle of radius 60 m at uniform headings and
+    altitudes 5-35 m and fly to the far side (heading + 180 deg +- 60 deg, altitude 5-35 m),
+    each with its own r_pz (5-10 m) and speed (2-5 m/s), among ``m`` obstacles (uniform 0-6)
+    centred in [-35, 35]^2 m: cylinders (radius 1-5 m) or yawed boxes (sides 2-10 m), height
+    20-80 m under a 40 m ceiling, their protected prisms at least 10 m apart."""
+    n = int(rng.integers(GROUP_AGENTS[0], GROUP_AGENTS[1] + 1))
+    m = int(rng.integers(GROUP_OBSTACLES[0], GROUP_OBSTACLES[1] + 1))
+    r_pz = rng.uniform(*GROUP_R_PZ, n)
+    speeds = rng.uniform(*GROUP_SPEED, n)
+    obstacles = _obstacles(rng, m)
+    points = _ring_points(rng, n, r_pz)
+    if obstacles is None or points is None:
+        return None
+    starts, goals = points
+    scenario = _base(v_max=GROUP_SPEED[1], altitude=GROUP_ALTITUDE, starts=starts, goals=goals,
+                     r_pz=r_pz, speeds=speeds)
+    scenario["obstacles"] = obstacles
+    # protected prism (height + 2 m margin) up to the ceiling: it cannot be overflown
+    tall = sum(o["height"] + 2.0 >= GROUP_ALTITUDE[1] for o in obstacles)
+    params = {"agents": n, "obstacles": m,
+              "cylinders": sum(o["type"] == "cylinder" for o in obstacles),
+              "boxes": sum(o["type"] == "box" for o in obstacles),
+              "obstacles_above_ceiling": int(tall),
+              "r_pz_min": float(r_pz.min()), "r_pz_max": float(r_pz.max()),
+              "speed_min": float(speeds.min()), "speed_max": float(speeds.max())}
+    return Draw(params=params, scenario=scenario)
+
+
+# ------------------------------------------------------------------------------ dense
+
+DENSE_AGENTS = (10, 24)          # UAVs, uniform integer
+DENSE_BOX = (60.0, 60.0, 30.0)   # m: starts and goals uniform in [-30, 30]^2 x [5, 35]
+DENSE_FLOOR = 5.0
+DENSE_R_PZ = (3.0, 6.0)          # m, one value for the whole encounter, uniform
+DENSE_SPEED = (2.0, 4.0)         # m/s per UAV, uniform
+DENSE_MIN_TRIP = 20.0            # m, least start-goal distance
+
+
+@register("dense", "10-24 UAVs swapping places inside a 60 x 60 x 30 m box (r_pz 3-6 m, "
+                   "2-4 m/s)", obstacle_free=True)
+def dense(rng: np.random.Generator) -> Draw | None:
+    """``n`` UAVs (uniform 10-24), one r_pz for all (3-6 m), speeds 2-4 m/s each: starts and
+    goals uniform in the box [-30, 30]^2 x [5, 35] m (altitude range 0-40 m), every start and
+    goal of different UAVs 1.25 r_pz apart, each goal at least 20 m from its own start."""
+    n = int(rng.integers(DENSE_AGENTS[0], DENSE_AGENTS[1] + 1))
+    r = float(rng.uniform(*DENSE_R_PZ))
+    speeds = rng.uniform(*DENSE_SPEED, n)
+    lo = np.array([-DENSE_BOX[0] / 2, -DENSE_BOX[1] / 2, DENSE_FLOOR])
+    hi = lo + np.asarray(DENSE_BOX)
+    taken: list[np.ndarray] = []
+    starts, goals = np.zeros((n, 3)), np.zeros((n, 3))
+    for i in range(n):
+        s = _place(lambda: rng.uniform(lo, hi), taken, SEPARATION * r)
+        g = None if s is None else _place(
+            lambda: rng.uniform(lo, hi), taken, SEPARATION * r,
+            accept=lambda p: bool(np.linalg.norm(p - s) >= DENSE_MIN_TRIP))
+        if s is None or g is None:
+            return None
+        starts[i], goals[i] = s, g
+        taken += [s, g]
+    r_pz = np.full(n, r)
+    scenario = _base(v_max=DENSE_SPEED[1], altitude=(0.0, DENSE_FLOOR + DENSE_BOX[2] + 5.0),
+                     starts=starts, goals=goals, r_pz=r_pz, speeds=speeds)
+    volume = float(np.prod(DENSE_BOX))
+    params = {"agents": n, "r_pz": r, "speed_min": float(speeds.min()),
+              "speed_max": float(speeds.max()), "agents_per_1000m3": 1000.0 * n / volume}
+    return Draw(params=params, scenario=scenario)
