@@ -111,7 +111,7 @@ nlp_used = [s for s in ("casadi", "casadi:sqpmethod") if s in solvers]
 combos = (
     [("sampled", None)]
     + [("plane_qp", s) for s in qp_used]
-    + [("cone_qp", s) for s in qp_used]
+    + [("cone_qp", s) for s in qp_used if s != "exact2d"]  # exact2d: the per-plane problem only
     + [("nlp", s) for s in nlp_used]
 )
 print(len(combos), "combinations; QP backends used:", ", ".join(qp_used))

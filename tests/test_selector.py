@@ -45,7 +45,8 @@ def safe(kw, v) -> bool:
 
 
 @pytest.mark.parametrize("formulation,solver", [("sampled", None), ("nlp", "casadi")]
-                         + [("plane_qp", s) for s in QP_SOLVERS] + [("cone_qp", s) for s in QP_SOLVERS])
+                         + [("plane_qp", s) for s in QP_SOLVERS]
+                         + [("cone_qp", s) for s in QP_SOLVERS if s != "exact2d"])
 def test_contract_example(formulation, solver):
     d = VelocitySelector(formulation=formulation, solver=solver).select(**CONTRACT)
     assert isinstance(d.velocity, np.ndarray) and d.velocity.shape == (3,)
@@ -214,6 +215,15 @@ def test_horizon_ignores_far_threats():
 def test_bad_input_names_the_field(change, field):
     with pytest.raises(ValueError, match=field.replace("[", r"\[").replace("]", r"\]")):
         VelocitySelector().select(**dict(CONTRACT, **change))
+
+
+def test_exact2d_only_for_plane_qp():
+    """exact2d solves the per-plane problem only: asking it for cone_qp's 3D QPs is an error
+    that names the backends that can."""
+    with pytest.raises(ValueError, match="exact2d.*plane_qp.*available: .*clarabel"):
+        VelocitySelector("cone_qp", solver="exact2d")
+    with pytest.raises(ValueError, match="exact2d"):
+        VelocitySelector("nlp", start_solver="osqp", solver="exact2d")
 
 
 def test_unknown_names_list_what_is_available():

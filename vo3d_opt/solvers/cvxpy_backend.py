@@ -12,9 +12,9 @@ import cvxpy as cp
 import numpy as np
 
 from vo3d_opt.solvers.base import Backend, Standard, make_result
-from vo3d_opt.status import Status
 from vo3d_opt.solvers.problem import QP, Result
 from vo3d_opt.solvers.registry import certified_infeasible
+from vo3d_opt.status import Status
 
 #: Extra options per cvxpy solver, for answers as tight as the direct backends'. OSQP is left
 #: unpolished: OSQP 1.x prints a line per polished solve without an active set.
@@ -105,7 +105,9 @@ class CvxpyBackend(Backend):
             t.E.value, t.e.value = E, e
         if t.r is not None:
             t.r.value = std.r
-        t.problem.solve(solver=self._solver, **self._options)
+        # No warm start from the last problem of this shape (cvxpy's default): an answer must not
+        # depend on the calls before it.
+        t.problem.solve(solver=self._solver, warm_start=False, **self._options)
         native = t.problem.status
         status = _STATUS.get(native, Status.FAILED)
         if (status == Status.INFEASIBLE and self._solver in UNRELIABLE_INFEASIBILITY
