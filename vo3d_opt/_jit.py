@@ -13,7 +13,10 @@ Four flavours, by what a function does:
 - ``kernel``: called only from compiled code, allocates nothing and returns no array: compiled
   without numba's reference counting (``_nrt=False``), whose atomic counter updates on every
   array passed or sliced otherwise cost more than the arithmetic of these small loops;
-- ``inline``: a small ``kernel`` inlined where it is called.
+- ``inline``: inlined by numba where it is called (and compiled with that caller's flags):
+  the small helpers of hot loops, whose arithmetic costs less than a call, the per-section code
+  into ``plane_rows``, and ``decide_one`` into its two callers. Inlining is costly to compile
+  (nested inlining most), so the large kernels are called, not inlined.
 """
 from __future__ import annotations
 

@@ -34,7 +34,7 @@ DEFAULT_SOLVERS = {"plane_qp": "exact2d", "cone_qp": "daqp", "nlp": "casadi"}
 DEFAULT_QP_SOLVER = DEFAULT_SOLVERS["plane_qp"]
 DEFAULT_NLP_SOLVER = DEFAULT_SOLVERS["nlp"]
 #: Seconds a first compilation may take before the user is told about it on stderr.
-_COMPILE_NOTICE_AFTER = 1.0
+_COMPILE_NOTICE_AFTER = 3.0
 _warm_lock = threading.Lock()
 _warm = False
 
@@ -93,28 +93,32 @@ def _checked(backend: Backend, method: str):
 
 
 def warm_up() -> None:
-    """Compile (or load from numba's cache) the decision kernel once per process, saying on
-    stderr when that takes a while: a new checkout compiles for a few seconds. Called by the
-    selector's constructor, so that no reported time includes it."""
+    """Compile the decision kernel, or load it from numba's on-disk cache, once per process,
+    saying on stderr when that takes a while (a first run on a machine compiles it). Called by
+    the selector's constructor, so that no reported time includes it."""
     global _warm
     with _warm_lock:
         if _warm:
             return
-        notice = threading.Timer(_COMPILE_NOTICE_AFTER, log.warning,
-                                 ("vo3d-opt: compiling the decision kernel (once; cached on disk afterwards)...",))
+        shown = threading.Event()
+
+        def tell() -> None:
+            log.warning("vo3d-opt: compiling the decision kernel (once per machine; numba caches it on disk)...")
+            shown.set()
+
+        notice = threading.Timer(_COMPILE_NOTICE_AFTER, tell)
         notice.daemon = True
         notice.start()
+        t0 = time.perf_counter()
         try:
-            t0 = time.perf_counter()
             own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
             nbrs = neighbor_rows([Neighbor(position=(10.0, 0.0, 10.0), velocity=(-1.0, 0.0, 0.0), r_pz=3.0)])
             kernel.decide(own.position, own.velocity, check_vector((1.0, 0.0, 0.0), 3), nbrs, np.zeros((0, 4)),
                           bounds_array(Limits(), 0.2), *Options().packed, np.empty(kernel.OUT_SIZE))
-            elapsed = time.perf_counter() - t0
         finally:
             notice.cancel()
-        if elapsed > _COMPILE_NOTICE_AFTER:
-            log.warning("vo3d-opt: the decision kernel is ready (%.1f s)", elapsed)
+        if shown.is_set():
+            log.warning("vo3d-opt: the decision kernel is ready (%.0f s)", time.perf_counter() - t0)
         _warm = True
 
 

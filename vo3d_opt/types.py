@@ -114,6 +114,8 @@ def raise_problems(title: str, problems: list[tuple[tuple[Any, ...], str, Any]])
 
 
 def _is_real(x: Any) -> bool:
+    if type(x) is float or type(x) is int:  # the common case, without the ABC check
+        return True
     return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
 
 
@@ -132,19 +134,24 @@ def check_number(value: Any) -> Any:
 
 def check_vector(value: Any, n: int) -> np.ndarray:
     """``value`` as a read-only float array of shape (n,); ValueError if it is not n finite
-    numbers (booleans and strings are not numbers)."""
+    numbers (booleans and strings are not numbers). Read-only float arrays of the right shape
+    come back as they are (every public type stores its vectors so)."""
     if isinstance(value, (list, tuple)):
         if not all(_is_real(x) for x in value):
             raise ValueError(f"must be {n} numbers, got {short_repr(value)}")
+        if len(value) != n:
+            raise ValueError(f"must be {n} numbers, got {len(value)}")
         arr = np.array(value, dtype=float)
     else:
         raw = np.asarray(value)
         if raw.dtype.kind not in "iuf":
             raise ValueError(f"must be {n} numbers, got {short_repr(value)}")
-        arr = raw.astype(float)
-    if arr.shape != (n,):
-        raise ValueError(f"must be {n} numbers, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+        if raw.shape != (n,):
+            raise ValueError(f"must be {n} numbers, got shape {raw.shape}")
+        if raw.dtype == np.float64 and not raw.flags.writeable and all(math.isfinite(x) for x in raw.tolist()):
+            return raw
+        arr = raw.astype(float)  # a copy: the caller's array stays theirs
+    if not all(math.isfinite(x) for x in arr.tolist()):
         raise ValueError("must be finite (no NaN or inf)")
     arr.setflags(write=False)
     return arr
@@ -213,7 +220,8 @@ class Neighbor(Model):
 
     @property
     def row(self) -> tuple[float, ...]:
-        """(x, y, z, v_x, v_y, v_z, r_pz, cooperative): what the VO needs, as plain floats."""
+        """(x, y, z, v_x, v_y, v_z, r_pz, cooperative): what the VO needs, as plain floats
+        (not cached: ``model_copy(update=...)`` would carry a stale copy over)."""
         return (
             *self.position.tolist(),
             *self.velocity.tolist(),

@@ -22,9 +22,10 @@ RVO2-3D's ``Agent.cc`` reads:
 6. the status, and the last line of the contract (never above v_max, never leaving the
    altitude band within dt).
 
-A plane QP costs well under a microsecond, so each QP's exact optimum is its own key in the
-best-first order: no bounds are needed (the Python search for outside backends,
-``plane_qp.py``, uses these exact optima as its lower bounds).
+A plane QP costs well under a microsecond, so a QP's key in the best-first order is its exact
+optimum once it is the least key: before, a one-line lower bound stands in for it, and QPs that
+cannot win are never solved (the Python search for outside backends, ``plane_qp.py``, uses the
+exact optima as lower bounds of their answers).
 """
 from __future__ import annotations
 
@@ -71,18 +72,20 @@ class PlaneQPs(NamedTuple):
     h: np.ndarray  # (V, R, P)
     active: np.ndarray  # (V, P) bool
     computed: np.ndarray  # (V, P) bool
-    base: np.ndarray  # (V, K + 3, 3)
+    base: np.ndarray  # (V, 3, K + 3)
     based: np.ndarray  # (V,) bool
     included: np.ndarray  # (R, P, V) bool
     G_lim: np.ndarray  # (P, L, 2)
     h_lim: np.ndarray  # (L,)
     key: np.ndarray  # (R, P)
+    exact: np.ndarray  # (R, P) bool: key is the QP's optimum (else a lower bound)
     sol: np.ndarray  # (R, P, 2)
     w0: np.ndarray  # (2,) the preferred velocity in plane coordinates (the same on every plane)
     rows: np.ndarray  # (V + L, 2) scratch: one QP's rows ...
     rhs: np.ndarray  # (V + L,) ... their right-hand sides
     order: np.ndarray  # (V + L,) scratch of the solver
     into: np.ndarray  # (V,) scratch: the VOs a velocity is in
+    todo: np.ndarray  # (V * P, 2) scratch: the (VO, plane) rows still to build
     v: np.ndarray  # (3,) scratch: a velocity
     work: RowWork  # scratch of plane_rows
 
@@ -90,8 +93,8 @@ class PlaneQPs(NamedTuple):
 @jit
 def plane_qps(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, initial: np.ndarray,
               cfg: Config) -> PlaneQPs:
-    """The QPs of one decision with the rows of the ``initial`` VOs (those holding the preferred
-    velocity, and the zones A is inside)."""
+    """The QPs of one decision, each starting with the rows of the ``initial`` VOs (those
+    holding the preferred velocity, and the zones A is inside) on every plane."""
     V, R, P, L = initial.shape[0], len(ROUNDS), cfg.phi.shape[0], G3.shape[0]
     G_lim = np.empty((P, L, 2))
     for p in range(P):  # the 3D limit rows G3 v <= h3 on P_phi: G3 @ [e1, e2(phi)]
@@ -109,33 +112,33 @@ def plane_qps(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray,
             for k in range(V):
                 included[r, p, k] = initial[k]
     qps = PlaneQPs(np.empty((V, R, P, 2)), np.empty((V, R, P)), np.zeros((V, P), dtype=np.bool_),
-                   np.zeros((V, P), dtype=np.bool_), np.empty((V, cfg.t.shape[0] + 3, 3)), np.zeros(V, dtype=np.bool_),
-                   included, G_lim, h3, key, np.empty((R, P, 2)),
+                   np.zeros((V, P), dtype=np.bool_), np.empty((V, 3, cfg.t.shape[0] + 3)), np.zeros(V, dtype=np.bool_),
+                   included, G_lim, h3, key, np.zeros((R, P), dtype=np.bool_), np.empty((R, P, 2)),
                    w0, np.empty((V + L, 2)), np.empty(V + L), np.empty(V + L, dtype=np.int64),
-                   np.empty(V, dtype=np.bool_), np.empty(3), row_work(cfg.t.shape[0]))
-    _initial_rows(qps, vos, planes, cfg, initial)
+                   np.empty(V, dtype=np.bool_), np.empty((V * P, 2), dtype=np.int64), np.empty(3),
+                   row_work(cfg.t.shape[0]))
+    n_todo = 0  # the rows of the VOs every QP starts with, on every plane
+    for k in range(V):
+        for p in range(P * initial[k]):
+            qps.todo[n_todo, 0], qps.todo[n_todo, 1], n_todo = k, p, n_todo + 1
+    add_rows(qps, vos, planes, cfg, n_todo)
     return qps
 
 
 @kernel
-def _initial_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, initial: np.ndarray) -> None:
-    for k in range(initial.shape[0]):
-        if initial[k]:
-            for p in range(cfg.phi.shape[0]):
-                add_rows(qps, vos, planes, cfg, k, p)
-
-
-@inline
-def add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, k: int, p: int) -> None:
-    """Build VO k's rows on plane p (every round), once."""
-    if qps.computed[k, p]:
-        return
-    if not qps.based[k]:
-        vo_base(vos, k, planes.frame, cfg, qps.base[k])
-        qps.based[k] = True
-    qps.active[k, p] = plane_rows(vos, k, p, qps.base[k], planes, cfg, qps.w0, qps.G[k, :, p], qps.h[k, :, p],
-                                  qps.work)
-    qps.computed[k, p] = True
+def add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, n_todo: int) -> None:
+    """Build the rows of the first ``n_todo`` (VO, plane) pairs of qps.todo (every round), each
+    once. One call for the whole list: the arguments are large."""
+    for q in range(n_todo):
+        k, p = qps.todo[q, 0], qps.todo[q, 1]
+        if qps.computed[k, p]:
+            continue
+        if not qps.based[k]:
+            vo_base(vos, k, planes.frame, cfg, qps.base[k])
+            qps.based[k] = True
+        qps.active[k, p] = plane_rows(vos, k, p, qps.base[k], planes, cfg, qps.w0, qps.G[k, :, p], qps.h[k, :, p],
+                                      qps.work)
+        qps.computed[k, p] = True
 
 
 @inline
@@ -152,7 +155,7 @@ def gather(qps: PlaneQPs, r: int, p: int) -> int:
     return m
 
 
-@inline
+@kernel
 def solve_qp(qps: PlaneQPs, r: int, p: int, bounds: Bounds) -> None:
     """QP (r, p) solved exactly: its optimum into sol[r, p], its deviation into key[r, p]."""
     m = gather(qps, r, p)
@@ -168,54 +171,64 @@ def search(vos: VOs, planes: AvoidancePlanes, qps: PlaneQPs, G3: np.ndarray, h3:
            cfg: Config, tried: np.ndarray) -> tuple[int, int, int, int]:
     """Best-first over the QPs (step 4 of the module docstring): (round, plane) of the answer,
     or (-1, -1) when no QP gives a safe one; the QPs solved; how many answers went into
-    ``tried`` (each QP answer in solve order, for the least-bad fallback)."""
+    ``tried`` (each QP answer in solve order, for the least-bad fallback).
+
+    A QP's key starts as a cheap lower bound (the farthest of its half-planes from the
+    preferred velocity) and becomes its exact optimum once it is the least key and solved, so
+    QPs that can never win are not solved at all. Rows are built as QPs need them (a work list
+    of (VO, plane) pairs: the VOs every QP starts with on every plane, then those an answer
+    enters, on that answer's plane)."""
     R, P = qps.key.shape
-    into, v = qps.into, qps.v
+    into, v, todo = qps.into, qps.v, qps.todo
+    n_todo = 0
     solved = n_tried = 0
-    for q in range(R * P + tried.shape[0]):
-        if q < R * P:  # every QP once with its initial rows, then the best first
-            r, p = q // P, q % P
-            if r > 0 and _same_rows(qps, r, p):  # a round that changes nothing on this plane
-                qps.key[r, p] = qps.key[r - 1, p]
-                qps.sol[r, p, 0], qps.sol[r, p, 1] = qps.sol[r - 1, p, 0], qps.sol[r - 1, p, 1]
-                continue
-        else:
-            r, p = _argmin(qps.key)
-            if qps.key[r, p] == np.inf:
-                return -1, -1, solved, n_tried
-            lift(planes, qps.sol[r, p], p, v)
-            if not containing(vos, v, cfg.horizon, into):
-                if within_limits(v, G3, h3, bounds):
-                    return r, p, solved, n_tried
-                qps.key[r, p] = np.inf  # outside the limits within tolerance: this QP gives nothing
-                continue
-            new = False
-            for k in range(into.shape[0]):  # constrain the VOs it entered and solve again
-                if into[k] and not qps.included[r, p, k]:
-                    add_rows(qps, vos, planes, cfg, k, p)
-                    qps.included[r, p, k] = new = True
-            if not new:  # it entered only VOs it already has rows for (a rounding edge): give up
-                qps.key[r, p] = np.inf
-                continue
-        solve_qp(qps, r, p, bounds)
-        solved += 1
-        if qps.key[r, p] < np.inf:
-            lift(planes, qps.sol[r, p], p, tried[n_tried])
-            n_tried += 1
+    for it in range(1 + R * P * (2 + 2 * into.shape[0])):  # per QP: its solve, then each VO it gains
+        add_rows(qps, vos, planes, cfg, n_todo)
+        n_todo = 0
+        if it == 0:
+            for r in range(R):
+                for p in range(P):
+                    qps.key[r, p], qps.exact[r, p] = _bound(qps, r, p), False
+        r, p = _argmin(qps.key)
+        if qps.key[r, p] == np.inf:
+            break
+        if not qps.exact[r, p]:
+            solve_qp(qps, r, p, bounds)
+            qps.exact[r, p] = True
+            solved += 1
+            if qps.key[r, p] < np.inf:
+                lift(planes, qps.sol[r, p], p, tried[n_tried])
+                n_tried += 1
+            continue
+        lift(planes, qps.sol[r, p], p, v)
+        if not containing(vos, v, cfg.horizon, into):
+            if within_limits(v, G3, h3, bounds):
+                return r, p, solved, n_tried
+            qps.key[r, p] = np.inf  # outside the limits within tolerance: this QP gives nothing
+            continue
+        new = False
+        for k in range(into.shape[0]):  # constrain the VOs it entered and solve again
+            if into[k] and not qps.included[r, p, k]:
+                qps.included[r, p, k] = new = True
+                if not qps.computed[k, p]:
+                    todo[n_todo, 0], todo[n_todo, 1], n_todo = k, p, n_todo + 1
+        # Solve it again (its new rows first): 0 is a valid lower bound until then.
+        qps.key[r, p], qps.exact[r, p] = (0.0, False) if new else (np.inf, True)
     return -1, -1, solved, n_tried
 
 
 @inline
-def _same_rows(qps: PlaneQPs, r: int, p: int) -> bool:
-    """Whether QP (r, p) has the same rows as QP (r - 1, p) (same VOs, same half-planes)."""
+def _bound(qps: PlaneQPs, r: int, p: int) -> float:
+    """A lower bound on QP (r, p)'s deviation: its feasible set lies inside each of its
+    half-planes, so it is at least as far from w0 as the farthest of them."""
+    wx, wy, lb = qps.w0[0], qps.w0[1], 0.0
     for k in range(qps.included.shape[2]):
-        if qps.included[r, p, k] != qps.included[r - 1, p, k]:
-            return False
-        if qps.included[r, p, k] and qps.active[k, p] and (
-                qps.G[k, r, p, 0] != qps.G[k, r - 1, p, 0] or qps.G[k, r, p, 1] != qps.G[k, r - 1, p, 1]
-                or qps.h[k, r, p] != qps.h[k, r - 1, p]):
-            return False
-    return True
+        if qps.included[r, p, k] and qps.active[k, p]:
+            gx, gy = qps.G[k, r, p, 0], qps.G[k, r, p, 1]
+            over = gx * wx + gy * wy - qps.h[k, r, p]
+            if over > 0.0:
+                lb = max(lb, over / np.sqrt(gx * gx + gy * gy))
+    return lb
 
 
 @inline
@@ -260,8 +273,9 @@ def py_plane_qps(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarr
 
 @entry
 def py_add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, k: int, p: int) -> None:
-    """``add_rows`` for Python callers (compiled code calls ``add_rows``: no Python wrapper)."""
-    return add_rows(qps, vos, planes, cfg, k, p)
+    """Build VO k's rows on plane p, for Python callers."""
+    qps.todo[0, 0], qps.todo[0, 1] = k, p
+    add_rows(qps, vos, planes, cfg, 1)
 
 
 @entry
@@ -298,7 +312,7 @@ def decide(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarra
     out[3], out[4], out[5], out[6] = res.status, res.phi, res.round, res.solved
 
 
-@jit
+@inline
 def decide_one(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray,
                bounds: Bounds, cfg: Config) -> KernelOut:
     """``decide`` on the compiled side (``select_many`` calls it for every vehicle)."""
@@ -316,7 +330,7 @@ def decide_one(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.nd
     planes = decision_planes(vos, v_now, cfg)  # 3
     qps = plane_qps(vos, planes, G3, h3, initial, cfg)
     R, P = qps.key.shape
-    tried = np.empty((R * P * (V + 1), 3))
+    tried = np.empty((R * P * (V + 1), 3))  # at most every QP once, then once per VO it gains
     r, plane, solved, n_tried = search(vos, planes, qps, G3, h3, bounds, cfg, tried)  # 4
     if r >= 0:
         v = np.empty(3)

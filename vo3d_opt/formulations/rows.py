@@ -97,16 +97,19 @@ def _curve_rows(vos: VOs, i: int, sec: Section, cfg: Config, w0: np.ndarray, to_
     False when the section has no boundary point. ``scratch`` (2, K + 2), ``valid`` (K + 2,)."""
     K = cfg.t.shape[0]
     dist, side_y = scratch[0], scratch[1]
-    any_valid = False
-    for k in range(K + 2):  # the curve of eq. (12), then the chord points of eq. (17)
-        qx = sec.curve[k, 0] if k < K else sec.chord[k - K, 0]
-        qy = sec.curve[k, 1] if k < K else sec.chord[k - K, 1]
+    for k in range(K):  # the curve of eq. (12) (vectorisable: no branches) ...
+        qx, qy = sec.curve[0, k], sec.curve[1, k]
         valid[k] = qx == qx  # not NaN
-        any_valid |= valid[k]
-        dist[k] = (qx - w0[0]) ** 2 + (qy - w0[1]) ** 2 if valid[k] else np.inf  # squared: only compared
+        dist[k] = (qx - w0[0]) ** 2 + (qy - w0[1]) ** 2 if qx == qx else np.inf  # squared: only compared
         side_y[k] = qy
-    if not any_valid:
-        return False
+    for j in range(2):  # ... and the chord points of eq. (17)
+        qx, qy = sec.chord[j, 0], sec.chord[j, 1]
+        valid[K + j] = qx == qx
+        dist[K + j] = (qx - w0[0]) ** 2 + (qy - w0[1]) ** 2 if qx == qx else np.inf
+        side_y[K + j] = qy
+    any_valid = False
+    for k in range(K + 2):
+        any_valid |= valid[k]
     picks = _pick(dist, side_y, valid)
     c, e1, e2 = vos.cones, to_plane[0], to_plane[1]
     for r in range(G.shape[0]):
@@ -131,14 +134,14 @@ class RowWork(NamedTuple):
 
 @jit
 def row_work(K: int) -> RowWork:
-    return RowWork(Section(np.empty((K, 2)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2), np.empty(2), np.empty(3)),
+    return RowWork(Section(np.empty((2, K)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2), np.empty(2), np.empty(3)),
                    np.empty((2, K + 2)), np.empty(K + 2, dtype=np.bool_))
 
 
-@inline
+@kernel
 def vo_base(vos: VOs, k: int, frame: np.ndarray, cfg: Config, out: np.ndarray) -> None:
     """VO k's points in the planes' frame (``cone_base_points`` / ``pyramid_base_points``),
-    computed once per VO: each plane then only turns them (eq. 8). ``out`` (K + 3, 3)."""
+    computed once per VO: each plane then only turns them (eq. 8). ``out`` (3, K + 3)."""
     n = vos.cones.d_oi.shape[0]
     if k < n:
         cone_base_points(vos.cones, k, frame, cfg.cos_t, cfg.sin_t, out)
@@ -146,7 +149,7 @@ def vo_base(vos: VOs, k: int, frame: np.ndarray, cfg: Config, out: np.ndarray) -
         pyramid_base_points(vos.pyramids, k - n, frame, out)
 
 
-@inline
+@kernel
 def plane_rows(vos: VOs, k: int, p: int, base: np.ndarray, planes: AvoidancePlanes, cfg: Config, w0: np.ndarray,
                G: np.ndarray, h: np.ndarray, work: RowWork) -> bool:
     """Every round's row of VO k (cones first, then pyramids) on plane p, G[r]·w <= h[r]

@@ -160,7 +160,7 @@ def pyramid_entry_time(pyramids: VOPyramids, v: np.ndarray) -> np.ndarray:
 _SEARCH_STEPS = 100
 
 
-@inline
+@kernel
 def _scaled_zone_distance(shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v: np.ndarray,
                           s: float) -> float:
     """Distance from v to the zone scaled by s about the apex: for cone k (shape 0) the ball
@@ -178,7 +178,7 @@ def _scaled_zone_distance(shape: int, cones: VOCones, pyramids: VOPyramids, k: i
     return np.sqrt(total)
 
 
-@inline
+@kernel
 def _reach(shape: int, cones: VOCones, pyramids: VOPyramids, k: int) -> float:
     """The distance from A to zone k (m): d_oi - r_pz for a sphere, to the prism for C_pz."""
     if shape == 0:

@@ -27,7 +27,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import entry, jit, inline
+from .._jit import entry, inline, jit, kernel
 from .cone import VOCones
 from .frames import AvoidancePlanes
 from .pyramid import BOX_EDGES, VOPyramids
@@ -72,7 +72,7 @@ class Section(NamedTuple):
     """One VO shape on one avoidance plane, in plane coordinates (NaN where there is none).
     The arrays are written by ``cone_section`` / ``pyramid_section``."""
 
-    curve: np.ndarray  # (K, 2) eq. (12): generator k meets the plane here (a vertex), else NaN
+    curve: np.ndarray  # (2, K) eq. (12): x and y where generator k meets the plane (a vertex), else NaN
     chord: np.ndarray  # (2, 2) eq. (17): B_vo meets the plane here
     chord_cs: np.ndarray  # (2, 2) cos and sin of the generator angles of the chord points
     apex: np.ndarray  # (2,) A^phi of eq. (7)
@@ -124,23 +124,24 @@ def _framed(x, y, z, frame):
             frame[2, 0] * x + frame[2, 1] * y + frame[2, 2] * z)
 
 
-@inline
+@kernel
 def cone_base_points(cones: VOCones, i: int, frame: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
                      out: np.ndarray) -> None:
     """B_vo(t_k) of eq. (4) for every generator angle, in the planes' (e_x, e_y0, e_z0) frame,
-    into ``out`` (K + 3, 3); its last three rows are the apex, C_vo (eq. 5) and rel."""
+    into ``out`` (3, K + 3), one row per axis (so that the per-plane loop vectorises); its last
+    three columns are the apex, C_vo (eq. 5) and rel."""
     a, R, dv, rv = cones.apex[i], cones.R[i], cones.d_vo[i], cones.r_vo[i]
     K = cos_t.shape[0]
     for k in range(K):
         ct, st = rv * cos_t[k], rv * sin_t[k]
-        out[k, 0], out[k, 1], out[k, 2] = _framed(a[0] + R[0, 0] * dv + R[0, 1] * ct + R[0, 2] * st,
+        out[0, k], out[1, k], out[2, k] = _framed(a[0] + R[0, 0] * dv + R[0, 1] * ct + R[0, 2] * st,
                                                   a[1] + R[1, 0] * dv + R[1, 1] * ct + R[1, 2] * st,
                                                   a[2] + R[2, 0] * dv + R[2, 1] * ct + R[2, 2] * st, frame)
-    out[K, 0], out[K, 1], out[K, 2] = _framed(a[0], a[1], a[2], frame)
-    out[K + 1, 0], out[K + 1, 1], out[K + 1, 2] = _framed(a[0] + dv * R[0, 0], a[1] + dv * R[1, 0], a[2] + dv * R[2, 0],
+    out[0, K], out[1, K], out[2, K] = _framed(a[0], a[1], a[2], frame)
+    out[0, K + 1], out[1, K + 1], out[2, K + 1] = _framed(a[0] + dv * R[0, 0], a[1] + dv * R[1, 0], a[2] + dv * R[2, 0],
                                                           frame)
     rel = cones.rel[i]
-    out[K + 2, 0], out[K + 2, 1], out[K + 2, 2] = _framed(rel[0], rel[1], rel[2], frame)
+    out[0, K + 2], out[1, K + 2], out[2, K + 2] = _framed(rel[0], rel[1], rel[2], frame)
 
 
 @inline
@@ -148,26 +149,27 @@ def cone_section(cones: VOCones, i: int, base: np.ndarray, frame: np.ndarray, c:
                  corr: Corrections, sec: Section) -> int:
     """Section 3.1 for cone i on the plane with cos/sin phi = c, s: writes ``sec`` and returns
     the kind. ``base`` is ``cone_base_points`` of the cone."""
-    K = base.shape[0] - 3
+    K = base.shape[1] - 3
     apex, R, d_vo, r_vo = cones.apex[i], cones.R[i], cones.d_vo[i], cones.r_vo[i]
-    xA, yA, zA = base[K, 0], c * base[K, 1] + s * base[K, 2], c * base[K, 2] - s * base[K, 1]  # eq. (7)
+    xA, yA, zA = base[0, K], c * base[1, K] + s * base[2, K], c * base[2, K] - s * base[1, K]  # eq. (7)
     sec.apex[0], sec.apex[1] = xA, yA
     scale = 1.0 + np.sqrt(apex[0] ** 2 + apex[1] ** 2 + apex[2] ** 2) + d_vo
     on_apex = abs(zA) <= 1e-9 * scale  # section 3.1.3: A_vo lies on the plane
-    # Eqs (11)-(12): generator k meets the plane at parameter t_g.
-    any_valid = False
+    # Eqs (11)-(12): generator k meets the plane at parameter t_g. Written without branches
+    # (bitwise & on booleans, selects) so that the compiler can vectorise it.
+    any_valid, nan = False, np.nan
     for k in range(K):
-        xB, yB, zB = base[k, 0], c * base[k, 1] + s * base[k, 2], c * base[k, 2] - s * base[k, 1]
+        yB, zB = c * base[1, k] + s * base[2, k], c * base[2, k] - s * base[1, k]
         dz = zB - zA
         t_g = -zA / dz
         if corr.tg_range:  # 3.1.1
-            valid = t_g >= 0.0 and t_g <= 1.0
+            valid = (t_g >= 0.0) & (t_g <= 1.0)
         else:  # the original condition z_Bvo != z_A: both nappes, any length
-            valid = np.isfinite(t_g) and abs(dz) > 1e-12
+            valid = np.isfinite(t_g) & (abs(dz) > 1e-12)
         any_valid |= valid
-        keep = valid and not on_apex
-        sec.curve[k, 0] = (xB - xA) * t_g + xA if keep else np.nan
-        sec.curve[k, 1] = (yB - yA) * t_g + yA if keep else np.nan
+        keep = valid & (not on_apex)
+        sec.curve[0, k] = (base[0, k] - xA) * t_g + xA if keep else nan
+        sec.curve[1, k] = (yB - yA) * t_g + yA if keep else nan
     # Eqs (14)-(17): where the base circle meets the plane.
     nx, ny, nz = (c * frame[2, 0] - s * frame[1, 0], c * frame[2, 1] - s * frame[1, 1],
                   c * frame[2, 2] - s * frame[1, 2])
@@ -198,7 +200,7 @@ def cone_section(cones: VOCones, i: int, base: np.ndarray, frame: np.ndarray, c:
         if kind == TRIANGLE and not corr.triangle:  # the original reduces eq. (12) to A^phi
             kind = POINT
     # Eq. (13): the symmetry-line point H, where the axis line meets the plane.
-    xC, yC, zC = base[K + 1, 0], c * base[K + 1, 1] + s * base[K + 1, 2], c * base[K + 1, 2] - s * base[K + 1, 1]
+    xC, yC, zC = base[0, K + 1], c * base[1, K + 1] + s * base[2, K + 1], c * base[2, K + 1] - s * base[1, K + 1]
     dzc = zC - zA
     if abs(dzc) <= 1e-12 * scale:  # the axis is parallel to the plane
         sec.symmetry[0], sec.symmetry[1] = xC, yC
@@ -208,7 +210,7 @@ def cone_section(cones: VOCones, i: int, base: np.ndarray, frame: np.ndarray, c:
             t_h = abs(t_h)
         sec.symmetry[0], sec.symmetry[1] = (xC - xA) * t_h + xA, (yC - yA) * t_h + yA
     # Inside the protected zone: the VO is the closing half-space (v - apex)·rel > 0.
-    xr, yr, zr = base[K + 2, 0], c * base[K + 2, 1] + s * base[K + 2, 2], c * base[K + 2, 2] - s * base[K + 2, 1]
+    xr, yr, zr = base[0, K + 2], c * base[1, K + 2] + s * base[2, K + 2], c * base[2, K + 2] - s * base[1, K + 2]
     sec.halfplane[0], sec.halfplane[1], sec.halfplane[2] = xr, yr, xA * xr + yA * yr + zA * zr
     return INSIDE_CODE if cones.inside[i] else kind
 
@@ -223,20 +225,20 @@ def _pseudo_angle(y: float, x: float) -> float:
     return (2.0 - abs(frac)) if y >= 0.0 else -(2.0 - abs(frac))
 
 
-@inline
+@kernel
 def pyramid_base_points(pyramids: VOPyramids, j: int, frame: np.ndarray, out: np.ndarray) -> None:
     """The eight corners of C_pz (bits far, left, top of k pick hi over lo) in the planes'
-    (e_x, e_y0, e_z0) frame, into ``out`` (9, 3); row 8 is the horizontal direction h towards
-    the obstacle."""
+    (e_x, e_y0, e_z0) frame, into ``out`` (3, 9), one row per axis; column 8 is the horizontal
+    direction h towards the obstacle."""
     F, lo, hi = pyramids.frame[j], pyramids.lo[j], pyramids.hi[j]
     for k in range(8):
         a0 = hi[0] if k & 1 else lo[0]
         a1 = hi[1] if (k >> 1) & 1 else lo[1]
         a2 = hi[2] if (k >> 2) & 1 else lo[2]
-        out[k, 0], out[k, 1], out[k, 2] = _framed(a0 * F[0, 0] + a1 * F[1, 0] + a2 * F[2, 0],
+        out[0, k], out[1, k], out[2, k] = _framed(a0 * F[0, 0] + a1 * F[1, 0] + a2 * F[2, 0],
                                                   a0 * F[0, 1] + a1 * F[1, 1] + a2 * F[2, 1],
                                                   a0 * F[0, 2] + a1 * F[1, 2] + a2 * F[2, 2], frame)
-    out[8, 0], out[8, 1], out[8, 2] = _framed(F[0, 0], F[0, 1], F[0, 2], frame)
+    out[0, 8], out[1, 8], out[2, 8] = _framed(F[0, 0], F[0, 1], F[0, 2], frame)
 
 
 @inline
@@ -248,17 +250,17 @@ def pyramid_section(pyramids: VOPyramids, j: int, base: np.ndarray, c: float, s:
     for a in range(2):
         sec.apex[a], sec.symmetry[a] = 0.0, np.nan
         sec.chord[a, 0], sec.chord[a, 1], sec.chord_cs[a, 0], sec.chord_cs[a, 1] = np.nan, np.nan, np.nan, np.nan
-    sec.halfplane[0], sec.halfplane[1], sec.halfplane[2] = base[8, 0], c * base[8, 1] + s * base[8, 2], 0.0
+    sec.halfplane[0], sec.halfplane[1], sec.halfplane[2] = base[0, 8], c * base[1, 8] + s * base[2, 8], 0.0
     # C_pz ∩ plane is the convex hull of the points where its edges cross the plane; the
     # extreme ones seen from the apex (the velocity origin) bound the section.
     n_cross, at_apex, sx, sy, mx, my = 0, False, 0.0, 0.0, 0.0, 0.0
     for e in range(BOX_EDGES.shape[0]):  # first pass: the mean direction of the crossings
         ka, kb = BOX_EDGES[e, 0], BOX_EDGES[e, 1]
-        za, zb = c * base[ka, 2] - s * base[ka, 1], c * base[kb, 2] - s * base[kb, 1]
+        za, zb = c * base[2, ka] - s * base[1, ka], c * base[2, kb] - s * base[1, kb]
         if za * zb <= 0 and za != zb:
             f = za / (za - zb)
-            x = base[ka, 0] + f * (base[kb, 0] - base[ka, 0])
-            ya, yb = c * base[ka, 1] + s * base[ka, 2], c * base[kb, 1] + s * base[kb, 2]
+            x = base[0, ka] + f * (base[0, kb] - base[0, ka])
+            ya, yb = c * base[1, ka] + s * base[2, ka], c * base[1, kb] + s * base[2, kb]
             y = ya + f * (yb - ya)
             norm = np.sqrt(x * x + y * y)
             n_cross, sx, sy = n_cross + 1, sx + x, sy + y
@@ -272,11 +274,11 @@ def pyramid_section(pyramids: VOPyramids, j: int, base: np.ndarray, c: float, s:
     a_lo, a_hi = np.inf, -np.inf
     for e in range(BOX_EDGES.shape[0]):  # second pass: the extreme angles about that direction
         ka, kb = BOX_EDGES[e, 0], BOX_EDGES[e, 1]
-        za, zb = c * base[ka, 2] - s * base[ka, 1], c * base[kb, 2] - s * base[kb, 1]
+        za, zb = c * base[2, ka] - s * base[1, ka], c * base[2, kb] - s * base[1, kb]
         if za * zb <= 0 and za != zb:
             f = za / (za - zb)
-            x = base[ka, 0] + f * (base[kb, 0] - base[ka, 0])
-            ya, yb = c * base[ka, 1] + s * base[ka, 2], c * base[kb, 1] + s * base[kb, 2]
+            x = base[0, ka] + f * (base[0, kb] - base[0, ka])
+            ya, yb = c * base[1, ka] + s * base[2, ka], c * base[1, kb] + s * base[2, kb]
             y = ya + f * (yb - ya)
             ang = _pseudo_angle(mx * y - my * x, mx * x + my * y)
             if ang < a_lo:
@@ -356,30 +358,34 @@ def _empty_sections(n: int, P: int, K: int, t: np.ndarray, corr: Corrections) ->
 
 
 @jit
-def _section_at(out: Sections, i: int, p: int) -> Section:
-    return Section(out.curve[i, p], out.chord[i, p], out.chord_cs[i, p], out.apex[i, p], out.symmetry[i, p],
-                   out.halfplane[i, p])
+def _section_at(out: Sections, i: int, p: int, curve: np.ndarray) -> Section:
+    """Section i on plane p of ``out`` (views), with ``curve`` (2, K) as its curve: the caller
+    copies it into out.curve[i, p] (K, 2) afterwards."""
+    return Section(curve, out.chord[i, p], out.chord_cs[i, p], out.apex[i, p], out.symmetry[i, p], out.halfplane[i, p])
 
 
 @entry
 def _fill_cone_sections(cones: VOCones, planes: AvoidancePlanes, out: Sections) -> None:
     cos_t, sin_t = np.cos(out.t), np.sin(out.t)
-    base = np.empty((out.t.shape[0] + 3, 3))
+    K = out.t.shape[0]
+    base, curve = np.empty((3, K + 3)), np.empty((2, K))
     for i in range(cones.d_oi.shape[0]):
         cone_base_points(cones, i, planes.frame, cos_t, sin_t, base)
         for p in range(planes.phi.shape[0]):
             out.kind[i, p] = cone_section(cones, i, base, planes.frame, np.cos(planes.phi[p]),
-                                          np.sin(planes.phi[p]), out.corrections, _section_at(out, i, p))
+                                          np.sin(planes.phi[p]), out.corrections, _section_at(out, i, p, curve))
+            for k in range(K):
+                out.curve[i, p, k, 0], out.curve[i, p, k, 1] = curve[0, k], curve[1, k]
 
 
 @entry
 def _fill_pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes, out: Sections) -> None:
-    base = np.empty((9, 3))
+    base, curve = np.empty((3, 9)), np.empty((2, 0))
     for j in range(pyramids.L_pz.shape[0]):
         pyramid_base_points(pyramids, j, planes.frame, base)
         for p in range(planes.phi.shape[0]):
             out.kind[j, p] = pyramid_section(pyramids, j, base, np.cos(planes.phi[p]), np.sin(planes.phi[p]),
-                                             _section_at(out, j, p))
+                                             _section_at(out, j, p, curve))
 
 
 def cone_sections(cones: VOCones, planes: AvoidancePlanes, *, corrections: Iterable[str] | None = None,

@@ -49,7 +49,7 @@ def _order(m: int, out: np.ndarray) -> None:
         out[k], out[j] = out[j], out[k]
 
 
-@inline
+@kernel
 def _on_line(G, h, order, upto, i, w0, r_max, tol, out) -> bool:
     """The point nearest w0 on the line G[i]·w = h[i], inside the disc and the half-planes
     order[:upto]; False when that set is empty."""
@@ -83,7 +83,7 @@ def _on_line(G, h, order, upto, i, w0, r_max, tol, out) -> bool:
     return True
 
 
-@inline
+@kernel
 def _on_circle(G, h, m, w0, radius, tol, out) -> bool:
     """The point nearest w0 on the circle ||w|| = radius inside every half-plane; False if none
     (the annulus case: see the module docstring)."""
