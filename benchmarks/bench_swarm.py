@@ -56,7 +56,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
     """One (case, N, method) run in this process: its figures as a dict."""
     import numba
 
-    from vo3d_opt.baselines.rvo2 import RVO2Step, summarize_record
+    from vo3d_opt.baselines.rvo2 import RVO2Step, summarize_rvo2
     from vo3d_opt.sim.deciders import SwarmSelect
     from vo3d_opt.sim.metrics import summarize
     from vo3d_opt.sim.simulator import fly, scenario_selector
@@ -78,7 +78,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
     rec = fly(sc, step, progress=False, max_steps=max_steps)
     loop = time.perf_counter() - t0
     t0 = time.perf_counter()
-    s = summarize_record(rec) if method == "rvo2" else summarize(rec)
+    s = summarize_rvo2(rec) if method == "rvo2" else summarize(rec)
     metrics = time.perf_counter() - t0
     agent_steps = int(rec.decided.sum())
     decide = float(np.nansum(rec.decision_times[rec.decided]))

@@ -171,3 +171,36 @@ def test_bad_arrays_name_the_argument(change, name):
     kw.update(change)
     with pytest.raises(ValueError, match=name):
         VelocitySelector().select_many(**kw)
+
+
+@pytest.mark.parametrize("k", [None, 0, 3, 7, 60])
+@pytest.mark.parametrize("spacing", [4.0, 20.0])
+def test_neighbour_lists_are_brute_force_with_ties_and_crowds(k, spacing):
+    """On a grid (many equal distances: ties go to the lower index) sparse (short lists, sorted
+    in place) and dense (every list longer than 48, sorted by numpy)."""
+    from vo3d_opt.swarm import vehicle_links
+
+    g = np.arange(5) * spacing
+    P = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    who = np.flatnonzero(np.arange(125) % 4 != 1)
+    span, idx = vehicle_links(P, who, 30.0, k)
+    dist = np.linalg.norm(P[:, None, :] - P[None, :, :], axis=-1)
+    longest = 0
+    for d, i in enumerate(who):
+        js = [j for j in range(125) if j != i and dist[i, j] <= 30.0]
+        longest = max(longest, len(js))
+        if k is not None:
+            js = sorted(sorted(js, key=lambda j: dist[i, j])[:k])
+        assert list(idx[span[d, 0]:span[d, 1]]) == js
+    assert longest > 48 if spacing == 4.0 else longest < 48
+
+
+def test_crowded_swarm_equals_a_loop_of_select():
+    sel = VelocitySelector(reciprocal=True)
+    P, V, W, R = random_swarm(2, n=60, side=30.0)
+    for k in (None, 6):
+        many = sel.select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0, max_neighbors=k)
+        vel, statuses = loop_of_select(sel, P, V, W, R, limits=LIMITS, sensing_range=55.0, max_neighbors=k)
+        np.testing.assert_allclose(many.velocities, vel, rtol=0, atol=TOL)
+        assert list(many.statuses) == list(statuses)
+        assert many.neighbors.max() == (59 if k is None else 6)

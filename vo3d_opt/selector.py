@@ -168,15 +168,21 @@ _STATUS_NAMES = np.array([str(s) for s in DECISION_STATUSES])
 _ROUND_NAMES = np.array(kernel.ROUND_NAMES)
 
 
+def _names(n: int, who: np.ndarray, names: np.ndarray) -> np.ndarray:
+    """(n,) str: ``names`` (D,) at ``who``, "" elsewhere."""
+    names = np.asarray(names, dtype=str)
+    out = np.full(n, "", dtype=names.dtype if names.size else "<U1")
+    out[who] = names
+    return out
+
+
 def _swarm_decision(V: np.ndarray, who: np.ndarray, vel: np.ndarray, statuses: np.ndarray, rounds: np.ndarray,
                     planes: np.ndarray, counts: np.ndarray, solved: np.ndarray) -> SwarmDecision:
     """A ``SwarmDecision`` of N vehicles from the deciding vehicles' (D,) answers; the others
     keep their velocity ``V``."""
     n = V.shape[0]
-    names = np.full((2, n), "", dtype=object)
-    names[0, who], names[1, who] = statuses, rounds
-    out = SwarmDecision(velocities=V.copy(), statuses=names[0].astype(str), solve_time=0.0,
-                        decided=np.zeros(n, dtype=bool), rounds=names[1].astype(str),
+    out = SwarmDecision(velocities=V.copy(), statuses=_names(n, who, statuses), solve_time=0.0,
+                        decided=np.zeros(n, dtype=bool), rounds=_names(n, who, rounds),
                         planes=np.full(n, np.nan), neighbors=np.zeros(n, dtype=np.int64),
                         obstacles=np.zeros(n, dtype=np.int64), solved=np.zeros(n, dtype=np.int64),
                         times=np.full(n, np.nan))

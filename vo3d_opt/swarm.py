@@ -31,6 +31,7 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ._jit import entry, inline
 from .formulations.common import bounds_array
 from .formulations.swarm import AGENT_COLUMNS, MANY_OUT_SIZE, Swarm, decide_range
 from .geometry.pyramid import prism_rows
@@ -196,32 +197,93 @@ def _reach(r: np.ndarray | float) -> np.ndarray | float:
 
 def vehicle_links(P: np.ndarray, who: np.ndarray, sensing_range: float, max_neighbors: int | None,
                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Each deciding vehicle's neighbours (vehicle indices, increasing) as (span, idx)."""
+    """Each deciding vehicle's neighbours (vehicle indices, increasing) as (span, idx): the
+    vehicles within ``sensing_range`` (numpy's distance), or the ``max_neighbors`` nearest of
+    them (equally near: the lower index first)."""
     n, D = P.shape[0], who.shape[0]
     if D == 0 or n < 2 or max_neighbors == 0:
         return np.zeros((D, 2), dtype=np.int64), _EMPTY
-    tree = cKDTree(P)
-    if max_neighbors is None or max_neighbors >= n - 1:
-        pairs = tree.query_pairs(_reach(sensing_range), output_type="ndarray")
-        I = np.concatenate([pairs[:, 0], pairs[:, 1]])
-        J = np.concatenate([pairs[:, 1], pairs[:, 0]])
-        place = np.full(n, -1, dtype=np.int64)
-        place[who] = np.arange(D)
-        keep = place[I] >= 0
-        I, J = I[keep], J[keep]
-        keep = np.linalg.norm(P[I] - P[J], axis=-1) <= sensing_range
-        return _spans(place[I[keep]], J[keep], D)
-    k = max_neighbors + 1  # the vehicle itself is (usually) among its own nearest
-    _, idx = tree.query(P[who], k=k, distance_upper_bound=_reach(sensing_range))
-    idx = idx.reshape(D, k)
-    valid = (idx < n) & (idx != who[:, None])
-    safe = np.where(valid, idx, 0)
-    valid &= np.linalg.norm(P[who][:, None, :] - P[safe], axis=-1) <= sensing_range
-    valid &= np.cumsum(valid, axis=1) <= max_neighbors  # the k nearest, nearest first
-    chosen = np.sort(np.where(valid, idx, n), axis=1)
-    ends = np.cumsum(valid.sum(axis=1))
-    span = np.stack([ends - valid.sum(axis=1), ends], axis=1).astype(np.int64)
-    return span, np.ascontiguousarray(chosen[chosen < n], dtype=np.int64)
+    pairs = cKDTree(P).query_pairs(_reach(sensing_range), output_type="ndarray")
+    a, b = np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1])
+    dist = np.linalg.norm(P[a] - P[b], axis=-1)
+    place = np.full(n, -1, dtype=np.int64)
+    place[who] = np.arange(D)
+    span = np.empty((D, 2), dtype=np.int64)
+    k = -1 if max_neighbors is None else int(max_neighbors)
+    idx = neighbor_lists(a, b, dist, float(sensing_range), place, k, span)
+    return span, idx
+
+
+#: Neighbour lists up to this long are sorted in place (insertion sort), longer ones by numpy.
+_SMALL_ROW = 48
+
+
+@inline
+def _insertion(key_i: np.ndarray, key_d: np.ndarray, c: int, by_distance: bool) -> None:
+    """Stable insertion sort of the first c entries of (key_i, key_d) by key_d (``by_distance``)
+    or by key_i."""
+    for q in range(1, c):
+        i, d = key_i[q], key_d[q]
+        r = q
+        while r > 0 and ((key_d[r - 1] > d) if by_distance else (key_i[r - 1] > i)):
+            key_i[r], key_d[r] = key_i[r - 1], key_d[r - 1]
+            r -= 1
+        key_i[r], key_d[r] = i, d
+
+
+@entry
+def neighbor_lists(a: np.ndarray, b: np.ndarray, dist: np.ndarray, sensing_range: float, place: np.ndarray,
+                   k: int, span: np.ndarray) -> np.ndarray:
+    """The pairs (a[e], b[e]) at distance dist[e] as each deciding vehicle's neighbour list
+    (``place``: a vehicle's row, -1 when it does not decide): those within ``sensing_range``,
+    the k nearest of them when k >= 0 (ties: the lower index), in increasing index order, into
+    ``span`` (D, 2); returns the concatenated lists. A counting sort by row: O(pairs)."""
+    D = span.shape[0]
+    count = np.zeros(D + 1, dtype=np.int64)
+    for e in range(a.shape[0]):
+        if dist[e] <= sensing_range:
+            if place[a[e]] >= 0:
+                count[place[a[e]] + 1] += 1
+            if place[b[e]] >= 0:
+                count[place[b[e]] + 1] += 1
+    start = np.cumsum(count)
+    fill = start.copy()
+    idx, near = np.empty(start[D], dtype=np.int64), np.empty(start[D])
+    for e in range(a.shape[0]):
+        if dist[e] <= sensing_range:
+            for x, y in ((a[e], b[e]), (b[e], a[e])):
+                r = place[x]
+                if r >= 0:
+                    idx[fill[r]], near[fill[r]] = y, dist[e]
+                    fill[r] += 1
+    out, m = np.empty(start[D], dtype=np.int64), 0
+    widest = 0
+    for r in range(D):
+        widest = max(widest, start[r + 1] - start[r])
+    key_i, key_d = np.empty(widest, dtype=np.int64), np.empty(widest)
+    for r in range(D):
+        c = start[r + 1] - start[r]
+        if c > _SMALL_ROW:  # a crowd: sorting with allocations is cheaper than insertion
+            row, d = idx[start[r]:start[r + 1]], near[start[r]:start[r + 1]]
+            by_index = np.argsort(row)
+            row, d = row[by_index], d[by_index]
+            if 0 <= k < c:
+                row = np.sort(row[np.argsort(d, kind="mergesort")[:k]])  # stable: ties by index
+            c = row.shape[0]
+            out[m:m + c] = row
+        else:
+            for q in range(c):  # by index, then (stable) by distance: ties keep the lower index
+                key_i[q], key_d[q] = idx[start[r] + q], near[start[r] + q]
+            _insertion(key_i, key_d, c, False)
+            if 0 <= k < c:
+                _insertion(key_i, key_d, c, True)
+                c = k
+                _insertion(key_i, key_d, c, False)
+            out[m:m + c] = key_i[:c]
+        span[r, 0] = m
+        m += c
+        span[r, 1] = m
+    return out[:m].copy()
 
 
 def _all(D: int, m: int) -> tuple[np.ndarray, np.ndarray]:

@@ -195,7 +195,8 @@ class RunBuffers:
 
     def put_statuses(self, k: int, statuses: np.ndarray, mask: np.ndarray) -> None:
         """Row k of the statuses: ``statuses`` where ``mask``, "" elsewhere."""
-        names, codes = np.unique(np.asarray(statuses, dtype=object)[mask].astype(str), return_inverse=True)
+        given = np.asarray(statuses)[mask]
+        names, codes = np.unique(given.astype(str) if given.dtype == object else given, return_inverse=True)
         lookup = np.empty(len(names), dtype=np.uint16)
         for c, name in enumerate(names):
             if name not in self.status_names:
@@ -235,10 +236,12 @@ def _checked_commands(out: StepDecision, deciding: np.ndarray) -> tuple[np.ndarr
     """The commands (0 for agents that do not decide) and statuses, a non-finite command
     replaced by 0 with the status ``invalid_velocity (...)``."""
     u = np.asarray(out.commands, dtype=float).reshape(deciding.shape[0], 3).copy()
-    statuses = np.asarray(out.statuses, dtype=object).copy()
+    statuses = np.asarray(out.statuses)
     bad = deciding & ~np.all(np.isfinite(u), axis=1)
-    for i in np.flatnonzero(bad):
-        statuses[i] = f"{INVALID} ({statuses[i]})"
+    if bad.any():
+        statuses = statuses.astype(object)
+        for i in np.flatnonzero(bad):
+            statuses[i] = f"{INVALID} ({statuses[i]})"
     u[bad | ~deciding] = 0.0
     return u, statuses
 
