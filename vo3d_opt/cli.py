@@ -37,10 +37,10 @@ from pathlib import Path
 from typing import Any
 
 from vo3d_opt import __version__
+from vo3d_opt.report import CSV_MAX_ROWS, rounded, write_outputs
 from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FORMULATIONS
 from vo3d_opt.sim.metrics import CONTRACT_KEYS, summarize
 from vo3d_opt.sim.scenario import Scenario, ScenarioError, bundled_files, load_scenario
-from vo3d_opt.report import CSV_MAX_ROWS, rounded, write_outputs
 from vo3d_opt.sim.simulator import DEFAULT_FORMULATION, Simulator, scenario_selector
 from vo3d_opt.types import one_line
 

@@ -384,7 +384,8 @@ def figure_trajectories_3d(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -
                    alpha=0.6 if s.physical else 0.3, linestyle="-" if s.physical else ":")
     p = record.positions
     if record.n_agents > SWARM_AGENTS:  # one artist per kind, not per agent: seconds, not minutes
-        ax.add_collection3d(Line3DCollection(list(p.transpose(1, 0, 2)), colors=colors, linewidths=0.6))
+        paths = Line3DCollection(list(p.transpose(1, 0, 2)), colors=colors, linewidths=0.6)
+        ax.add_collection3d(paths)
         for point, marker, size in ((p[0], "o", 4), (sc.goals, "x", 6)):
             ax.scatter(point[:, 0], point[:, 1], point[:, 2], color=colors, marker=marker, s=size,
                        depthshade=False)
@@ -477,7 +478,8 @@ def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figur
     draw_obstacles_2d(ax, record)
     p = record.positions
     if record.n_agents > SWARM_AGENTS:  # one artist per kind, not per agent
-        ax.add_collection(LineCollection(list(p[:, :, :2].transpose(1, 0, 2)), colors=colors, linewidths=0.6))
+        paths = LineCollection(list(p[:, :, :2].transpose(1, 0, 2)), colors=colors, linewidths=0.6)
+        ax.add_collection(paths)
         ax.scatter(p[0, :, 0], p[0, :, 1], color=colors, marker="o", s=4)
         ax.scatter(sc.goals[:, 0], sc.goals[:, 1], color=colors, marker="x", s=6)
     for i in range(record.n_agents if record.n_agents <= SWARM_AGENTS else 0):

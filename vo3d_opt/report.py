@@ -11,6 +11,7 @@ summary and the figures. One module for the CLI and the demo.
   significant digits;
 * the figures of ``vo3d_opt.plots`` and, when asked, ``animation.gif``.
 """
+
 from __future__ import annotations
 
 import csv
@@ -29,8 +30,23 @@ log = logging.getLogger(__name__)
 #: The trajectory columns: the velocity columns hold the velocity flown from that sample to the
 #: next (``cmd_*``: the command), empty / NaN on the last sample, as are ``status`` and
 #: ``decision_time_us`` for agents that did not decide.
-COLUMNS = ["step", "time", "agent", "x", "y", "z", "vx", "vy", "vz", "cmd_vx", "cmd_vy", "cmd_vz", "status",
-           "decision_time_us", "arrived"]
+COLUMNS = [
+    "step",
+    "time",
+    "agent",
+    "x",
+    "y",
+    "z",
+    "vx",
+    "vy",
+    "vz",
+    "cmd_vx",
+    "cmd_vy",
+    "cmd_vz",
+    "status",
+    "decision_time_us",
+    "arrived",
+]
 #: Above this many rows (agents × samples) ``write_outputs`` writes no CSV, only Parquet.
 CSV_MAX_ROWS = 500_000
 #: Significant digits of the floats in JSON output (17 show rounding noise: 31.200000000000003).
@@ -99,8 +115,9 @@ def _table(record: RunRecord, lo: int, hi: int) -> Any:
     cols = {
         "step": np.repeat(k, n).astype(np.int32),
         "time": np.repeat(record.times[lo:hi], n),
-        "agent": pa.DictionaryArray.from_arrays(np.tile(np.arange(n, dtype=np.int32), len(k)),
-                                                pa.array(record.ids)),
+        "agent": pa.DictionaryArray.from_arrays(
+            np.tile(np.arange(n, dtype=np.int32), len(k)), pa.array(record.ids)
+        ),
         **{c: record.positions[lo:hi, :, j].ravel() for j, c in enumerate("xyz")},
         **{f"v{c}": vel[..., j].ravel() for j, c in enumerate("xyz")},
         **{f"cmd_v{c}": cmd[..., j].ravel() for j, c in enumerate("xyz")},
@@ -132,8 +149,14 @@ def write_parquet(record: RunRecord, path: str | Path) -> Path:
     return path
 
 
-def write_outputs(record: RunRecord, summary: dict[str, Any], out: Path, *,
-                  plot_options: dict[str, Any] | None = None, animate: bool = False) -> list[Path]:
+def write_outputs(
+    record: RunRecord,
+    summary: dict[str, Any],
+    out: Path,
+    *,
+    plot_options: dict[str, Any] | None = None,
+    animate: bool = False,
+) -> list[Path]:
     """trajectories.parquet, trajectories.csv (up to CSV_MAX_ROWS rows), summary.json, the
     figures (``plot_options``: ``write_plots``' keywords) and with ``animate`` animation.gif of
     a run in ``out``; the paths written."""
@@ -145,8 +168,11 @@ def write_outputs(record: RunRecord, summary: dict[str, Any], out: Path, *,
     if rows <= CSV_MAX_ROWS:
         written.append(write_csv(record, out / "trajectories.csv"))
     else:
-        log.info("not written: trajectories.csv (%d rows, more than %d; trajectories.parquet has them)",
-                 rows, CSV_MAX_ROWS)
+        log.info(
+            "not written: trajectories.csv (%d rows, more than %d; trajectories.parquet has them)",
+            rows,
+            CSV_MAX_ROWS,
+        )
     written.append(write_summary(summary, out / "summary.json"))
     written += write_plots(record, out, **(plot_options or {}))
     for name, why in skipped_plots(record).items():
@@ -158,4 +184,12 @@ def write_outputs(record: RunRecord, summary: dict[str, Any], out: Path, *,
     return written
 
 
-__all__ = ["COLUMNS", "CSV_MAX_ROWS", "rounded", "write_csv", "write_outputs", "write_parquet", "write_summary"]
+__all__ = [
+    "COLUMNS",
+    "CSV_MAX_ROWS",
+    "rounded",
+    "write_csv",
+    "write_outputs",
+    "write_parquet",
+    "write_summary",
+]

@@ -104,28 +104,29 @@ def warm_up() -> None:
     with _warm_lock:
         if _warm:
             return
-        notice = _compile_notice("the decision kernel")
-        try:
-            t0 = time.perf_counter()
-            own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
-            nbrs = neighbor_rows([Neighbor(position=(10.0, 0.0, 10.0), velocity=(-1.0, 0.0, 0.0), r_pz=3.0)])
-            kernel.decide(own.position, own.velocity, check_vector((1.0, 0.0, 0.0), 3), nbrs, np.zeros((0, 4)),
-                          bounds_array(Limits(), 0.2), *Options().packed, np.empty(kernel.OUT_SIZE))
-            elapsed = time.perf_counter() - t0
-        finally:
-            notice.cancel()
-        if elapsed > _COMPILE_NOTICE_AFTER:
-            log.warning("vo3d-opt: the decision kernel is ready (%.1f s)", elapsed)
+        own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
+        nbrs = neighbor_rows([Neighbor(position=(10.0, 0.0, 10.0), velocity=(-1.0, 0.0, 0.0), r_pz=3.0)])
+        _compiling("the decision kernel", lambda: kernel.decide(
+            own.position, own.velocity, check_vector((1.0, 0.0, 0.0), 3), nbrs, np.zeros((0, 4)),
+            bounds_array(Limits(), 0.2), *Options().packed, np.empty(kernel.OUT_SIZE)))
         _warm = True
 
 
-def _compile_notice(what: str):
-    """A timer that says on stderr, after _COMPILE_NOTICE_AFTER s, that ``what`` compiles."""
+def _compiling(what: str, run) -> None:
+    """``run()``, saying on stderr that ``what`` compiles when that takes over
+    _COMPILE_NOTICE_AFTER s, and when it is ready."""
     notice = threading.Timer(_COMPILE_NOTICE_AFTER, log.warning,
                              (f"vo3d-opt: compiling {what} (once; cached on disk afterwards)...",))
     notice.daemon = True
     notice.start()
-    return notice
+    try:
+        t0 = time.perf_counter()
+        run()
+        elapsed = time.perf_counter() - t0
+    finally:
+        notice.cancel()
+    if elapsed > _COMPILE_NOTICE_AFTER:
+        log.warning("vo3d-opt: %s is ready (%.1f s)", what, elapsed)
 
 
 def warm_up_many() -> None:
@@ -136,18 +137,10 @@ def warm_up_many() -> None:
     with _warm_lock:
         if _warm_many:
             return
-        notice = _compile_notice("the swarm kernel")
-        try:
-            t0 = time.perf_counter()
-            v = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
-            inputs = swarm.SwarmInputs.checked([[0.0, 0.0, 10.0], [10.0, 0.0, 10.0]], v, v, 3.0, [], None, 0.2,
-                                               55.0, None, None)
-            _select_many_compiled(Options(), inputs, 1, time.perf_counter())
-            elapsed = time.perf_counter() - t0
-        finally:
-            notice.cancel()
-        if elapsed > _COMPILE_NOTICE_AFTER:
-            log.warning("vo3d-opt: the swarm kernel is ready (%.1f s)", elapsed)
+        v = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+        inputs = swarm.SwarmInputs.checked([[0.0, 0.0, 10.0], [10.0, 0.0, 10.0]], v, v, 3.0, [], None, 0.2, 55.0,
+                                           None, None)
+        _compiling("the swarm kernel", lambda: _select_many_compiled(Options(), inputs, 1, time.perf_counter()))
         _warm_many = True
 
 

@@ -17,15 +17,17 @@ Sensing, for deciding vehicle i (the same rules as a loop of ``select`` calls wo
   non-cooperative neighbours with their own r_pz after the vehicles, filtered like the obstacles
   (surface distance ``max(‖p − c‖ − radius, 0)``).
 """
+
 from __future__ import annotations
 
 import itertools
 import math
 import numbers
 import threading
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numba
 import numpy as np
@@ -87,7 +89,9 @@ def _array(value: Any, name: str, shape: tuple[int, ...]) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected numbers of shape {shape}, got {type(value).__name__}") from None
+        raise ValueError(
+            f"{name}: expected numbers of shape {shape}, got {type(value).__name__}"
+        ) from None
     if arr.shape != shape:
         raise ValueError(f"{name}: expected shape {shape}, got {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -132,7 +136,8 @@ def mask(value: Any, name: str, n: int) -> np.ndarray:
 def distance(value: Any, name: str, *, allow_inf: bool = False) -> float:
     """A positive distance in m (inf allowed when ``allow_inf``)."""
     if not _real(value) or math.isnan(value) or value <= 0 or (math.isinf(value) and not allow_inf):
-        raise ValueError(f"{name}: must be a positive{'' if allow_inf else ' finite'} number of metres, got {value!r}")
+        what = "positive" if allow_inf else "positive finite"
+        raise ValueError(f"{name}: must be a {what} number of metres, got {value!r}")
     return float(value)
 
 
@@ -195,8 +200,12 @@ def _reach(r: np.ndarray | float) -> np.ndarray | float:
     return r * (1.0 + _REACH) + _REACH
 
 
-def vehicle_links(P: np.ndarray, who: np.ndarray, sensing_range: float, max_neighbors: int | None,
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def vehicle_links(
+    P: np.ndarray,
+    who: np.ndarray,
+    sensing_range: float,
+    max_neighbors: int | None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Each deciding vehicle's neighbours (vehicle indices, increasing) as (span, idx): the
     vehicles within ``sensing_range`` (numpy's distance), or the ``max_neighbors`` nearest of
     them (equally near: the lower index first)."""
@@ -232,8 +241,15 @@ def _insertion(key_i: np.ndarray, key_d: np.ndarray, c: int, by_distance: bool) 
 
 
 @entry
-def neighbor_lists(a: np.ndarray, b: np.ndarray, dist: np.ndarray, sensing_range: float, place: np.ndarray,
-                   k: int, span: np.ndarray) -> np.ndarray:
+def neighbor_lists(
+    a: np.ndarray,
+    b: np.ndarray,
+    dist: np.ndarray,
+    sensing_range: float,
+    place: np.ndarray,
+    k: int,
+    span: np.ndarray,
+) -> np.ndarray:
     """The pairs (a[e], b[e]) at distance dist[e] as each deciding vehicle's neighbour list
     (``place``: a vehicle's row, -1 when it does not decide): those within ``sensing_range``,
     the k nearest of them when k >= 0 (ties: the lower index), in increasing index order, into
@@ -264,13 +280,13 @@ def neighbor_lists(a: np.ndarray, b: np.ndarray, dist: np.ndarray, sensing_range
     for r in range(D):
         c = start[r + 1] - start[r]
         if c > _SMALL_ROW:  # a crowd: sorting with allocations is cheaper than insertion
-            row, d = idx[start[r]:start[r + 1]], near[start[r]:start[r + 1]]
+            row, d = idx[start[r] : start[r + 1]], near[start[r] : start[r + 1]]
             by_index = np.argsort(row)
             row, d = row[by_index], d[by_index]
             if 0 <= k < c:
                 row = np.sort(row[np.argsort(d, kind="mergesort")[:k]])  # stable: ties by index
             c = row.shape[0]
-            out[m:m + c] = row
+            out[m : m + c] = row
         else:
             for q in range(c):  # by index, then (stable) by distance: ties keep the lower index
                 key_i[q], key_d[q] = idx[start[r] + q], near[start[r] + q]
@@ -279,7 +295,7 @@ def neighbor_lists(a: np.ndarray, b: np.ndarray, dist: np.ndarray, sensing_range
                 _insertion(key_i, key_d, c, True)
                 c = k
                 _insertion(key_i, key_d, c, False)
-            out[m:m + c] = key_i[:c]
+            out[m : m + c] = key_i[:c]
         span[r, 0] = m
         m += c
         span[r, 1] = m
@@ -293,8 +309,14 @@ def _all(D: int, m: int) -> tuple[np.ndarray, np.ndarray]:
     return span, np.arange(m, dtype=np.int64)
 
 
-def _near(tree: cKDTree | None, points: np.ndarray, centres: np.ndarray, bound: np.ndarray,
-          surface: Any, rng: float) -> tuple[np.ndarray, np.ndarray]:
+def _near(
+    tree: cKDTree | None,
+    points: np.ndarray,
+    centres: np.ndarray,
+    bound: np.ndarray,
+    surface: Any,
+    rng: float,
+) -> tuple[np.ndarray, np.ndarray]:
     """(vehicle, item) pairs with item m's surface within ``rng`` of the vehicle:
     candidates from ``tree`` (over ``points``) within rng + bound[m] of centres[m], then
     ``surface(m, pts)`` decides."""
@@ -312,8 +334,11 @@ def _near(tree: cKDTree | None, points: np.ndarray, centres: np.ndarray, bound: 
     return np.concatenate(rows), np.concatenate(cols)
 
 
-def obstacle_links(Pd: np.ndarray, obstacles: Sequence[Cylinder | Box], obstacle_range: float | None,
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def obstacle_links(
+    Pd: np.ndarray,
+    obstacles: Sequence[Cylinder | Box],
+    obstacle_range: float | None,
+) -> tuple[np.ndarray, np.ndarray]:
     """The obstacles each deciding vehicle (positions ``Pd``) takes into account, as (span, idx)."""
     D, m = Pd.shape[0], len(obstacles)
     if obstacle_range is None or m == 0 or D == 0:
@@ -321,15 +346,26 @@ def obstacle_links(Pd: np.ndarray, obstacles: Sequence[Cylinder | Box], obstacle
     centres = np.array([o.center for o in obstacles], dtype=float).reshape(m, 2)
     # Any point of the footprint is within this of the centre: the surface is at least
     # (horizontal distance - bound) away.
-    bound = np.array([o.radius if isinstance(o, Cylinder) else 0.5 * math.hypot(*o.size)
-                      for o in obstacles], dtype=float)
-    rows, cols = _near(cKDTree(Pd[:, :2]), Pd, centres, bound,
-                       lambda k, pts: obstacles[k].surface_distance(pts), obstacle_range)
+    bound = np.array(
+        [o.radius if isinstance(o, Cylinder) else 0.5 * math.hypot(*o.size) for o in obstacles],
+        dtype=float,
+    )
+    rows, cols = _near(
+        cKDTree(Pd[:, :2]),
+        Pd,
+        centres,
+        bound,
+        lambda k, pts: obstacles[k].surface_distance(pts),
+        obstacle_range,
+    )
     return _spans(rows, cols, D)
 
 
-def sphere_links(Pd: np.ndarray, spheres: np.ndarray, obstacle_range: float | None,
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def sphere_links(
+    Pd: np.ndarray,
+    spheres: np.ndarray,
+    obstacle_range: float | None,
+) -> tuple[np.ndarray, np.ndarray]:
     """The static spheres each deciding vehicle takes into account, as (span, idx)."""
     D, s = Pd.shape[0], spheres.shape[0]
     if obstacle_range is None or s == 0 or D == 0:
@@ -368,9 +404,23 @@ class SwarmInputs:
         return np.flatnonzero(self.deciding).astype(np.int64)
 
     @classmethod
-    def checked(cls, positions: Any, velocities: Any, preferred_velocities: Any, r_pz: Any, obstacles: Any,
-                limits: Any, dt: Any, sensing_range: Any, max_neighbors: Any, decide: Any, *,
-                obstacle_range: Any = None, spheres: Any = None, max_speed: Any = None) -> "SwarmInputs":
+    def checked(
+        cls,
+        positions: Any,
+        velocities: Any,
+        preferred_velocities: Any,
+        r_pz: Any,
+        obstacles: Any,
+        limits: Any,
+        dt: Any,
+        sensing_range: Any,
+        max_neighbors: Any,
+        decide: Any,
+        *,
+        obstacle_range: Any = None,
+        spheres: Any = None,
+        max_speed: Any = None,
+    ) -> SwarmInputs:
         """The arguments of ``select_many``, checked: ``ValueError`` naming a bad one."""
         P = points(positions, "positions")
         n = P.shape[0]
@@ -379,22 +429,33 @@ class SwarmInputs:
             raise ValueError(f"limits: expected Limits, got {type(limits).__name__}")
         if not (_real(dt) and math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt: must be a positive finite number of seconds, got {dt!r}")
-        return cls(P=P, V=points(velocities, "velocities", n), W=points(preferred_velocities, "preferred_velocities", n),
-                   R=radii(r_pz, "r_pz", n), obstacles=obstacle_list(obstacles), limits=limits, dt=float(dt),
-                   bounds=vehicle_limits(limits, float(dt), n, max_speed), deciding=mask(decide, "decide", n),
-                   sensing_range=distance(sensing_range, "sensing_range", allow_inf=True),
-                   max_neighbors=count(max_neighbors, "max_neighbors"),
-                   obstacle_range=None if obstacle_range is None else distance(obstacle_range, "obstacle_range",
-                                                                               allow_inf=True),
-                   spheres=sphere_rows(spheres))
+        return cls(
+            P=P,
+            V=points(velocities, "velocities", n),
+            W=points(preferred_velocities, "preferred_velocities", n),
+            R=radii(r_pz, "r_pz", n),
+            obstacles=obstacle_list(obstacles),
+            limits=limits,
+            dt=float(dt),
+            bounds=vehicle_limits(limits, float(dt), n, max_speed),
+            deciding=mask(decide, "decide", n),
+            sensing_range=distance(sensing_range, "sensing_range", allow_inf=True),
+            max_neighbors=count(max_neighbors, "max_neighbors"),
+            obstacle_range=None
+            if obstacle_range is None
+            else distance(obstacle_range, "obstacle_range", allow_inf=True),
+            spheres=sphere_rows(spheres),
+        )
 
     def links(self) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
         """(span, idx) of the deciding vehicles' neighbours, spheres and obstacles."""
         who = self.who
         Pd = np.ascontiguousarray(self.P[who])
-        return (vehicle_links(self.P, who, self.sensing_range, self.max_neighbors),
-                sphere_links(Pd, self.spheres, self.obstacle_range),
-                obstacle_links(Pd, self.obstacles, self.obstacle_range))
+        return (
+            vehicle_links(self.P, who, self.sensing_range, self.max_neighbors),
+            sphere_links(Pd, self.spheres, self.obstacle_range),
+            obstacle_links(Pd, self.obstacles, self.obstacle_range),
+        )
 
     def arrays(self) -> Swarm:
         """The ``Swarm`` arrays of the compiled call."""
@@ -402,15 +463,27 @@ class SwarmInputs:
         agents[:, 0:3], agents[:, 3:6], agents[:, 6:9] = self.P, self.V, self.W
         agents[:, 9], agents[:, 10] = self.R, self.deciding
         (nb_span, nb_idx), (sp_span, sp_idx), (ob_span, ob_idx) = self.links()
-        return Swarm(agents, self.bounds, self.who, nb_span, nb_idx,
-                     np.ascontiguousarray(self.spheres[:, [0, 1, 2, 4]]), sp_span, sp_idx,
-                     prism_rows(self.obstacles), ob_span, ob_idx)
+        return Swarm(
+            agents,
+            self.bounds,
+            self.who,
+            nb_span,
+            nb_idx,
+            np.ascontiguousarray(self.spheres[:, [0, 1, 2, 4]]),
+            sp_span,
+            sp_idx,
+            prism_rows(self.obstacles),
+            ob_span,
+            ob_idx,
+        )
 
     def vehicle_limits(self, i: int) -> Limits:
         """Vehicle i's ``Limits`` (its own v_max under ``max_speed``)."""
         if self.bounds[i, 1] == self.limits.v_max:
             return self.limits
-        return self.limits.model_copy(update={"speed": (self.limits.v_min, float(self.bounds[i, 1]))})
+        return self.limits.model_copy(
+            update={"speed": (self.limits.v_min, float(self.bounds[i, 1]))}
+        )
 
 
 # ------------------------------------------------------------------------------ threads
@@ -435,15 +508,23 @@ def thread_count(threads: Any) -> int:
     """``threads`` checked (an integer in [1, NUMBA_NUM_THREADS]); None: numba's current setting
     (``numba.set_num_threads``, else the ``NUMBA_NUM_THREADS`` environment variable, else every
     core)."""
-    limit = numba.config.NUMBA_NUM_THREADS
+    limit = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
     if threads is None:
-        return numba.get_num_threads()
-    if not isinstance(threads, numbers.Integral) or isinstance(threads, bool) or not 1 <= threads <= limit:
-        raise ValueError(f"threads: must be an integer in [1, {limit}] (NUMBA_NUM_THREADS), got {threads!r}")
+        return int(numba.get_num_threads())
+    if (
+        not isinstance(threads, numbers.Integral)
+        or isinstance(threads, bool)
+        or not 1 <= int(threads) <= limit
+    ):
+        raise ValueError(
+            f"threads: must be an integer in [1, {limit}] (NUMBA_NUM_THREADS), got {threads!r}"
+        )
     return int(threads)
 
 
-def decide_all(sw: Swarm, packed: tuple[np.ndarray, np.ndarray, np.ndarray], threads: int) -> np.ndarray:
+def decide_all(
+    sw: Swarm, packed: tuple[np.ndarray, np.ndarray, np.ndarray], threads: int
+) -> np.ndarray:
     """Every deciding vehicle of ``sw`` by the compiled ``decide_range``: (D, MANY_OUT_SIZE).
     With several threads, each takes the next CHUNK vehicles until none are left (the compiled
     code releases the GIL); the rows do not depend on who computed them."""

@@ -92,8 +92,8 @@ class RVO2Step:
 
     formulation = FORMULATION
 
-    def __init__(self, sc: Scenario, *, time_horizon: float | None = None, max_neighbors: int | None = None,
-                 radius_factor: float = 0.5) -> None:
+    def __init__(self, sc: Scenario, *, time_horizon: float | None = None,
+                 max_neighbors: int | None = None, radius_factor: float = 0.5) -> None:
         rvo23d = _rvo23d()
         if sc.obstacles or sc.spheres:
             raise ValueError(f"{sc.name}: the RVO2-3D baseline runs agent-only scenarios "
@@ -108,19 +108,19 @@ class RVO2Step:
         self.vrange = float(sc.sensing.vehicle_range)
         self.horizon, self.radii, self.vmax = horizon, sc.r_pz * radius_factor, sc.max_speed
         self.solver = f"rvo23d {version()}"
-        self.sim = rvo23d.PyRVOSimulator(dt, self.vrange, self.neighbours, horizon, float(self.radii.max()),
-                                         float(self.vmax.max()))
+        self.sim = rvo23d.PyRVOSimulator(dt, self.vrange, self.neighbours, horizon,
+                                         float(self.radii.max()), float(self.vmax.max()))
         for i in range(n):
-            self.sim.addAgent(tuple(float(c) for c in sc.starts[i]), self.vrange, self.neighbours, horizon,
-                              float(self.radii[i]), float(self.vmax[i]), (0.0, 0.0, 0.0))
+            self.sim.addAgent(tuple(float(c) for c in sc.starts[i]), self.vrange, self.neighbours,
+                              horizon, float(self.radii[i]), float(self.vmax[i]), (0.0, 0.0, 0.0))
         self.frozen = np.zeros(n, dtype=bool)
         self.step_times: list[float] = []
 
     def decide(self, snap: Snapshot) -> StepDecision:
         sim, n = self.sim, snap.positions.shape[0]
-        for i in np.flatnonzero(~snap.deciding & ~self.frozen):  # arrived: hover, still seen
-            sim.setAgentMaxSpeed(int(i), 0.0)
-            self.frozen[i] = True
+        for a in np.flatnonzero(~snap.deciding & ~self.frozen):  # arrived: hover, still seen
+            sim.setAgentMaxSpeed(int(a), 0.0)
+            self.frozen[a] = True
         p, v, w = snap.positions.tolist(), snap.velocities.tolist(), snap.preferred.tolist()
         for i in range(n):
             sim.setAgentPosition(i, tuple(p[i]))
@@ -132,8 +132,8 @@ class RVO2Step:
         self.step_times.append(elapsed)
         u = np.array([sim.getAgentVelocity(i) for i in range(n)], dtype=float)
         share = np.where(snap.deciding, elapsed / max(1, int(snap.deciding.sum())), np.nan)
-        return StepDecision(commands=u, statuses=np.where(snap.deciding, STATUS, ""), decision_times=share,
-                            solve_times=share)
+        return StepDecision(commands=u, statuses=np.where(snap.deciding, STATUS, ""),
+                            decision_times=share, solve_times=share)
 
     def extra(self) -> dict[str, Any]:
         radius = self.radii.tolist() if len(np.unique(self.radii)) > 1 else float(self.radii[0])
@@ -149,7 +149,8 @@ def run_rvo2(scenario: Scenario | str, *, time_horizon: float | None = None,
     agent radius (0.5: pairs keep r_pz apart). ``max_steps`` caps the control steps like
     ``Simulator.run``."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    step = RVO2Step(sc, time_horizon=time_horizon, max_neighbors=max_neighbors, radius_factor=radius_factor)
+    step = RVO2Step(sc, time_horizon=time_horizon, max_neighbors=max_neighbors,
+                    radius_factor=radius_factor)
     return fly(sc, step, progress=progress, max_steps=max_steps)
 
 

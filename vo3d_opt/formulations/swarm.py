@@ -7,34 +7,34 @@ vehicles, each vehicle's ``nbrs`` and ``prisms`` rows are built from those lists
 ``kernel.decide_one`` decides for it: exactly what ``select`` computes for that vehicle, with
 no Python object per vehicle or neighbour.
 
-Parallel over vehicles: ``decide_range`` is compiled ``nogil`` and ``vo3d_opt.swarm.run_ranges``
+Parallel over vehicles: ``decide_range`` is compiled ``nogil`` and ``vo3d_opt.swarm.decide_all``
 runs ranges of vehicles on several threads at once. Not numba's ``prange``: a ``parallel=True``
 kernel compiles the whole decision kernel's code twice more (the parfor body and its caller
 are separate LLVM modules, each linking and generating machine code for everything
 ``decide_one`` calls), measured 14 s against 4.4 s for this one on the 2-core machine. The
 vehicles are independent, so the answers do not depend on the number of threads.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
-import numba
-
-from .._jit import entry
+from .._jit import _COMMON, entry
+from .common import bounds_of, config_of
+from .kernel import OUT_SIZE, decide_one
 
 #: Inlined into ``decide_range`` at numba's IR level (allocating, unlike ``_jit.inline``): no
 #: LLVM module of their own, each of which would link and generate code for ``decide_one``'s
 #: whole call tree again (a few seconds of compilation each).
-inline_alloc = numba.njit(cache=True, error_model="numpy", nogil=True, no_cpython_wrapper=True, inline="always")
-from .common import bounds_of, config_of
-from .kernel import OUT_SIZE, decide_one
+inline_alloc = numba.njit(**_COMMON, no_cpython_wrapper=True, inline="always")  # type: ignore[call-overload]
 
 #: Columns of ``Swarm.agents``: position (3), velocity (3), preferred velocity (3), r_pz,
 #: cooperative (1: it decides, 0: it keeps its velocity whatever the others do).
 AGENT_COLUMNS = 11
-#: ``decide_many``'s output row: ``kernel.decide``'s (velocity, status, phi, round, solved),
+#: ``decide_range``'s output row: ``kernel.decide``'s (velocity, status, phi, round, solved),
 #: then the vehicles and the static zones (spheres and obstacles) the vehicle took into account.
 MANY_OUT_SIZE = OUT_SIZE + 2
 
@@ -86,12 +86,22 @@ def vehicle_rows(sw: Swarm, d: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @inline_alloc
-def decide_vehicle(sw: Swarm, d: int, options: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray,
-                   out: np.ndarray) -> None:
+def decide_vehicle(
+    sw: Swarm,
+    d: int,
+    options: np.ndarray,
+    plane_tab: np.ndarray,
+    gen_tab: np.ndarray,
+    out: np.ndarray,
+) -> None:
     """``kernel.decide`` for vehicle who[d], into ``out`` (MANY_OUT_SIZE,)."""
     cfg = config_of(options, plane_tab, gen_tab)  # views, no copies: cheap per vehicle
     i, a = sw.who[d], sw.agents
-    p, v_now, v_pref = np.empty(3), np.empty(3), np.empty(3)  # C-contiguous, as decide_one is compiled for
+    p, v_now, v_pref = (
+        np.empty(3),
+        np.empty(3),
+        np.empty(3),
+    )  # C-contiguous, as decide_one is compiled for
     for c in range(3):
         p[c], v_now[c], v_pref[c] = a[i, c], a[i, 3 + c], a[i, 6 + c]
     nbrs, prisms = vehicle_rows(sw, d)
@@ -103,8 +113,15 @@ def decide_vehicle(sw: Swarm, d: int, options: np.ndarray, plane_tab: np.ndarray
 
 
 @entry
-def decide_range(sw: Swarm, lo: int, hi: int, options: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray,
-                 out: np.ndarray) -> None:
+def decide_range(
+    sw: Swarm,
+    lo: int,
+    hi: int,
+    options: np.ndarray,
+    plane_tab: np.ndarray,
+    gen_tab: np.ndarray,
+    out: np.ndarray,
+) -> None:
     """Deciding vehicles lo <= d < hi of ``sw``: row d of ``out`` (D, MANY_OUT_SIZE) for vehicle
     who[d]. The options as ``Options.packed``. Compiled ``nogil``: ``vo3d_opt.swarm`` runs
     several ranges at once on threads."""

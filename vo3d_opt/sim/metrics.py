@@ -88,7 +88,8 @@ def _segment_min(p0: np.ndarray, p1: np.ndarray, ii: np.ndarray, jj: np.ndarray)
     return np.minimum(ends, np.linalg.norm(r0 + t[:, None] * w, axis=-1))
 
 
-def close_pairs(positions: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def close_pairs(positions: np.ndarray, threshold: float,
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(i, j, dmin), i < j: every vehicle pair whose closest approach over the run (continuous
     along the straight segments) is below ``threshold``, and the closest pair of the run
     whatever its distance (first, when it is not below ``threshold``); dmin is exact, as
@@ -109,7 +110,8 @@ def close_pairs(positions: np.ndarray, threshold: float) -> tuple[np.ndarray, np
     keys, dists = [], []
     for k in range(max(S - 1, 1)):
         p0, p1 = positions[k], positions[min(k + 1, S - 1)]
-        reach = max(threshold, min(best, bound)) + 2.0 * float(np.max(np.linalg.norm(p1 - p0, axis=1)))
+        longest = float(np.max(np.linalg.norm(p1 - p0, axis=1)))
+        reach = max(threshold, min(best, bound)) + 2.0 * longest
         pairs = cKDTree(p0).query_pairs(reach * (1 + 1e-9) + 1e-9, output_type="ndarray")
         if not pairs.size:
             continue
@@ -300,9 +302,11 @@ def _limits_and_paths(record: RunRecord) -> tuple[int, int, np.ndarray]:
     speed_bad, path = 0, np.zeros(record.n_agents)
     for a in range(0, record.steps, _CHUNK):
         speed = np.linalg.norm(record.velocities[a: a + _CHUNK], axis=-1)
-        bad = (speed > sc.max_speed[None, :] + TOL) | (record.decided[a: a + _CHUNK] & (speed < v_lo - TOL))
+        slow = record.decided[a: a + _CHUNK] & (speed < v_lo - TOL)
+        bad = (speed > sc.max_speed[None, :] + TOL) | slow
         speed_bad += int(np.count_nonzero(bad))
-        path += np.linalg.norm(np.diff(record.positions[a: a + _CHUNK + 1], axis=0), axis=-1).sum(axis=0)
+        steps = np.diff(record.positions[a: a + _CHUNK + 1], axis=0)
+        path += np.linalg.norm(steps, axis=-1).sum(axis=0)
     return altitude, speed_bad, path
 
 

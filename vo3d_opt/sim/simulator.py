@@ -162,7 +162,7 @@ class RunRecord:
         out[hit] = self.times[first[hit]]
         return out
 
-    def same_trajectory(self, other: "RunRecord") -> bool:
+    def same_trajectory(self, other: RunRecord) -> bool:
         """Bitwise-equal positions, velocities, commands and statuses (timing excluded)."""
         return (
             np.array_equal(self.positions, other.positions)
@@ -196,7 +196,8 @@ class RunBuffers:
     def put_statuses(self, k: int, statuses: np.ndarray, mask: np.ndarray) -> None:
         """Row k of the statuses: ``statuses`` where ``mask``, "" elsewhere."""
         given = np.asarray(statuses)[mask]
-        names, codes = np.unique(given.astype(str) if given.dtype == object else given, return_inverse=True)
+        given = given.astype(str) if given.dtype == object else given
+        names, codes = np.unique(given, return_inverse=True)
         lookup = np.empty(len(names), dtype=np.uint16)
         for c, name in enumerate(names):
             if name not in self.status_names:
@@ -282,7 +283,9 @@ def fly(sc: Scenario, step: DecisionStep, *,
             w = np.asarray(prefer(p), dtype=float)
             w[done] = 0.0
             deciding = ~done
-            out = step.decide(Snapshot(k=k, t=k * dt, positions=p, velocities=v, preferred=w, deciding=deciding))
+            snap = Snapshot(k=k, t=k * dt, positions=p, velocities=v, preferred=w,
+                            deciding=deciding)
+            out = step.decide(snap)
             u, statuses = _checked_commands(out, deciding)
             buf.pref[k], buf.cmd[k], buf.decided[k] = w, u, deciding
             buf.put_statuses(k, statuses, deciding)
@@ -303,7 +306,8 @@ def fly(sc: Scenario, step: DecisionStep, *,
             bar.refresh()
     finally:
         bar.close()
-    return buf.record(sc, step.formulation, step.solver, steps, time.perf_counter() - t_start, step.extra())
+    wall = time.perf_counter() - t_start
+    return buf.record(sc, step.formulation, step.solver, steps, wall, step.extra())
 
 
 def make_selector(formulation: str | None = None, solver: str | None = None,

@@ -463,7 +463,8 @@ def close_pairs(points: np.ndarray, reach: np.ndarray, most: float) -> list[tupl
 
     if len(points) < 2:
         return []
-    found = cKDTree(points).query_pairs(2.0 * float(most) * (1 + 1e-9) + 1e-9, output_type="ndarray")
+    within = 2.0 * float(most) * (1 + 1e-9) + 1e-9
+    found = cKDTree(points).query_pairs(within, output_type="ndarray")
     i, j = found.max(axis=1), found.min(axis=1)
     order = np.lexsort((j, i))
     i, j = i[order], j[order]

@@ -10,6 +10,7 @@ random horizontal direction (climbing or descending a little) to a goal that is 
 on its way do not depend on N: the cost per agent-step of a method that scales should not
 either.
 """
+
 from __future__ import annotations
 
 import math
@@ -38,9 +39,13 @@ class _Grid:
     def clear(self, p: np.ndarray) -> bool:
         """Whether p is at least ``spacing`` from every point added."""
         x, y, z = self._key(p)
-        return all(np.sum((p - q) ** 2) >= self.spacing ** 2
-                   for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)
-                   for q in self.cells.get((x + dx, y + dy, z + dz), ()))
+        return all(
+            np.sum((p - q) ** 2) >= self.spacing**2
+            for dx in (-1, 0, 1)
+            for dy in (-1, 0, 1)
+            for dz in (-1, 0, 1)
+            for q in self.cells.get((x + dx, y + dy, z + dz), ())
+        )
 
     def add(self, p: np.ndarray) -> None:
         self.cells.setdefault(self._key(p), []).append(p)
@@ -62,11 +67,22 @@ def _place(n: int, spacing: float, propose: Any, what: str) -> np.ndarray:
     return out
 
 
-def random_crossing_scenario(n: int, *, seed: int = 0, volume_per_agent: float = 40.0 ** 3,
-                             distance: float = 200.0, slab: tuple[float, float] = (10.0, 90.0),
-                             spacing: float = 25.0, r_pz: float = 10.0, v_max: float = 4.0,
-                             dt: float = 0.2, vehicle_range: float = 55.0, radius: float = 0.5,
-                             decimals: int | None = 2, name: str | None = None) -> Scenario:
+def random_crossing_scenario(
+    n: int,
+    *,
+    seed: int = 0,
+    volume_per_agent: float = 40.0**3,
+    distance: float = 200.0,
+    slab: tuple[float, float] = (10.0, 90.0),
+    spacing: float = 25.0,
+    r_pz: float = 10.0,
+    v_max: float = 4.0,
+    dt: float = 0.2,
+    vehicle_range: float = 55.0,
+    radius: float = 0.5,
+    decimals: int | None = 2,
+    name: str | None = None,
+) -> Scenario:
     """The constant-density random crossing of ``n`` agents (module docstring), seeded.
 
     The slab spans altitudes ``slab`` (the altitude limits are 10 m wider on each side) and a
@@ -87,8 +103,13 @@ def random_crossing_scenario(n: int, *, seed: int = 0, volume_per_agent: float =
 
     def goal(i: int) -> np.ndarray | None:
         heading, climb = rng.uniform(0.0, 2 * math.pi), math.radians(rng.uniform(-10.0, 10.0))
-        g = P[i] + distance * np.array([math.cos(heading) * math.cos(climb),
-                                        math.sin(heading) * math.cos(climb), math.sin(climb)])
+        g = P[i] + distance * np.array(
+            [
+                math.cos(heading) * math.cos(climb),
+                math.sin(heading) * math.cos(climb),
+                math.sin(climb),
+            ]
+        )
         return g if z_lo <= g[2] <= z_hi else None
 
     G = _place(n, spacing, goal, "goal")
@@ -97,18 +118,23 @@ def random_crossing_scenario(n: int, *, seed: int = 0, volume_per_agent: float =
     width = len(str(n - 1))
     data = {
         "name": name or f"random-crossing-{n}",
-        "description": (f"{n} UAVs start at random in a {side:.0f} m square slab of airspace, "
-                        f"{z_lo:g}-{z_hi:g} m high (one UAV per {volume_per_agent:,.0f} m3, at least "
-                        f"{spacing:g} m apart), and each flies {distance:g} m in a random direction "
-                        f"to a goal at least {spacing:g} m from the others, all at once. Generated "
-                        f"by vo3d_opt.sim.scenario.swarms.random_crossing_scenario({n}, seed={seed})."),
+        "description": (
+            f"{n} UAVs start at random in a {side:.0f} m square slab of airspace, "
+            f"{z_lo:g}-{z_hi:g} m high (one UAV per {volume_per_agent:,.0f} m3, at least "
+            f"{spacing:g} m apart), and each flies {distance:g} m in a random direction "
+            f"to a goal at least {spacing:g} m from the others, all at once. Generated "
+            f"by vo3d_opt.sim.scenario.swarms.random_crossing_scenario({n}, seed={seed})."
+        ),
         "dt": float(dt),
         "max_time": float(math.ceil(2.0 * distance / v_max + 30.0)),
         "goal_tolerance": 1.0,
         "limits": {"speed": [0.0, float(v_max)], "altitude": [z_lo - 10.0, z_hi + 10.0]},
         "sensing": {"vehicle_range": float(vehicle_range), "obstacle_range": float(vehicle_range)},
         "defaults": {"r_pz": float(r_pz), "radius": float(radius), "max_speed": float(v_max)},
-        "agents": [{"id": f"u{i:0{width}d}", "start": P[i].tolist(), "goal": G[i].tolist()} for i in range(n)],
+        "agents": [
+            {"id": f"u{i:0{width}d}", "start": P[i].tolist(), "goal": G[i].tolist()}
+            for i in range(n)
+        ],
     }
     return scenario_from_dict(data, source=f"<random_crossing_scenario({n})>")
 
