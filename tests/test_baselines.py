@@ -17,7 +17,7 @@ from vo3d_opt.baselines.rvo2 import (
 )
 from vo3d_opt.sim.metrics import CONTRACT_KEYS
 from vo3d_opt.sim.scenario import bundled_dir, scenario_from_dict
-from vo3d_opt.sim.simulator import Simulator
+from vo3d_opt.sim.traffic import goal_velocity
 
 
 
@@ -56,7 +56,7 @@ def test_record_shapes_and_the_shared_preferred_velocity_rule(swap4):
     assert rec.positions.shape == (T + 1, n, 3) and rec.velocities.shape == (T, n, 3)
     assert rec.arrived.shape == (T + 1, n) and rec.decided.shape == (T, n)
     assert np.allclose(rec.positions[0], sc.starts, atol=1e-4)  # RVO2-3D stores float32
-    expected = Simulator(sc, selector=None).preferred_velocity(sc.starts)
+    expected = goal_velocity(sc.starts, sc.goals, sc.max_speed, sc.dt)
     assert np.allclose(rec.preferred[0], expected)
     # the positions follow p += v dt with the recorded velocities
     assert np.allclose(np.diff(rec.positions, axis=0), rec.velocities * sc.dt, atol=1e-3)

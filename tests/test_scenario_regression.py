@@ -1,6 +1,8 @@
 """Regression over the bundled scenarios: every one under the default formulation (plane_qp),
 and the paper's cases also under the paper's sampled selection, must end with every agent
-arrived, no collision, no protected-zone intrusion and no speed or altitude violation."""
+arrived, no collision, no protected-zone intrusion and no speed or altitude violation. The
+swarm-sized scenarios are flown by benchmarks/bench_swarm.py instead (a test flies the first
+steps of each: tests/test_sim_loop.py)."""
 from __future__ import annotations
 
 import json
@@ -12,7 +14,9 @@ from vo3d_opt.sim.scenario import bundled_files
 from vo3d_opt.sim.simulator import run_scenario
 
 
-FILES = bundled_files()
+#: Bundled scenarios too large for the suite's time budget.
+SWARMS = {"random-crossing-1000"}
+FILES = [p for p in bundled_files() if p.stem not in SWARMS]
 PAPER = [p for p in FILES if p.stem.startswith("paper-")]
 CASES = [pytest.param(p, "plane_qp", id=f"{p.stem}-plane_qp") for p in FILES] + [
     pytest.param(p, "sampled", id=f"{p.stem}-sampled") for p in PAPER

@@ -1,9 +1,12 @@
 """The ``vo3d`` command line (contract §3).
 
 * ``vo3d run SCENARIO [--formulation F] [--solver S] [--json] [--out DIR]`` runs one scenario,
-  every agent deciding for itself; a table by default, exactly one JSON object on stdout with
-  ``--json``; ``--out DIR`` writes ``trajectories.csv``, ``summary.json`` and the figures
-  (``--format png|pdf|svg``, ``--dpi``, ``--zones``), and with ``--animate`` ``animation.gif``.
+  every agent deciding for itself (the whole swarm in one ``select_many`` call per step); a
+  table by default, exactly one JSON object on stdout with ``--json``; ``--out DIR`` writes
+  ``trajectories.parquet`` (and ``trajectories.csv`` up to ``report.CSV_MAX_ROWS`` rows),
+  ``summary.json`` and the figures (``--format png|pdf|svg``, ``--dpi``, ``--zones``), and with
+  ``--animate`` ``animation.gif`` (``vo3d_opt.report``). The decisions use every core; set the
+  ``NUMBA_NUM_THREADS`` environment variable to use fewer.
 * ``vo3d compare SCENARIO --formulations A B --solvers X Y [--json]`` runs every combination and
   prints one row per combination with the summary's columns (a JSON list with ``--json``).
 * ``vo3d list`` lists the bundled scenarios: name, agents, obstacles, first sentence.
@@ -25,7 +28,6 @@ import contextlib
 import ctypes
 import json
 import logging
-import math
 import os
 import re
 import sys
@@ -35,15 +37,14 @@ from pathlib import Path
 from typing import Any
 
 from vo3d_opt import __version__
+from vo3d_opt.report import CSV_MAX_ROWS, rounded, write_outputs
 from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FORMULATIONS
 from vo3d_opt.sim.metrics import CONTRACT_KEYS, summarize
 from vo3d_opt.sim.scenario import Scenario, ScenarioError, bundled_files, load_scenario
-from vo3d_opt.sim.simulator import DEFAULT_FORMULATION, Simulator, scenario_selector, write_csv
+from vo3d_opt.sim.simulator import DEFAULT_FORMULATION, Simulator, scenario_selector
 from vo3d_opt.types import one_line
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
-#: Significant digits of the floats in JSON output (17 show rounding noise: 31.200000000000003).
-JSON_DIGITS = 12
 
 log = logging.getLogger("vo3d_opt.cli")
 
@@ -82,18 +83,8 @@ def configure_logging(verbosity: int = 0) -> None:
 
 
 def _json(value: Any) -> str:
-    """One line of JSON with floats cut to ``JSON_DIGITS`` significant digits."""
-    return json.dumps(_rounded(value), allow_nan=False)
-
-
-def _rounded(value: Any) -> Any:
-    if isinstance(value, float) and math.isfinite(value):
-        return float(f"{value:.{JSON_DIGITS}g}")
-    if isinstance(value, dict):
-        return {k: _rounded(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_rounded(v) for v in value]
-    return value
+    """One line of JSON with floats cut to ``report.JSON_DIGITS`` significant digits."""
+    return json.dumps(rounded(value), allow_nan=False)
 
 
 def _load(arg: str) -> Scenario:
@@ -208,33 +199,6 @@ def _print_table(rows: list[dict[str, Any]], keys: list[str]) -> None:
     print("  ".join(k.ljust(w) for k, w in zip(keys, widths, strict=True)).rstrip())
     for c in cells:
         print("  ".join(v.ljust(w) for v, w in zip(c, widths, strict=True)).rstrip())
-
-
-def write_outputs(
-    record: Any,
-    summary: dict[str, Any],
-    out: Path,
-    *,
-    plot_options: dict[str, Any] | None = None,
-    animate: bool = False,
-) -> list[Path]:
-    """trajectories.csv, summary.json, the figures (``plot_options``: ``write_plots``'
-    keywords) and with ``animate`` animation.gif of a run in ``out``; the paths."""
-    from vo3d_opt.plots import skipped_plots, write_plots  # matplotlib only when asked for
-
-    out.mkdir(parents=True, exist_ok=True)
-    written = [write_csv(record, out / "trajectories.csv")]
-    path = out / "summary.json"
-    path.write_text(json.dumps(_rounded(summary), indent=2, allow_nan=False) + "\n")
-    written.append(path)
-    written += write_plots(record, out, **(plot_options or {}))
-    for name, why in skipped_plots(record).items():
-        log.info("not drawn: %s (%s)", name, why)
-    if animate:
-        from vo3d_opt.animation import write_animation
-
-        written.append(write_animation(record, out / "animation.gif"))
-    return written
 
 
 def _figure_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -537,7 +501,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--out",
         metavar="DIR",
-        help="also write trajectories.csv, summary.json and the figures to DIR "
+        help="also write trajectories.parquet, trajectories.csv (runs of at most "
+        f"{CSV_MAX_ROWS:,} agent-samples), summary.json and the figures to DIR "
         "(created; checked before the run)",
     )
     run.add_argument(

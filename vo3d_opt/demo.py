@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from vo3d_opt.cli import write_outputs
+from vo3d_opt.report import write_outputs
 from vo3d_opt.sim.metrics import summarize
 from vo3d_opt.sim.scenario import bundled_dir, load_scenario
 from vo3d_opt.sim.simulator import Simulator, scenario_selector
@@ -15,7 +15,8 @@ SCENARIO = "paper-case1-ten-uav-crossing.yaml"
 
 
 def main(out_dir: str | Path = Path("out") / "demo") -> int:
-    """Run case 1, write ./out/demo/{summary.json, trajectories.csv, *.png}, print where."""
+    """Run case 1, write ./out/demo/{summary.json, trajectories.parquet, trajectories.csv, *.png},
+    print where."""
     out = Path(out_dir)
     sc = load_scenario(bundled_dir() / SCENARIO)
     sel, formulation, solver = scenario_selector(sc)

@@ -28,6 +28,7 @@ from matplotlib import colormaps, rc_context
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.cm import ScalarMappable
+from matplotlib.collections import LineCollection
 from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
@@ -35,7 +36,7 @@ from matplotlib.patches import Circle, Patch, Polygon
 from matplotlib.ticker import MaxNLocator
 from matplotlib.transforms import Bbox
 from mpl_toolkits.mplot3d import Axes3D, proj3d
-from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
 from vo3d_opt.sim.metrics import (
     Approach,
@@ -54,6 +55,9 @@ FORMATS = ("png", "pdf", "svg")
 DEFAULT_DPI = 150
 #: Above this many agents, a colour bar names them instead of a legend.
 LEGEND_MAX_AGENTS = 12
+#: Above this many agents the paths, starts and goals are drawn as one collection each (a
+#: thousand separate lines take a matplotlib figure most of a minute).
+SWARM_AGENTS = 100
 #: "closest": the protected spheres of the closest pair at its closest approach.
 DEFAULT_ZONES = "closest"
 
@@ -379,7 +383,13 @@ def figure_trajectories_3d(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -
         _sphere_3d(ax, s.center, s.radius, color="0.45", linewidth=0.4,
                    alpha=0.6 if s.physical else 0.3, linestyle="-" if s.physical else ":")
     p = record.positions
-    for i in range(record.n_agents):
+    if record.n_agents > SWARM_AGENTS:  # one artist per kind, not per agent: seconds, not minutes
+        paths = Line3DCollection(list(p.transpose(1, 0, 2)), colors=colors, linewidths=0.6)
+        ax.add_collection3d(paths)
+        for point, marker, size in ((p[0], "o", 4), (sc.goals, "x", 6)):
+            ax.scatter(point[:, 0], point[:, 1], point[:, 2], color=colors, marker=marker, s=size,
+                       depthshade=False)
+    for i in range(record.n_agents if record.n_agents <= SWARM_AGENTS else 0):
         ax.plot(p[:, i, 0], p[:, i, 1], p[:, i, 2], color=colors[i], linewidth=1.2)
         for point, marker, size in ((p[0, i], "o", 14), (sc.goals[i], "x", 22)):
             ax.scatter(point[0], point[1], point[2], color=colors[i], marker=marker, s=size,
@@ -467,7 +477,12 @@ def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figur
     colors = agent_colors(record.n_agents)
     draw_obstacles_2d(ax, record)
     p = record.positions
-    for i in range(record.n_agents):
+    if record.n_agents > SWARM_AGENTS:  # one artist per kind, not per agent
+        paths = LineCollection(list(p[:, :, :2].transpose(1, 0, 2)), colors=colors, linewidths=0.6)
+        ax.add_collection(paths)
+        ax.scatter(p[0, :, 0], p[0, :, 1], color=colors, marker="o", s=4)
+        ax.scatter(sc.goals[:, 0], sc.goals[:, 1], color=colors, marker="x", s=6)
+    for i in range(record.n_agents if record.n_agents <= SWARM_AGENTS else 0):
         ax.plot(p[:, i, 0], p[:, i, 1], color=colors[i], linewidth=1.2)
         ax.plot(*p[0, i, :2], "o", color=colors[i], markersize=4)
         ax.plot(*sc.goals[i, :2], "x", color=colors[i], markersize=6)

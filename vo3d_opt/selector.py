@@ -1,4 +1,5 @@
-"""The public API: ``VelocitySelector(formulation, solver).select(...)`` (contracts §1).
+"""The public API: ``VelocitySelector(formulation, solver).select(...)`` (contracts §1) and
+``select_many(...)`` for a whole swarm in one call (contracts §4).
 
 With the default formulation and solver (``plane_qp`` on ``exact2d``) a decision is: validate
 → arrays → one compiled call (``formulations/kernel.py``) → ``Decision``. The other
@@ -12,16 +13,18 @@ import math
 import numbers
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import swarm
 from .formulations import cone_qp, kernel, nlp, plane_qp, sampled
 from .formulations.common import Bounds, Encounter, Options, Outcome, bounds_array, neighbor_rows, py_build_vos
 from .geometry.pyramid import prism_rows
 from .solvers import FEAS_TOL, NLP, QP, Backend, Result, available_qp_solvers, available_solvers, get_backend, standardise
 from .status import DECISION_STATUSES, Status
+from .swarm import SwarmDecision
 from .types import AgentState, Box, Cylinder, Limits, Neighbor, check_vector
 
 log = logging.getLogger(__name__)
@@ -37,6 +40,7 @@ DEFAULT_NLP_SOLVER = DEFAULT_SOLVERS["nlp"]
 _COMPILE_NOTICE_AFTER = 3.0
 _warm_lock = threading.Lock()
 _warm = False
+_warm_many = False
 
 
 @dataclass
@@ -100,26 +104,90 @@ def warm_up() -> None:
     with _warm_lock:
         if _warm:
             return
-        shown = threading.Event()
-
-        def tell() -> None:
-            log.warning("vo3d-opt: compiling the decision kernel (once per machine; numba caches it on disk)...")
-            shown.set()
-
-        notice = threading.Timer(_COMPILE_NOTICE_AFTER, tell)
-        notice.daemon = True
-        notice.start()
-        t0 = time.perf_counter()
-        try:
-            own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
-            nbrs = neighbor_rows([Neighbor(position=(10.0, 0.0, 10.0), velocity=(-1.0, 0.0, 0.0), r_pz=3.0)])
-            kernel.decide(own.position, own.velocity, check_vector((1.0, 0.0, 0.0), 3), nbrs, np.zeros((0, 4)),
-                          bounds_array(Limits(), 0.2), *Options().packed, np.empty(kernel.OUT_SIZE))
-        finally:
-            notice.cancel()
-        if shown.is_set():
-            log.warning("vo3d-opt: the decision kernel is ready (%.0f s)", time.perf_counter() - t0)
+        own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
+        nbrs = neighbor_rows([Neighbor(position=(10.0, 0.0, 10.0), velocity=(-1.0, 0.0, 0.0), r_pz=3.0)])
+        _compiling("the decision kernel", lambda: kernel.decide(
+            own.position, own.velocity, check_vector((1.0, 0.0, 0.0), 3), nbrs, np.zeros((0, 4)),
+            bounds_array(Limits(), 0.2), *Options().packed, np.empty(kernel.OUT_SIZE)))
         _warm = True
+
+
+def _compiling(what: str, run: Callable[[], object]) -> None:
+    """``run()``, saying on stderr that ``what`` compiles when that takes over
+    _COMPILE_NOTICE_AFTER s (a first run on a machine; numba caches it on disk), and then
+    when it is ready. Loading from the cache says nothing."""
+    shown = threading.Event()
+
+    def tell() -> None:
+        log.warning("vo3d-opt: compiling %s (once per machine; numba caches it on disk)...", what)
+        shown.set()
+
+    notice = threading.Timer(_COMPILE_NOTICE_AFTER, tell)
+    notice.daemon = True
+    notice.start()
+    t0 = time.perf_counter()
+    try:
+        run()
+    finally:
+        notice.cancel()
+    if shown.is_set():
+        log.warning("vo3d-opt: %s is ready (%.0f s)", what, time.perf_counter() - t0)
+
+
+def warm_up_many() -> None:
+    """Compile (or load from numba's cache) ``select_many``'s kernel once per process,
+    outside every reported time; said on stderr when it takes a while."""
+    global _warm_many
+    warm_up()
+    with _warm_lock:
+        if _warm_many:
+            return
+        v = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+        inputs = swarm.SwarmInputs.checked([[0.0, 0.0, 10.0], [10.0, 0.0, 10.0]], v, v, 3.0, [], None, 0.2, 55.0,
+                                           None, None)
+        _compiling("the swarm kernel", lambda: _select_many_compiled(Options(), inputs, 1, time.perf_counter()))
+        _warm_many = True
+
+
+def _select_many_compiled(options: Options, inputs: swarm.SwarmInputs, threads: int, t0: float) -> SwarmDecision:
+    """``select_many`` compiled: every deciding vehicle, on ``threads`` threads."""
+    sw = inputs.arrays()
+    out = swarm.decide_all(sw, options.packed, threads)
+    result = _swarm_decision(inputs.V, sw.who, out[:, :3], _STATUS_NAMES[out[:, 3].astype(np.int64)],
+                             _ROUND_NAMES[out[:, 5].astype(np.int64)], out[:, 4], out[:, 7:9].astype(np.int64),
+                             out[:, 6].astype(np.int64))
+    result.compiled, result.threads = True, threads
+    result.solve_time = time.perf_counter() - t0
+    result.times[sw.who] = result.solve_time / max(1, sw.who.shape[0])
+    return result
+
+
+_STATUS_NAMES = np.array([str(s) for s in DECISION_STATUSES])
+_ROUND_NAMES = np.array(kernel.ROUND_NAMES)
+
+
+def _names(n: int, who: np.ndarray, names: np.ndarray) -> np.ndarray:
+    """(n,) str: ``names`` (D,) at ``who``, "" elsewhere."""
+    names = np.asarray(names, dtype=str)
+    out = np.full(n, "", dtype=names.dtype if names.size else "<U1")
+    out[who] = names
+    return out
+
+
+def _swarm_decision(V: np.ndarray, who: np.ndarray, vel: np.ndarray, statuses: np.ndarray, rounds: np.ndarray,
+                    planes: np.ndarray, counts: np.ndarray, solved: np.ndarray) -> SwarmDecision:
+    """A ``SwarmDecision`` of N vehicles from the deciding vehicles' (D,) answers; the others
+    keep their velocity ``V``."""
+    n = V.shape[0]
+    out = SwarmDecision(velocities=V.copy(), statuses=_names(n, who, statuses), solve_time=0.0,
+                        decided=np.zeros(n, dtype=bool), rounds=_names(n, who, rounds),
+                        planes=np.full(n, np.nan), neighbors=np.zeros(n, dtype=np.int64),
+                        obstacles=np.zeros(n, dtype=np.int64), solved=np.zeros(n, dtype=np.int64),
+                        times=np.full(n, np.nan))
+    out.velocities[who], out.planes[who] = vel, planes
+    out.neighbors[who], out.obstacles[who], out.solved[who] = counts[:, 0], counts[:, 1], solved
+    out.decided[who] = True
+    return out
 
 
 class VelocitySelector:
@@ -218,6 +286,95 @@ class VelocitySelector:
                         formulation=self.formulation, solver=self.solver, plane=None if math.isnan(phi) else phi,
                         info={"round": kernel.ROUND_NAMES[int(rnd)], "solved": int(solved)})
 
+    # ------------------------------------------------------------------------------------------
+    @property
+    def compiled(self) -> bool:
+        """Whether ``select_many`` runs as one compiled call (plane_qp on exact2d), not a loop."""
+        return self._compiled and self._nlp is None
+
+    def select_many(
+        self,
+        positions: np.ndarray,
+        velocities: np.ndarray,
+        preferred_velocities: np.ndarray,
+        r_pz: float | np.ndarray,
+        obstacles: Sequence[Cylinder | Box] = (),
+        limits: Limits | None = None,
+        dt: float = 0.2,
+        sensing_range: float = 55.0,
+        max_neighbors: int | None = None,
+        decide: np.ndarray | None = None,
+        *,
+        obstacle_range: float | None = None,
+        spheres: np.ndarray | None = None,
+        max_speed: float | np.ndarray | None = None,
+        threads: int | None = None,
+    ) -> SwarmDecision:
+        """Decide for every vehicle of a swarm in one call (contracts §4): vehicle i gets exactly
+        ``select``'s velocity and status with, as its ``Neighbor``s, the other vehicles within
+        ``sensing_range`` (centre distance; with ``max_neighbors = k`` the k nearest of them)
+        in index order, each with ``r_pz = max(r_pz[i], r_pz[j])``, cooperative when it decides
+        too, and ``obstacles`` (all of them, for every vehicle). Vehicles with ``decide[i]``
+        false keep their velocity (status "") and are seen by the others as non-cooperative.
+
+        ``positions``, ``velocities``, ``preferred_velocities``: (N, 3); ``r_pz``: (N,) or one
+        number, m; ``limits``: one ``Limits`` for all; ``decide``: (N,) bool or None (all).
+        Extensions: ``obstacle_range`` (m; None: every obstacle): each vehicle takes only the
+        obstacles (and spheres) whose surface is within this distance, found with a k-d tree;
+        ``spheres`` (S, 5): x, y, z, radius, r_pz of static spheres, seen as zero-velocity,
+        non-cooperative neighbours with their own r_pz after the vehicles; ``max_speed`` ((N,)
+        or one number, m/s): each vehicle's own cap on ``limits``' v_max; ``threads``: threads
+        for this call, at most ``NUMBA_NUM_THREADS`` (default: ``numba.get_num_threads()``, i.e.
+        what ``numba.set_num_threads`` set, else the ``NUMBA_NUM_THREADS`` environment variable,
+        else every core; the answers do not depend on it). Who senses whom: ``vo3d_opt.swarm``.
+
+        With the default formulation and backend (plane_qp on exact2d) the deciding vehicles
+        are decided by compiled code, parallel over vehicles on ``threads`` threads, without a
+        Python object per vehicle or neighbour (its first use in a process compiles or loads a
+        kernel, outside ``solve_time``). Any other formulation or backend (sampled, cone_qp,
+        nlp, an outside QP solver) cannot run compiled: then ``select_many`` calls ``select``
+        for each deciding vehicle in turn, with the same neighbours, and returns the same.
+        Malformed arrays raise ``ValueError`` naming the argument.
+        """
+        if self.compiled:
+            warm_up_many()
+        t0 = time.perf_counter()
+        inputs = swarm.SwarmInputs.checked(positions, velocities, preferred_velocities, r_pz, obstacles, limits, dt,
+                                           sensing_range, max_neighbors, decide, obstacle_range=obstacle_range,
+                                           spheres=spheres, max_speed=max_speed)
+        n_threads = swarm.thread_count(threads)
+        if not self.compiled:
+            return self._select_many_loop(inputs, t0)
+        return _select_many_compiled(self.options, inputs, n_threads, t0)
+
+    def _select_many_loop(self, inputs: swarm.SwarmInputs, t0: float) -> SwarmDecision:
+        """``select`` for each deciding vehicle with the same neighbours (formulations and
+        backends that cannot run compiled)."""
+        P, V, W, R = inputs.P, inputs.V, inputs.W, inputs.R
+        who = inputs.who
+        (nb_span, nb_idx), (sp_span, sp_idx), (ob_span, ob_idx) = inputs.links()
+        spheres = [Neighbor(position=s[:3], velocity=(0.0, 0.0, 0.0), r_pz=float(s[4]), cooperative=False)
+                   for s in inputs.spheres]
+        D = who.shape[0]
+        vel, statuses, rounds = np.empty((D, 3)), np.empty(D, dtype=object), np.empty(D, dtype=object)
+        planes, counts = np.full(D, np.nan), np.zeros((D, 2), dtype=np.int64)
+        solved, times = np.zeros(D, dtype=np.int64), np.empty(D)
+        for d, i in enumerate(who):
+            nbrs = [Neighbor(position=P[j], velocity=V[j], r_pz=float(max(R[i], R[j])),
+                             cooperative=bool(inputs.deciding[j])) for j in nb_idx[nb_span[d, 0]:nb_span[d, 1]]]
+            nbrs += [spheres[k] for k in sp_idx[sp_span[d, 0]:sp_span[d, 1]]]
+            obs = [inputs.obstacles[m] for m in ob_idx[ob_span[d, 0]:ob_span[d, 1]]]
+            dec = self.select(AgentState(position=P[i], velocity=V[i]), W[i], nbrs, obs, inputs.vehicle_limits(i),
+                              inputs.dt)
+            vel[d], statuses[d], rounds[d] = dec.velocity, str(dec.status), str(dec.info.get("round", ""))
+            planes[d] = np.nan if dec.plane is None else dec.plane
+            counts[d] = (nb_span[d, 1] - nb_span[d, 0], len(obs) + sp_span[d, 1] - sp_span[d, 0])
+            solved[d], times[d] = int(dec.info.get("solved", 0)), dec.solve_time
+        result = _swarm_decision(V, who, vel, statuses.astype(str), rounds.astype(str), planes, counts, solved)
+        result.times[who] = times
+        result.solve_time = time.perf_counter() - t0
+        return result
+
     def _run(self, enc: Encounter, nbrs: np.ndarray, prisms: np.ndarray, bounds: Bounds) -> Outcome:
         if self.formulation == "sampled":
             return sampled.select(enc)
@@ -240,4 +397,5 @@ class VelocitySelector:
         return Outcome(d.velocity, status, d.plane, d.info)
 
 
-__all__ = ["Decision", "VelocitySelector", "DEFAULT_SOLVERS", "FORMULATIONS", "warm_up"]
+__all__ = ["Decision", "SwarmDecision", "VelocitySelector", "DEFAULT_SOLVERS", "FORMULATIONS", "warm_up",
+           "warm_up_many"]

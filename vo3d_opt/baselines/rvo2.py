@@ -1,16 +1,17 @@
 """RVO2-3D (van den Berg et al., reciprocal velocity obstacles in 3D) flown on our scenarios.
 
-The runner mirrors :class:`vo3d_opt.sim.simulator.Simulator` step for step, so that a
-:class:`~vo3d_opt.sim.simulator.RunRecord` comes out and the very same metrics
-(:func:`vo3d_opt.sim.metrics.summarize`) judge both methods:
+:class:`RVO2Step` is a decision step of our one simulation loop
+(:func:`vo3d_opt.sim.simulator.fly`), so both methods sense, get their preferred velocities
+(:func:`vo3d_opt.sim.traffic.goal_velocity`) and are integrated by the same code, and the very
+same metrics (:func:`vo3d_opt.sim.metrics.summarize`) judge both:
 
-* every ``dt`` each agent gets our simulator's preferred velocity (towards its goal at
-  ``min(v_max, distance / dt)``, :meth:`Simulator.preferred_velocity`), then one
-  ``doStep()`` computes every new velocity from the same snapshot and integrates
-  ``p += v dt`` (RVO2's own update, the same as ours without a velocity response);
-* an agent within ``goal_tolerance`` of its goal has arrived: its RVO2 max speed is set to 0
-  so it hovers there, still seen by the others (as in our simulator); the run stops when all
-  arrived or after ``max_time``.
+* every ``dt`` RVO2's agents are set to the loop's snapshot (positions, velocities) and
+  preferred velocities, one ``doStep()`` computes every new velocity, and that velocity is the
+  command the loop integrates (RVO2's own position update is overwritten at the next step: the
+  loop's dynamics move the vehicles, ``p += v dt`` under the default kinematic model, or with
+  the scenario's ``velocity_response_tau``);
+* an arrived agent's RVO2 max speed is set to 0 so it hovers there, still seen by the others (as
+  in our simulator); the run stops when all arrived or after ``max_time``.
 
 Parameter choices (the honest comparison gives both methods the same protected distance):
 
@@ -19,27 +20,27 @@ Parameter choices (the honest comparison gives both methods the same protected d
   counts (``distance < max(r_pz_i, r_pz_j)``; with unequal zones RVO2's pair distance
   ``(r_i + r_j) / 2`` is the smaller one: use equal r_pz for comparisons);
 * **neighborDist** ``sensing.vehicle_range`` (RVO2 measures it centre to centre, as we do);
-* **maxNeighbors** every other agent (our selector considers every vehicle in range);
+* **maxNeighbors** every other agent by default (our selector considers every vehicle in
+  range), or ``max_neighbors``;
 * **maxSpeed** the agent's speed bound (``Scenario.max_speed``), **timeStep** ``dt``;
 * **timeHorizon** ``vehicle_range / (2 v_max)`` by default: the time in which two vehicles
   closing head-on at full speed cover the sensing range, so every sensed vehicle can matter
   (our VO has no horizon at all). Override with ``time_horizon=``.
 
 Limits RVO2-3D does not have: no altitude range (it flies freely in 3D: the metrics count any
-``altitude_violations``), no minimum speed, no velocity response, no static obstacles (scenarios
-with ``obstacles`` or ``spheres`` are refused). RVO2-3D works in single precision (float):
-positions and velocities come back as float32 values.
+``altitude_violations``), no minimum speed, no static obstacles (scenarios with ``obstacles`` or
+``spheres`` are refused). RVO2-3D works in single precision (float): the velocities it returns
+are float32 values.
 
-Compute time: ``doStep()`` (neighbour search and every agent's 3D linear program) is timed per
-step and shared equally among the agents that decided in that step, giving
-``decision_times`` comparable with our per-``select()`` times. RVO2 reports no
-infeasibility, so its decisions carry the status ``"rvo2"`` and :func:`summarize_rvo2` reports
-``fallbacks`` as ``None`` (unknown), not 0.
+Compute time: ``doStep()`` (RVO2's neighbour search, every agent's 3D linear program and its own
+position update) runs on one thread; it is timed per step and shared equally among the agents
+that decided in that step, giving ``decision_times`` comparable with our per-agent times. RVO2
+reports no infeasibility, so its decisions carry the status ``"rvo2"`` and
+:func:`summarize_rvo2` reports ``fallbacks`` as ``None`` (unknown), not 0.
 """
 from __future__ import annotations
 
 import math
-import sys
 import time
 from importlib import metadata
 from typing import Any
@@ -48,7 +49,7 @@ import numpy as np
 
 from vo3d_opt.sim import metrics
 from vo3d_opt.sim.scenario import Scenario, load_scenario, scenario_from_dict
-from vo3d_opt.sim.simulator import RunBuffers, RunRecord, Simulator
+from vo3d_opt.sim.simulator import RunRecord, Snapshot, StepDecision, fly
 
 FORMULATION = "rvo2-3d"
 STATUS = "rvo2"
@@ -85,99 +86,72 @@ def default_time_horizon(scenario: Scenario) -> float:
     return float(scenario.sensing.vehicle_range / (2.0 * float(np.max(scenario.max_speed))))
 
 
+class RVO2Step:
+    """RVO2-3D as a decision step of :func:`vo3d_opt.sim.simulator.fly` (the module docstring
+    gives the parameters)."""
+
+    formulation = FORMULATION
+
+    def __init__(self, sc: Scenario, *, time_horizon: float | None = None,
+                 max_neighbors: int | None = None, radius_factor: float = 0.5) -> None:
+        rvo23d = _rvo23d()
+        if sc.obstacles or sc.spheres:
+            raise ValueError(f"{sc.name}: the RVO2-3D baseline runs agent-only scenarios "
+                             "(no obstacles, no spheres)")
+        n, dt = sc.n_agents, float(sc.dt)
+        horizon = default_time_horizon(sc) if time_horizon is None else float(time_horizon)
+        if not (math.isfinite(horizon) and horizon > 0):
+            raise ValueError("time_horizon: must be a positive number of seconds")
+        if not (radius_factor > 0):
+            raise ValueError("radius_factor: must be positive")
+        self.neighbours = max(1, n - 1) if max_neighbors is None else int(max_neighbors)
+        self.vrange = float(sc.sensing.vehicle_range)
+        self.horizon, self.radii, self.vmax = horizon, sc.r_pz * radius_factor, sc.max_speed
+        self.solver = f"rvo23d {version()}"
+        self.sim = rvo23d.PyRVOSimulator(dt, self.vrange, self.neighbours, horizon,
+                                         float(self.radii.max()), float(self.vmax.max()))
+        for i in range(n):
+            self.sim.addAgent(tuple(float(c) for c in sc.starts[i]), self.vrange, self.neighbours,
+                              horizon, float(self.radii[i]), float(self.vmax[i]), (0.0, 0.0, 0.0))
+        self.frozen = np.zeros(n, dtype=bool)
+        self.step_times: list[float] = []
+
+    def decide(self, snap: Snapshot) -> StepDecision:
+        sim, n = self.sim, snap.positions.shape[0]
+        for a in np.flatnonzero(~snap.deciding & ~self.frozen):  # arrived: hover, still seen
+            sim.setAgentMaxSpeed(int(a), 0.0)
+            self.frozen[a] = True
+        p, v, w = snap.positions.tolist(), snap.velocities.tolist(), snap.preferred.tolist()
+        for i in range(n):
+            sim.setAgentPosition(i, tuple(p[i]))
+            sim.setAgentVelocity(i, tuple(v[i]))
+            sim.setAgentPrefVelocity(i, tuple(w[i]))
+        t0 = time.perf_counter()
+        sim.doStep()
+        elapsed = time.perf_counter() - t0
+        self.step_times.append(elapsed)
+        u = np.array([sim.getAgentVelocity(i) for i in range(n)], dtype=float)
+        share = np.where(snap.deciding, elapsed / max(1, int(snap.deciding.sum())), np.nan)
+        return StepDecision(commands=u, statuses=np.where(snap.deciding, STATUS, ""),
+                            decision_times=share, solve_times=share)
+
+    def extra(self) -> dict[str, Any]:
+        radius = self.radii.tolist() if len(np.unique(self.radii)) > 1 else float(self.radii[0])
+        return {"time_horizon": self.horizon, "max_neighbors": self.neighbours, "radius": radius,
+                "neighbor_dist": self.vrange, "step_times": np.array(self.step_times)}
+
+
 def run_rvo2(scenario: Scenario | str, *, time_horizon: float | None = None,
              max_neighbors: int | None = None, radius_factor: float = 0.5,
              max_steps: int | None = None, progress: bool | None = None) -> RunRecord:
-    """Fly an agent-only scenario with RVO2-3D; returns a :class:`RunRecord` (formulation
-    ``"rvo2-3d"``). ``radius_factor`` scales r_pz into RVO2's agent radius (0.5: pairs keep
-    r_pz apart). ``max_steps`` caps the control steps like ``Simulator.run``."""
-    rvo23d = _rvo23d()
+    """Fly an agent-only scenario with RVO2-3D in our simulation loop; returns a
+    :class:`RunRecord` (formulation ``"rvo2-3d"``). ``radius_factor`` scales r_pz into RVO2's
+    agent radius (0.5: pairs keep r_pz apart). ``max_steps`` caps the control steps like
+    ``Simulator.run``."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    if sc.obstacles or sc.spheres:
-        raise ValueError(f"{sc.name}: the RVO2-3D baseline runs agent-only scenarios "
-                         "(no obstacles, no spheres)")
-    if sc.velocity_response_tau is not None:
-        raise ValueError(f"{sc.name}: velocity_response_tau is not supported by the RVO2-3D baseline")
-    n, dt = sc.n_agents, float(sc.dt)
-    horizon = default_time_horizon(sc) if time_horizon is None else float(time_horizon)
-    if not (math.isfinite(horizon) and horizon > 0):
-        raise ValueError("time_horizon: must be a positive number of seconds")
-    if not (radius_factor > 0):
-        raise ValueError("radius_factor: must be positive")
-    neighbours = max(1, n - 1) if max_neighbors is None else int(max_neighbors)
-    vrange = float(sc.sensing.vehicle_range)
-    r_pz, vmax, goals, tol = sc.r_pz, sc.max_speed, sc.goals, sc.goal_tolerance
-    radii = r_pz * radius_factor
-
-    sim = rvo23d.PyRVOSimulator(dt, vrange, neighbours, horizon, float(radii.max()),
-                                float(vmax.max()))
-    for i in range(n):
-        sim.addAgent(tuple(float(c) for c in sc.starts[i]), vrange, neighbours, horizon,
-                     float(radii[i]), float(vmax[i]), (0.0, 0.0, 0.0))
-    rule = Simulator(sc, selector=None)  # only for its preferred-velocity rule
-
-    total = sc.n_steps if max_steps is None else min(int(max_steps), sc.n_steps)
-    buf = RunBuffers.empty(total, n)
-    pos, vel, pref, arrived = buf.pos, buf.vel, buf.pref, buf.arrived
-    decided, statuses, dtimes = buf.decided, buf.statuses, buf.dtimes
-    step_times = np.zeros(total)
-
-    p = np.array([sim.getAgentPosition(i) for i in range(n)], dtype=float)
-    done = np.linalg.norm(p - goals, axis=1) <= tol
-    frozen = np.zeros(n, dtype=bool)
-    pos[0], arrived[0] = p, done
-    steps = 0
-    bar = _progress(total, sc.name, progress)
-    t_start = time.perf_counter()
-    try:
-        for k in range(total):
-            if done.all():
-                break
-            steps = k + 1
-            for i in np.flatnonzero(done & ~frozen):  # arrived: hover, still seen by the others
-                sim.setAgentMaxSpeed(int(i), 0.0)
-                sim.setAgentVelocity(int(i), (0.0, 0.0, 0.0))
-                frozen[i] = True
-            v_pref = rule.preferred_velocity(p)
-            v_pref[done] = 0.0
-            pref[k] = v_pref
-            for i in range(n):
-                sim.setAgentPrefVelocity(i, (float(v_pref[i, 0]), float(v_pref[i, 1]),
-                                             float(v_pref[i, 2])))
-            t0 = time.perf_counter()
-            sim.doStep()
-            step_times[k] = time.perf_counter() - t0
-            active = ~done
-            decided[k] = active
-            statuses[k, active] = STATUS
-            dtimes[k, active] = step_times[k] / max(1, int(active.sum()))
-            vel[k] = [sim.getAgentVelocity(i) for i in range(n)]
-            vel[k, done] = 0.0
-            p = np.array([sim.getAgentPosition(i) for i in range(n)], dtype=float)
-            done = done | (np.linalg.norm(p - goals, axis=1) <= tol)
-            pos[k + 1], arrived[k + 1] = p, done
-            if bar is not None:
-                bar.update(1)
-    finally:
-        if bar is not None:
-            bar.close()
-    wall = time.perf_counter() - t_start
-    buf.cmd[:], buf.stimes[:] = vel, dtimes  # RVO2's command is its velocity; no solve time apart
-    return buf.record(
-        sc, FORMULATION, f"rvo23d {version()}", steps, wall,
-        extra={"time_horizon": horizon, "max_neighbors": neighbours,
-               "radius": radii.tolist() if len(np.unique(radii)) > 1 else float(radii[0]),
-               "neighbor_dist": vrange, "step_times": step_times[:steps]},
-    )
-
-
-def _progress(total: int, name: str, progress: bool | None):
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover
-        return None
-    return tqdm(total=total, desc=f"{name} (rvo2)", unit="step", file=sys.stderr, delay=1.0,
-                leave=False, disable=(None if progress is None else not progress))
+    step = RVO2Step(sc, time_horizon=time_horizon, max_neighbors=max_neighbors,
+                    radius_factor=radius_factor)
+    return fly(sc, step, progress=progress, max_steps=max_steps)
 
 
 def summarize_record(record: RunRecord) -> dict[str, Any]:

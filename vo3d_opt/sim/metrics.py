@@ -6,6 +6,11 @@ lines, so their relative motion is linear and the closest approach on each segme
 evaluated at the samples and at three interior points of every segment. A 1e-6 tolerance
 absorbs rounding in every threshold (distance, altitude, speed).
 
+Swarms: the summary never forms every vehicle pair. :func:`close_pairs` finds, step by step with
+a k-d tree, the pairs that come closer than the largest protected-zone (or collision) distance
+and the closest pair of the run, so its cost grows with the vehicles and their near neighbours,
+not with their square; every per-step array is taken a chunk of steps at a time.
+
 Keys of :func:`summarize` beyond the contract: ``decisions`` (select() calls),
 ``status_counts`` (per status), ``vehicle_collisions`` / ``obstacle_collisions`` (the two parts
 of ``collisions``), ``obstacle_pz_intrusions`` (vehicle–obstacle pairs whose centre ever entered
@@ -22,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from vo3d_opt.sim.scenario import prism_contains, sphere_surface_distance
 from vo3d_opt.sim.simulator import RunRecord
@@ -69,6 +75,65 @@ def pair_min_distances(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     return ii, jj, dmin
 
 
+def _segment_min(p0: np.ndarray, p1: np.ndarray, ii: np.ndarray, jj: np.ndarray) -> np.ndarray:
+    """Closest approach of pairs (ii, jj) over one straight segment from p0 to p1 (N, 3) each:
+    the same arithmetic as :func:`pair_min_distances`."""
+    r0, r1 = p0[ii] - p0[jj], p1[ii] - p1[jj]
+    w = r1 - r0
+    ww = np.einsum("pk,pk->p", w, w)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(ww > 0, -np.einsum("pk,pk->p", r0, w) / ww, 0.0)
+    t = np.clip(t, 0.0, 1.0)
+    ends = np.minimum(np.linalg.norm(r0, axis=-1), np.linalg.norm(r1, axis=-1))
+    return np.minimum(ends, np.linalg.norm(r0 + t[:, None] * w, axis=-1))
+
+
+def close_pairs(positions: np.ndarray, threshold: float,
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(i, j, dmin), i < j: every vehicle pair whose closest approach over the run (continuous
+    along the straight segments) is below ``threshold``, and the closest pair of the run
+    whatever its distance (first, when it is not below ``threshold``); dmin is exact, as
+    :func:`pair_min_distances` gives it.
+
+    Step by step, a k-d tree at the segment's start proposes the pairs within ``max(threshold,
+    best) + 2 × the longest step flown`` (best: the smallest distance found so far, at first the
+    nearest pair at the start): no pair outside can come closer than that within the segment.
+    """
+    S, n = positions.shape[0], positions.shape[1]
+    empty = np.zeros(0, dtype=np.int64)
+    if n < 2:
+        return empty, empty, np.zeros(0)
+    # An upper bound of the run's smallest distance: the nearest pair at the start (inflated a
+    # hair: the tree's distance may differ from numpy's in the last bit).
+    bound = float(cKDTree(positions[0]).query(positions[0], k=2)[0][:, 1].min()) * (1 + 1e-9) + 1e-9
+    best_key, best = -1, np.inf
+    keys, dists = [], []
+    for k in range(max(S - 1, 1)):
+        p0, p1 = positions[k], positions[min(k + 1, S - 1)]
+        longest = float(np.max(np.linalg.norm(p1 - p0, axis=1)))
+        reach = max(threshold, min(best, bound)) + 2.0 * longest
+        pairs = cKDTree(p0).query_pairs(reach * (1 + 1e-9) + 1e-9, output_type="ndarray")
+        if not pairs.size:
+            continue
+        ii, jj = pairs.min(axis=1), pairs.max(axis=1)
+        d = _segment_min(p0, p1, ii, jj)
+        m = int(np.argmin(d))
+        if d[m] < best:
+            best, best_key = float(d[m]), int(ii[m]) * n + int(jj[m])
+        near = d < threshold
+        keys.append(ii[near] * n + jj[near])
+        dists.append(d[near])
+    key = np.concatenate(keys) if keys else empty
+    dist = np.concatenate(dists) if dists else np.zeros(0)
+    order = np.argsort(key, kind="stable")
+    key, dist = key[order], dist[order]
+    uniq, start = np.unique(key, return_index=True)
+    dmin = np.minimum.reduceat(dist, start) if uniq.size else np.zeros(0)
+    if best_key >= 0 and not np.any(uniq == best_key):
+        uniq, dmin = np.concatenate([[best_key], uniq]), np.concatenate([[best], dmin])
+    return uniq // n, uniq % n, dmin
+
+
 def _with_subsamples(positions: np.ndarray) -> np.ndarray:
     """Samples plus interior points of each segment, shape (S, N, 3)."""
     if positions.shape[0] < 2:
@@ -89,41 +154,47 @@ def _physical_obstacles(record: RunRecord) -> list[tuple[str, Any]]:
 def obstacle_min_distances(record: RunRecord, positions: np.ndarray | None = None,
                            ) -> tuple[np.ndarray, np.ndarray]:
     """(N, M) smallest centre-to-surface distance and (N, M) 'entered the protected zone', over
-    the M physical obstacles, for the record's positions (or the ``positions`` given)."""
-    pts = _with_subsamples(record.positions if positions is None else positions)
+    the M physical obstacles, for the record's positions (or the ``positions`` given); a chunk
+    of steps at a time."""
+    positions = record.positions if positions is None else positions
     obstacles = _physical_obstacles(record)
-    n = record.n_agents
+    n = positions.shape[1]
     dist = np.full((n, len(obstacles)), np.inf)
     entered = np.zeros((n, len(obstacles)), dtype=bool)
-    for m, (kind, ob) in enumerate(obstacles):
-        if kind == "body":
-            dist[:, m] = ob.surface_distance(pts).min(axis=0)
-            shrunk = pts.copy()
-            horiz = pts[..., :2] - ob.center
-            norm = np.linalg.norm(horiz, axis=-1, keepdims=True)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                shrunk[..., :2] += np.where(norm > 0, horiz / norm * TOL, 0.0)
-            shrunk[..., 2] += TOL
-            entered[:, m] = prism_contains(ob, shrunk).any(axis=0)
-        else:
-            centre = np.asarray(ob.center, dtype=float)
-            dist[:, m] = sphere_surface_distance(centre, ob.radius, pts).min(axis=0)
-            entered[:, m] = (np.linalg.norm(pts - centre, axis=-1) < ob.r_pz - TOL).any(axis=0)
+    if not obstacles:
+        return dist, entered
+    for a in range(0, max(positions.shape[0] - 1, 1), _CHUNK):
+        pts = _with_subsamples(positions[a: a + _CHUNK + 1])
+        for m, (kind, ob) in enumerate(obstacles):
+            d, e = _obstacle_distance(kind, ob, pts)
+            dist[:, m] = np.minimum(dist[:, m], d.min(axis=0))
+            entered[:, m] |= e.any(axis=0)
     return dist, entered
+
+
+def _obstacle_distance(kind: str, ob: Any, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Surface distance and 'inside the protected zone' of points (..., 3) for one obstacle."""
+    if kind == "body":
+        shrunk = pts.copy()
+        horiz = pts[..., :2] - ob.center
+        norm = np.linalg.norm(horiz, axis=-1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            shrunk[..., :2] += np.where(norm > 0, horiz / norm * TOL, 0.0)
+        shrunk[..., 2] += TOL
+        return ob.surface_distance(pts), prism_contains(ob, shrunk)
+    centre = np.asarray(ob.center, dtype=float)
+    return (sphere_surface_distance(centre, ob.radius, pts),
+            np.linalg.norm(pts - centre, axis=-1) < ob.r_pz - TOL)
 
 
 def nearest_vehicle_distance(record: RunRecord) -> np.ndarray:
     """(T+1, N): each vehicle's distance to its nearest other vehicle at each sample (inf alone)."""
     p = record.positions
-    n = p.shape[1]
     out = np.full(p.shape[:2], np.inf)
-    if n < 2:
+    if p.shape[1] < 2:
         return out
-    for a in range(0, p.shape[0], _CHUNK):
-        q = p[a : a + _CHUNK]
-        d = np.linalg.norm(q[:, :, None, :] - q[:, None, :, :], axis=-1)
-        d[:, np.arange(n), np.arange(n)] = np.inf
-        out[a : a + _CHUNK] = d.min(axis=2)
+    for k in range(p.shape[0]):
+        out[k] = cKDTree(p[k]).query(p[k], k=2)[0][:, 1]
     return out
 
 
@@ -167,11 +238,27 @@ def _closest_time(rel: np.ndarray, times: np.ndarray) -> float:
     return float(times[k] + f[k] * (times[k + 1] - times[k]))
 
 
+def pz_threshold(record: RunRecord) -> float:
+    """The largest distance below which a vehicle pair counts (an intrusion or a collision),
+    plus the tolerance: the ``threshold`` of :func:`close_pairs` for the summary."""
+    sc = record.scenario
+    return float(max(np.max(sc.r_pz), 2.0 * np.max(sc.radius))) + TOL
+
+
+def record_close_pairs(record: RunRecord) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`close_pairs` of the record at :func:`pz_threshold`, computed once per record."""
+    cache = record.cache
+    if "close_pairs" not in cache:
+        cache["close_pairs"] = close_pairs(record.positions, pz_threshold(record))
+    return cache["close_pairs"]
+
+
 def closest_vehicle_approach(record: RunRecord, pairs: tuple[np.ndarray, ...] | None = None,
                              ) -> Approach | None:
     """The closest vehicle pair over the run (continuous, as in the summary); None with fewer
-    than two vehicles. ``pairs``: :func:`pair_min_distances`' answer, when already computed."""
-    ii, jj, dmin = pairs if pairs is not None else pair_min_distances(record.positions)
+    than two vehicles. ``pairs``: (i, j, dmin) of pairs including the closest one
+    (:func:`close_pairs` or :func:`pair_min_distances`), when already computed."""
+    ii, jj, dmin = pairs if pairs is not None else record_close_pairs(record)
     if not dmin.size or not np.isfinite(dmin.min()):
         return None
     k = int(np.argmin(dmin))
@@ -205,19 +292,37 @@ def physical_obstacle_names(record: RunRecord) -> list[str]:
             + [f"spheres[{k}]" for k, s in enumerate(sc.spheres) if s.physical])
 
 
+def _limits_and_paths(record: RunRecord) -> tuple[int, int, np.ndarray]:
+    """Altitude and speed violations, and each vehicle's path length, a chunk of steps at a time."""
+    sc = record.scenario
+    z_lo, z_hi = sc.limits.altitude
+    v_lo = sc.limits.speed[0]
+    z = record.positions[..., 2]
+    altitude = int(np.count_nonzero((z < z_lo - TOL) | (z > z_hi + TOL)))
+    speed_bad, path = 0, np.zeros(record.n_agents)
+    for a in range(0, record.steps, _CHUNK):
+        speed = np.linalg.norm(record.velocities[a: a + _CHUNK], axis=-1)
+        slow = record.decided[a: a + _CHUNK] & (speed < v_lo - TOL)
+        bad = (speed > sc.max_speed[None, :] + TOL) | slow
+        speed_bad += int(np.count_nonzero(bad))
+        steps = np.diff(record.positions[a: a + _CHUNK + 1], axis=0)
+        path += np.linalg.norm(steps, axis=-1).sum(axis=0)
+    return altitude, speed_bad, path
+
+
 def summarize(record: RunRecord) -> dict[str, Any]:
     """The JSON summary of contract §3 (exact keys first) plus the extra keys listed above."""
     sc = record.scenario
     n, steps = record.n_agents, record.steps
     r_pz, radius = sc.r_pz, sc.radius
 
-    ii, jj, dmin = pair_min_distances(record.positions)
+    ii, jj, dmin = record_close_pairs(record)
     closest_vehicle = closest_vehicle_approach(record, (ii, jj, dmin))
     pz_limit = np.maximum(r_pz[ii], r_pz[jj])
     vehicle_pz = int(np.count_nonzero(dmin < pz_limit - TOL))
     vehicle_coll = int(np.count_nonzero(dmin < radius[ii] + radius[jj] - TOL))
-    start_d = np.linalg.norm(record.positions[0, ii] - record.positions[0, jj], axis=-1)
-    starts_pz = int(np.count_nonzero(start_d < pz_limit - TOL))
+    si, sj, start_d = close_pairs(record.positions[:1], pz_threshold(record))
+    starts_pz = int(np.count_nonzero(start_d < np.maximum(r_pz[si], r_pz[sj]) - TOL))
 
     odist, entered = obstacle_min_distances(record)
     closest_obstacle = closest_obstacle_approach(record, odist)
@@ -226,13 +331,7 @@ def summarize(record: RunRecord) -> dict[str, Any]:
     if odist.size:
         starts_pz += int(np.count_nonzero(obstacle_min_distances(record, record.positions[:1])[1]))
 
-    z = record.positions[..., 2]
-    z_lo, z_hi = sc.limits.altitude
-    altitude_violations = int(np.count_nonzero((z < z_lo - TOL) | (z > z_hi + TOL)))
-    speed = np.linalg.norm(record.velocities, axis=-1)
-    v_lo = sc.limits.speed[0]
-    speed_bad = (speed > sc.max_speed[None, :] + TOL) | (record.decided & (speed < v_lo - TOL))
-    speed_violations = int(np.count_nonzero(speed_bad))
+    altitude_violations, speed_violations, steps_flown = _limits_and_paths(record)
 
     statuses = record.statuses[record.decided]
     counts = Counter(str(s) for s in statuses)
@@ -242,7 +341,6 @@ def summarize(record: RunRecord) -> dict[str, Any]:
 
     reached_mask = record.arrived[-1]
     arrival = record.arrival_times()
-    steps_flown = np.linalg.norm(np.diff(record.positions, axis=0), axis=-1).sum(axis=0)
     straight = np.linalg.norm(sc.goals - sc.starts, axis=1)
     ratio_ok = reached_mask & (straight > 0)
 

@@ -1,34 +1,42 @@
-"""Decentralised multi-UAV simulation (paper section 5).
+"""Decentralised multi-UAV simulation (paper section 5): one loop, sense → decide → integrate.
 
 "Each UAV independently produces avoiding velocity control based on its own detection of
 obstacles ... moves at a constant time step ... the avoiding velocity control is updated at each
-time step." Here, every ``dt`` each agent that has not arrived calls the selector with what it
-senses in the *same snapshot* of the previous step (so the order of the calls does not matter):
+time step." Here, every ``dt`` (:func:`fly`):
 
-* the other vehicles within ``sensing.vehicle_range`` (centre distance), as ``Neighbor`` with
-  their current velocity and ``r_pz = max(own r_pz, their r_pz)`` (so each side keeps the larger
-  zone, which is what the metrics count); arrived ones as ``cooperative=False`` (they hover and
-  no longer avoid, so a ``reciprocal`` selector takes all of the avoidance, not half);
-* the obstacles within ``sensing.obstacle_range`` of their nearest point (those with
-  ``sensed: false`` are never seen), and the scenario's static spheres within that range as
-  zero-velocity, non-cooperative neighbours;
-* a preferred velocity pointing at its goal with speed ``min(v_max, distance / dt)`` (full speed,
-  slowing only to land on the goal in the last step);
-* its limits: speed ``(limits.speed[0], min(limits.speed[1], max_speed))`` and the altitude range.
+1. **sense**: the snapshot of the previous step (positions, velocities), the same for everyone,
+   so the order of the decisions does not matter; each agent's preferred velocity comes from a
+   plain function of the positions (default :func:`vo3d_opt.sim.traffic.goal_velocity`: towards
+   the goal at ``min(v_max, distance / dt)``; 0 for arrived agents);
+2. **decide**: a pluggable :class:`DecisionStep` turns the snapshot into one command per agent
+   that has not arrived: our selector for the whole swarm in one ``select_many`` call
+   (:class:`vo3d_opt.sim.deciders.SwarmSelect`, what ``run_scenario`` and ``vo3d run`` use),
+   any ``SelectorLike`` called once per agent (:class:`~vo3d_opt.sim.deciders.PerAgentSelect`),
+   or RVO2-3D (:class:`vo3d_opt.baselines.rvo2.RVO2Step`);
+3. **integrate**: ``vo3d_opt.sim.dynamics`` (``kinematic``: ``p += v_cmd dt``; ``first_order``
+   with ``velocity_response_tau``: ``v += (v_cmd - v) min(1, dt / tau)``, ``p += v dt``).
 
-The position is integrated kinematically, ``p += v dt``, with ``v`` the command, or with a
-first-order response ``v += (v_cmd - v) min(1, dt / tau)`` when ``velocity_response_tau`` is
-set. An agent within ``goal_tolerance`` of its goal has arrived: it stops (velocity 0 from that
+What an agent senses (both selector steps apply the same rules; ``vo3d_opt.swarm`` documents
+them): the other vehicles within ``sensing.vehicle_range`` (centre distance), as neighbours with
+their current velocity and ``r_pz = max(own r_pz, their r_pz)`` (so each side keeps the larger
+zone, which is what the metrics count); arrived ones as non-cooperative (they hover and no
+longer avoid, so a ``reciprocal`` selector takes all of the avoidance, not half); the obstacles
+within ``sensing.obstacle_range`` of their nearest point (those with ``sensed: false`` are never
+seen), and the scenario's static spheres within that range as zero-velocity, non-cooperative
+neighbours; its limits: speed ``(limits.speed[0], min(limits.speed[1], max_speed))`` and the
+altitude range.
+
+An agent within ``goal_tolerance`` of its goal has arrived: it stops (velocity 0 from that
 sample on, which is what the others sense next), hovers there for the rest of the run, still
-seen by the others, and no longer decides. The run stops
-when all agents have arrived or after ``max_time``. The simulator never clips the selector's
-answer: the metrics report any limit it breaks.
+seen by the others, and no longer decides. The run stops when all agents have arrived or after
+``max_time``. The loop never clips a decision: the metrics report any limit it breaks (a
+non-finite command becomes 0 with the status ``invalid_velocity (...)``).
 """
 from __future__ import annotations
 
-import csv
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -36,11 +44,15 @@ from typing import Any, Protocol
 import numpy as np
 from tqdm import tqdm
 
-from vo3d_opt.sim.scenario import Scenario, load_scenario, sphere_surface_distance
+from vo3d_opt.sim.dynamics import Dynamics, make_dynamics
+from vo3d_opt.sim.scenario import Scenario, load_scenario
+from vo3d_opt.sim.traffic import goal_velocity
 from vo3d_opt.types import AgentState, Limits, Neighbor
 
 #: Default formulation when neither the caller nor the scenario names one (contract §1).
 DEFAULT_FORMULATION = "plane_qp"
+#: The status of a command that was not a finite 3-vector (replaced by 0).
+INVALID = "invalid_velocity"
 
 
 class Decision(Protocol):
@@ -56,16 +68,55 @@ class SelectorLike(Protocol):
                obstacles: list[Any], limits: Limits, dt: float) -> Decision: ...
 
 
+@dataclass(frozen=True)
+class Snapshot:
+    """What the agents sense at step ``k`` (time ``t``): everyone's ``positions`` and
+    ``velocities`` (N, 3), their ``preferred`` velocities (N, 3; 0 for arrived agents) and which
+    of them decide (``deciding`` (N,): those that have not arrived)."""
+
+    k: int
+    t: float
+    positions: np.ndarray
+    velocities: np.ndarray
+    preferred: np.ndarray
+    deciding: np.ndarray
+
+
+@dataclass
+class StepDecision:
+    """A decision step's answer: ``commands`` (N, 3) m/s (rows of agents that do not decide are
+    ignored), ``statuses`` (N,) str, ``decision_times`` and ``solve_times`` (N,) s (NaN where
+    an agent did not decide)."""
+
+    commands: np.ndarray
+    statuses: np.ndarray
+    decision_times: np.ndarray
+    solve_times: np.ndarray
+
+
+class DecisionStep(Protocol):
+    """The pluggable decision of :func:`fly`. ``formulation`` and ``solver`` name it in the
+    record; ``extra()`` adds to ``RunRecord.extra`` at the end of the run."""
+
+    formulation: str
+    solver: str
+
+    def decide(self, snap: Snapshot) -> StepDecision: ...
+
+    def extra(self) -> dict[str, Any]: ...
+
+
 @dataclass
 class RunRecord:
     """Everything a run produced; arrays indexed [step, agent, ...] in the scenario's agent order.
 
     ``positions[k]`` is the state at ``times[k]`` (k = 0..T); ``commands[k]`` the decision taken
-    at ``times[k]`` and ``velocities[k]`` the velocity flown over [t_k, t_k+1] (equal to the
-    command without a velocity response; 0 for arrived agents). ``decided[k, i]`` says whether
-    agent i called the selector at step k; ``statuses``, ``decision_times`` (wall time of the
-    ``select()`` call, s) and ``solve_times`` (the decision's own ``solve_time``) are "" / NaN
-    where it did not.
+    at ``times[k]`` and ``velocities[k]`` the velocity flown over [t_k, t_k+1] (under kinematic
+    dynamics the command itself: then ``commands`` is the same array as ``velocities``; 0 for
+    arrived agents). ``decided[k, i]`` says whether agent i decided at step k; ``statuses``,
+    ``decision_times`` (wall time of its decision, s: the ``select()`` call, or its equal share
+    of the step's ``select_many()`` or ``doStep()`` call) and ``solve_times`` (the decision's
+    own ``solve_time``) are "" / NaN where it did not.
     """
 
     scenario: Scenario
@@ -83,6 +134,8 @@ class RunRecord:
     arrived: np.ndarray
     wall_time: float = 0.0
     extra: dict[str, Any] = field(default_factory=dict)
+    #: What the metrics computed once for this record (``metrics.record_close_pairs``).
+    cache: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def dt(self) -> float:
@@ -109,7 +162,7 @@ class RunRecord:
         out[hit] = self.times[first[hit]]
         return out
 
-    def same_trajectory(self, other: "RunRecord") -> bool:
+    def same_trajectory(self, other: RunRecord) -> bool:
         """Bitwise-equal positions, velocities, commands and statuses (timing excluded)."""
         return (
             np.array_equal(self.positions, other.positions)
@@ -120,41 +173,141 @@ class RunRecord:
         )
 
 
-@dataclass
 class RunBuffers:
-    """The arrays a run fills step by step, [step, agent, ...] as in :class:`RunRecord`, for
-    ``total`` steps of ``n`` agents; ``record`` cuts them to the steps actually simulated."""
+    """The arrays a run fills step by step, [step, agent, ...] as in :class:`RunRecord`, for at
+    most ``total`` steps of ``n`` agents. Memory is taken as the steps are filled (untouched
+    pages of ``np.empty``/``np.zeros`` cost nothing), so a 10,000-agent run allotted
+    ``max_time / dt`` steps that ends early costs only what it flew. ``same_commands``: the
+    commands are the velocities (kinematic dynamics): one array for both. Statuses are kept as
+    small codes and written out as strings in :meth:`record`."""
 
-    pos: np.ndarray
-    vel: np.ndarray
-    cmd: np.ndarray
-    pref: np.ndarray
-    decided: np.ndarray
-    statuses: np.ndarray
-    dtimes: np.ndarray
-    stimes: np.ndarray
-    arrived: np.ndarray
+    def __init__(self, total: int, n: int, *, same_commands: bool = False) -> None:
+        self.pos = np.empty((total + 1, n, 3))
+        self.vel = np.zeros((total, n, 3))
+        self.cmd = self.vel if same_commands else np.zeros((total, n, 3))
+        self.pref = np.zeros((total, n, 3))
+        self.decided = np.zeros((total, n), dtype=bool)
+        self.status_codes = np.zeros((total, n), dtype=np.uint16)
+        self.status_names: list[str] = [""]
+        self.dtimes = np.empty((total, n))
+        self.stimes = np.empty((total, n))
+        self.arrived = np.zeros((total + 1, n), dtype=bool)
 
-    @classmethod
-    def empty(cls, total: int, n: int) -> "RunBuffers":
-        return cls(pos=np.empty((total + 1, n, 3)), vel=np.zeros((total, n, 3)),
-                   cmd=np.zeros((total, n, 3)), pref=np.zeros((total, n, 3)),
-                   decided=np.zeros((total, n), dtype=bool),
-                   statuses=np.full((total, n), "", dtype=object),
-                   dtimes=np.full((total, n), np.nan), stimes=np.full((total, n), np.nan),
-                   arrived=np.zeros((total + 1, n), dtype=bool))
+    def put_statuses(self, k: int, statuses: np.ndarray, mask: np.ndarray) -> None:
+        """Row k of the statuses: ``statuses`` where ``mask``, "" elsewhere."""
+        given = np.asarray(statuses)[mask]
+        given = given.astype(str) if given.dtype == object else given
+        names, codes = np.unique(given, return_inverse=True)
+        lookup = np.empty(len(names), dtype=np.uint16)
+        for c, name in enumerate(names):
+            if name not in self.status_names:
+                self.status_names.append(name)
+            lookup[c] = self.status_names.index(name)
+        self.status_codes[k, mask] = lookup[codes]
 
     def record(self, sc: Scenario, formulation: str, solver: str, steps: int, wall: float,
                extra: dict[str, Any] | None = None) -> RunRecord:
         s = steps
+        statuses = np.array(self.status_names, dtype=object)[self.status_codes[:s]]
         return RunRecord(
             scenario=sc, formulation=formulation, solver=solver,
             times=np.arange(s + 1) * sc.dt, positions=self.pos[: s + 1], velocities=self.vel[:s],
             commands=self.cmd[:s], preferred=self.pref[:s], decided=self.decided[:s],
-            statuses=self.statuses[:s], decision_times=self.dtimes[:s],
+            statuses=statuses, decision_times=self.dtimes[:s],
             solve_times=self.stimes[:s], arrived=self.arrived[: s + 1], wall_time=wall,
             extra=extra or {},
         )
+
+
+def scenario_dynamics(sc: Scenario) -> Dynamics:
+    """The scenario's dynamics: ``first_order`` with ``velocity_response_tau`` when set, else
+    ``kinematic``."""
+    tau = sc.velocity_response_tau
+    return make_dynamics(None if tau is None else {"model": "first_order", "tau": tau})
+
+
+def scenario_goal_velocity(sc: Scenario) -> Callable[[np.ndarray], np.ndarray]:
+    """The scenario's preferred-velocity rule as a plain function of the positions (N, 3):
+    :func:`~vo3d_opt.sim.traffic.goal_velocity` towards each agent's goal."""
+    goals, v_max, dt = sc.goals, sc.max_speed, float(sc.dt)
+    return lambda positions: goal_velocity(positions, goals, v_max, dt)
+
+
+def _checked_commands(out: StepDecision, deciding: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The commands (0 for agents that do not decide) and statuses, a non-finite command
+    replaced by 0 with the status ``invalid_velocity (...)``."""
+    u = np.asarray(out.commands, dtype=float).reshape(deciding.shape[0], 3).copy()
+    statuses = np.asarray(out.statuses)
+    bad = deciding & ~np.all(np.isfinite(u), axis=1)
+    if bad.any():
+        statuses = statuses.astype(object)
+        for i in np.flatnonzero(bad):
+            statuses[i] = f"{INVALID} ({statuses[i]})"
+    u[bad | ~deciding] = 0.0
+    return u, statuses
+
+
+def _progress_bar(sc: Scenario, total: int, progress: bool | None) -> tqdm:
+    """Steps against the most the run may take, with the arrivals alongside (``finish`` sets
+    the total to the steps flown when everyone arrived early, so the bar ends at 100 %)."""
+    return tqdm(total=total, desc=sc.name, unit="step", file=sys.stderr, delay=1.0, leave=False,
+                dynamic_ncols=True, disable=(None if progress is None else not progress))
+
+
+def fly(sc: Scenario, step: DecisionStep, *,
+        preferred_velocity: Callable[[np.ndarray], np.ndarray] | None = None,
+        dynamics: Dynamics | None = None, progress: bool | None = None,
+        max_steps: int | None = None) -> RunRecord:
+    """The one simulation loop (the module docstring): sense → ``step.decide`` → integrate,
+    until every agent arrived or ``max_time`` (or ``max_steps``). ``preferred_velocity``:
+    positions (N, 3) → preferred velocities (N, 3), default the scenario's goal rule;
+    ``dynamics``: default :func:`scenario_dynamics`; ``progress`` None = a bar only on a TTY."""
+    n, dt, tol = sc.n_agents, float(sc.dt), sc.goal_tolerance
+    total = sc.n_steps if max_steps is None else min(max_steps, sc.n_steps)
+    prefer = preferred_velocity or scenario_goal_velocity(sc)
+    dyn = dynamics or scenario_dynamics(sc)
+    dyn.reset(sc.starts)
+    buf = RunBuffers(total, n, same_commands=dyn.model == "kinematic")
+    p, v = dyn.positions, dyn.velocities
+    done = np.linalg.norm(p - sc.goals, axis=1) <= tol
+    dyn.hold(done)
+    buf.pos[0], buf.arrived[0] = p, done
+    steps = 0
+    t_start = time.perf_counter()
+    bar = _progress_bar(sc, total, progress)
+    try:
+        for k in range(total):
+            if done.all():
+                break
+            steps = k + 1
+            w = np.asarray(prefer(p), dtype=float)
+            w[done] = 0.0
+            deciding = ~done
+            snap = Snapshot(k=k, t=k * dt, positions=p, velocities=v, preferred=w,
+                            deciding=deciding)
+            out = step.decide(snap)
+            u, statuses = _checked_commands(out, deciding)
+            buf.pref[k], buf.cmd[k], buf.decided[k] = w, u, deciding
+            buf.put_statuses(k, statuses, deciding)
+            buf.dtimes[k] = np.where(deciding, out.decision_times, np.nan)
+            buf.stimes[k] = np.where(deciding, out.solve_times, np.nan)
+            flown = dyn.step(u, dt)
+            p = flown.positions
+            buf.vel[k] = flown.velocities
+            arrived = ~done & (np.linalg.norm(p - sc.goals, axis=1) <= tol)
+            done = done | arrived
+            dyn.hold(arrived)  # an arrived agent hovers from now on: the others see it still
+            v = dyn.velocities
+            buf.pos[k + 1], buf.arrived[k + 1] = p, done
+            bar.update(1)
+            bar.set_postfix_str(f"arrived {int(done.sum())}/{n}", refresh=False)
+        if done.all() and bar.total != steps:  # everyone arrived before max_time: complete
+            bar.total = steps
+            bar.refresh()
+    finally:
+        bar.close()
+    wall = time.perf_counter() - t_start
+    return buf.record(sc, step.formulation, step.solver, steps, wall, step.extra())
 
 
 def make_selector(formulation: str | None = None, solver: str | None = None,
@@ -179,110 +332,27 @@ def make_selector(formulation: str | None = None, solver: str | None = None,
 
 
 class Simulator:
-    """Runs one scenario with one selector object shared by every agent (it must be stateless
-    between calls, or at least deterministic given the call order, which is agent order)."""
+    """Runs one scenario with one selector shared by every agent: a ``VelocitySelector`` (or
+    anything with its ``select_many``) decides for the whole swarm in one call per step
+    (:class:`~vo3d_opt.sim.deciders.SwarmSelect`); any other ``SelectorLike`` is called once per
+    agent per step, in id order (:class:`~vo3d_opt.sim.deciders.PerAgentSelect`; it must be
+    stateless between calls, or at least deterministic given the call order).
+    ``max_neighbors`` (the k nearest vehicles in range) and ``threads`` go to ``select_many``.
+    """
 
     def __init__(self, scenario: Scenario, selector: SelectorLike, *, formulation: str = "custom",
-                 solver: str = "custom") -> None:
+                 solver: str = "custom", max_neighbors: int | None = None,
+                 threads: int | None = None) -> None:
+        from vo3d_opt.sim.deciders import decision_step
+
         self.scenario = scenario
         self.selector = selector
-        self.formulation = formulation
-        self.solver = solver
-        sc = scenario
-        self.limits = [sc.agent_limits(i) for i in range(sc.n_agents)]
-        self.bodies = sc.bodies
-        self.sensed_idx = np.flatnonzero(sc.sensed) if sc.obstacles else np.zeros(0, dtype=int)
-        self.spheres = sc.sphere_neighbors()
-        self.sphere_centers = np.array([s.center for s in sc.spheres], dtype=float).reshape(-1, 3)
-        self.sphere_radii = np.array([s.radius for s in sc.spheres], dtype=float)
-
-    def preferred_velocity(self, positions: np.ndarray) -> np.ndarray:
-        """Goal-seeking velocities (N, 3): towards the goal at min(v_max, distance / dt)."""
-        sc = self.scenario
-        to_goal = sc.goals - positions
-        dist = np.linalg.norm(to_goal, axis=1)
-        speed = np.minimum(sc.max_speed, dist / sc.dt)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            unit = np.where(dist[:, None] > 0, to_goal / dist[:, None], 0.0)
-        return unit * speed[:, None]
+        self.step = decision_step(scenario, selector, formulation=formulation, solver=solver,
+                                  max_neighbors=max_neighbors, threads=threads)
 
     def run(self, *, progress: bool | None = None, max_steps: int | None = None) -> RunRecord:
         """Simulate until every agent arrived or ``max_time``; ``progress`` None = only on a TTY."""
-        sc = self.scenario
-        n, dt = sc.n_agents, sc.dt
-        total = sc.n_steps if max_steps is None else min(max_steps, sc.n_steps)
-        r_pz, goals, tol = sc.r_pz, sc.goals, sc.goal_tolerance
-        vrange, orange = sc.sensing.vehicle_range, sc.sensing.obstacle_range
-        alpha = None if sc.velocity_response_tau is None else min(1.0, dt / sc.velocity_response_tau)
-        order = sorted(range(n), key=lambda i: sc.ids[i])
-
-        buf = RunBuffers.empty(total, n)
-        pos, vel, cmd, pref, arrived = buf.pos, buf.vel, buf.cmd, buf.pref, buf.arrived
-        decided, statuses, dtimes, stimes = buf.decided, buf.statuses, buf.dtimes, buf.stimes
-
-        p = sc.starts.copy()
-        v = np.zeros((n, 3))
-        done = np.linalg.norm(p - goals, axis=1) <= tol
-        pos[0], arrived[0] = p, done
-        steps = 0
-        t_start = time.perf_counter()
-        bar = tqdm(total=total, desc=sc.name, unit="step", file=sys.stderr, delay=1.0,
-                   leave=False, disable=(None if progress is None else not progress))
-        try:
-            for k in range(total):
-                if done.all():
-                    break
-                steps = k + 1
-                v_pref = self.preferred_velocity(p)
-                v_pref[done] = 0.0
-                pref[k] = v_pref
-                centre = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
-                obst = (np.stack([self.bodies[m].surface_distance(p) for m in self.sensed_idx],
-                                 axis=1) if len(self.sensed_idx) else np.zeros((n, 0)))
-                sph = (np.stack([sphere_surface_distance(c, r, p) for c, r in
-                                 zip(self.sphere_centers, self.sphere_radii)], axis=1)
-                       if len(self.spheres) else np.zeros((n, 0)))
-                cache: dict[tuple[int, float], Neighbor] = {}
-                u = np.zeros((n, 3))
-                for i in order:
-                    if done[i]:
-                        continue
-                    neighbors: list[Neighbor] = []
-                    for j in np.flatnonzero(centre[i] <= vrange):
-                        if j == i:
-                            continue
-                        key = (int(j), float(max(r_pz[i], r_pz[j])))
-                        if key not in cache:  # an arrived agent hovers: it does not avoid
-                            cache[key] = Neighbor(position=p[j], velocity=v[j], r_pz=key[1],
-                                                  cooperative=not done[j])
-                        neighbors.append(cache[key])
-                    neighbors.extend(self.spheres[s] for s in np.flatnonzero(sph[i] <= orange))
-                    obstacles = [self.bodies[self.sensed_idx[m]]
-                                 for m in np.flatnonzero(obst[i] <= orange)]
-                    own = AgentState(position=p[i], velocity=v[i])
-                    t0 = time.perf_counter()
-                    d = self.selector.select(own=own, preferred_velocity=v_pref[i],
-                                             neighbors=neighbors, obstacles=obstacles,
-                                             limits=self.limits[i], dt=dt)
-                    dtimes[k, i] = time.perf_counter() - t0
-                    out = np.asarray(d.velocity, dtype=float).reshape(-1)
-                    status = str(d.status)
-                    if out.shape != (3,) or not np.all(np.isfinite(out)):
-                        out, status = np.zeros(3), f"invalid_velocity ({status})"
-                    u[i], statuses[k, i], decided[k, i] = out, status, True
-                    stimes[k, i] = float(getattr(d, "solve_time", np.nan))
-                cmd[k] = u
-                v = u.copy() if alpha is None else v + (u - v) * alpha
-                v[done] = 0.0
-                vel[k] = v
-                p = p + v * dt
-                done = done | (np.linalg.norm(p - goals, axis=1) <= tol)
-                v[done] = 0.0  # an arrived agent hovers from now on: the others see it still
-                pos[k + 1], arrived[k + 1] = p, done
-                bar.update(1)
-        finally:
-            bar.close()
-        return buf.record(sc, self.formulation, self.solver, steps, time.perf_counter() - t_start)
+        return fly(self.scenario, self.step, progress=progress, max_steps=max_steps)
 
 
 def default_selector_options(sc: Scenario) -> dict[str, Any]:
@@ -294,7 +364,7 @@ def default_selector_options(sc: Scenario) -> dict[str, Any]:
     distance a vehicle covers in one step at full speed. Without these the paper's
     non-reciprocal selection lets vehicles slide along each other's zones and dip into them
     (see README, "Safety in simulation")."""
-    v_max = max(sc.agent_limits(i).v_max for i in range(sc.n_agents))
+    v_max = float(np.max(sc.max_speed))
     return {"reciprocal": True, "pz_buffer": 2.0 * v_max * sc.dt}
 
 
@@ -308,41 +378,14 @@ def scenario_selector(sc: Scenario, formulation: str | None = None, solver: str 
 
 def run_scenario(scenario: Scenario | str | Path, selector: SelectorLike | None = None, *,
                  formulation: str | None = None, solver: str | None = None,
-                 progress: bool | None = None, max_steps: int | None = None) -> RunRecord:
+                 progress: bool | None = None, max_steps: int | None = None,
+                 max_neighbors: int | None = None, threads: int | None = None) -> RunRecord:
     """Load (if a path) and run a scenario. Without ``selector``, build a ``VelocitySelector``
     from ``formulation``/``solver`` (falling back to the scenario's, then to plane_qp and the
     selector's default solver); ``ValueError`` for unknown names."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     if selector is None:
         selector, formulation, solver = scenario_selector(sc, formulation, solver)
-    sim = Simulator(sc, selector, formulation=formulation or "custom", solver=solver or "custom")
+    sim = Simulator(sc, selector, formulation=formulation or "custom", solver=solver or "custom",
+                    max_neighbors=max_neighbors, threads=threads)
     return sim.run(progress=progress, max_steps=max_steps)
-
-
-CSV_COLUMNS = ["step", "time", "agent", "x", "y", "z", "vx", "vy", "vz", "cmd_vx", "cmd_vy",
-               "cmd_vz", "status", "decision_time_us", "arrived"]
-
-
-def write_csv(record: RunRecord, path: str | Path) -> Path:
-    """Trajectories as CSV, one row per (sample, agent); the velocity columns hold the velocity
-    flown from that sample to the next (empty on the last sample)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    ids, steps = record.ids, record.steps
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(CSV_COLUMNS)
-        for k in range(steps + 1):
-            t = f"{record.times[k]:.6g}"
-            for i, name in enumerate(ids):
-                x, y, z = (f"{c:.6f}" for c in record.positions[k, i])
-                if k < steps:
-                    v = [f"{c:.6f}" for c in record.velocities[k, i]]
-                    c = [f"{c:.6f}" for c in record.commands[k, i]]
-                    st = record.statuses[k, i]
-                    dtu = record.decision_times[k, i]
-                    dtu = "" if np.isnan(dtu) else f"{dtu * 1e6:.1f}"
-                else:
-                    v, c, st, dtu = ["", "", ""], ["", "", ""], "", ""
-                w.writerow([k, t, name, x, y, z, *v, *c, st, dtu, int(record.arrived[k, i])])
-    return path

@@ -327,17 +327,15 @@ class Scenario(Spec):
         out: list[Problem] = []
         radius = self.radius
         for key, pts in (("start", self.starts), ("goal", self.goals)):
-            for i in range(len(pts)):
-                for j in range(i):
-                    d = float(np.linalg.norm(pts[i] - pts[j]))
-                    if d < radius[i] + radius[j]:
-                        out.append(
-                            (
-                                ("agents", i, key),
-                                f"overlaps agents[{j}] ({self.agents[j].id}) at {d:.3g} m",
-                                pts[i],
-                            )
+            for i, j, d in close_pairs(pts, radius, radius.max()):
+                if d < radius[i] + radius[j]:
+                    out.append(
+                        (
+                            ("agents", i, key),
+                            f"overlaps agents[{j}] ({self.agents[j].id}) at {d:.3g} m",
+                            pts[i],
                         )
+                    )
         return out
 
     # -------------------------------------------------------------- convenience accessors
@@ -420,27 +418,25 @@ class Scenario(Spec):
 
     def step_warnings(self) -> list[str]:
         """Agents that fly farther than their protected-zone radius in one step."""
-        step = self.max_speed * self.dt
+        step, r_pz = self.max_speed * self.dt, self.r_pz
         return [
             f"{a.id} flies {step[i]:g} m per step (max_speed x dt), more than its protected-zone "
-            f"radius {self.r_pz[i]:g} m: it can cross a zone between two decisions"
+            f"radius {r_pz[i]:g} m: it can cross a zone between two decisions"
             for i, a in enumerate(self.agents)
-            if step[i] > self.r_pz[i]
+            if step[i] > r_pz[i]
         ]
 
     def start_warnings(self) -> list[str]:
         """Starts inside a protected zone (allowed, but worth saying): one line each."""
         out: list[str] = []
         p, r_pz, ids = self.starts, self.r_pz, self.ids
-        n = len(ids)
-        for i in range(n):
-            for j in range(i + 1, n):
-                d = float(np.linalg.norm(p[i] - p[j]))
-                if d < max(r_pz[i], r_pz[j]):
-                    out.append(
-                        f"{ids[i]} and {ids[j]} start {d:.2f} m apart, inside the "
-                        f"protected zone ({max(r_pz[i], r_pz[j]):g} m)"
-                    )
+        pairs = sorted((j, i, d) for i, j, d in close_pairs(p, r_pz, 0.5 * r_pz.max()))
+        for i, j, d in pairs:
+            if d < max(r_pz[i], r_pz[j]):
+                out.append(
+                    f"{ids[i]} and {ids[j]} start {d:.2f} m apart, inside the "
+                    f"protected zone ({max(r_pz[i], r_pz[j]):g} m)"
+                )
         for k, body in enumerate(self._bodies):
             out += [
                 f"{ids[a]} starts inside the protected prism of obstacles[{k}]"
@@ -456,6 +452,25 @@ class Scenario(Spec):
 
 
 # ------------------------------------------------------------------------------ geometry
+
+
+def close_pairs(points: np.ndarray, reach: np.ndarray, most: float) -> list[tuple[int, int, float]]:
+    """Point pairs (i, j, distance), i > j, in order of i then j, closer than ``reach[i] +
+    reach[j]`` or so (a k-d tree proposes those within 2 × ``most`` ≥ any reach sum; the
+    caller applies its own test): no loop over every pair, for scenarios of thousands of
+    agents."""
+    from scipy.spatial import cKDTree
+
+    if len(points) < 2:
+        return []
+    within = 2.0 * float(most) * (1 + 1e-9) + 1e-9
+    found = cKDTree(points).query_pairs(within, output_type="ndarray")
+    i, j = found.max(axis=1), found.min(axis=1)
+    order = np.lexsort((j, i))
+    i, j = i[order], j[order]
+    d = np.linalg.norm(points[i] - points[j], axis=-1)
+    keep = d < reach[i] + reach[j]
+    return [(int(a), int(b), float(c)) for a, b, c in zip(i[keep], j[keep], d[keep], strict=True)]
 
 
 def prism_contains(body: Cylinder | Box, points: np.ndarray) -> np.ndarray:

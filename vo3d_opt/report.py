@@ -1,0 +1,195 @@
+"""What a run leaves on disk (``vo3d run --out DIR``, ``make demo``): the trajectories, the
+summary and the figures. One module for the CLI and the demo.
+
+* ``trajectories.parquet``: one row per agent and sample (pandas: ``pd.read_parquet``), the
+  columns of :data:`COLUMNS`; written a chunk of steps at a time, so a 10,000-agent run never
+  holds the whole table in memory;
+* ``trajectories.csv``: the same rows as text, up to :data:`CSV_MAX_ROWS` rows (agents × samples);
+  a larger run writes only the Parquet file (a CSV of a million rows is over 100 MB and takes
+  longer to write than many runs take to fly);
+* ``summary.json``: the summary (contract §3 and the extras), floats to :data:`JSON_DIGITS`
+  significant digits;
+* the figures of ``vo3d_opt.plots`` and, when asked, ``animation.gif``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vo3d_opt.sim.simulator import RunRecord
+
+log = logging.getLogger(__name__)
+
+#: The trajectory columns: the velocity columns hold the velocity flown from that sample to the
+#: next (``cmd_*``: the command), empty / NaN on the last sample, as are ``status`` and
+#: ``decision_time_us`` for agents that did not decide.
+COLUMNS = [
+    "step",
+    "time",
+    "agent",
+    "x",
+    "y",
+    "z",
+    "vx",
+    "vy",
+    "vz",
+    "cmd_vx",
+    "cmd_vy",
+    "cmd_vz",
+    "status",
+    "decision_time_us",
+    "arrived",
+]
+#: Above this many rows (agents × samples) ``write_outputs`` writes no CSV, only Parquet.
+CSV_MAX_ROWS = 500_000
+#: Significant digits of the floats in JSON output (17 show rounding noise: 31.200000000000003).
+JSON_DIGITS = 12
+#: Samples per Parquet row group.
+_PARQUET_STEPS = 200
+
+
+def rounded(value: Any) -> Any:
+    """``value`` with every finite float cut to JSON_DIGITS significant digits."""
+    if isinstance(value, float) and math.isfinite(value):
+        return float(f"{value:.{JSON_DIGITS}g}")
+    if isinstance(value, dict):
+        return {k: rounded(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [rounded(v) for v in value]
+    return value
+
+
+def write_summary(summary: dict[str, Any], path: str | Path) -> Path:
+    path = Path(path)
+    path.write_text(json.dumps(rounded(summary), indent=2, allow_nan=False) + "\n")
+    return path
+
+
+def write_csv(record: RunRecord, path: str | Path) -> Path:
+    """Trajectories as CSV, one row per (sample, agent), the columns of :data:`COLUMNS`."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ids, steps = record.ids, record.steps
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(COLUMNS)
+        for k in range(steps + 1):
+            t = f"{record.times[k]:.6g}"
+            for i, name in enumerate(ids):
+                x, y, z = (f"{c:.6f}" for c in record.positions[k, i])
+                if k < steps:
+                    v = [f"{c:.6f}" for c in record.velocities[k, i]]
+                    c = [f"{c:.6f}" for c in record.commands[k, i]]
+                    st = record.statuses[k, i]
+                    dtu = record.decision_times[k, i]
+                    dtu = "" if np.isnan(dtu) else f"{dtu * 1e6:.1f}"
+                else:
+                    v, c, st, dtu = ["", "", ""], ["", "", ""], "", ""
+                w.writerow([k, t, name, x, y, z, *v, *c, st, dtu, int(record.arrived[k, i])])
+    return path
+
+
+def _table(record: RunRecord, lo: int, hi: int) -> Any:
+    """Samples lo <= k < hi as a pyarrow table of :data:`COLUMNS`."""
+    import pyarrow as pa
+
+    n, steps = record.n_agents, record.steps
+    k = np.arange(lo, hi)
+    flown = np.minimum(k, steps - 1)  # the last sample has no step after it: NaN below
+    last = (k >= steps)[:, None]
+
+    def per_step(a: np.ndarray) -> np.ndarray:
+        out = a[flown] if steps else np.full((len(k), n) + a.shape[2:], np.nan)
+        return np.where(last[..., None] if out.ndim == 3 else last, np.nan, out)
+
+    vel, cmd = per_step(record.velocities), per_step(record.commands)
+    status = record.statuses[flown].astype(str) if steps else np.full((len(k), n), "")
+    status = np.where(last, "", status)
+    cols = {
+        "step": np.repeat(k, n).astype(np.int32),
+        "time": np.repeat(record.times[lo:hi], n),
+        "agent": pa.DictionaryArray.from_arrays(
+            np.tile(np.arange(n, dtype=np.int32), len(k)), pa.array(record.ids)
+        ),
+        **{c: record.positions[lo:hi, :, j].ravel() for j, c in enumerate("xyz")},
+        **{f"v{c}": vel[..., j].ravel() for j, c in enumerate("xyz")},
+        **{f"cmd_v{c}": cmd[..., j].ravel() for j, c in enumerate("xyz")},
+        "status": pa.array(status.ravel()).dictionary_encode(),
+        "decision_time_us": per_step(record.decision_times).ravel() * 1e6,
+        "arrived": record.arrived[lo:hi].ravel(),
+    }
+    return pa.table(cols)
+
+
+def write_parquet(record: RunRecord, path: str | Path) -> Path:
+    """Trajectories as Parquet, one row per (sample, agent), the columns of :data:`COLUMNS`
+    (``agent`` and ``status`` dictionary-encoded), a row group per 200 samples."""
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    samples = record.steps + 1
+    writer = None
+    try:
+        for lo in range(0, samples, _PARQUET_STEPS):
+            table = _table(record, lo, min(samples, lo + _PARQUET_STEPS))
+            if writer is None:
+                writer = pq.ParquetWriter(path, table.schema)
+            writer.write_table(table)
+    finally:
+        if writer is not None:
+            writer.close()
+    return path
+
+
+def write_outputs(
+    record: RunRecord,
+    summary: dict[str, Any],
+    out: Path,
+    *,
+    plot_options: dict[str, Any] | None = None,
+    animate: bool = False,
+) -> list[Path]:
+    """trajectories.parquet, trajectories.csv (up to CSV_MAX_ROWS rows), summary.json, the
+    figures (``plot_options``: ``write_plots``' keywords) and with ``animate`` animation.gif of
+    a run in ``out``; the paths written."""
+    from vo3d_opt.plots import skipped_plots, write_plots  # matplotlib only when asked for
+
+    out.mkdir(parents=True, exist_ok=True)
+    written = [write_parquet(record, out / "trajectories.parquet")]
+    rows = record.n_agents * (record.steps + 1)
+    if rows <= CSV_MAX_ROWS:
+        written.append(write_csv(record, out / "trajectories.csv"))
+    else:
+        log.info(
+            "not written: trajectories.csv (%d rows, more than %d; trajectories.parquet has them)",
+            rows,
+            CSV_MAX_ROWS,
+        )
+    written.append(write_summary(summary, out / "summary.json"))
+    written += write_plots(record, out, **(plot_options or {}))
+    for name, why in skipped_plots(record).items():
+        log.info("not drawn: %s (%s)", name, why)
+    if animate:
+        from vo3d_opt.animation import write_animation
+
+        written.append(write_animation(record, out / "animation.gif"))
+    return written
+
+
+__all__ = [
+    "COLUMNS",
+    "CSV_MAX_ROWS",
+    "rounded",
+    "write_csv",
+    "write_outputs",
+    "write_parquet",
+    "write_summary",
+]

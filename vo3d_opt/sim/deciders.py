@@ -1,0 +1,190 @@
+"""The decision steps of the simulation loop (``simulator.fly``) that run a selector.
+
+* :class:`SwarmSelect`: ``VelocitySelector.select_many`` decides for every agent that has not
+  arrived in one call per step (compiled for the default formulation and backend; a loop of
+  ``select`` otherwise, inside the selector);
+* :class:`PerAgentSelect`: any ``SelectorLike`` called once per agent per step, in id order,
+  with ``Neighbor`` objects built here (stand-ins, other libraries' selectors).
+
+Both apply the same sensing rules (``vo3d_opt.swarm``; ``simulator``'s docstring), so for a
+``VelocitySelector`` they give the same trajectory (tests/test_sim_loop.py).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
+from vo3d_opt.sim.simulator import SelectorLike, Snapshot, StepDecision
+from vo3d_opt.types import AgentState, Neighbor
+
+
+def sphere_table(sc: Scenario) -> np.ndarray:
+    """The scenario's static spheres as (S, 5): x, y, z, radius, r_pz (``select_many``'s
+    ``spheres``)."""
+    return np.array([[*s.center, s.radius, s.r_pz] for s in sc.spheres], dtype=float).reshape(-1, 5)
+
+
+class _SelectorStep:
+    """A decision step that runs ``selector`` on scenario ``sc``; ``formulation`` and
+    ``solver`` name it in the record."""
+
+    def __init__(self, sc: Scenario, selector: Any, *, formulation: str = "custom",
+                 solver: str = "custom") -> None:
+        self.scenario, self.selector = sc, selector
+        self.formulation, self.solver = formulation, solver
+
+
+class SwarmSelect(_SelectorStep):
+    """Every deciding agent by one ``select_many`` call per step. ``max_neighbors``: each agent
+    considers only its k nearest vehicles in range; ``threads``: ``select_many``'s."""
+
+    def __init__(self, sc: Scenario, selector: Any, *, formulation: str = "custom",
+                 solver: str = "custom", max_neighbors: int | None = None,
+                 threads: int | None = None) -> None:
+        super().__init__(sc, selector, formulation=formulation, solver=solver)
+        self.max_neighbors, self.threads = max_neighbors, threads
+        self.obstacles = [b for b, seen in zip(sc.bodies, sc.sensed, strict=True) if seen]
+        self.spheres = sphere_table(sc)
+        self.compiled = bool(getattr(selector, "compiled", False))
+
+    def decide(self, snap: Snapshot) -> StepDecision:
+        sc = self.scenario
+        out = self.selector.select_many(
+            snap.positions,
+            snap.velocities,
+            snap.preferred,
+            sc.r_pz,
+            self.obstacles,
+            sc.limits,
+            sc.dt,
+            sc.sensing.vehicle_range,
+            self.max_neighbors,
+            snap.deciding,
+            obstacle_range=sc.sensing.obstacle_range,
+            spheres=self.spheres,
+            max_speed=sc.max_speed,
+            threads=self.threads,
+        )
+        return StepDecision(
+            commands=out.velocities,
+            statuses=out.statuses,
+            decision_times=out.times,
+            solve_times=out.times,
+        )
+
+    def extra(self) -> dict[str, Any]:
+        return {
+            "decision_step": "select_many",
+            "compiled": self.compiled,
+            "max_neighbors": self.max_neighbors,
+        }
+
+
+class PerAgentSelect(_SelectorStep):
+    """Each deciding agent by its own ``select`` call, in id order, with the neighbours (in
+    index order, then the spheres) and the obstacles it senses."""
+
+    def __init__(self, sc: Scenario, selector: SelectorLike, *, formulation: str = "custom",
+                 solver: str = "custom") -> None:
+        super().__init__(sc, selector, formulation=formulation, solver=solver)
+        self.limits = [sc.agent_limits(i) for i in range(sc.n_agents)]
+        self.sensed_idx = np.flatnonzero(sc.sensed) if sc.obstacles else np.zeros(0, dtype=int)
+        self.spheres = sc.sphere_neighbors()
+        self.order = sorted(range(sc.n_agents), key=lambda i: sc.ids[i])
+
+    def _sensed(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centre distances (N, N), obstacle surface distances (N, M), sphere surface distances
+        (N, S)."""
+        sc, n = self.scenario, p.shape[0]
+        centre = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
+        bodies = sc.bodies
+        obst = (
+            np.stack([bodies[m].surface_distance(p) for m in self.sensed_idx], axis=1)
+            if len(self.sensed_idx)
+            else np.zeros((n, 0))
+        )
+        sph = (
+            np.stack(
+                [
+                    sphere_surface_distance(np.asarray(s.center, dtype=float), s.radius, p)
+                    for s in sc.spheres
+                ],
+                axis=1,
+            )
+            if sc.spheres
+            else np.zeros((n, 0))
+        )
+        return centre, obst, sph
+
+    def decide(self, snap: Snapshot) -> StepDecision:
+        sc = self.scenario
+        p, v, done = snap.positions, snap.velocities, ~snap.deciding
+        r_pz, vrange, orange = sc.r_pz, sc.sensing.vehicle_range, sc.sensing.obstacle_range
+        n = p.shape[0]
+        centre, obst, sph = self._sensed(p)
+        u, statuses = np.zeros((n, 3)), np.full(n, "", dtype=object)
+        dtimes, stimes = np.full(n, np.nan), np.full(n, np.nan)
+        for i in self.order:
+            if done[i]:
+                continue
+            neighbors = [
+                Neighbor(
+                    position=p[j],
+                    velocity=v[j],
+                    r_pz=float(max(r_pz[i], r_pz[j])),
+                    cooperative=not done[j],
+                )  # an arrived agent hovers: it does not avoid
+                for j in np.flatnonzero(centre[i] <= vrange)
+                if j != i
+            ]
+            neighbors += [self.spheres[s] for s in np.flatnonzero(sph[i] <= orange)]
+            obstacles = [sc.bodies[self.sensed_idx[m]] for m in np.flatnonzero(obst[i] <= orange)]
+            t0 = time.perf_counter()
+            d = self.selector.select(
+                own=AgentState(position=p[i], velocity=v[i]),
+                preferred_velocity=snap.preferred[i],
+                neighbors=neighbors,
+                obstacles=obstacles,
+                limits=self.limits[i],
+                dt=sc.dt,
+            )
+            dtimes[i] = time.perf_counter() - t0
+            out = np.asarray(d.velocity, dtype=float).reshape(-1)
+            u[i] = out if out.shape == (3,) else np.nan
+            statuses[i] = str(d.status)
+            stimes[i] = float(getattr(d, "solve_time", np.nan))
+        return StepDecision(
+            commands=u, statuses=statuses, decision_times=dtimes, solve_times=stimes
+        )
+
+    def extra(self) -> dict[str, Any]:
+        return {"decision_step": "select"}
+
+
+def decision_step(
+    sc: Scenario,
+    selector: Any,
+    *,
+    formulation: str = "custom",
+    solver: str = "custom",
+    max_neighbors: int | None = None,
+    threads: int | None = None,
+) -> SwarmSelect | PerAgentSelect:
+    """``SwarmSelect`` for a selector with ``select_many`` (a ``VelocitySelector``), else
+    ``PerAgentSelect``."""
+    if callable(getattr(selector, "select_many", None)):
+        return SwarmSelect(
+            sc,
+            selector,
+            formulation=formulation,
+            solver=solver,
+            max_neighbors=max_neighbors,
+            threads=threads,
+        )
+    if max_neighbors is not None:
+        raise ValueError("max_neighbors: only for selectors with select_many")
+    return PerAgentSelect(sc, selector, formulation=formulation, solver=solver)

@@ -1,0 +1,550 @@
+"""The Python side of ``VelocitySelector.select_many`` (contracts §4): the arrays checked, who
+senses whom (k-d trees, never an N×N matrix), and the answer, ``SwarmDecision``.
+
+Sensing, for deciding vehicle i (the same rules as a loop of ``select`` calls would apply):
+
+* vehicles: every other vehicle j whose centre distance ``‖P[i] − P[j]‖`` is at most
+  ``sensing_range`` (or, with ``max_neighbors = k``, the k nearest of them), in index order, each
+  seen with ``r_pz = max(R[i], R[j])``, its current velocity, and as cooperative when it decides
+  too. scipy's ``cKDTree`` proposes the candidates within a hair more than the range; the range
+  itself is then applied with numpy's distance, so the neighbour sets are exactly those of a
+  brute-force ``np.linalg.norm`` test;
+* obstacles: all of them, in the order given (contract §4: "the same for every vehicle"); with
+  the ``obstacle_range`` extension only those whose surface is within that distance
+  (``Cylinder.surface_distance`` / ``Box.surface_distance``), found through a 2D k-d tree over
+  the vehicles so that many obstacles stay cheap;
+* static spheres (the ``spheres`` extension, (S, 5): x, y, z, radius, r_pz): zero-velocity,
+  non-cooperative neighbours with their own r_pz after the vehicles, filtered like the obstacles
+  (surface distance ``max(‖p − c‖ − radius, 0)``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import numbers
+import threading
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any
+
+import numba
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ._jit import entry, inline
+from .formulations.common import bounds_array
+from .formulations.swarm import AGENT_COLUMNS, MANY_OUT_SIZE, Swarm, decide_range
+from .geometry.pyramid import prism_rows
+from .types import Box, Cylinder, Limits
+
+#: The k-d trees propose candidates within range·(1 + _REACH) + _REACH, m: a hair more than the
+#: range, so that a rounding difference between the tree's distance and numpy's never drops a
+#: neighbour; numpy's distance then decides.
+_REACH = 1e-9
+_EMPTY = np.zeros(0, dtype=np.int64)
+
+
+@dataclass
+class SwarmDecision:
+    """What ``select_many`` returns (contracts §4), per vehicle in the order given.
+
+    ``velocities`` (N, 3) m/s: the decision, or the current velocity of a vehicle that does not
+    decide; ``statuses`` (N,) str: the status of contract §1, "" for a vehicle that does not
+    decide; ``solve_time`` s: the whole call. Beyond the contract: ``decided`` (N,) bool;
+    ``rounds`` (N,) str: how each velocity was found (``Decision.info["round"]``: "preferred", a
+    QP round, "sampled", "least_bad"); ``planes`` (N,) rad: the avoidance plane chosen (NaN: none);
+    ``neighbors`` (N,) int: the vehicles each took into account; ``obstacles`` (N,) int: the
+    obstacles and spheres it took into account; ``solved`` (N,) int: plane QPs solved; ``times``
+    (N,) s: each vehicle's share of the time (its own ``select`` call when looping, the call's
+    time shared equally among the deciding vehicles when compiled; NaN when not deciding);
+    ``compiled``: whether the one compiled call ran (else a loop of ``select``); ``threads``:
+    numba threads used."""
+
+    velocities: np.ndarray
+    statuses: np.ndarray
+    solve_time: float
+    decided: np.ndarray
+    rounds: np.ndarray
+    planes: np.ndarray
+    neighbors: np.ndarray
+    obstacles: np.ndarray
+    solved: np.ndarray
+    times: np.ndarray
+    compiled: bool = False
+    threads: int = 1
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+# ------------------------------------------------------------------------------ the arrays
+
+
+def _real(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _array(value: Any, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    """A finite float array of exactly ``shape`` (C-contiguous, a copy), or ValueError."""
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{name}: expected numbers of shape {shape}, got {type(value).__name__}"
+        ) from None
+    if arr.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: must be finite (no NaN or inf)")
+    return np.ascontiguousarray(arr)
+
+
+def points(value: Any, name: str, n: int | None = None) -> np.ndarray:
+    """(n, 3) finite floats; ``n`` None: any number of rows."""
+    if n is None:
+        shape = np.shape(value)
+        if len(shape) != 2 or shape[1] != 3:
+            raise ValueError(f"{name}: expected shape (N, 3), got {shape}")
+        n = shape[0]
+    return _array(value, name, (n, 3))
+
+
+def radii(value: Any, name: str, n: int) -> np.ndarray:
+    """(n,) positive finite floats from one number or n of them."""
+    if _real(value):
+        value = np.full(n, float(value))
+    arr = _array(value, name, (n,))
+    if np.any(arr <= 0):
+        raise ValueError(f"{name}: must be positive")
+    return arr
+
+
+def mask(value: Any, name: str, n: int) -> np.ndarray:
+    """(n,) bool from None (all true) or n booleans (or 0/1)."""
+    if value is None:
+        return np.ones(n, dtype=bool)
+    arr = np.asarray(value)
+    if arr.shape != (n,):
+        raise ValueError(f"{name}: expected shape ({n},), got {arr.shape}")
+    if arr.dtype != bool:
+        if not (np.issubdtype(arr.dtype, np.number) and np.all((arr == 0) | (arr == 1))):
+            raise ValueError(f"{name}: expected booleans (or 0/1)")
+        arr = arr != 0
+    return arr.copy()
+
+
+def distance(value: Any, name: str, *, allow_inf: bool = False) -> float:
+    """A positive distance in m (inf allowed when ``allow_inf``)."""
+    if not _real(value) or math.isnan(value) or value <= 0 or (math.isinf(value) and not allow_inf):
+        what = "positive" if allow_inf else "positive finite"
+        raise ValueError(f"{name}: must be a {what} number of metres, got {value!r}")
+    return float(value)
+
+
+def count(value: Any, name: str) -> int | None:
+    """None or an integer >= 0."""
+    if value is None:
+        return None
+    if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < 0:
+        raise ValueError(f"{name}: must be None or an integer >= 0, got {value!r}")
+    return int(value)
+
+
+def vehicle_limits(limits: Limits, dt: float, n: int, max_speed: Any) -> np.ndarray:
+    """(n, 6) ``bounds_array`` rows; the ``max_speed`` extension (one number or (n,), m/s) caps
+    each vehicle's v_max (a scenario's per-agent ``max_speed``)."""
+    rows = np.tile(bounds_array(limits, dt), (n, 1))
+    if max_speed is not None:
+        cap = radii(max_speed, "max_speed", n)
+        if np.any(cap < limits.v_min):
+            raise ValueError(f"max_speed: below the minimum speed {limits.v_min:g}")
+        rows[:, 1] = np.minimum(rows[:, 1], cap)
+    return rows
+
+
+def sphere_rows(value: Any) -> np.ndarray:
+    """The ``spheres`` extension: (S, 5) x, y, z, radius, r_pz (radius >= 0, r_pz > 0)."""
+    if value is None:
+        return np.zeros((0, 5))
+    shape = np.shape(value)
+    if len(shape) != 2 or shape[1] != 5:
+        raise ValueError(f"spheres: expected shape (S, 5) (x, y, z, radius, r_pz), got {shape}")
+    arr = _array(value, "spheres", shape)
+    if np.any(arr[:, 3] < 0) or np.any(arr[:, 4] <= 0):
+        raise ValueError("spheres: radius must be >= 0 and r_pz positive")
+    return arr
+
+
+def obstacle_list(value: Any) -> list[Cylinder | Box]:
+    items = [] if value is None else list(value)
+    for i, item in enumerate(items):
+        if not isinstance(item, (Cylinder, Box)):
+            raise ValueError(f"obstacles[{i}]: expected Cylinder or Box, got {type(item).__name__}")
+    return items
+
+
+# ------------------------------------------------------------------------------ who senses whom
+
+
+def _spans(rows: np.ndarray, cols: np.ndarray, n_rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (row, col) as index lists: ``idx[span[r, 0]:span[r, 1]]`` are row r's columns, in
+    increasing order."""
+    order = np.lexsort((cols, rows))
+    counts = np.bincount(rows, minlength=n_rows)
+    ends = np.cumsum(counts)
+    span = np.stack([ends - counts, ends], axis=1).astype(np.int64)
+    return span, np.ascontiguousarray(cols[order], dtype=np.int64)
+
+
+def _reach(r: np.ndarray | float) -> np.ndarray | float:
+    return r * (1.0 + _REACH) + _REACH
+
+
+def vehicle_links(
+    P: np.ndarray,
+    who: np.ndarray,
+    sensing_range: float,
+    max_neighbors: int | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each deciding vehicle's neighbours (vehicle indices, increasing) as (span, idx): the
+    vehicles within ``sensing_range`` (numpy's distance), or the ``max_neighbors`` nearest of
+    them (equally near: the lower index first)."""
+    n, D = P.shape[0], who.shape[0]
+    if D == 0 or n < 2 or max_neighbors == 0:
+        return np.zeros((D, 2), dtype=np.int64), _EMPTY
+    pairs = cKDTree(P).query_pairs(_reach(sensing_range), output_type="ndarray")
+    a, b = np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1])
+    dist = np.linalg.norm(P[a] - P[b], axis=-1)
+    place = np.full(n, -1, dtype=np.int64)
+    place[who] = np.arange(D)
+    span = np.empty((D, 2), dtype=np.int64)
+    k = -1 if max_neighbors is None else int(max_neighbors)
+    idx = neighbor_lists(a, b, dist, float(sensing_range), place, k, span)
+    return span, idx
+
+
+#: Neighbour lists up to this long are sorted in place (insertion sort), longer ones by numpy.
+_SMALL_ROW = 48
+
+
+@inline
+def _insertion(key_i: np.ndarray, key_d: np.ndarray, c: int, by_distance: bool) -> None:
+    """Stable insertion sort of the first c entries of (key_i, key_d) by key_d (``by_distance``)
+    or by key_i."""
+    for q in range(1, c):
+        i, d = key_i[q], key_d[q]
+        r = q
+        while r > 0 and ((key_d[r - 1] > d) if by_distance else (key_i[r - 1] > i)):
+            key_i[r], key_d[r] = key_i[r - 1], key_d[r - 1]
+            r -= 1
+        key_i[r], key_d[r] = i, d
+
+
+@entry
+def neighbor_lists(
+    a: np.ndarray,
+    b: np.ndarray,
+    dist: np.ndarray,
+    sensing_range: float,
+    place: np.ndarray,
+    k: int,
+    span: np.ndarray,
+) -> np.ndarray:
+    """The pairs (a[e], b[e]) at distance dist[e] as each deciding vehicle's neighbour list
+    (``place``: a vehicle's row, -1 when it does not decide): those within ``sensing_range``,
+    the k nearest of them when k >= 0 (ties: the lower index), in increasing index order, into
+    ``span`` (D, 2); returns the concatenated lists. A counting sort by row: O(pairs)."""
+    D = span.shape[0]
+    count = np.zeros(D + 1, dtype=np.int64)
+    for e in range(a.shape[0]):
+        if dist[e] <= sensing_range:
+            if place[a[e]] >= 0:
+                count[place[a[e]] + 1] += 1
+            if place[b[e]] >= 0:
+                count[place[b[e]] + 1] += 1
+    start = np.cumsum(count)
+    fill = start.copy()
+    idx, near = np.empty(start[D], dtype=np.int64), np.empty(start[D])
+    for e in range(a.shape[0]):
+        if dist[e] <= sensing_range:
+            for x, y in ((a[e], b[e]), (b[e], a[e])):
+                r = place[x]
+                if r >= 0:
+                    idx[fill[r]], near[fill[r]] = y, dist[e]
+                    fill[r] += 1
+    out, m = np.empty(start[D], dtype=np.int64), 0
+    widest = 0
+    for r in range(D):
+        widest = max(widest, start[r + 1] - start[r])
+    key_i, key_d = np.empty(widest, dtype=np.int64), np.empty(widest)
+    for r in range(D):
+        c = start[r + 1] - start[r]
+        if c > _SMALL_ROW:  # a crowd: sorting with allocations is cheaper than insertion
+            row, d = idx[start[r] : start[r + 1]], near[start[r] : start[r + 1]]
+            by_index = np.argsort(row)
+            row, d = row[by_index], d[by_index]
+            if 0 <= k < c:
+                row = np.sort(row[np.argsort(d, kind="mergesort")[:k]])  # stable: ties by index
+            c = row.shape[0]
+            out[m : m + c] = row
+        else:
+            for q in range(c):  # by index, then (stable) by distance: ties keep the lower index
+                key_i[q], key_d[q] = idx[start[r] + q], near[start[r] + q]
+            _insertion(key_i, key_d, c, False)
+            if 0 <= k < c:
+                _insertion(key_i, key_d, c, True)
+                c = k
+                _insertion(key_i, key_d, c, False)
+            out[m : m + c] = key_i[:c]
+        span[r, 0] = m
+        m += c
+        span[r, 1] = m
+    return out[:m].copy()
+
+
+def _all(D: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every one of m items for each of D vehicles, as (span, idx)."""
+    span = np.zeros((D, 2), dtype=np.int64)
+    span[:, 1] = m
+    return span, np.arange(m, dtype=np.int64)
+
+
+def _near(
+    tree: cKDTree | None,
+    points: np.ndarray,
+    centres: np.ndarray,
+    bound: np.ndarray,
+    surface: Any,
+    rng: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(vehicle, item) pairs with item m's surface within ``rng`` of the vehicle:
+    candidates from ``tree`` (over ``points``) within rng + bound[m] of centres[m], then
+    ``surface(m, pts)`` decides."""
+    rows, cols = [], []
+    if tree is None:
+        tree = cKDTree(points)
+    for m, near in enumerate(tree.query_ball_point(centres, _reach(rng + bound))):
+        if near:
+            cand = np.asarray(near, dtype=np.int64)
+            hit = cand[surface(m, points[cand]) <= rng]
+            rows.append(hit)
+            cols.append(np.full(hit.shape, m, dtype=np.int64))
+    if not rows:
+        return _EMPTY, _EMPTY
+    return np.concatenate(rows), np.concatenate(cols)
+
+
+def obstacle_links(
+    Pd: np.ndarray,
+    obstacles: Sequence[Cylinder | Box],
+    obstacle_range: float | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The obstacles each deciding vehicle (positions ``Pd``) takes into account, as (span, idx)."""
+    D, m = Pd.shape[0], len(obstacles)
+    if obstacle_range is None or m == 0 or D == 0:
+        return _all(D, m)
+    centres = np.array([o.center for o in obstacles], dtype=float).reshape(m, 2)
+    # Any point of the footprint is within this of the centre: the surface is at least
+    # (horizontal distance - bound) away.
+    bound = np.array(
+        [o.radius if isinstance(o, Cylinder) else 0.5 * math.hypot(*o.size) for o in obstacles],
+        dtype=float,
+    )
+    rows, cols = _near(
+        cKDTree(Pd[:, :2]),
+        Pd,
+        centres,
+        bound,
+        lambda k, pts: obstacles[k].surface_distance(pts),
+        obstacle_range,
+    )
+    return _spans(rows, cols, D)
+
+
+def sphere_links(
+    Pd: np.ndarray,
+    spheres: np.ndarray,
+    obstacle_range: float | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The static spheres each deciding vehicle takes into account, as (span, idx)."""
+    D, s = Pd.shape[0], spheres.shape[0]
+    if obstacle_range is None or s == 0 or D == 0:
+        return _all(D, s)
+
+    def surface(k: int, pts: np.ndarray) -> np.ndarray:
+        return np.maximum(np.linalg.norm(pts - spheres[k, :3], axis=-1) - spheres[k, 3], 0.0)
+
+    rows, cols = _near(None, Pd, spheres[:, :3], spheres[:, 3], surface, obstacle_range)
+    return _spans(rows, cols, D)
+
+
+@dataclass
+class SwarmInputs:
+    """One ``select_many`` call's arguments, checked (``SwarmInputs.checked``): P, V, W (N, 3),
+    R (N,), the obstacles, ``bounds`` (N, 6) (``bounds_array`` per vehicle), the deciding
+    vehicles (``deciding`` (N,) bool, ``who`` their indices), the sensing parameters and the
+    static spheres (S, 5)."""
+
+    P: np.ndarray
+    V: np.ndarray
+    W: np.ndarray
+    R: np.ndarray
+    obstacles: list[Cylinder | Box]
+    limits: Limits
+    dt: float
+    bounds: np.ndarray
+    deciding: np.ndarray
+    sensing_range: float
+    max_neighbors: int | None
+    obstacle_range: float | None
+    spheres: np.ndarray
+
+    @property
+    def who(self) -> np.ndarray:
+        return np.flatnonzero(self.deciding).astype(np.int64)
+
+    @classmethod
+    def checked(
+        cls,
+        positions: Any,
+        velocities: Any,
+        preferred_velocities: Any,
+        r_pz: Any,
+        obstacles: Any,
+        limits: Any,
+        dt: Any,
+        sensing_range: Any,
+        max_neighbors: Any,
+        decide: Any,
+        *,
+        obstacle_range: Any = None,
+        spheres: Any = None,
+        max_speed: Any = None,
+    ) -> SwarmInputs:
+        """The arguments of ``select_many``, checked: ``ValueError`` naming a bad one."""
+        P = points(positions, "positions")
+        n = P.shape[0]
+        limits = Limits() if limits is None else limits
+        if not isinstance(limits, Limits):
+            raise ValueError(f"limits: expected Limits, got {type(limits).__name__}")
+        if not (_real(dt) and math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt: must be a positive finite number of seconds, got {dt!r}")
+        return cls(
+            P=P,
+            V=points(velocities, "velocities", n),
+            W=points(preferred_velocities, "preferred_velocities", n),
+            R=radii(r_pz, "r_pz", n),
+            obstacles=obstacle_list(obstacles),
+            limits=limits,
+            dt=float(dt),
+            bounds=vehicle_limits(limits, float(dt), n, max_speed),
+            deciding=mask(decide, "decide", n),
+            sensing_range=distance(sensing_range, "sensing_range", allow_inf=True),
+            max_neighbors=count(max_neighbors, "max_neighbors"),
+            obstacle_range=None
+            if obstacle_range is None
+            else distance(obstacle_range, "obstacle_range", allow_inf=True),
+            spheres=sphere_rows(spheres),
+        )
+
+    def links(self) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+        """(span, idx) of the deciding vehicles' neighbours, spheres and obstacles."""
+        who = self.who
+        Pd = np.ascontiguousarray(self.P[who])
+        return (
+            vehicle_links(self.P, who, self.sensing_range, self.max_neighbors),
+            sphere_links(Pd, self.spheres, self.obstacle_range),
+            obstacle_links(Pd, self.obstacles, self.obstacle_range),
+        )
+
+    def arrays(self) -> Swarm:
+        """The ``Swarm`` arrays of the compiled call."""
+        agents = np.empty((self.P.shape[0], AGENT_COLUMNS))
+        agents[:, 0:3], agents[:, 3:6], agents[:, 6:9] = self.P, self.V, self.W
+        agents[:, 9], agents[:, 10] = self.R, self.deciding
+        (nb_span, nb_idx), (sp_span, sp_idx), (ob_span, ob_idx) = self.links()
+        return Swarm(
+            agents,
+            self.bounds,
+            self.who,
+            nb_span,
+            nb_idx,
+            np.ascontiguousarray(self.spheres[:, [0, 1, 2, 4]]),
+            sp_span,
+            sp_idx,
+            prism_rows(self.obstacles),
+            ob_span,
+            ob_idx,
+        )
+
+    def vehicle_limits(self, i: int) -> Limits:
+        """Vehicle i's ``Limits`` (its own v_max under ``max_speed``)."""
+        if self.bounds[i, 1] == self.limits.v_max:
+            return self.limits
+        return self.limits.model_copy(
+            update={"speed": (self.limits.v_min, float(self.bounds[i, 1]))}
+        )
+
+
+# ------------------------------------------------------------------------------ threads
+
+#: Vehicles per compiled call when several threads share the work: small enough that the
+#: threads finish together (a crowded vehicle costs many times a lone one), large enough that
+#: the call overhead (about 20 µs) stays negligible.
+CHUNK = 64
+_pool_lock = threading.Lock()
+_pool: ThreadPoolExecutor | None = None
+
+
+def _workers(n: int) -> ThreadPoolExecutor:
+    global _pool
+    with _pool_lock:
+        if _pool is None or _pool._max_workers < n:  # noqa: SLF001 - grow to the threads asked for
+            _pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix="vo3d-swarm")
+        return _pool
+
+
+def thread_count(threads: Any) -> int:
+    """``threads`` checked (an integer in [1, NUMBA_NUM_THREADS]); None: numba's current setting
+    (``numba.set_num_threads``, else the ``NUMBA_NUM_THREADS`` environment variable, else every
+    core)."""
+    limit = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+    if threads is None:
+        return int(numba.get_num_threads())
+    if (
+        not isinstance(threads, numbers.Integral)
+        or isinstance(threads, bool)
+        or not 1 <= int(threads) <= limit
+    ):
+        raise ValueError(
+            f"threads: must be an integer in [1, {limit}] (NUMBA_NUM_THREADS), got {threads!r}"
+        )
+    return int(threads)
+
+
+def decide_all(
+    sw: Swarm, packed: tuple[np.ndarray, np.ndarray, np.ndarray], threads: int
+) -> np.ndarray:
+    """Every deciding vehicle of ``sw`` by the compiled ``decide_range``: (D, MANY_OUT_SIZE).
+    With several threads, each takes the next CHUNK vehicles until none are left (the compiled
+    code releases the GIL); the rows do not depend on who computed them."""
+    D = sw.who.shape[0]
+    out = np.empty((D, MANY_OUT_SIZE))
+    chunks = -(-D // CHUNK)
+    if threads <= 1 or chunks <= 1:
+        decide_range(sw, 0, D, *packed, out)
+        return out
+    claim = itertools.count()  # next() on it is atomic under the GIL
+
+    def work() -> None:
+        while (c := next(claim)) < chunks:
+            decide_range(sw, c * CHUNK, min(D, (c + 1) * CHUNK), *packed, out)
+
+    helpers = [_workers(threads - 1).submit(work) for _ in range(min(threads, chunks) - 1)]
+    work()
+    for h in helpers:
+        h.result()
+    return out
+
+
+__all__ = ["SwarmDecision", "SwarmInputs", "vehicle_links", "obstacle_links", "sphere_links"]
