@@ -121,7 +121,7 @@ def main() -> None:
     grid = [(9, 6)] if args.quick else [(1, 0), (1, 6), (5, 0), (5, 6), (9, 6), (10, 0), (10, 6), (20, 0), (20, 6)]
     solvers = args.solvers or available_qp_solvers()
     combos = [("sampled", None)] + [("plane_qp", s) for s in solvers] \
-        + [("cone_qp", s) for s in solvers] + [("nlp", "casadi")]
+        + [("cone_qp", s) for s in solvers if s != "exact2d"] + [("nlp", "casadi")]  # exact2d: plane_qp only
     print(f"# {platform.processor() or platform.machine()}, {platform.python_implementation()} "
           f"{platform.python_version()}, {time.strftime('%Y-%m-%d')}")
     if args.breakdown:
