@@ -146,5 +146,5 @@ display(Markdown("\n".join(lines)))
 # Both methods are judged by the same rule: a pair intrudes when it comes closer than
 # r_pz − 1 µm. RVO2-3D's agents are spheres of radius r_pz/2 that may just touch while they
 # squeeze past each other, and it computes in single precision, so the depth printed above tells
-# such grazes from real intrusions. The larger sphere swaps (100 and 1000 agents) are in
-# `benchmarks/bench_rvo2.py`.
+# such grazes from real intrusions. Swarms of 100 to 10,000 agents, against RVO2-3D, are in
+# `benchmarks/bench_swarm.py`.
