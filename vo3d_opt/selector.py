@@ -20,9 +20,27 @@ import numpy as np
 
 from . import swarm
 from .formulations import cone_qp, kernel, nlp, plane_qp, sampled
-from .formulations.common import Bounds, Encounter, Options, Outcome, bounds_array, neighbor_rows, py_build_vos
+from .formulations.common import (
+    Bounds,
+    Encounter,
+    Options,
+    Outcome,
+    bounds_array,
+    neighbor_rows,
+    py_build_vos,
+)
 from .geometry.pyramid import prism_rows
-from .solvers import FEAS_TOL, NLP, QP, Backend, Result, available_qp_solvers, available_solvers, get_backend, standardise
+from .solvers import (
+    FEAS_TOL,
+    NLP,
+    QP,
+    Backend,
+    Result,
+    available_qp_solvers,
+    available_solvers,
+    get_backend,
+    standardise,
+)
 from .status import DECISION_STATUSES, Status
 from .swarm import SwarmDecision
 from .types import AgentState, Box, Cylinder, Limits, Neighbor, check_vector

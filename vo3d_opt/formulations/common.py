@@ -18,8 +18,18 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 from .._jit import entry, inline, jit, kernel
-from ..geometry import (CORRECTIONS, AvoidancePlanes, Corrections, VOCones, VOPyramids, build_cones, build_planes,
-                        build_pyramids, default_phis, in_vos)
+from ..geometry import (
+    CORRECTIONS,
+    AvoidancePlanes,
+    Corrections,
+    VOCones,
+    VOPyramids,
+    build_cones,
+    build_planes,
+    build_pyramids,
+    default_phis,
+    in_vos,
+)
 from ..geometry.cone import NO_VIRTUAL_SPHERE, TAU_MIN, min_speed
 from ..geometry.membership import NO_HORIZON, closest_approach, entry_time, in_cone, in_pyramid
 from ..geometry.pyramid import prism_rows
@@ -72,7 +82,7 @@ class Bounds(NamedTuple):
     dt: float
 
     @classmethod
-    def of(cls, limits: Limits, dt: float) -> "Bounds":
+    def of(cls, limits: Limits, dt: float) -> Bounds:
         return cls(*bounds_array(limits, dt).tolist())
 
 

@@ -18,7 +18,6 @@ from ..status import Status
 from .common import Encounter, Outcome, Solve, py_decision_planes
 from .fallback import fallback
 
-
 #: Rounds: the tangent generator nearest v_pref, then turned about each cone's axis by these angles.
 TURNS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
 

@@ -14,7 +14,18 @@ from .._jit import entry, inline, jit, kernel
 from ..geometry import AvoidancePlanes
 from ..geometry.membership import clearance
 from ..status import Status
-from .common import NEVER, Bounds, Config, Encounter, Outcome, VOs, containing, time_to_intrusion, vz_range, within_limits
+from .common import (
+    NEVER,
+    Bounds,
+    Config,
+    Encounter,
+    Outcome,
+    VOs,
+    containing,
+    time_to_intrusion,
+    vz_range,
+    within_limits,
+)
 
 
 @jit

@@ -36,8 +36,19 @@ import numpy as np
 from .._jit import entry, inline, jit, kernel
 from ..geometry import AvoidancePlanes
 from ..solvers.exact2d import nearest_in_disc
-from .common import (Bounds, Config, VOs, bounds_of, build_vos, config_of, containing, decision_planes, limit_rows,
-                     vz_range, within_limits)
+from .common import (
+    Bounds,
+    Config,
+    VOs,
+    bounds_of,
+    build_vos,
+    config_of,
+    containing,
+    decision_planes,
+    limit_rows,
+    vz_range,
+    within_limits,
+)
 from .fallback import grid_search, least_bad
 from .rows import ROUNDS, RowWork, plane_rows, row_work, vo_base
 

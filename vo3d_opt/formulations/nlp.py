@@ -15,7 +15,6 @@ from ..status import Status
 from .common import Encounter, Outcome, SolveNLP
 from .fallback import first_safe
 
-
 #: Metres added to every protected radius in the exact cone constraints.
 RADIUS_MARGIN = 1e-3
 

@@ -23,10 +23,21 @@ from typing import NamedTuple
 import numpy as np
 
 from .._jit import inline, jit, kernel
-from ..geometry.cone import outward_normal
-from ..geometry.sections import (CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, Section, cone_base_points,
-                                 cone_section, pyramid_base_points, pyramid_section)
 from ..geometry import AvoidancePlanes
+from ..geometry.cone import outward_normal
+from ..geometry.sections import (
+    CIRCLE,
+    ELLIPSE,
+    HYPERBOLA,
+    INSIDE_CODE,
+    PARABOLA,
+    TRIANGLE,
+    Section,
+    cone_base_points,
+    cone_section,
+    pyramid_base_points,
+    pyramid_section,
+)
 from .common import Config, VOs
 
 #: Linearisation rounds: nearest boundary point, then every section passed on its left, right.

@@ -54,7 +54,7 @@ class VOCones(NamedTuple):
         """C_vo of eq. (5), (n, 3)."""
         return self.apex + self.d_vo[:, None] * self.axis
 
-    def subset(self, keep: np.ndarray) -> "VOCones":
+    def subset(self, keep: np.ndarray) -> VOCones:
         """The cones selected by the boolean or index array ``keep``."""
         return VOCones(*(np.ascontiguousarray(field[keep]) for field in self))
 

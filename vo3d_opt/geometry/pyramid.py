@@ -37,7 +37,7 @@ class VOPyramids(NamedTuple):
     def n(self) -> int:
         return int(self.L_pz.shape[0])
 
-    def subset(self, keep: np.ndarray) -> "VOPyramids":
+    def subset(self, keep: np.ndarray) -> VOPyramids:
         """The pyramids selected by the boolean or index array ``keep``."""
         return VOPyramids(*(np.ascontiguousarray(field[keep]) for field in self))
 

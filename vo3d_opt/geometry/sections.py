@@ -58,7 +58,7 @@ class Corrections(NamedTuple):
     virtual_sphere: bool = True
 
     @classmethod
-    def of(cls, names: Iterable[str] | None) -> "Corrections":
+    def of(cls, names: Iterable[str] | None) -> Corrections:
         """From a set of correction names (None: all); ValueError for an unknown name."""
         if names is None:
             return cls()

@@ -46,7 +46,7 @@ class Backend:
         except Exception as exc:  # noqa: BLE001 - a backend never raises on a well-formed QP
             return failure(self.name, exc)
 
-    def _solve(self, qp: QP, std: "Standard") -> Result:
+    def _solve(self, qp: QP, std: Standard) -> Result:
         """The backend's own solve of a screened QP (QP backends override it)."""
         raise NotImplementedError(f"backend {self.name!r} does not solve QPs")
 

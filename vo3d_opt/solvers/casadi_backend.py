@@ -16,8 +16,8 @@ import casadi as ca
 import numpy as np
 
 from vo3d_opt.solvers.base import Backend, Standard, failure, make_result, screen, standardise
-from vo3d_opt.status import Status
 from vo3d_opt.solvers.problem import NLP, QP, ConeConstraint, Result
+from vo3d_opt.status import Status
 
 #: Smoothing of the cone constraint's norm (inside the square root).
 CONE_EPS = 1e-9

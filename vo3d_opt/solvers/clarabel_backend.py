@@ -11,10 +11,10 @@ from __future__ import annotations
 import clarabel
 import numpy as np
 
-from vo3d_opt.solvers.base import Backend, Standard, make_result
-from vo3d_opt.status import Status
-from vo3d_opt.solvers.problem import QP, Result
 from vo3d_opt.solvers._sparse import dense_csc, triu_csc, triu_index
+from vo3d_opt.solvers.base import Backend, Standard, make_result
+from vo3d_opt.solvers.problem import QP, Result
+from vo3d_opt.status import Status
 
 #: At most this many persistent solvers (one per structure); the cache is emptied when full.
 MAX_CACHED = 64

@@ -13,8 +13,8 @@ import numpy as np
 
 from vo3d_opt._jit import entry
 from vo3d_opt.solvers.base import Backend, Standard, make_result
-from vo3d_opt.status import Status
 from vo3d_opt.solvers.problem import QP, Result
+from vo3d_opt.status import Status
 
 #: DAQP's infinity: bounds beyond it are clipped to it.
 INF = 1e30

@@ -8,14 +8,13 @@ formulation substitutes a polygon for ``soc_radius``.
 """
 from __future__ import annotations
 
-import numpy as np
 import qpsolvers
 import scipy.sparse as sp
 
 from vo3d_opt.solvers.base import Backend, Standard, make_result
-from vo3d_opt.status import Status
 from vo3d_opt.solvers.problem import QP, Result
 from vo3d_opt.solvers.registry import certified_infeasible
+from vo3d_opt.status import Status
 
 #: Extra options per solver, for answers as tight as the direct backends'. OSQP is left
 #: unpolished: OSQP 1.x prints a line per polished solve without an active set. ProxQP stays
