@@ -18,6 +18,7 @@ Four flavours, by what a function does:
   into ``plane_rows``, and ``decide_one`` into its two callers. Inlining is costly to compile
   (nested inlining most), so the large kernels are called, not inlined.
 """
+
 from __future__ import annotations
 
 import numba

@@ -5,6 +5,7 @@ constraints, the exact safety check and the time to the first intrusion.
 Compiled code receives the options as a ``Config`` and the limits as ``Bounds`` (NamedTuples of
 numbers and arrays); the Python formulations wrap the same values in an ``Encounter``.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -89,7 +90,10 @@ class Bounds(NamedTuple):
 def bounds_array(limits: Limits, dt: float) -> np.ndarray:
     """(6,) v_min, v_max, z_min, z_max, acceleration (NaN: none), dt: ``Bounds`` as one array."""
     acc = np.nan if limits.acceleration is None else limits.acceleration
-    return np.array([limits.speed[0], limits.speed[1], limits.altitude[0], limits.altitude[1], acc, dt], dtype=float)
+    return np.array(
+        [limits.speed[0], limits.speed[1], limits.altitude[0], limits.altitude[1], acc, dt],
+        dtype=float,
+    )
 
 
 class VOs(NamedTuple):
@@ -114,8 +118,12 @@ class Options(BaseModel):
     reciprocal: StrictBool = False  # RVO-style: apex (V_A + V_B)/2 for cooperative neighbours
     horizon: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None  # s; None: infinite
     corrections: frozenset[Literal[tuple(CORRECTIONS)]] | None = None  # None: all six of 3.1
-    n_samples: Annotated[int, Field(ge=8, strict=True)] = 72  # generator samples of eq. (12), sampled
-    qp_samples: Annotated[int, Field(ge=8, strict=True)] = 36  # the same for plane_qp's tangent points
+    n_samples: Annotated[int, Field(ge=8, strict=True)] = (
+        72  # generator samples of eq. (12), sampled
+    )
+    qp_samples: Annotated[int, Field(ge=8, strict=True)] = (
+        36  # the same for plane_qp's tangent points
+    )
     pz_buffer: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0  # m; see build_vos
     margin: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1e-3  # m/s; linearised VO
     # half-spaces are pushed out by this much, so that an answer on the boundary (within a
@@ -127,9 +135,23 @@ class Options(BaseModel):
         as 0/1), (phi, cos phi, sin phi) of the planes, (t, cos t, sin t) of the generators."""
         t, phi = generator_angles(self.qp_samples), default_phis(self.plane_step_deg)
         corr = Corrections.of(self.corrections)
-        values = np.array([self.reciprocal, NO_HORIZON if self.horizon is None else self.horizon, self.pz_buffer,
-                           self.margin, self.speed_levels, math.radians(self.heading_step_deg), *corr], dtype=float)
-        return values, np.stack([phi, np.cos(phi), np.sin(phi)]), np.stack([t, np.cos(t), np.sin(t)])
+        values = np.array(
+            [
+                self.reciprocal,
+                NO_HORIZON if self.horizon is None else self.horizon,
+                self.pz_buffer,
+                self.margin,
+                self.speed_levels,
+                math.radians(self.heading_step_deg),
+                *corr,
+            ],
+            dtype=float,
+        )
+        return (
+            values,
+            np.stack([phi, np.cos(phi), np.sin(phi)]),
+            np.stack([t, np.cos(t), np.sin(t)]),
+        )
 
     @cached_property
     def config(self) -> Config:
@@ -139,9 +161,24 @@ class Options(BaseModel):
 @jit
 def config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray) -> Config:
     """``Config`` from ``Options.packed``."""
-    corr = Corrections(values[6] > 0, values[7] > 0, values[8] > 0, values[9] > 0, values[10] > 0, values[11] > 0)
-    return Config(values[0] > 0, values[1], values[2], values[3], corr, plane_tab[0], plane_tab[1], plane_tab[2],
-                  gen_tab[0], gen_tab[1], gen_tab[2], int(values[4]), values[5])
+    corr = Corrections(
+        values[6] > 0, values[7] > 0, values[8] > 0, values[9] > 0, values[10] > 0, values[11] > 0
+    )
+    return Config(
+        values[0] > 0,
+        values[1],
+        values[2],
+        values[3],
+        corr,
+        plane_tab[0],
+        plane_tab[1],
+        plane_tab[2],
+        gen_tab[0],
+        gen_tab[1],
+        gen_tab[2],
+        int(values[4]),
+        values[5],
+    )
 
 
 @jit
@@ -160,8 +197,15 @@ def py_config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray)
 
 
 @jit
-def build_vos(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray,
-              bounds: Bounds, cfg: Config) -> VOs:
+def build_vos(
+    p: np.ndarray,
+    v_now: np.ndarray,
+    v_pref: np.ndarray,
+    nbrs: np.ndarray,
+    prisms: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+) -> VOs:
     """The VOs of one decision. ``nbrs`` (n, 8): position, velocity, r_pz, cooperative (1/0);
     ``prisms`` (m, 4): x, y, L_pz, h_pz of the protected prisms.
 
@@ -191,7 +235,11 @@ def build_vos(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.nda
         for k in range(3):
             rows[n, k] = nbrs[i, k]
             rows[n, 3 + k] = 0.5 * (nbrs[i, 3 + k] + v_now[k]) if cooperative else nbrs[i, 3 + k]
-        rows[n, 6] = r_pz + min(cfg.pz_buffer, BUFFER_GAP_SHARE * (d - r_pz)) if cfg.pz_buffer > 0.0 and d > r_pz else r_pz
+        rows[n, 6] = (
+            r_pz + min(cfg.pz_buffer, BUFFER_GAP_SHARE * (d - r_pz))
+            if cfg.pz_buffer > 0.0 and d > r_pz
+            else r_pz
+        )
         n += 1
     reach = bounds.v_max if cfg.corrections.virtual_sphere else NO_VIRTUAL_SPHERE
     cones = build_cones(p, rows[:n, 0:3], rows[:n, 3:6], rows[:n, 6], reach, TAU_MIN)
@@ -315,12 +363,22 @@ def decision_planes(vos: VOs, v_now: np.ndarray, cfg: Config) -> AvoidancePlanes
     use_now = v_now[0] ** 2 + v_now[1] ** 2 + v_now[2] ** 2 > 1e-18
     direction = np.zeros(3)
     for k in range(3):
-        direction[k] = vos.v_pref[k] if use_pref else (v_now[k] if use_now else (1.0 if k == 0 else 0.0))
+        direction[k] = (
+            vos.v_pref[k] if use_pref else (v_now[k] if use_now else (1.0 if k == 0 else 0.0))
+        )
     return build_planes(direction, cfg.phi)
 
 
 @entry
-def py_build_vos(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray, bounds: Bounds, cfg: Config) -> VOs:
+def py_build_vos(
+    p: np.ndarray,
+    v_now: np.ndarray,
+    v_pref: np.ndarray,
+    nbrs: np.ndarray,
+    prisms: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+) -> VOs:
     """``build_vos`` for Python callers (compiled code calls ``build_vos``: no Python wrapper)."""
     return build_vos(p, v_now, v_pref, nbrs, prisms, bounds, cfg)
 
@@ -396,7 +454,9 @@ class Encounter:
     def within_limits(self, v: np.ndarray) -> np.ndarray:
         """(M,) whether each velocity respects speed, altitude and acceleration limits."""
         G, h = self._linear_bounds
-        return _all_within(np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float))), G, h, self.bounds)
+        return _all_within(
+            np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float))), G, h, self.bounds
+        )
 
     def containing(self, v: np.ndarray) -> np.ndarray:
         """(n + m, M): which VOs (cones first, then pyramids) contain each velocity, by the
@@ -415,7 +475,9 @@ class Encounter:
     def time_to_intrusion(self, v: np.ndarray) -> np.ndarray:
         """(M,) the earliest time any protected zone would be entered (inf: never; 0: inside
         and closing)."""
-        return _times_to_intrusion(self.vos, np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float))))
+        return _times_to_intrusion(
+            self.vos, np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float)))
+        )
 
     def deviation(self, v: np.ndarray) -> np.ndarray:
         return np.linalg.norm(np.atleast_2d(v) - self.v_pref, axis=1)
@@ -432,10 +494,23 @@ def prepare(
 ) -> Encounter:
     """Build the VO cones and pyramids of one decision (``build_vos``)."""
     bounds = Bounds.of(limits, dt)
-    vos = py_build_vos(np.asarray(own.position, dtype=float), np.asarray(own.velocity, dtype=float),
-                    np.asarray(v_pref, dtype=float), neighbor_rows(neighbors), prism_rows(obstacles), bounds,
-                    options.config)
-    return Encounter(position=own.position, v_now=own.velocity, vos=vos, limits=limits, dt=float(dt), options=options)
+    vos = py_build_vos(
+        np.asarray(own.position, dtype=float),
+        np.asarray(own.velocity, dtype=float),
+        np.asarray(v_pref, dtype=float),
+        neighbor_rows(neighbors),
+        prism_rows(obstacles),
+        bounds,
+        options.config,
+    )
+    return Encounter(
+        position=own.position,
+        v_now=own.velocity,
+        vos=vos,
+        limits=limits,
+        dt=float(dt),
+        options=options,
+    )
 
 
 @dataclass

@@ -6,6 +6,7 @@ The compiled kernel calls ``grid_search`` and ``least_bad`` directly; the Python
 (``sampled``, ``plane_qp`` on outside backends, ``cone_qp``, ``nlp``) through ``fallback`` and
 ``first_safe``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -62,8 +63,15 @@ def _by_value(x: np.ndarray) -> np.ndarray:
 
 
 @kernel
-def safe_by_margin(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config,
-                   into: np.ndarray) -> bool:
+def safe_by_margin(
+    vos: VOs,
+    v: np.ndarray,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+    into: np.ndarray,
+) -> bool:
     """Within the limits, outside every VO by the exact check, and at least ``margin`` (m/s)
     from every VO: the same margin the linearised rows keep, so no answer lies on a VO's
     boundary."""
@@ -73,8 +81,9 @@ def safe_by_margin(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, boun
 
 
 @jit
-def grid_search(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds,
-                cfg: Config) -> tuple[bool, np.ndarray, int]:
+def grid_search(
+    vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config
+) -> tuple[bool, np.ndarray, int]:
     """The grid velocity nearest the preferred one that ``safe_by_margin`` accepts: (found,
     velocity, plane index). Grid points equally far from it are tried plane by plane."""
     grid = polar_grid(bounds, cfg)
@@ -104,22 +113,40 @@ def grid_search(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarra
 
 
 @inline
-def _consider(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, best: np.ndarray,
-              key: np.ndarray) -> None:
+def _consider(
+    vos: VOs,
+    v: np.ndarray,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    best: np.ndarray,
+    key: np.ndarray,
+) -> None:
     """Keep v in ``best`` if it is within the limits and its (latest intrusion, least
     deviation) beats ``key`` = (-time, deviation)."""
     if not within_limits(v, G3, h3, bounds):
         return
     t = -min(time_to_intrusion(vos, v), NEVER)
-    dev = np.sqrt((v[0] - vos.v_pref[0]) ** 2 + (v[1] - vos.v_pref[1]) ** 2 + (v[2] - vos.v_pref[2]) ** 2)
+    dev = np.sqrt(
+        (v[0] - vos.v_pref[0]) ** 2 + (v[1] - vos.v_pref[1]) ** 2 + (v[2] - vos.v_pref[2]) ** 2
+    )
     if t < key[0] or (t == key[0] and dev < key[1]):
         best[0], best[1], best[2] = v[0], v[1], v[2]
         key[0], key[1] = t, dev
 
 
 @jit
-def least_bad(vos: VOs, planes: AvoidancePlanes, tried: np.ndarray, p: np.ndarray, v_now: np.ndarray,
-              G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> np.ndarray:
+def least_bad(
+    vos: VOs,
+    planes: AvoidancePlanes,
+    tried: np.ndarray,
+    p: np.ndarray,
+    v_now: np.ndarray,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+) -> np.ndarray:
     """Among the tried answers (k, 3), the grid on every plane, zero and v_now, within the
     limits, the velocity whose first protected-zone intrusion comes latest (ties: nearest the
     preferred velocity). With an acceleration limit each is also tried clipped into the
@@ -139,7 +166,10 @@ def least_bad(vos: VOs, planes: AvoidancePlanes, tried: np.ndarray, p: np.ndarra
                     v[c] = tried[q, c]
                 elif q < k + P * M:
                     pl, g = (q - k) // M, (q - k) % M
-                    v[c] = grid[g, 0] * planes.to_plane[pl, 0, c] + grid[g, 1] * planes.to_plane[pl, 1, c]
+                    v[c] = (
+                        grid[g, 0] * planes.to_plane[pl, 0, c]
+                        + grid[g, 1] * planes.to_plane[pl, 1, c]
+                    )
                 else:
                     v[c] = 0.0 if q == k + P * M else v_now[c]
                 if pass_ == 1:
@@ -158,19 +188,33 @@ def py_polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
 
 
 @entry
-def py_grid_search(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> tuple[bool, np.ndarray, int]:
+def py_grid_search(
+    vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config
+) -> tuple[bool, np.ndarray, int]:
     """``grid_search`` for Python callers (compiled code calls ``grid_search``: no Python wrapper)."""
     return grid_search(vos, planes, G3, h3, bounds, cfg)
 
 
 @entry
-def py_least_bad(vos: VOs, planes: AvoidancePlanes, tried: np.ndarray, p: np.ndarray, v_now: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> np.ndarray:
+def py_least_bad(
+    vos: VOs,
+    planes: AvoidancePlanes,
+    tried: np.ndarray,
+    p: np.ndarray,
+    v_now: np.ndarray,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+) -> np.ndarray:
     """``least_bad`` for Python callers (compiled code calls ``least_bad``: no Python wrapper)."""
     return least_bad(vos, planes, tried, p, v_now, G3, h3, bounds, cfg)
 
 
 @entry
-def _first_safe(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> int:
+def _first_safe(
+    vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config
+) -> int:
     into = np.empty(vos.cones.d_oi.shape[0] + vos.pyramids.L_pz.shape[0], dtype=np.bool_)
     for k in range(v.shape[0]):
         if safe_by_margin(vos, v[k], G3, h3, bounds, cfg, into):
@@ -190,7 +234,9 @@ def first_safe(enc: Encounter, candidates: np.ndarray) -> int | None:
     return None if k < 0 else int(k)
 
 
-def fallback(enc: Encounter, planes: AvoidancePlanes, tried: np.ndarray, all_failed: bool) -> Outcome:
+def fallback(
+    enc: Encounter, planes: AvoidancePlanes, tried: np.ndarray, all_failed: bool
+) -> Outcome:
     """No answer passed the exact check: the sampled reference's grid (the exact check and the
     margin decide, not its sections); if none is safe either, the least-bad velocity. When the
     backend failed on every problem the status says so whatever the fallback found."""
@@ -198,9 +244,22 @@ def fallback(enc: Encounter, planes: AvoidancePlanes, tried: np.ndarray, all_fai
     cfg = enc.options.config
     found, v, p = py_grid_search(enc.vos, planes, G3, h3, enc.bounds, cfg)
     if found:
-        return Outcome(v, Status.SOLVER_FAILED_FALLBACK if all_failed else Status.OPTIMAL, float(planes.phi[p]),
-                       {"round": "sampled"})
-    v = py_least_bad(enc.vos, planes, np.ascontiguousarray(tried, dtype=float).reshape(-1, 3), enc.position,
-                  enc.v_now, G3, h3, enc.bounds, cfg)
+        return Outcome(
+            v,
+            Status.SOLVER_FAILED_FALLBACK if all_failed else Status.OPTIMAL,
+            float(planes.phi[p]),
+            {"round": "sampled"},
+        )
+    v = py_least_bad(
+        enc.vos,
+        planes,
+        np.ascontiguousarray(tried, dtype=float).reshape(-1, 3),
+        enc.position,
+        enc.v_now,
+        G3,
+        h3,
+        enc.bounds,
+        cfg,
+    )
     status = Status.SOLVER_FAILED_FALLBACK if all_failed else Status.INFEASIBLE_MIN_VIOLATION
     return Outcome(v, status, None, {"round": "least_bad"})

@@ -5,6 +5,7 @@ angle(v - apex, axis) >= alpha (curved, not linearised), the pyramid face the st
 and the same limits, and minimises ||v - v_pref||². The answer replaces the start only when it
 passes the exact 3D check, respects the limits and is strictly nearer the preferred velocity:
 the NLP never returns anything worse than its start."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -25,8 +26,11 @@ def build_nlp(enc: Encounter, start: np.ndarray) -> NLP:
     # its tolerance, is still strictly outside the exact VO.
     sin_a = np.minimum((c.r_pz + RADIUS_MARGIN) / np.maximum(c.d_oi, 1e-12), 1.0)
     cos_a = np.sqrt(1.0 - sin_a**2)
-    cones = [ConeConstraint(apex=c.apex[i], axis=c.axis[i], cos_alpha=float(cos_a[i]))
-             for i in range(c.n) if not c.inside[i]]
+    cones = [
+        ConeConstraint(apex=c.apex[i], axis=c.axis[i], cos_alpha=float(cos_a[i]))
+        for i in range(c.n)
+        if not c.inside[i]
+    ]
     rows_G, rows_h = [], []
     if np.any(c.inside):  # escape half-spaces stay linear
         rows_G.append(c.rel[c.inside])
@@ -38,8 +42,13 @@ def build_nlp(enc: Encounter, start: np.ndarray) -> NLP:
     G3, h3 = enc.linear_bounds()
     rows_G.append(G3)
     rows_h.append(h3)
-    qp = QP(P=2.0 * np.eye(3), q=-2.0 * enc.v_pref, G=np.vstack(rows_G), h=np.concatenate(rows_h),
-            soc_radius=enc.limits.v_max)
+    qp = QP(
+        P=2.0 * np.eye(3),
+        q=-2.0 * enc.v_pref,
+        G=np.vstack(rows_G),
+        h=np.concatenate(rows_h),
+        soc_radius=enc.limits.v_max,
+    )
     return NLP(qp=qp, cones=cones, x0=start)
 
 

@@ -8,6 +8,7 @@ paper's base B_vo is the near face (eqs 20–22, lines L1–L4). We span the pyr
 corners of C_pz: for a vehicle below h_pz this is exactly the near-face pyramid; above h_pz the top
 face is seen too and belongs to the obstacle's shadow (see formulations/geometry.md).
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence

@@ -10,6 +10,7 @@ cones) with all data as parameters.
 within 1e-6. When the start x0 is feasible and the solver ends somewhere worse (or fails), the
 start is returned instead, with status "failed": never a worse answer than the caller had.
 """
+
 from __future__ import annotations
 
 import casadi as ca
@@ -26,13 +27,28 @@ NLP_TOL = 1e-6
 
 #: Quiet options per plugin.
 PLUGIN_OPTIONS: dict[str, dict[str, object]] = {
-    "ipopt": {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
-              "ipopt.tol": 1e-9, "ipopt.max_iter": 500},
-    "sqpmethod": {"print_header": False, "print_iteration": False, "print_time": False,
-                  "print_status": False, "qpsol": "qrqp", "max_iter": 200,
-                  "convexify_strategy": "regularize",
-                  "qpsol_options": {"print_iter": False, "print_header": False,
-                                    "print_info": False, "error_on_fail": False}},
+    "ipopt": {
+        "ipopt.print_level": 0,
+        "print_time": False,
+        "ipopt.sb": "yes",
+        "ipopt.tol": 1e-9,
+        "ipopt.max_iter": 500,
+    },
+    "sqpmethod": {
+        "print_header": False,
+        "print_iteration": False,
+        "print_time": False,
+        "print_status": False,
+        "qpsol": "qrqp",
+        "max_iter": 200,
+        "convexify_strategy": "regularize",
+        "qpsol_options": {
+            "print_iter": False,
+            "print_header": False,
+            "print_info": False,
+            "error_on_fail": False,
+        },
+    },
 }
 
 _INFEASIBLE = {"Infeasible_Problem_Detected"}
@@ -72,8 +88,12 @@ def _build(plugin: str, n: int, m: int, k: int) -> ca.Function:
     for i in range(k):
         d = x - apex[:, i]
         g.append(ca.dot(axis[:, i], d) - cos[i] * ca.sqrt(ca.dot(d, d) + CONE_EPS))
-    problem = {"x": x, "f": 0.5 * ca.dot(x, P @ x) + ca.dot(q, x), "g": ca.vertcat(*g),
-               "p": ca.vertcat(ca.vec(P), q, ca.vec(C), ca.vec(apex), ca.vec(axis), cos)}
+    problem = {
+        "x": x,
+        "f": 0.5 * ca.dot(x, P @ x) + ca.dot(q, x),
+        "g": ca.vertcat(*g),
+        "p": ca.vertcat(ca.vec(P), q, ca.vec(C), ca.vec(apex), ca.vec(axis), cos),
+    }
     options = {**PLUGIN_OPTIONS[plugin], "error_on_fail": False}
     return ca.nlpsol(f"vo3d_{plugin}_{n}_{m}_{k}", plugin, problem, options)
 
@@ -84,8 +104,9 @@ def _params(std: Standard, cones: list[ConeConstraint]) -> np.ndarray:
     apex = np.array([c.apex for c in cones], dtype=float).reshape(k, std.n)
     axis = np.array([c.axis for c in cones], dtype=float).reshape(k, std.n)
     cos = np.array([c.cos_alpha for c in cones], dtype=float)
-    return np.concatenate([std.P.ravel(order="F"), std.q, std.C[:m].ravel(order="F"),
-                           apex.ravel(), axis.ravel(), cos])
+    return np.concatenate(
+        [std.P.ravel(order="F"), std.q, std.C[:m].ravel(order="F"), apex.ravel(), axis.ravel(), cos]
+    )
 
 
 class CasadiBackend(Backend):
@@ -132,10 +153,12 @@ class CasadiBackend(Backend):
             self._solvers[key] = _build(self._plugin, *key)
         solver = self._solvers[key]
         sol = solver(
-            x0=x0, p=_params(std, cones), lbx=std.l[m:], ubx=std.u[m:],
+            x0=x0,
+            p=_params(std, cones),
+            lbx=std.l[m:],
+            ubx=std.u[m:],
             lbg=np.concatenate([std.l[:m], np.full(1 + k, -np.inf)]),
-            ubg=np.concatenate([std.u[:m], [np.inf if std.r is None else std.r ** 2],
-                                np.zeros(k)]),
+            ubg=np.concatenate([std.u[:m], [np.inf if std.r is None else std.r**2], np.zeros(k)]),
         )
         stats = solver.stats()
         native = str(stats.get("return_status", ""))
@@ -145,15 +168,22 @@ class CasadiBackend(Backend):
         if not stats.get("success", False):
             return make_result(self.name, std, x, Status.FAILED, native)
         if not np.isfinite(x).all() or nlp_violation(std, cones, x) > NLP_TOL:
-            return make_result(self.name, std, x, Status.FAILED, f"{native}, but x violates constraints")
+            return make_result(
+                self.name, std, x, Status.FAILED, f"{native}, but x violates constraints"
+            )
         return Result(x, Status.OPTIMAL, self.name, native)
 
-    def _no_worse_than_start(self, std: Standard, cones: list[ConeConstraint], x0: np.ndarray,
-                             result: Result) -> Result:
+    def _no_worse_than_start(
+        self, std: Standard, cones: list[ConeConstraint], x0: np.ndarray, result: Result
+    ) -> Result:
         """``result``, or the feasible start x0 when the solver ended worse than it."""
         if nlp_violation(std, cones, x0) > NLP_TOL:
             return result
         if result.ok and objective(std, result.x) <= objective(std, x0) + 1e-9:
             return result
-        return Result(x0.copy(), Status.FAILED, self.name,
-                      f"{result.status} ({result.info}); returning the feasible start x0")
+        return Result(
+            x0.copy(),
+            Status.FAILED,
+            self.name,
+            f"{result.status} ({result.info}); returning the feasible start x0",
+        )

@@ -6,6 +6,7 @@ of the :class:`~vo3d_opt.solvers.Standard` rows as ``D x <= d`` (nonnegative con
 is stored, so problems with the same row counts share a pattern and a persistent solver is
 updated in place rather than rebuilt (Clarabel is interior-point: there is no warm start).
 """
+
 from __future__ import annotations
 
 import clarabel
@@ -70,11 +71,17 @@ class ClarabelBackend(Backend):
         if solver is None:
             if len(self._solvers) >= MAX_CACHED:
                 self._solvers.clear()
-            cones = [cone(size) for cone, size in zip(
-                (clarabel.ZeroConeT, clarabel.NonnegativeConeT, clarabel.SecondOrderConeT),
-                sizes) if size]
-            solver = clarabel.DefaultSolver(triu_csc(std.P), std.q, dense_csc(M), b, cones,
-                                            settings())
+            cones = [
+                cone(size)
+                for cone, size in zip(
+                    (clarabel.ZeroConeT, clarabel.NonnegativeConeT, clarabel.SecondOrderConeT),
+                    sizes,
+                )
+                if size
+            ]
+            solver = clarabel.DefaultSolver(
+                triu_csc(std.P), std.q, dense_csc(M), b, cones, settings()
+            )
             self._solvers[key] = solver
         # Always through update(), also right after set-up: a fresh solver and an updated
         # one differ in the last digits, and a run must not depend on what came before.

@@ -9,6 +9,7 @@ OSQP 1.x prints "Polishing not needed" whatever ``verbose`` says when the optimu
 constraint (osqp/osqp#785). Such problems are answered before OSQP runs: when P is positive
 definite and the unconstrained minimiser -P⁻¹q satisfies every constraint, it is the optimum.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -6,6 +6,7 @@ the solvers that want sparse matrices. qpsolvers reports only whether a solution
 when none is, the problem is "infeasible" if Clarabel proves it so, else "failed". No cones: the
 formulation substitutes a polygon for ``soc_radius``.
 """
+
 from __future__ import annotations
 
 import qpsolvers
@@ -51,10 +52,15 @@ class QpsolversBackend(Backend):
         self._sparse = solver not in qpsolvers.dense_solvers
 
     def _solve(self, qp: QP, std: Standard) -> Result:
-        sol = qpsolvers.solve_problem(to_problem(std, self._sparse), solver=self._solver,
-                                      **self._options)
+        sol = qpsolvers.solve_problem(
+            to_problem(std, self._sparse), solver=self._solver, **self._options
+        )
         if sol.found:
             return make_result(self.name, std, sol.x, Status.OPTIMAL)
         if certified_infeasible(qp):
-            return Result(None, Status.INFEASIBLE, self.name, "no solution; Clarabel proves infeasible")
-        return Result(None, Status.FAILED, self.name, "no solution found, yet QP not proved infeasible")
+            return Result(
+                None, Status.INFEASIBLE, self.name, "no solution; Clarabel proves infeasible"
+            )
+        return Result(
+            None, Status.FAILED, self.name, "no solution found, yet QP not proved infeasible"
+        )
