@@ -289,9 +289,9 @@ class VelocitySelector:
             self.solver = solver or DEFAULT_NLP_SOLVER
             backend = get_backend(self.solver)
             if backend.kind != "nlp":
+                nlp_solvers = ", ".join(s for s in available_solvers() if s.startswith("casadi"))
                 raise ValueError(
-                    f"solver: formulation 'nlp' needs an NLP solver "
-                    f"({', '.join(s for s in available_solvers() if s.startswith('casadi'))}), got {solver!r}"
+                    f"solver: formulation 'nlp' needs an NLP solver ({nlp_solvers}), got {solver!r}"
                 )
             self._nlp = backend
             self._qp = self._qp_backend(start_solver or DEFAULT_QP_SOLVER, "plane_qp")
@@ -308,11 +308,13 @@ class VelocitySelector:
         backend = get_backend(name)
         if backend.kind != "qp":
             raise ValueError(
-                f"solver: {name!r} does not solve QPs; available: {', '.join(available_qp_solvers())}"
+                f"solver: {name!r} does not solve QPs; "
+                f"available: {', '.join(available_qp_solvers())}"
             )
         if backend.name == "exact2d" and formulation != "plane_qp":
             raise ValueError(
-                f"solver: 'exact2d' solves plane_qp's 2-variable problems only, not {formulation}'s; "
+                f"solver: 'exact2d' solves plane_qp's 2-variable problems only, "
+                f"not {formulation}'s; "
                 f"available: {', '.join(s for s in available_qp_solvers() if s != 'exact2d')}"
             )
         return backend
@@ -530,18 +532,21 @@ class VelocitySelector:
         # The preferred velocity itself, when safe, is every formulation's optimum.
         if not enc.inside_any and enc.within_limits(enc.v_pref)[0] and not enc.pref_in.any():
             return Outcome(enc.v_pref.copy(), Status.OPTIMAL, None, {"round": "preferred"})
+        assert self._qp is not None  # every formulation but sampled has a QP backend
         solve = _checked(self._qp, "solve")
         if self.formulation == "cone_qp":
             return cone_qp.select(enc, solve, self._qp.has_cones)
         start = self._plane_qp(enc, nbrs, prisms, bounds, solve)
         if self.formulation == "plane_qp":
             return start
+        assert self._nlp is not None  # set for formulation "nlp"
         return nlp.select(enc, start, _checked(self._nlp, "solve_nlp"))
 
     def _plane_qp(
         self, enc: Encounter, nbrs: np.ndarray, prisms: np.ndarray, bounds: Bounds, solve
     ) -> Outcome:
         if not self._compiled:
+            assert self._qp is not None  # plane_qp and nlp have a QP backend
             return plane_qp.select(enc, solve, self._qp.has_cones)
         d = self._decide(
             enc.position, enc.v_now, enc.v_pref, nbrs, prisms, bounds_array(enc.limits, enc.dt), 0.0

@@ -117,13 +117,11 @@ class Options(BaseModel):
     polygon_sides: Annotated[int, Field(ge=3, strict=True)] = 24  # inscribed speed polygon
     reciprocal: StrictBool = False  # RVO-style: apex (V_A + V_B)/2 for cooperative neighbours
     horizon: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None  # s; None: infinite
-    corrections: frozenset[Literal[tuple(CORRECTIONS)]] | None = None  # None: all six of 3.1
-    n_samples: Annotated[int, Field(ge=8, strict=True)] = (
-        72  # generator samples of eq. (12), sampled
-    )
-    qp_samples: Annotated[int, Field(ge=8, strict=True)] = (
-        36  # the same for plane_qp's tangent points
-    )
+    # Literal of the names in CORRECTIONS, which pydantic reads at runtime and mypy cannot
+    corrections: frozenset[Literal[tuple(CORRECTIONS)]] | None = None  # type: ignore[valid-type]
+    # generator samples of eq. (12), sampled; the same for plane_qp's tangent points
+    n_samples: Annotated[int, Field(ge=8, strict=True)] = 72
+    qp_samples: Annotated[int, Field(ge=8, strict=True)] = 36
     pz_buffer: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0  # m; see build_vos
     margin: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1e-3  # m/s; linearised VO
     # half-spaces are pushed out by this much, so that an answer on the boundary (within a
@@ -385,7 +383,8 @@ def py_build_vos(
 
 @entry
 def py_decision_planes(vos: VOs, v_now: np.ndarray, cfg: Config) -> AvoidancePlanes:
-    """``decision_planes`` for Python callers (compiled code calls ``decision_planes``: no Python wrapper)."""
+    """``decision_planes`` for Python callers (compiled code calls ``decision_planes``: no Python
+    wrapper)."""
     return decision_planes(vos, v_now, cfg)
 
 

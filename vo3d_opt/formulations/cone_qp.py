@@ -118,7 +118,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
         while True:
             res = solve(build_qp(enc, has_cones, turn, included))
             attempts += 1
-            if not (res.ok and res.x.shape == (3,)):
+            if not (res.ok and res.x is not None and res.x.shape == (3,)):
                 failed += res.status == "failed"
                 break
             tried.append(res.x)

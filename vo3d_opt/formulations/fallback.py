@@ -191,7 +191,8 @@ def py_polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
 def py_grid_search(
     vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config
 ) -> tuple[bool, np.ndarray, int]:
-    """``grid_search`` for Python callers (compiled code calls ``grid_search``: no Python wrapper)."""
+    """``grid_search`` for Python callers (compiled code calls ``grid_search``: no Python
+    wrapper)."""
     return grid_search(vos, planes, G3, h3, bounds, cfg)
 
 

@@ -122,9 +122,8 @@ def plane_qps(
                 G_lim[p, j, c] = G3[j, 0] * T[0] + G3[j, 1] * T[1] + G3[j, 2] * T[2]
     e1 = planes.to_plane[0, 0]
     w0 = np.zeros(2)
-    w0[0] = (
-        e1[0] * vos.v_pref[0] + e1[1] * vos.v_pref[1] + e1[2] * vos.v_pref[2]
-    )  # v_pref lies in every plane
+    # v_pref lies in every plane
+    w0[0] = e1[0] * vos.v_pref[0] + e1[1] * vos.v_pref[1] + e1[2] * vos.v_pref[2]
     included, key = np.empty((R, P, V), dtype=np.bool_), np.empty((R, P))
     for r in range(R):
         for p in range(P):
@@ -423,6 +422,6 @@ def decide_one(
     if found:
         return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], SAMPLED, solved)
     v = least_bad(vos, planes, tried[:n_tried], p, v_now, G3, h3, bounds, cfg)
-    return KernelOut(
+    return KernelOut(  # 6
         enforce_limits(v, p, bounds), INFEASIBLE_MIN_VIOLATION, np.nan, LEAST_BAD, solved
-    )  # 6
+    )

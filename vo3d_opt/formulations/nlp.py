@@ -57,7 +57,7 @@ def select(enc: Encounter, start: Outcome, solve_nlp: SolveNLP) -> Outcome:
     if start.status != Status.OPTIMAL:
         return start
     res = solve_nlp(build_nlp(enc, start.velocity))
-    if res.ok and res.x.shape == (3,):
+    if res.ok and res.x is not None and res.x.shape == (3,):
         better = enc.deviation(res.x)[0] < enc.deviation(start.velocity)[0] - 1e-9
         if better and first_safe(enc, res.x[None]) is not None:
             return Outcome(res.x, Status.OPTIMAL, None, {"round": "nlp", "start": start.velocity})

@@ -77,14 +77,13 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
             QP(P=_HESSIAN, q=q, G=G, h=h, soc_radius=enc.limits.v_max if has_cones else None)
         )
         attempts += 1
-        if not (res.ok and res.x.shape == (2,)):
+        if not (res.ok and res.x is not None and res.x.shape == (2,)):
             failed += res.status == Status.FAILED
             continue
         py_lift(planes, np.ascontiguousarray(res.x, dtype=float), p, v)
         tried.append(v.copy())
-        dev = math.hypot(
-            res.x[0] - qps.w0[0], res.x[1] - qps.w0[1]
-        )  # |v - v_pref|: planes are isometric
+        # |v - v_pref|: planes are isometric
+        dev = math.hypot(res.x[0] - qps.w0[0], res.x[1] - qps.w0[1])
         if dev >= best_dev:  # more constraints only move it farther
             continue
         entered = enc.containing(v)[:, 0]

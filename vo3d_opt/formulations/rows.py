@@ -124,9 +124,8 @@ def _curve_rows(
     for k in range(K):  # the curve of eq. (12) (vectorisable: no branches) ...
         qx, qy = sec.curve[0, k], sec.curve[1, k]
         valid[k] = qx == qx  # not NaN
-        dist[k] = (
-            (qx - w0[0]) ** 2 + (qy - w0[1]) ** 2 if qx == qx else np.inf
-        )  # squared: only compared
+        # squared: only compared
+        dist[k] = (qx - w0[0]) ** 2 + (qy - w0[1]) ** 2 if qx == qx else np.inf
         side_y[k] = qy
     for j in range(2):  # ... and the chord points of eq. (17)
         qx, qy = sec.chord[j, 0], sec.chord[j, 1]

@@ -185,7 +185,8 @@ def py_build_cones(
     reach: float,
     tau_min: float,
 ) -> VOCones:
-    """``build_cones`` for Python callers (compiled code calls ``build_cones``: no Python wrapper)."""
+    """``build_cones`` for Python callers (compiled code calls ``build_cones``: no Python
+    wrapper)."""
     return build_cones(p_A, p_B, apex, r_pz, reach, tau_min)
 
 

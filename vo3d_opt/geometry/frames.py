@@ -96,7 +96,8 @@ def build_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
 
 @entry
 def py_build_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
-    """``build_planes`` for Python callers (compiled code calls ``build_planes``: no Python wrapper)."""
+    """``build_planes`` for Python callers (compiled code calls ``build_planes``: no Python
+    wrapper)."""
     return build_planes(direction, phi)
 
 

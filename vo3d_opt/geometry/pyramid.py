@@ -100,7 +100,8 @@ def build_pyramids(p_A: np.ndarray, prisms: np.ndarray) -> VOPyramids:
 
 @entry
 def py_build_pyramids(p_A: np.ndarray, prisms: np.ndarray) -> VOPyramids:
-    """``build_pyramids`` for Python callers (compiled code calls ``build_pyramids``: no Python wrapper)."""
+    """``build_pyramids`` for Python callers (compiled code calls ``build_pyramids``: no Python
+    wrapper)."""
     return build_pyramids(p_A, prisms)
 
 

@@ -73,9 +73,8 @@ class Section(NamedTuple):
     """One VO shape on one avoidance plane, in plane coordinates (NaN where there is none).
     The arrays are written by ``cone_section`` / ``pyramid_section``."""
 
-    curve: (
-        np.ndarray
-    )  # (2, K) eq. (12): x and y where generator k meets the plane (a vertex), else NaN
+    # (2, K) eq. (12): x and y where generator k meets the plane (a vertex), else NaN
+    curve: np.ndarray
     chord: np.ndarray  # (2, 2) eq. (17): B_vo meets the plane here
     chord_cs: np.ndarray  # (2, 2) cos and sin of the generator angles of the chord points
     apex: np.ndarray  # (2,) A^phi of eq. (7)
@@ -177,11 +176,8 @@ def cone_section(
     the kind. ``base`` is ``cone_base_points`` of the cone."""
     K = base.shape[1] - 3
     apex, R, d_vo, r_vo = cones.apex[i], cones.R[i], cones.d_vo[i], cones.r_vo[i]
-    xA, yA, zA = (
-        base[0, K],
-        c * base[1, K] + s * base[2, K],
-        c * base[2, K] - s * base[1, K],
-    )  # eq. (7)
+    # eq. (7)
+    xA, yA, zA = base[0, K], c * base[1, K] + s * base[2, K], c * base[2, K] - s * base[1, K]
     sec.apex[0], sec.apex[1] = xA, yA
     scale = 1.0 + np.sqrt(apex[0] ** 2 + apex[1] ** 2 + apex[2] ** 2) + d_vo
     on_apex = abs(zA) <= 1e-9 * scale  # section 3.1.3: A_vo lies on the plane

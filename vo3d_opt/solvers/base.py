@@ -74,7 +74,7 @@ class Standard:
     P: np.ndarray
     q: np.ndarray
     C: np.ndarray
-    l: np.ndarray
+    l: np.ndarray  # noqa: E741 - l <= C x <= u, OSQP's standard form
     u: np.ndarray
     r: float | None
     m_ineq: int
@@ -109,7 +109,7 @@ class Standard:
 
 
 @entry
-def _violation(C, l, u, x, r):
+def _violation(C, l, u, x, r):  # noqa: E741 - l as in Standard
     worst = -np.inf
     for i in range(C.shape[0]):
         cx = 0.0
@@ -186,13 +186,13 @@ def standardise(qp: QP) -> Standard:
         and qp.h.shape == (qp.G.shape[0],)
     ):
         # The formulations' usual problem (inequalities only, float arrays): no conversions.
-        C, l, u = _rows(qp.G, qp.h, _eye(n)[:0], _EMPTY, *_free_bounds(n))
+        C, l, u = _rows(qp.G, qp.h, _eye(n)[:0], _EMPTY, *_free_bounds(n))  # noqa: E741
         return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u, r=r, m_ineq=qp.G.shape[0], m_eq=0)
     G, A = _matrix(qp.G, n, "G"), _matrix(qp.A, n, "A")
     h = _vector(qp.h, G.shape[0], np.inf, "h")
     b = _vector(qp.b, A.shape[0], 0.0, "b")
     lb, ub = _vector(qp.lb, n, -np.inf, "lb"), _vector(qp.ub, n, np.inf, "ub")
-    C, l, u = _rows(G, h, A, b, lb, ub)
+    C, l, u = _rows(G, h, A, b, lb, ub)  # noqa: E741 - l as in Standard
     return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u, r=r, m_ineq=G.shape[0], m_eq=A.shape[0])
 
 
@@ -213,7 +213,7 @@ def _free_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:
 def _rows(G, h, A, b, lb, ub):
     """C = [G; A; I], l = [-inf; b; lb], u = [h; b; ub]."""
     mg, ma, n = G.shape[0], A.shape[0], lb.shape[0]
-    C, l, u = np.zeros((mg + ma + n, n)), np.empty(mg + ma + n), np.empty(mg + ma + n)
+    C, l, u = np.zeros((mg + ma + n, n)), np.empty(mg + ma + n), np.empty(mg + ma + n)  # noqa: E741
     C[:mg], l[:mg], u[:mg] = G, -np.inf, h
     C[mg : mg + ma], l[mg : mg + ma], u[mg : mg + ma] = A, b, b
     for j in range(n):
@@ -253,7 +253,7 @@ def screen(std: Standard, solver: str) -> Result | None:
 
 
 @entry
-def _screen(P, q, C, l, u, r, has_r, m_ineq, m_eq):
+def _screen(P, q, C, l, u, r, has_r, m_ineq, m_eq):  # noqa: E741 - l as in Standard
     """0: fine; 1: NaN or a misplaced infinity; 2: an infinite b; 3: infeasible bounds."""
     finite = np.isfinite(P.sum() + q.sum() + C.sum()) and (not has_r or np.isfinite(r))
     if not finite:

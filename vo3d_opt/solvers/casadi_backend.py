@@ -13,6 +13,8 @@ start is returned instead, with status "failed": never a worse answer than the c
 
 from __future__ import annotations
 
+from typing import Any
+
 import casadi as ca
 import numpy as np
 
@@ -94,7 +96,7 @@ def _build(plugin: str, n: int, m: int, k: int) -> ca.Function:
         "g": ca.vertcat(*g),
         "p": ca.vertcat(ca.vec(P), q, ca.vec(C), ca.vec(apex), ca.vec(axis), cos),
     }
-    options = {**PLUGIN_OPTIONS[plugin], "error_on_fail": False}
+    options: dict[str, Any] = {**PLUGIN_OPTIONS[plugin], "error_on_fail": False}
     return ca.nlpsol(f"vo3d_{plugin}_{n}_{m}_{k}", plugin, problem, options)
 
 
@@ -134,7 +136,7 @@ class CasadiBackend(Backend):
                 raise ValueError(f"ConeConstraint apex and axis must have shape ({n},)")
         x0 = np.zeros(n) if nlp.x0 is None else np.asarray(nlp.x0, dtype=float).reshape(-1)
         if x0.shape != (n,):
-            raise ValueError(f"NLP.x0 must have shape ({n},), got {np.shape(nlp.x0)}")
+            raise ValueError(f"NLP.x0 must have shape ({n},), got {np.asarray(nlp.x0).shape}")
         if (early := screen(std, self.name)) is not None:
             return early
         cone_data = np.array([[*c.apex, *c.axis, c.cos_alpha] for c in cones], dtype=float)
@@ -179,7 +181,11 @@ class CasadiBackend(Backend):
         """``result``, or the feasible start x0 when the solver ended worse than it."""
         if nlp_violation(std, cones, x0) > NLP_TOL:
             return result
-        if result.ok and objective(std, result.x) <= objective(std, x0) + 1e-9:
+        if (
+            result.ok
+            and result.x is not None
+            and objective(std, result.x) <= objective(std, x0) + 1e-9
+        ):
             return result
         return Result(
             x0.copy(),

@@ -76,6 +76,7 @@ class ClarabelBackend(Backend):
                 for cone, size in zip(
                     (clarabel.ZeroConeT, clarabel.NonnegativeConeT, clarabel.SecondOrderConeT),
                     sizes,
+                    strict=True,
                 )
                 if size
             ]

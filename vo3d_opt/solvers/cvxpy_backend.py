@@ -100,9 +100,9 @@ class CvxpyBackend(Backend):
             self._templates[key] = _template(*key)
         t = self._templates[key]
         t.F.value, t.q.value = square_root(std.P), std.q
-        if t.D is not None:
+        if t.D is not None and t.d is not None:  # both or neither, by the shape
             t.D.value, t.d.value = D, d
-        if t.E is not None:
+        if t.E is not None and t.e is not None:
             t.E.value, t.e.value = E, e
         if t.r is not None:
             t.r.value = std.r

@@ -53,7 +53,7 @@ class DaqpBackend(Backend):
 
 
 @entry
-def _daqp_rows(l, u, n, m_ineq, m_eq):
+def _daqp_rows(l, u, n, m_ineq, m_eq):  # noqa: E741 - l as in Standard
     """DAQP's bounds: the simple bounds (the identity rows, last in Standard) first, clipped to
     its infinity, and the ``sense`` flags marking equalities immutable."""
     m = m_ineq + m_eq

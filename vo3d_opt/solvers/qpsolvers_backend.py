@@ -9,6 +9,8 @@ formulation substitutes a polygon for ``soc_radius``.
 
 from __future__ import annotations
 
+from typing import Any
+
 import qpsolvers
 import scipy.sparse as sp
 
@@ -48,7 +50,7 @@ class QpsolversBackend(Backend):
     def __init__(self, name: str, solver: str) -> None:
         self.name = name
         self._solver = solver
-        self._options = SOLVER_OPTIONS.get(solver, {})
+        self._options: dict[str, Any] = SOLVER_OPTIONS.get(solver, {})  # solver-specific **kwargs
         self._sparse = solver not in qpsolvers.dense_solvers
 
     def _solve(self, qp: QP, std: Standard) -> Result:
