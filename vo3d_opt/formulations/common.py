@@ -16,7 +16,7 @@ from functools import cached_property
 from typing import Annotated, Literal, NamedTuple
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, StrictBool
+from pydantic import Field, StrictBool
 
 from .._jit import entry, inline, jit, kernel
 from ..geometry import (
@@ -37,7 +37,7 @@ from ..geometry.pyramid import prism_rows
 from ..geometry.sections import generator_angles
 from ..solvers import NLP, QP, Result
 from ..status import Status
-from ..types import AgentState, Box, Cylinder, Limits, Neighbor
+from ..types import AgentState, Box, Cylinder, Limits, Model, Neighbor
 
 #: Tolerance (m/s) on the speed and altitude limits when checking a candidate.
 LIMIT_TOL = 1e-6
@@ -105,11 +105,10 @@ class VOs(NamedTuple):
     v_pref: np.ndarray
 
 
-class Options(BaseModel):
-    """Formulation options (the selector's keyword arguments), validated: a wrong value raises
-    ``ValueError`` (pydantic's ``ValidationError``) naming the option."""
-
-    model_config = ConfigDict(frozen=True, extra="forbid")
+class Options(Model):
+    """Formulation options (the selector's keyword arguments), validated: a wrong or unknown
+    option raises a one-line ``ValueError`` (``InputError``) naming it, ``Options: margin: ...``
+    (``model_validate``, which scenario files use, keeps pydantic's structured errors)."""
 
     plane_step_deg: _Deg = 10.0  # avoidance planes every this many degrees in [-90, 90]
     heading_step_deg: _Deg = 10.0  # sampled: polar grid, heading resolution in each plane
