@@ -18,10 +18,17 @@ $(STAMP): pyproject.toml | $(PY)
 
 install: $(STAMP)
 
-demo: $(STAMP)
+# numba's on-disk cache is keyed on each function's own file, not on the files of the functions
+# it inlines: after an edit of vo3d_opt/, drop every cached kernel so nothing stale is loaded.
+NUMBA_STAMP := $(VENV)/.numba-sources
+$(NUMBA_STAMP): $(shell find vo3d_opt -name '*.py') | $(PY)
+	@find vo3d_opt -name '*.nb[ic]' -delete
+	@touch $@
+
+demo: $(STAMP) $(NUMBA_STAMP)
 	$(PY) -m vo3d_opt.demo
 
-test: $(STAMP)
+test: $(STAMP) $(NUMBA_STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider -n 2
 
 # ruff (lint + format check) and mypy, configured in pyproject.toml. The notebooks' .py
@@ -43,8 +50,9 @@ notebooks-sync: $(STAMP)
 	$(VENV)/bin/jupytext --update --to ipynb notebooks/[0-9]*.py
 	$(VENV)/bin/jupyter nbconvert --log-level WARN --clear-output --inplace notebooks/[0-9]*.ipynb
 
-bench: $(STAMP)
+bench: $(STAMP) $(NUMBA_STAMP)
 	$(PY) benchmarks/bench_select.py
 
 clean:
 	rm -rf $(VENV) out
+	find vo3d_opt -name '*.nb[ic]' -delete

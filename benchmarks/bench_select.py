@@ -6,7 +6,11 @@ the 55 m sensing range, and with obstacles six random cylinders/boxes, one 20 m 
 Prints median and p99 microseconds per call, and plane_qp's speed-up over sampled.
 
     python benchmarks/bench_select.py [--encounters 40] [--repeat 3] [--quick] [--solvers S ...]
-                                      [--deviation | --solved] [--fast-path]
+                                      [--deviation | --solved | --breakdown] [--fast-path]
+
+``--breakdown``: one default decision (plane_qp on exact2d) split into the compiled kernel alone
+(``kernel.decide`` on the arrays ``select`` would build) and the Python around it (checking the
+inputs, building the arrays, the ``Decision``), with ``sampled`` timed on the same encounters.
 """
 from __future__ import annotations
 
@@ -18,6 +22,9 @@ import warnings
 import numpy as np
 
 from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
+from vo3d_opt.formulations import kernel
+from vo3d_opt.formulations.common import bounds_array, neighbor_rows
+from vo3d_opt.geometry.pyramid import prism_rows
 from vo3d_opt.solvers import available_qp_solvers
 
 
@@ -62,6 +69,37 @@ def time_calls(selector: VelocitySelector, cases: list[dict], repeat: int) -> tu
     return np.array(times) * 1e6, statuses
 
 
+def kernel_times(selector: VelocitySelector, cases: list[dict], repeat: int) -> np.ndarray:
+    """µs per ``kernel.decide`` call alone, on the arrays ``select`` builds for each case."""
+    packed, out = selector.options.packed, np.empty(kernel.OUT_SIZE)
+    args = [(kw["own"].position, kw["own"].velocity, np.asarray(kw["preferred_velocity"], dtype=float),
+             neighbor_rows(kw["neighbors"]), prism_rows(kw["obstacles"]), bounds_array(kw["limits"], kw["dt"]))
+            for kw in cases]
+    times = []
+    for _ in range(repeat):
+        for a in args:
+            t0 = time.perf_counter()
+            kernel.decide(*a, *packed, out)
+            times.append(time.perf_counter() - t0)
+    return np.array(times) * 1e6
+
+
+def breakdown(rng: np.random.Generator, grid: list[tuple[int, int]], args: argparse.Namespace) -> None:
+    """Median µs of the default decision, the kernel alone and the Python around it, and sampled."""
+    print("| neighbours | obstacles | select() median µs | p99 µs | kernel alone median µs | "
+          "Python around µs | sampled median µs | speed-up over sampled |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|")
+    default, ref = VelocitySelector(), VelocitySelector("sampled")
+    for n, m in grid:
+        cases = [encounter(rng, n, m, conflict=not args.fast_path) for _ in range(args.encounters)]
+        t_sel, _ = time_calls(default, cases, args.repeat)
+        t_ker = kernel_times(default, cases, args.repeat)
+        t_ref, _ = time_calls(ref, cases, 1)
+        sel, ker, smp = np.median(t_sel), np.median(t_ker), np.median(t_ref)
+        print(f"| {n} | {m} | {sel:.1f} | {np.percentile(t_sel, 99):.0f} | {ker:.1f} | {sel - ker:.1f} | "
+              f"{smp:.0f} | {smp / sel:.0f}x |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--encounters", type=int, default=40)
@@ -73,6 +111,8 @@ def main() -> None:
                     help="only these QP backends (default: every installed one)")
     ap.add_argument("--solved", action="store_true",
                     help="instead of times: QPs solved per plane_qp decision, on each backend")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="the default decision: select() vs the compiled kernel alone, and sampled")
     ap.add_argument("--fast-path", action="store_true",
                     help="encounters where the preferred velocity is already safe (all behind)")
     args = ap.parse_args()
@@ -81,9 +121,12 @@ def main() -> None:
     grid = [(9, 6)] if args.quick else [(1, 0), (1, 6), (5, 0), (5, 6), (9, 6), (10, 0), (10, 6), (20, 0), (20, 6)]
     solvers = args.solvers or available_qp_solvers()
     combos = [("sampled", None)] + [("plane_qp", s) for s in solvers] \
-        + [("cone_qp", s) for s in solvers] + [("nlp", "casadi")]
+        + [("cone_qp", s) for s in solvers if s != "exact2d"] + [("nlp", "casadi")]  # exact2d: plane_qp only
     print(f"# {platform.processor() or platform.machine()}, {platform.python_implementation()} "
           f"{platform.python_version()}, {time.strftime('%Y-%m-%d')}")
+    if args.breakdown:
+        breakdown(rng, grid, args)
+        return
     if args.deviation:
         print("| neighbours | obstacles | formulation | mean deviation m/s | max deviation m/s |")
         print("|---:|---:|---|---:|---:|")

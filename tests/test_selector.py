@@ -190,6 +190,21 @@ def test_reciprocal_takes_half_the_avoidance():
     assert dev(own_all.velocity)[0] == pytest.approx(dev(full.velocity)[0], abs=1e-3)
 
 
+@pytest.mark.parametrize("formulation", ["sampled", "plane_qp"])
+def test_answer_keeps_the_margin_off_the_cone(formulation):
+    """Issue 9 §4: a neighbour at rest 20 m ahead on the line of flight (r_pz 10 m): the VO is
+    the cone about +x of half-angle 30°. Once the answer was (2.598, 0, 1.5), exactly on the
+    cone; every answer must be at least the margin (1e-3 m/s) outside it."""
+    own = AgentState(position=(0.0, 0.0, 20.0), velocity=(4.0, 0.0, 0.0))
+    kw = dict(own=own, preferred_velocity=(4.0, 0.0, 0.0), obstacles=[], limits=Limits(), dt=0.2,
+              neighbors=[Neighbor(position=(20.0, 0.0, 20.0), velocity=(0.0, 0.0, 0.0), r_pz=10.0)])
+    d = VelocitySelector(formulation).select(**kw)
+    v = d.velocity
+    off_axis = np.degrees(np.arctan2(np.hypot(v[1], v[2]), v[0]))
+    distance = np.linalg.norm(v) * np.sin(np.radians(min(off_axis - 30.0, 90.0)))  # to the cone
+    assert d.status == "optimal" and distance >= 1e-3 * (1 - 1e-6)
+
+
 def test_horizon_ignores_far_threats():
     own = AgentState(position=(0.0, 0.0, 20.0), velocity=(2.0, 0.0, 0.0))
     nb = Neighbor(position=(50.0, 0.0, 20.0), velocity=(0.0, 0.0, 0.0), r_pz=5.0)

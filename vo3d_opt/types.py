@@ -200,6 +200,17 @@ class Model(BaseModel):
     # errors), so a model inside another one reports its errors with their locations.
     __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]
 
+    def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False) -> Any:
+        """pydantic's copy, without the values cached from the fields (each ``cached_property``)
+        when fields change: the copy computes its own."""
+        copy = super().model_copy(update=update, deep=deep)
+        if update:
+            for klass in type(self).__mro__:
+                for name, attr in vars(klass).items():
+                    if isinstance(attr, cached_property):
+                        copy.__dict__.pop(name, None)
+        return copy
+
 
 # ------------------------------------------------------------------------------------ models
 
@@ -222,10 +233,10 @@ class Neighbor(Model):
     #: that keeps its velocity whatever A does (a hovering vehicle, a static sphere).
     cooperative: StrictBool = True
 
-    @property
+    @cached_property
     def row(self) -> tuple[float, ...]:
         """(x, y, z, v_x, v_y, v_z, r_pz, cooperative): what the VO needs, as plain floats
-        (not cached: ``model_copy(update=...)`` would carry a stale copy over)."""
+        (cached: the model is frozen, and a neighbour is often reused over many calls)."""
         return (
             *self.position.tolist(),
             *self.velocity.tolist(),
@@ -255,13 +266,6 @@ class _StaticObstacle(Model):
     def prism_height(self) -> float:
         """h_pz: given, or the obstacle height plus the margin."""
         return self.h_pz if self.h_pz is not None else self.height + self.margin
-
-    def model_copy(self, *, update: Mapping[str, Any] | None = None, deep: bool = False) -> Any:
-        """pydantic's copy, without the cached ``prism`` when fields change."""
-        copy = super().model_copy(update=update, deep=deep)
-        if update:
-            copy.__dict__.pop("prism", None)
-        return copy
 
     @cached_property
     def prism(self) -> tuple[float, float, float, float]:

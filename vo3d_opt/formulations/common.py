@@ -309,38 +309,50 @@ def containing(vos: VOs, v: np.ndarray, horizon: float, out: np.ndarray) -> bool
     return any_in
 
 
-@kernel
-def time_to_intrusion(vos: VOs, v: np.ndarray) -> float:
-    """The earliest time (s) any protected zone would be entered at velocity v (inf: never; 0:
-    inside and closing). The least-bad velocity maximises it."""
-    c, t = vos.cones, np.inf
-    for i in range(c.d_oi.shape[0]):
-        closest, _, pu = closest_approach(c, i, v, NO_HORIZON)
-        if c.inside[i]:
-            if pu > 0:
-                t = 0.0
-            continue
-        u0, u1, u2 = v[0] - c.apex[i, 0], v[1] - c.apex[i, 1], v[2] - c.apex[i, 2]
-        uu = u0 * u0 + u1 * u1 + u2 * u2
-        disc = pu * pu - uu * (c.d_oi[i] ** 2 - c.r_pz[i] ** 2)
-        if disc > 0 and pu > 0 and uu > 0:
-            t = min(t, max((pu - np.sqrt(disc)) / uu, 0.0))
-    py = vos.pyramids
-    for j in range(py.L_pz.shape[0]):
+@inline
+def _zone_time(vos: VOs, k: int, v: np.ndarray) -> float:
+    """When zone k (cones first) would be entered at velocity v (inf: never; 0: inside and
+    closing)."""
+    c, n = vos.cones, vos.cones.d_oi.shape[0]
+    if k >= n:
+        py, j = vos.pyramids, k - n
         if py.inside[j]:
             h = py.frame[j, 0]
-            if h[0] * v[0] + h[1] * v[1] + h[2] * v[2] > 0:
-                t = 0.0
-        else:
-            t = min(t, entry_time(py, j, v))
+            return 0.0 if h[0] * v[0] + h[1] * v[1] + h[2] * v[2] > 0 else np.inf
+        return entry_time(py, j, v)
+    _, _, pu = closest_approach(c, k, v, NO_HORIZON)
+    if c.inside[k]:
+        return 0.0 if pu > 0 else np.inf
+    u0, u1, u2 = v[0] - c.apex[k, 0], v[1] - c.apex[k, 1], v[2] - c.apex[k, 2]
+    uu = u0 * u0 + u1 * u1 + u2 * u2
+    disc = pu * pu - uu * (c.d_oi[k] ** 2 - c.r_pz[k] ** 2)
+    if disc > 0 and pu > 0 and uu > 0:
+        return max((pu - np.sqrt(disc)) / uu, 0.0)
+    return np.inf
+
+
+@kernel
+def time_to_intrusion(vos: VOs, v: np.ndarray, floor: float, hint: np.ndarray) -> float:
+    """The earliest time (s) any protected zone would be entered at velocity v (inf: never; 0:
+    inside and closing). The least-bad velocity maximises it. Once the time is known to be
+    below ``floor`` it is returned at once (``floor`` -1: always the earliest time), and the
+    zone that showed it goes into hint[0], where the next call starts: in a crowd most
+    velocities are beaten by the same zone."""
+    count, t = vos.cones.d_oi.shape[0] + vos.pyramids.L_pz.shape[0], np.inf
+    for q in range(count):
+        k = (hint[0] + q) % count
+        t = min(t, _zone_time(vos, k, v))
+        if t < floor or t == 0.0:
+            hint[0] = k
+            return t
     return t
 
 
 @entry
 def _times_to_intrusion(vos: VOs, v: np.ndarray) -> np.ndarray:
-    out = np.empty(v.shape[0])
+    out, hint = np.empty(v.shape[0]), np.zeros(1, dtype=np.int64)
     for k in range(v.shape[0]):
-        out[k] = time_to_intrusion(vos, v[k])
+        out[k] = time_to_intrusion(vos, v[k], -1.0, hint)
     return out
 
 

@@ -78,10 +78,13 @@ def _triangle_rows(
     "near" takes the nearer side, "left" / "right" the upper / lower one (as _pick does)."""
     d0x, d0y = chord[0, 0] - apex[0], chord[0, 1] - apex[1]
     d1x, d1y = chord[1, 0] - apex[0], chord[1, 1] - apex[1]
+    if d0x * d0x + d0y * d0y == 0.0 or d1x * d1x + d1y * d1y == 0.0:
+        return False  # a side of length zero: the section is a segment (measure zero)
     wx, wy = w0[0] - apex[0], w0[1] - apex[1]
     s0 = max((wx * d0x + wy * d0y) / (d0x * d0x + d0y * d0y), 0.0)
     s1 = max((wx * d1x + wy * d1y) / (d1x * d1x + d1y * d1y), 0.0)
-    dist0, dist1 = np.hypot(wx - s0 * d0x, wy - s0 * d0y), np.hypot(wx - s1 * d1x, wy - s1 * d1y)
+    dist0 = np.sqrt((wx - s0 * d0x) ** 2 + (wy - s0 * d0y) ** 2)
+    dist1 = np.sqrt((wx - s1 * d1x) ** 2 + (wy - s1 * d1y) ** 2)
     if not (np.isfinite(dist0) and np.isfinite(dist1)):
         return False
     centre = 0.5 * (chord[0, 1] + chord[1, 1])
@@ -97,7 +100,9 @@ def _triangle_rows(
                 i = 0 if on0 else 1
         dx, dy = (d0x, d0y) if i == 0 else (d1x, d1y)
         ox, oy = (d1x, d1y) if i == 0 else (d0x, d0y)
-        nx, ny = dy, -dx  # G·w <= G·apex keeps w on the side away from the other chord point
+        length = np.sqrt(dx * dx + dy * dy)  # a unit normal: the margin is then in m/s
+        # G·w <= G·apex: the side away from the other chord point
+        nx, ny = dy / length, -dx / length
         if nx * ox + ny * oy < 0:
             nx, ny = -nx, -ny
         G[r, 0], G[r, 1], h[r] = nx, ny, nx * apex[0] + ny * apex[1]
