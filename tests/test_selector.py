@@ -232,6 +232,22 @@ def test_bad_input_names_the_field(change, field):
         VelocitySelector().select(**dict(CONTRACT, **change))
 
 
+@pytest.mark.parametrize("options,name", [
+    (dict(unknown_opt=1), "unknown_opt"),
+    (dict(margin=-1), "margin"),
+    (dict(margin=float("nan")), "margin"),
+    (dict(n_samples="72"), "n_samples"),
+    (dict(reciprocal=1), "reciprocal"),
+    (dict(corrections={"tg_range", "typo"}), "corrections"),
+])
+def test_bad_option_is_one_line_naming_it(options, name):
+    """A wrong or unknown option: a ValueError of one line that names it, without pydantic's
+    multi-line report and its URLs."""
+    with pytest.raises(ValueError, match=rf"^Options: {name}\b") as err:
+        VelocitySelector(formulation="plane_qp", **options)
+    assert "\n" not in str(err.value) and "http" not in str(err.value)
+
+
 def test_exact2d_only_for_plane_qp():
     """exact2d solves the per-plane problem only: asking it for cone_qp's 3D QPs is an error
     that names the backends that can."""

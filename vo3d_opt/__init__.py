@@ -1,5 +1,6 @@
 """vo3d-opt: safe velocities for multi-UAV systems by optimisation over the improved 3D velocity
 obstacle (VO cones, VO pyramids, avoidance planes)."""
+
 from .selector import Decision, VelocitySelector
 from .types import AgentState, Box, Cylinder, Limits, Neighbor
 

@@ -18,13 +18,33 @@ Four flavours, by what a function does:
   into ``plane_rows``, and ``decide_one`` into its two callers. Inlining is costly to compile
   (nested inlining most), so the large kernels are called, not inlined.
 """
+
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Protocol, TypeVar
 
 import numba
 
-_COMMON = dict(cache=True, error_model="numpy", nogil=True)
+_F = TypeVar("_F", bound=Callable[..., Any])
 
-entry = numba.njit(**_COMMON)
-jit = numba.njit(**_COMMON, no_cpython_wrapper=True)
-kernel = numba.njit(**_COMMON, no_cpython_wrapper=True, _nrt=False)
-inline = numba.njit(**_COMMON, no_cpython_wrapper=True, _nrt=False, inline="always")
+
+class _Compiler(Protocol):
+    """A decorator that compiles a function; mypy checks its calls against the Python
+    signature (numba dispatches on the same arguments)."""
+
+    def __call__(self, fn: _F, /) -> _F: ...
+
+
+def _compiler(**options: Any) -> _Compiler:
+    # Options as **Any: numba's stubs omit those it takes through **options (no_cpython_wrapper,
+    # _nrt); typed as _Compiler, not numba's Dispatcher, so that calls are checked.
+    return numba.njit(**options)
+
+
+_COMMON: dict[str, Any] = dict(cache=True, error_model="numpy", nogil=True)
+
+entry = _compiler(**_COMMON)
+jit = _compiler(**_COMMON, no_cpython_wrapper=True)
+kernel = _compiler(**_COMMON, no_cpython_wrapper=True, _nrt=False)
+inline = _compiler(**_COMMON, no_cpython_wrapper=True, _nrt=False, inline="always")

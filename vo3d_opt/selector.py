@@ -6,6 +6,7 @@ With the default formulation and solver (``plane_qp`` on ``exact2d``) a decision
 formulations and backends run the Python formulations over the same compiled geometry.
 Statuses: ``vo3d_opt.status.Status`` (documented in the README).
 """
+
 from __future__ import annotations
 
 import logging
@@ -20,9 +21,27 @@ import numpy as np
 
 from . import swarm
 from .formulations import cone_qp, kernel, nlp, plane_qp, sampled
-from .formulations.common import Bounds, Encounter, Options, Outcome, bounds_array, neighbor_rows, py_build_vos
+from .formulations.common import (
+    Bounds,
+    Encounter,
+    Options,
+    Outcome,
+    bounds_array,
+    neighbor_rows,
+    py_build_vos,
+)
 from .geometry.pyramid import prism_rows
-from .solvers import FEAS_TOL, NLP, QP, Backend, Result, available_qp_solvers, available_solvers, get_backend, standardise
+from .solvers import (
+    FEAS_TOL,
+    NLP,
+    QP,
+    Backend,
+    Result,
+    available_qp_solvers,
+    available_solvers,
+    get_backend,
+    standardise,
+)
 from .status import DECISION_STATUSES, Status
 from .swarm import SwarmDecision
 from .types import AgentState, Box, Cylinder, Limits, Neighbor, check_vector
@@ -88,7 +107,12 @@ def _checked(backend: Backend, method: str):
         if res.status == Status.OPTIMAL and not backend.checks_answers:
             qp = problem.qp if isinstance(problem, NLP) else problem
             x = None if res.x is None else np.asarray(res.x, dtype=float).reshape(-1)
-            if x is None or x.shape != (qp.n,) or not np.all(np.isfinite(x)) or standardise(qp).violation(x) > FEAS_TOL:
+            if (
+                x is None
+                or x.shape != (qp.n,)
+                or not np.all(np.isfinite(x))
+                or standardise(qp).violation(x) > FEAS_TOL
+            ):
                 return Result(None, Status.FAILED, res.solver, "garbage answer rejected")
             return Result(x, Status.OPTIMAL, res.solver, res.info)
         return res
@@ -105,10 +129,22 @@ def warm_up() -> None:
         if _warm:
             return
         own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
-        nbrs = neighbor_rows([Neighbor(position=(10.0, 0.0, 10.0), velocity=(-1.0, 0.0, 0.0), r_pz=3.0)])
-        _compiling("the decision kernel", lambda: kernel.decide(
-            own.position, own.velocity, check_vector((1.0, 0.0, 0.0), 3), nbrs, np.zeros((0, 4)),
-            bounds_array(Limits(), 0.2), *Options().packed, np.empty(kernel.OUT_SIZE)))
+        nbrs = neighbor_rows(
+            [Neighbor(position=(10.0, 0.0, 10.0), velocity=(-1.0, 0.0, 0.0), r_pz=3.0)]
+        )
+        _compiling(
+            "the decision kernel",
+            lambda: kernel.decide(
+                own.position,
+                own.velocity,
+                check_vector((1.0, 0.0, 0.0), 3),
+                nbrs,
+                np.zeros((0, 4)),
+                bounds_array(Limits(), 0.2),
+                *Options().packed,
+                np.empty(kernel.OUT_SIZE),
+            ),
+        )
         _warm = True
 
 
@@ -143,19 +179,32 @@ def warm_up_many() -> None:
         if _warm_many:
             return
         v = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
-        inputs = swarm.SwarmInputs.checked([[0.0, 0.0, 10.0], [10.0, 0.0, 10.0]], v, v, 3.0, [], None, 0.2, 55.0,
-                                           None, None)
-        _compiling("the swarm kernel", lambda: _select_many_compiled(Options(), inputs, 1, time.perf_counter()))
+        inputs = swarm.SwarmInputs.checked(
+            [[0.0, 0.0, 10.0], [10.0, 0.0, 10.0]], v, v, 3.0, [], None, 0.2, 55.0, None, None
+        )
+        _compiling(
+            "the swarm kernel",
+            lambda: _select_many_compiled(Options(), inputs, 1, time.perf_counter()),
+        )
         _warm_many = True
 
 
-def _select_many_compiled(options: Options, inputs: swarm.SwarmInputs, threads: int, t0: float) -> SwarmDecision:
+def _select_many_compiled(
+    options: Options, inputs: swarm.SwarmInputs, threads: int, t0: float
+) -> SwarmDecision:
     """``select_many`` compiled: every deciding vehicle, on ``threads`` threads."""
     sw = inputs.arrays()
     out = swarm.decide_all(sw, options.packed, threads)
-    result = _swarm_decision(inputs.V, sw.who, out[:, :3], _STATUS_NAMES[out[:, 3].astype(np.int64)],
-                             _ROUND_NAMES[out[:, 5].astype(np.int64)], out[:, 4], out[:, 7:9].astype(np.int64),
-                             out[:, 6].astype(np.int64))
+    result = _swarm_decision(
+        inputs.V,
+        sw.who,
+        out[:, :3],
+        _STATUS_NAMES[out[:, 3].astype(np.int64)],
+        _ROUND_NAMES[out[:, 5].astype(np.int64)],
+        out[:, 4],
+        out[:, 7:9].astype(np.int64),
+        out[:, 6].astype(np.int64),
+    )
     result.compiled, result.threads = True, threads
     result.solve_time = time.perf_counter() - t0
     result.times[sw.who] = result.solve_time / max(1, sw.who.shape[0])
@@ -174,16 +223,31 @@ def _names(n: int, who: np.ndarray, names: np.ndarray) -> np.ndarray:
     return out
 
 
-def _swarm_decision(V: np.ndarray, who: np.ndarray, vel: np.ndarray, statuses: np.ndarray, rounds: np.ndarray,
-                    planes: np.ndarray, counts: np.ndarray, solved: np.ndarray) -> SwarmDecision:
+def _swarm_decision(
+    V: np.ndarray,
+    who: np.ndarray,
+    vel: np.ndarray,
+    statuses: np.ndarray,
+    rounds: np.ndarray,
+    planes: np.ndarray,
+    counts: np.ndarray,
+    solved: np.ndarray,
+) -> SwarmDecision:
     """A ``SwarmDecision`` of N vehicles from the deciding vehicles' (D,) answers; the others
     keep their velocity ``V``."""
     n = V.shape[0]
-    out = SwarmDecision(velocities=V.copy(), statuses=_names(n, who, statuses), solve_time=0.0,
-                        decided=np.zeros(n, dtype=bool), rounds=_names(n, who, rounds),
-                        planes=np.full(n, np.nan), neighbors=np.zeros(n, dtype=np.int64),
-                        obstacles=np.zeros(n, dtype=np.int64), solved=np.zeros(n, dtype=np.int64),
-                        times=np.full(n, np.nan))
+    out = SwarmDecision(
+        velocities=V.copy(),
+        statuses=_names(n, who, statuses),
+        solve_time=0.0,
+        decided=np.zeros(n, dtype=bool),
+        rounds=_names(n, who, rounds),
+        planes=np.full(n, np.nan),
+        neighbors=np.zeros(n, dtype=np.int64),
+        obstacles=np.zeros(n, dtype=np.int64),
+        solved=np.zeros(n, dtype=np.int64),
+        times=np.full(n, np.nan),
+    )
     out.velocities[who], out.planes[who] = vel, planes
     out.neighbors[who], out.obstacles[who], out.solved[who] = counts[:, 0], counts[:, 1], solved
     out.decided[who] = True
@@ -202,10 +266,18 @@ class VelocitySelector:
     with every neighbour's sphere this much larger), margin.
     """
 
-    def __init__(self, formulation: str = "plane_qp", solver: str | None = None, *,
-                 start_solver: str | None = None, **options) -> None:
+    def __init__(
+        self,
+        formulation: str = "plane_qp",
+        solver: str | None = None,
+        *,
+        start_solver: str | None = None,
+        **options,
+    ) -> None:
         if formulation not in FORMULATIONS:
-            raise ValueError(f"formulation: unknown {formulation!r}; available: {', '.join(FORMULATIONS)}")
+            raise ValueError(
+                f"formulation: unknown {formulation!r}; available: {', '.join(FORMULATIONS)}"
+            )
         self.options = Options(**options)  # ValueError naming a wrong or unknown option
         self.formulation = formulation
         self._qp = self._nlp = None
@@ -217,8 +289,10 @@ class VelocitySelector:
             self.solver = solver or DEFAULT_NLP_SOLVER
             backend = get_backend(self.solver)
             if backend.kind != "nlp":
-                raise ValueError(f"solver: formulation 'nlp' needs an NLP solver "
-                                 f"({', '.join(s for s in available_solvers() if s.startswith('casadi'))}), got {solver!r}")
+                nlp_solvers = ", ".join(s for s in available_solvers() if s.startswith("casadi"))
+                raise ValueError(
+                    f"solver: formulation 'nlp' needs an NLP solver ({nlp_solvers}), got {solver!r}"
+                )
             self._nlp = backend
             self._qp = self._qp_backend(start_solver or DEFAULT_QP_SOLVER, "plane_qp")
         else:
@@ -233,10 +307,16 @@ class VelocitySelector:
     def _qp_backend(name: str, formulation: str) -> Backend:
         backend = get_backend(name)
         if backend.kind != "qp":
-            raise ValueError(f"solver: {name!r} does not solve QPs; available: {', '.join(available_qp_solvers())}")
+            raise ValueError(
+                f"solver: {name!r} does not solve QPs; "
+                f"available: {', '.join(available_qp_solvers())}"
+            )
         if backend.name == "exact2d" and formulation != "plane_qp":
-            raise ValueError(f"solver: 'exact2d' solves plane_qp's 2-variable problems only, not {formulation}'s; "
-                             f"available: {', '.join(s for s in available_qp_solvers() if s != 'exact2d')}")
+            raise ValueError(
+                f"solver: 'exact2d' solves plane_qp's 2-variable problems only, "
+                f"not {formulation}'s; "
+                f"available: {', '.join(s for s in available_qp_solvers() if s != 'exact2d')}"
+            )
         return backend
 
     # ------------------------------------------------------------------------------------------
@@ -259,32 +339,66 @@ class VelocitySelector:
         limits = Limits() if limits is None else limits
         if not isinstance(limits, Limits):
             raise ValueError(f"limits: expected Limits, got {type(limits).__name__}")
-        if isinstance(dt, bool) or not (isinstance(dt, numbers.Real) and math.isfinite(dt) and dt > 0):
+        if isinstance(dt, bool) or not (
+            isinstance(dt, numbers.Real) and math.isfinite(dt) and dt > 0
+        ):
             raise ValueError(f"dt: must be a positive finite number of seconds, got {dt!r}")
         prisms = prism_rows(obstacles)
         if self._compiled and self._nlp is None:
-            return self._decide(own.position, own.velocity, v_pref, nbrs, prisms, bounds_array(limits, dt), t0)
+            return self._decide(
+                own.position, own.velocity, v_pref, nbrs, prisms, bounds_array(limits, dt), t0
+            )
         bounds = Bounds.of(limits, dt)
-        vos = py_build_vos(own.position, own.velocity, v_pref, nbrs, prisms, bounds, self.options.config)
-        enc = Encounter(position=own.position, v_now=own.velocity, vos=vos, limits=limits, dt=float(dt),
-                        options=self.options)
+        vos = py_build_vos(
+            own.position, own.velocity, v_pref, nbrs, prisms, bounds, self.options.config
+        )
+        enc = Encounter(
+            position=own.position,
+            v_now=own.velocity,
+            vos=vos,
+            limits=limits,
+            dt=float(dt),
+            options=self.options,
+        )
         out = self._run(enc, nbrs, prisms, bounds)
         status = out.status
         if status == Status.OPTIMAL and enc.inside_any:
             status = Status.INSIDE_PROTECTED_ZONE
-        return Decision(velocity=kernel.enforce_limits(np.asarray(out.velocity, dtype=float), own.position, bounds),
-                        status=status, solve_time=time.perf_counter() - t0, formulation=self.formulation,
-                        solver=self.solver, plane=out.plane, info=out.info)
+        return Decision(
+            velocity=kernel.enforce_limits(
+                np.asarray(out.velocity, dtype=float), own.position, bounds
+            ),
+            status=status,
+            solve_time=time.perf_counter() - t0,
+            formulation=self.formulation,
+            solver=self.solver,
+            plane=out.plane,
+            info=out.info,
+        )
 
-    def _decide(self, p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray,
-                limits: np.ndarray, t0: float) -> Decision:
+    def _decide(
+        self,
+        p: np.ndarray,
+        v_now: np.ndarray,
+        v_pref: np.ndarray,
+        nbrs: np.ndarray,
+        prisms: np.ndarray,
+        limits: np.ndarray,
+        t0: float,
+    ) -> Decision:
         """The compiled decision and its ``Decision``."""
         out = np.empty(kernel.OUT_SIZE)
         kernel.decide(p, v_now, v_pref, nbrs, prisms, limits, *self.options.packed, out)
         vx, vy, vz, status, phi, rnd, solved = out.tolist()
-        return Decision(velocity=out[:3], status=DECISION_STATUSES[int(status)], solve_time=time.perf_counter() - t0,
-                        formulation=self.formulation, solver=self.solver, plane=None if math.isnan(phi) else phi,
-                        info={"round": kernel.ROUND_NAMES[int(rnd)], "solved": int(solved)})
+        return Decision(
+            velocity=out[:3],
+            status=DECISION_STATUSES[int(status)],
+            solve_time=time.perf_counter() - t0,
+            formulation=self.formulation,
+            solver=self.solver,
+            plane=None if math.isnan(phi) else phi,
+            info={"round": kernel.ROUND_NAMES[int(rnd)], "solved": int(solved)},
+        )
 
     # ------------------------------------------------------------------------------------------
     @property
@@ -339,9 +453,21 @@ class VelocitySelector:
         if self.compiled:
             warm_up_many()
         t0 = time.perf_counter()
-        inputs = swarm.SwarmInputs.checked(positions, velocities, preferred_velocities, r_pz, obstacles, limits, dt,
-                                           sensing_range, max_neighbors, decide, obstacle_range=obstacle_range,
-                                           spheres=spheres, max_speed=max_speed)
+        inputs = swarm.SwarmInputs.checked(
+            positions,
+            velocities,
+            preferred_velocities,
+            r_pz,
+            obstacles,
+            limits,
+            dt,
+            sensing_range,
+            max_neighbors,
+            decide,
+            obstacle_range=obstacle_range,
+            spheres=spheres,
+            max_speed=max_speed,
+        )
         n_threads = swarm.thread_count(threads)
         if not self.compiled:
             return self._select_many_loop(inputs, t0)
@@ -353,24 +479,49 @@ class VelocitySelector:
         P, V, W, R = inputs.P, inputs.V, inputs.W, inputs.R
         who = inputs.who
         (nb_span, nb_idx), (sp_span, sp_idx), (ob_span, ob_idx) = inputs.links()
-        spheres = [Neighbor(position=s[:3], velocity=(0.0, 0.0, 0.0), r_pz=float(s[4]), cooperative=False)
-                   for s in inputs.spheres]
+        spheres = [
+            Neighbor(position=s[:3], velocity=(0.0, 0.0, 0.0), r_pz=float(s[4]), cooperative=False)
+            for s in inputs.spheres
+        ]
         D = who.shape[0]
-        vel, statuses, rounds = np.empty((D, 3)), np.empty(D, dtype=object), np.empty(D, dtype=object)
+        vel, statuses, rounds = (
+            np.empty((D, 3)),
+            np.empty(D, dtype=object),
+            np.empty(D, dtype=object),
+        )
         planes, counts = np.full(D, np.nan), np.zeros((D, 2), dtype=np.int64)
         solved, times = np.zeros(D, dtype=np.int64), np.empty(D)
         for d, i in enumerate(who):
-            nbrs = [Neighbor(position=P[j], velocity=V[j], r_pz=float(max(R[i], R[j])),
-                             cooperative=bool(inputs.deciding[j])) for j in nb_idx[nb_span[d, 0]:nb_span[d, 1]]]
-            nbrs += [spheres[k] for k in sp_idx[sp_span[d, 0]:sp_span[d, 1]]]
-            obs = [inputs.obstacles[m] for m in ob_idx[ob_span[d, 0]:ob_span[d, 1]]]
-            dec = self.select(AgentState(position=P[i], velocity=V[i]), W[i], nbrs, obs, inputs.vehicle_limits(i),
-                              inputs.dt)
-            vel[d], statuses[d], rounds[d] = dec.velocity, str(dec.status), str(dec.info.get("round", ""))
+            nbrs = [
+                Neighbor(
+                    position=P[j],
+                    velocity=V[j],
+                    r_pz=float(max(R[i], R[j])),
+                    cooperative=bool(inputs.deciding[j]),
+                )
+                for j in nb_idx[nb_span[d, 0] : nb_span[d, 1]]
+            ]
+            nbrs += [spheres[k] for k in sp_idx[sp_span[d, 0] : sp_span[d, 1]]]
+            obs = [inputs.obstacles[m] for m in ob_idx[ob_span[d, 0] : ob_span[d, 1]]]
+            dec = self.select(
+                AgentState(position=P[i], velocity=V[i]),
+                W[i],
+                nbrs,
+                obs,
+                inputs.vehicle_limits(i),
+                inputs.dt,
+            )
+            vel[d], statuses[d], rounds[d] = (
+                dec.velocity,
+                str(dec.status),
+                str(dec.info.get("round", "")),
+            )
             planes[d] = np.nan if dec.plane is None else dec.plane
             counts[d] = (nb_span[d, 1] - nb_span[d, 0], len(obs) + sp_span[d, 1] - sp_span[d, 0])
             solved[d], times[d] = int(dec.info.get("solved", 0)), dec.solve_time
-        result = _swarm_decision(V, who, vel, statuses.astype(str), rounds.astype(str), planes, counts, solved)
+        result = _swarm_decision(
+            V, who, vel, statuses.astype(str), rounds.astype(str), planes, counts, solved
+        )
         result.times[who] = times
         result.solve_time = time.perf_counter() - t0
         return result
@@ -381,21 +532,35 @@ class VelocitySelector:
         # The preferred velocity itself, when safe, is every formulation's optimum.
         if not enc.inside_any and enc.within_limits(enc.v_pref)[0] and not enc.pref_in.any():
             return Outcome(enc.v_pref.copy(), Status.OPTIMAL, None, {"round": "preferred"})
+        assert self._qp is not None  # every formulation but sampled has a QP backend
         solve = _checked(self._qp, "solve")
         if self.formulation == "cone_qp":
             return cone_qp.select(enc, solve, self._qp.has_cones)
         start = self._plane_qp(enc, nbrs, prisms, bounds, solve)
         if self.formulation == "plane_qp":
             return start
+        assert self._nlp is not None  # set for formulation "nlp"
         return nlp.select(enc, start, _checked(self._nlp, "solve_nlp"))
 
-    def _plane_qp(self, enc: Encounter, nbrs: np.ndarray, prisms: np.ndarray, bounds: Bounds, solve) -> Outcome:
+    def _plane_qp(
+        self, enc: Encounter, nbrs: np.ndarray, prisms: np.ndarray, bounds: Bounds, solve
+    ) -> Outcome:
         if not self._compiled:
+            assert self._qp is not None  # plane_qp and nlp have a QP backend
             return plane_qp.select(enc, solve, self._qp.has_cones)
-        d = self._decide(enc.position, enc.v_now, enc.v_pref, nbrs, prisms, bounds_array(enc.limits, enc.dt), 0.0)
+        d = self._decide(
+            enc.position, enc.v_now, enc.v_pref, nbrs, prisms, bounds_array(enc.limits, enc.dt), 0.0
+        )
         status = Status.OPTIMAL if d.status == Status.INSIDE_PROTECTED_ZONE else d.status
         return Outcome(d.velocity, status, d.plane, d.info)
 
 
-__all__ = ["Decision", "SwarmDecision", "VelocitySelector", "DEFAULT_SOLVERS", "FORMULATIONS", "warm_up",
-           "warm_up_many"]
+__all__ = [
+    "Decision",
+    "SwarmDecision",
+    "VelocitySelector",
+    "DEFAULT_SOLVERS",
+    "FORMULATIONS",
+    "warm_up",
+    "warm_up_many",
+]

@@ -3,6 +3,7 @@
 ``Status`` is a ``str`` (a ``StrEnum``), so ``decision.status == "optimal"`` holds and JSON
 writes the plain name (contract §1: ``decision.status`` is a str).
 """
+
 from __future__ import annotations
 
 from enum import StrEnum
@@ -31,5 +32,9 @@ class Status(StrEnum):
 
 
 #: The statuses a decision can have, in the order of their integer codes in compiled code.
-DECISION_STATUSES = (Status.OPTIMAL, Status.INSIDE_PROTECTED_ZONE, Status.INFEASIBLE_MIN_VIOLATION,
-                     Status.SOLVER_FAILED_FALLBACK)
+DECISION_STATUSES = (
+    Status.OPTIMAL,
+    Status.INSIDE_PROTECTED_ZONE,
+    Status.INFEASIBLE_MIN_VIOLATION,
+    Status.SOLVER_FAILED_FALLBACK,
+)

@@ -148,7 +148,11 @@ def check_vector(value: Any, n: int) -> np.ndarray:
             raise ValueError(f"must be {n} numbers, got {short_repr(value)}")
         if raw.shape != (n,):
             raise ValueError(f"must be {n} numbers, got shape {raw.shape}")
-        if raw.dtype == np.float64 and not raw.flags.writeable and all(math.isfinite(x) for x in raw.tolist()):
+        if (
+            raw.dtype == np.float64
+            and not raw.flags.writeable
+            and all(math.isfinite(x) for x in raw.tolist())
+        ):
             return raw
         arr = raw.astype(float)  # a copy: the caller's array stays theirs
     if not all(math.isfinite(x) for x in arr.tolist()):

@@ -5,6 +5,7 @@ constraints, the exact safety check and the time to the first intrusion.
 Compiled code receives the options as a ``Config`` and the limits as ``Bounds`` (NamedTuples of
 numbers and arrays); the Python formulations wrap the same values in an ``Encounter``.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -15,18 +16,28 @@ from functools import cached_property
 from typing import Annotated, Literal, NamedTuple
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, StrictBool
+from pydantic import Field, StrictBool
 
 from .._jit import entry, inline, jit, kernel
-from ..geometry import (CORRECTIONS, AvoidancePlanes, Corrections, VOCones, VOPyramids, build_cones, build_planes,
-                        build_pyramids, default_phis, in_vos)
+from ..geometry import (
+    CORRECTIONS,
+    AvoidancePlanes,
+    Corrections,
+    VOCones,
+    VOPyramids,
+    build_cones,
+    build_planes,
+    build_pyramids,
+    default_phis,
+    in_vos,
+)
 from ..geometry.cone import NO_VIRTUAL_SPHERE, TAU_MIN, min_speed
 from ..geometry.membership import NO_HORIZON, closest_approach, entry_time, in_cone, in_pyramid
 from ..geometry.pyramid import prism_rows
 from ..geometry.sections import generator_angles
 from ..solvers import NLP, QP, Result
 from ..status import Status
-from ..types import AgentState, Box, Cylinder, Limits, Neighbor
+from ..types import AgentState, Box, Cylinder, Limits, Model, Neighbor
 
 #: Tolerance (m/s) on the speed and altitude limits when checking a candidate.
 LIMIT_TOL = 1e-6
@@ -72,14 +83,17 @@ class Bounds(NamedTuple):
     dt: float
 
     @classmethod
-    def of(cls, limits: Limits, dt: float) -> "Bounds":
+    def of(cls, limits: Limits, dt: float) -> Bounds:
         return cls(*bounds_array(limits, dt).tolist())
 
 
 def bounds_array(limits: Limits, dt: float) -> np.ndarray:
     """(6,) v_min, v_max, z_min, z_max, acceleration (NaN: none), dt: ``Bounds`` as one array."""
     acc = np.nan if limits.acceleration is None else limits.acceleration
-    return np.array([limits.speed[0], limits.speed[1], limits.altitude[0], limits.altitude[1], acc, dt], dtype=float)
+    return np.array(
+        [limits.speed[0], limits.speed[1], limits.altitude[0], limits.altitude[1], acc, dt],
+        dtype=float,
+    )
 
 
 class VOs(NamedTuple):
@@ -91,11 +105,10 @@ class VOs(NamedTuple):
     v_pref: np.ndarray
 
 
-class Options(BaseModel):
-    """Formulation options (the selector's keyword arguments), validated: a wrong value raises
-    ``ValueError`` (pydantic's ``ValidationError``) naming the option."""
-
-    model_config = ConfigDict(frozen=True, extra="forbid")
+class Options(Model):
+    """Formulation options (the selector's keyword arguments), validated: a wrong or unknown
+    option raises a one-line ``ValueError`` (``InputError``) naming it, ``Options: margin: ...``
+    (``model_validate``, which scenario files use, keeps pydantic's structured errors)."""
 
     plane_step_deg: _Deg = 10.0  # avoidance planes every this many degrees in [-90, 90]
     heading_step_deg: _Deg = 10.0  # sampled: polar grid, heading resolution in each plane
@@ -103,9 +116,11 @@ class Options(BaseModel):
     polygon_sides: Annotated[int, Field(ge=3, strict=True)] = 24  # inscribed speed polygon
     reciprocal: StrictBool = False  # RVO-style: apex (V_A + V_B)/2 for cooperative neighbours
     horizon: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None  # s; None: infinite
-    corrections: frozenset[Literal[tuple(CORRECTIONS)]] | None = None  # None: all six of 3.1
-    n_samples: Annotated[int, Field(ge=8, strict=True)] = 72  # generator samples of eq. (12), sampled
-    qp_samples: Annotated[int, Field(ge=8, strict=True)] = 36  # the same for plane_qp's tangent points
+    # Literal of the names in CORRECTIONS, which pydantic reads at runtime and mypy cannot
+    corrections: frozenset[Literal[tuple(CORRECTIONS)]] | None = None  # type: ignore[valid-type]
+    # generator samples of eq. (12), sampled; the same for plane_qp's tangent points
+    n_samples: Annotated[int, Field(ge=8, strict=True)] = 72
+    qp_samples: Annotated[int, Field(ge=8, strict=True)] = 36
     pz_buffer: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0  # m; see build_vos
     margin: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1e-3  # m/s; linearised VO
     # half-spaces are pushed out by this much, so that an answer on the boundary (within a
@@ -117,9 +132,23 @@ class Options(BaseModel):
         as 0/1), (phi, cos phi, sin phi) of the planes, (t, cos t, sin t) of the generators."""
         t, phi = generator_angles(self.qp_samples), default_phis(self.plane_step_deg)
         corr = Corrections.of(self.corrections)
-        values = np.array([self.reciprocal, NO_HORIZON if self.horizon is None else self.horizon, self.pz_buffer,
-                           self.margin, self.speed_levels, math.radians(self.heading_step_deg), *corr], dtype=float)
-        return values, np.stack([phi, np.cos(phi), np.sin(phi)]), np.stack([t, np.cos(t), np.sin(t)])
+        values = np.array(
+            [
+                self.reciprocal,
+                NO_HORIZON if self.horizon is None else self.horizon,
+                self.pz_buffer,
+                self.margin,
+                self.speed_levels,
+                math.radians(self.heading_step_deg),
+                *corr,
+            ],
+            dtype=float,
+        )
+        return (
+            values,
+            np.stack([phi, np.cos(phi), np.sin(phi)]),
+            np.stack([t, np.cos(t), np.sin(t)]),
+        )
 
     @cached_property
     def config(self) -> Config:
@@ -129,9 +158,24 @@ class Options(BaseModel):
 @jit
 def config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray) -> Config:
     """``Config`` from ``Options.packed``."""
-    corr = Corrections(values[6] > 0, values[7] > 0, values[8] > 0, values[9] > 0, values[10] > 0, values[11] > 0)
-    return Config(values[0] > 0, values[1], values[2], values[3], corr, plane_tab[0], plane_tab[1], plane_tab[2],
-                  gen_tab[0], gen_tab[1], gen_tab[2], int(values[4]), values[5])
+    corr = Corrections(
+        values[6] > 0, values[7] > 0, values[8] > 0, values[9] > 0, values[10] > 0, values[11] > 0
+    )
+    return Config(
+        values[0] > 0,
+        values[1],
+        values[2],
+        values[3],
+        corr,
+        plane_tab[0],
+        plane_tab[1],
+        plane_tab[2],
+        gen_tab[0],
+        gen_tab[1],
+        gen_tab[2],
+        int(values[4]),
+        values[5],
+    )
 
 
 @jit
@@ -150,8 +194,15 @@ def py_config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray)
 
 
 @jit
-def build_vos(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray,
-              bounds: Bounds, cfg: Config) -> VOs:
+def build_vos(
+    p: np.ndarray,
+    v_now: np.ndarray,
+    v_pref: np.ndarray,
+    nbrs: np.ndarray,
+    prisms: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+) -> VOs:
     """The VOs of one decision. ``nbrs`` (n, 8): position, velocity, r_pz, cooperative (1/0);
     ``prisms`` (m, 4): x, y, L_pz, h_pz of the protected prisms.
 
@@ -181,7 +232,11 @@ def build_vos(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.nda
         for k in range(3):
             rows[n, k] = nbrs[i, k]
             rows[n, 3 + k] = 0.5 * (nbrs[i, 3 + k] + v_now[k]) if cooperative else nbrs[i, 3 + k]
-        rows[n, 6] = r_pz + min(cfg.pz_buffer, BUFFER_GAP_SHARE * (d - r_pz)) if cfg.pz_buffer > 0.0 and d > r_pz else r_pz
+        rows[n, 6] = (
+            r_pz + min(cfg.pz_buffer, BUFFER_GAP_SHARE * (d - r_pz))
+            if cfg.pz_buffer > 0.0 and d > r_pz
+            else r_pz
+        )
         n += 1
     reach = bounds.v_max if cfg.corrections.virtual_sphere else NO_VIRTUAL_SPHERE
     cones = build_cones(p, rows[:n, 0:3], rows[:n, 3:6], rows[:n, 6], reach, TAU_MIN)
@@ -317,19 +372,30 @@ def decision_planes(vos: VOs, v_now: np.ndarray, cfg: Config) -> AvoidancePlanes
     use_now = v_now[0] ** 2 + v_now[1] ** 2 + v_now[2] ** 2 > 1e-18
     direction = np.zeros(3)
     for k in range(3):
-        direction[k] = vos.v_pref[k] if use_pref else (v_now[k] if use_now else (1.0 if k == 0 else 0.0))
+        direction[k] = (
+            vos.v_pref[k] if use_pref else (v_now[k] if use_now else (1.0 if k == 0 else 0.0))
+        )
     return build_planes(direction, cfg.phi)
 
 
 @entry
-def py_build_vos(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray, bounds: Bounds, cfg: Config) -> VOs:
+def py_build_vos(
+    p: np.ndarray,
+    v_now: np.ndarray,
+    v_pref: np.ndarray,
+    nbrs: np.ndarray,
+    prisms: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+) -> VOs:
     """``build_vos`` for Python callers (compiled code calls ``build_vos``: no Python wrapper)."""
     return build_vos(p, v_now, v_pref, nbrs, prisms, bounds, cfg)
 
 
 @entry
 def py_decision_planes(vos: VOs, v_now: np.ndarray, cfg: Config) -> AvoidancePlanes:
-    """``decision_planes`` for Python callers (compiled code calls ``decision_planes``: no Python wrapper)."""
+    """``decision_planes`` for Python callers (compiled code calls ``decision_planes``: no Python
+    wrapper)."""
     return decision_planes(vos, v_now, cfg)
 
 
@@ -398,7 +464,9 @@ class Encounter:
     def within_limits(self, v: np.ndarray) -> np.ndarray:
         """(M,) whether each velocity respects speed, altitude and acceleration limits."""
         G, h = self._linear_bounds
-        return _all_within(np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float))), G, h, self.bounds)
+        return _all_within(
+            np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float))), G, h, self.bounds
+        )
 
     def containing(self, v: np.ndarray) -> np.ndarray:
         """(n + m, M): which VOs (cones first, then pyramids) contain each velocity, by the
@@ -417,7 +485,9 @@ class Encounter:
     def time_to_intrusion(self, v: np.ndarray) -> np.ndarray:
         """(M,) the earliest time any protected zone would be entered (inf: never; 0: inside
         and closing)."""
-        return _times_to_intrusion(self.vos, np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float))))
+        return _times_to_intrusion(
+            self.vos, np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float)))
+        )
 
     def deviation(self, v: np.ndarray) -> np.ndarray:
         return np.linalg.norm(np.atleast_2d(v) - self.v_pref, axis=1)
@@ -434,10 +504,23 @@ def prepare(
 ) -> Encounter:
     """Build the VO cones and pyramids of one decision (``build_vos``)."""
     bounds = Bounds.of(limits, dt)
-    vos = py_build_vos(np.asarray(own.position, dtype=float), np.asarray(own.velocity, dtype=float),
-                    np.asarray(v_pref, dtype=float), neighbor_rows(neighbors), prism_rows(obstacles), bounds,
-                    options.config)
-    return Encounter(position=own.position, v_now=own.velocity, vos=vos, limits=limits, dt=float(dt), options=options)
+    vos = py_build_vos(
+        np.asarray(own.position, dtype=float),
+        np.asarray(own.velocity, dtype=float),
+        np.asarray(v_pref, dtype=float),
+        neighbor_rows(neighbors),
+        prism_rows(obstacles),
+        bounds,
+        options.config,
+    )
+    return Encounter(
+        position=own.position,
+        v_now=own.velocity,
+        vos=vos,
+        limits=limits,
+        dt=float(dt),
+        options=options,
+    )
 
 
 @dataclass

@@ -6,6 +6,7 @@ preferred velocity is least inside of (or most outside of). Both are supporting 
 convex VO, so every feasible velocity is outside every VO. Same speed, altitude and acceleration
 bounds as plane_qp; the speed ball is exact on cone-capable backends and an inscribed polytope
 elsewhere."""
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -17,7 +18,6 @@ from ..solvers import QP
 from ..status import Status
 from .common import Encounter, Outcome, Solve, py_decision_planes
 from .fallback import fallback
-
 
 #: Rounds: the tangent generator nearest v_pref, then turned about each cone's axis by these angles.
 TURNS = (0.0, np.pi, np.pi / 2, -np.pi / 2)
@@ -34,8 +34,14 @@ def cone_tangent_halfspaces(enc: Encounter, v0: np.ndarray, turn: float = 0.0):
     norm = np.linalg.norm(perp, axis=1, keepdims=True)
     # Head-on (v0 on the axis): pass on the right, horizontally, as a convention.
     right = np.cross(a, np.array([0.0, 0.0, 1.0]))
-    right = np.where(np.linalg.norm(right, axis=1, keepdims=True) > 1e-9, right, np.array([0.0, 1.0, 0.0]))
-    e_perp = np.where(norm > 1e-9, perp / np.maximum(norm, 1e-12), right / np.linalg.norm(right, axis=1, keepdims=True))
+    right = np.where(
+        np.linalg.norm(right, axis=1, keepdims=True) > 1e-9, right, np.array([0.0, 1.0, 0.0])
+    )
+    e_perp = np.where(
+        norm > 1e-9,
+        perp / np.maximum(norm, 1e-12),
+        right / np.linalg.norm(right, axis=1, keepdims=True),
+    )
     if turn:  # rotate e_perp about the axis (Rodrigues; e_perp is perpendicular to a)
         e_perp = np.cos(turn) * e_perp + np.sin(turn) * np.cross(a, e_perp)
     N = -c.sin_alpha[:, None] * a + c.cos_alpha[:, None] * e_perp
@@ -48,7 +54,9 @@ def fibonacci_directions(k: int) -> np.ndarray:
     i = np.arange(k) + 0.5
     phi = np.arccos(1 - 2 * i / k)
     theta = np.pi * (1 + 5**0.5) * i
-    return np.stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)], axis=-1)
+    return np.stack(
+        [np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)], axis=-1
+    )
 
 
 @lru_cache(maxsize=4)
@@ -66,7 +74,9 @@ def speed_polytope(radius: float, k: int = 64) -> tuple[np.ndarray, np.ndarray]:
     return D, np.full(k, radius * c)
 
 
-def build_qp(enc: Encounter, has_cones: bool, turn: float = 0.0, included: np.ndarray | None = None) -> QP:
+def build_qp(
+    enc: Encounter, has_cones: bool, turn: float = 0.0, included: np.ndarray | None = None
+) -> QP:
     """The 3D QP with the half-spaces of the ``included`` VOs (cones first, then pyramids;
     all when None)."""
     n = enc.cones.n
@@ -87,8 +97,13 @@ def build_qp(enc: Encounter, has_cones: bool, turn: float = 0.0, included: np.nd
         Gs, hs = speed_polytope(enc.limits.v_max)
         rows_G.append(Gs)
         rows_h.append(hs)
-    return QP(P=2.0 * np.eye(3), q=-2.0 * enc.v_pref, G=np.vstack(rows_G), h=np.concatenate(rows_h),
-              soc_radius=enc.limits.v_max if has_cones else None)
+    return QP(
+        P=2.0 * np.eye(3),
+        q=-2.0 * enc.v_pref,
+        G=np.vstack(rows_G),
+        h=np.concatenate(rows_h),
+        soc_radius=enc.limits.v_max if has_cones else None,
+    )
 
 
 def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
@@ -103,19 +118,30 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
         while True:
             res = solve(build_qp(enc, has_cones, turn, included))
             attempts += 1
-            if not (res.ok and res.x.shape == (3,)):
+            if not (res.ok and res.x is not None and res.x.shape == (3,)):
                 failed += res.status == "failed"
                 break
             tried.append(res.x)
             entered = enc.containing(res.x)[:, 0]
             if not entered.any():
-                if enc.within_limits(res.x)[0] and (best is None or enc.deviation(res.x)[0] < enc.deviation(best[0])[0]):
+                if enc.within_limits(res.x)[0] and (
+                    best is None or enc.deviation(res.x)[0] < enc.deviation(best[0])[0]
+                ):
                     best = (res.x, turn)
                 break
             if np.all(included[entered]):
                 break
             included |= entered
     if best is not None:
-        return Outcome(best[0], Status.OPTIMAL, None, {"round": f"turn {np.degrees(best[1]):.0f}", "solved": attempts})
-    return fallback(enc, py_decision_planes(enc.vos, enc.v_now, enc.options.config), np.array(tried).reshape(-1, 3),
-                    failed == attempts)
+        return Outcome(
+            best[0],
+            Status.OPTIMAL,
+            None,
+            {"round": f"turn {np.degrees(best[1]):.0f}", "solved": attempts},
+        )
+    return fallback(
+        enc,
+        py_decision_planes(enc.vos, enc.v_now, enc.options.config),
+        np.array(tried).reshape(-1, 3),
+        failed == attempts,
+    )

@@ -6,6 +6,7 @@ The compiled kernel calls ``grid_search`` and ``least_bad`` directly; the Python
 (``sampled``, ``plane_qp`` on outside backends, ``cone_qp``, ``nlp``) through ``fallback`` and
 ``first_safe``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -14,7 +15,17 @@ from .._jit import entry, inline, jit, kernel
 from ..geometry import AvoidancePlanes
 from ..geometry.membership import clearance, in_cone, in_pyramid
 from ..status import Status
-from .common import NEVER, Bounds, Config, Encounter, Outcome, VOs, time_to_intrusion, vz_range, within_limits
+from .common import (
+    NEVER,
+    Bounds,
+    Config,
+    Encounter,
+    Outcome,
+    VOs,
+    time_to_intrusion,
+    vz_range,
+    within_limits,
+)
 
 
 @jit
@@ -59,7 +70,11 @@ def _in_any(vos: VOs, v: np.ndarray, horizon: float, hint: np.ndarray) -> bool:
     count = n + vos.pyramids.L_pz.shape[0]
     for q in range(count):
         k = (hint[0] + q) % count
-        inside = in_cone(vos.cones, k, v, horizon, 0.0) if k < n else in_pyramid(vos.pyramids, k - n, v, horizon)
+        inside = (
+            in_cone(vos.cones, k, v, horizon, 0.0)
+            if k < n
+            else in_pyramid(vos.pyramids, k - n, v, horizon)
+        )
         if inside:
             hint[0] = k
             return True
@@ -67,8 +82,15 @@ def _in_any(vos: VOs, v: np.ndarray, horizon: float, hint: np.ndarray) -> bool:
 
 
 @kernel
-def safe_by_margin(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config,
-                   hint: np.ndarray) -> bool:
+def safe_by_margin(
+    vos: VOs,
+    v: np.ndarray,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+    hint: np.ndarray,
+) -> bool:
     """Within the limits, outside every VO by the exact check, and at least ``margin`` (m/s)
     from every VO: the same margin the linearised rows keep, so no answer lies on a VO's
     boundary. ``hint`` (1,) int: see ``_in_any``."""
@@ -78,8 +100,9 @@ def safe_by_margin(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, boun
 
 
 @jit
-def grid_search(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds,
-                cfg: Config) -> tuple[bool, np.ndarray, int]:
+def grid_search(
+    vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config
+) -> tuple[bool, np.ndarray, int]:
     """The grid velocity nearest the preferred one that ``safe_by_margin`` accepts: (found,
     velocity, plane index). Grid points equally far from it are tried plane by plane."""
     grid = polar_grid(bounds, cfg)
@@ -109,8 +132,16 @@ def grid_search(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarra
 
 
 @inline
-def _consider(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, best: np.ndarray,
-              key: np.ndarray, hint: np.ndarray) -> None:
+def _consider(
+    vos: VOs,
+    v: np.ndarray,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    best: np.ndarray,
+    key: np.ndarray,
+    hint: np.ndarray,
+) -> None:
     """Keep v in ``best`` if it is within the limits and its (latest intrusion, least
     deviation) beats ``key`` = (-time, deviation)."""
     if not within_limits(v, G3, h3, bounds):
@@ -118,15 +149,26 @@ def _consider(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: B
     # A velocity whose intrusion comes before the best one's cannot win: its time is only
     # computed far enough to know that (the answer is the same, most grid points cost less).
     t = -min(time_to_intrusion(vos, v, -key[0], hint), NEVER)
-    dev = np.sqrt((v[0] - vos.v_pref[0]) ** 2 + (v[1] - vos.v_pref[1]) ** 2 + (v[2] - vos.v_pref[2]) ** 2)
+    dev = np.sqrt(
+        (v[0] - vos.v_pref[0]) ** 2 + (v[1] - vos.v_pref[1]) ** 2 + (v[2] - vos.v_pref[2]) ** 2
+    )
     if t < key[0] or (t == key[0] and dev < key[1]):
         best[0], best[1], best[2] = v[0], v[1], v[2]
         key[0], key[1] = t, dev
 
 
 @jit
-def least_bad(vos: VOs, planes: AvoidancePlanes, tried: np.ndarray, p: np.ndarray, v_now: np.ndarray,
-              G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> np.ndarray:
+def least_bad(
+    vos: VOs,
+    planes: AvoidancePlanes,
+    tried: np.ndarray,
+    p: np.ndarray,
+    v_now: np.ndarray,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+) -> np.ndarray:
     """Among the tried answers (k, 3), the grid on every plane, zero and v_now, within the
     limits, the velocity whose first protected-zone intrusion comes latest (ties: nearest the
     preferred velocity). With an acceleration limit each is also tried clipped into the
@@ -146,7 +188,10 @@ def least_bad(vos: VOs, planes: AvoidancePlanes, tried: np.ndarray, p: np.ndarra
                     v[c] = tried[q, c]
                 elif q < k + P * M:
                     pl, g = (q - k) // M, (q - k) % M
-                    v[c] = grid[g, 0] * planes.to_plane[pl, 0, c] + grid[g, 1] * planes.to_plane[pl, 1, c]
+                    v[c] = (
+                        grid[g, 0] * planes.to_plane[pl, 0, c]
+                        + grid[g, 1] * planes.to_plane[pl, 1, c]
+                    )
                 else:
                     v[c] = 0.0 if q == k + P * M else v_now[c]
                 if pass_ == 1:
@@ -165,19 +210,34 @@ def py_polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
 
 
 @entry
-def py_grid_search(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> tuple[bool, np.ndarray, int]:
-    """``grid_search`` for Python callers (compiled code calls ``grid_search``: no Python wrapper)."""
+def py_grid_search(
+    vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config
+) -> tuple[bool, np.ndarray, int]:
+    """``grid_search`` for Python callers (compiled code calls ``grid_search``: no Python
+    wrapper)."""
     return grid_search(vos, planes, G3, h3, bounds, cfg)
 
 
 @entry
-def py_least_bad(vos: VOs, planes: AvoidancePlanes, tried: np.ndarray, p: np.ndarray, v_now: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> np.ndarray:
+def py_least_bad(
+    vos: VOs,
+    planes: AvoidancePlanes,
+    tried: np.ndarray,
+    p: np.ndarray,
+    v_now: np.ndarray,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+) -> np.ndarray:
     """``least_bad`` for Python callers (compiled code calls ``least_bad``: no Python wrapper)."""
     return least_bad(vos, planes, tried, p, v_now, G3, h3, bounds, cfg)
 
 
 @entry
-def _first_safe(vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config) -> int:
+def _first_safe(
+    vos: VOs, v: np.ndarray, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config
+) -> int:
     hint = np.zeros(1, dtype=np.int64)
     for k in range(v.shape[0]):
         if safe_by_margin(vos, v[k], G3, h3, bounds, cfg, hint):
@@ -197,7 +257,9 @@ def first_safe(enc: Encounter, candidates: np.ndarray) -> int | None:
     return None if k < 0 else int(k)
 
 
-def fallback(enc: Encounter, planes: AvoidancePlanes, tried: np.ndarray, all_failed: bool) -> Outcome:
+def fallback(
+    enc: Encounter, planes: AvoidancePlanes, tried: np.ndarray, all_failed: bool
+) -> Outcome:
     """No answer passed the exact check: the sampled reference's grid (the exact check and the
     margin decide, not its sections); if none is safe either, the least-bad velocity. When the
     backend failed on every problem the status says so whatever the fallback found."""
@@ -205,9 +267,22 @@ def fallback(enc: Encounter, planes: AvoidancePlanes, tried: np.ndarray, all_fai
     cfg = enc.options.config
     found, v, p = py_grid_search(enc.vos, planes, G3, h3, enc.bounds, cfg)
     if found:
-        return Outcome(v, Status.SOLVER_FAILED_FALLBACK if all_failed else Status.OPTIMAL, float(planes.phi[p]),
-                       {"round": "sampled"})
-    v = py_least_bad(enc.vos, planes, np.ascontiguousarray(tried, dtype=float).reshape(-1, 3), enc.position,
-                  enc.v_now, G3, h3, enc.bounds, cfg)
+        return Outcome(
+            v,
+            Status.SOLVER_FAILED_FALLBACK if all_failed else Status.OPTIMAL,
+            float(planes.phi[p]),
+            {"round": "sampled"},
+        )
+    v = py_least_bad(
+        enc.vos,
+        planes,
+        np.ascontiguousarray(tried, dtype=float).reshape(-1, 3),
+        enc.position,
+        enc.v_now,
+        G3,
+        h3,
+        enc.bounds,
+        cfg,
+    )
     status = Status.SOLVER_FAILED_FALLBACK if all_failed else Status.INFEASIBLE_MIN_VIOLATION
     return Outcome(v, status, None, {"round": "least_bad"})

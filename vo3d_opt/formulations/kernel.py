@@ -27,6 +27,7 @@ optimum once it is the least key: before, a one-line lower bound stands in for i
 cannot win are never solved (the Python search for outside backends, ``plane_qp.py``, uses the
 exact optima as lower bounds of their answers).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -36,8 +37,19 @@ import numpy as np
 from .._jit import entry, inline, jit, kernel
 from ..geometry import AvoidancePlanes
 from ..solvers.exact2d import nearest_in_disc
-from .common import (Bounds, Config, VOs, bounds_of, build_vos, config_of, containing, decision_planes, limit_rows,
-                     vz_range, within_limits)
+from .common import (
+    Bounds,
+    Config,
+    VOs,
+    bounds_of,
+    build_vos,
+    config_of,
+    containing,
+    decision_planes,
+    limit_rows,
+    vz_range,
+    within_limits,
+)
 from .fallback import grid_search, least_bad
 from .rows import ROUNDS, RowWork, plane_rows, row_work, vo_base
 
@@ -91,8 +103,14 @@ class PlaneQPs(NamedTuple):
 
 
 @jit
-def plane_qps(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, initial: np.ndarray,
-              cfg: Config) -> PlaneQPs:
+def plane_qps(
+    vos: VOs,
+    planes: AvoidancePlanes,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    initial: np.ndarray,
+    cfg: Config,
+) -> PlaneQPs:
     """The QPs of one decision, each starting with the rows of the ``initial`` VOs (those
     holding the preferred velocity, and the zones A is inside) on every plane."""
     V, R, P, L = initial.shape[0], len(ROUNDS), cfg.phi.shape[0], G3.shape[0]
@@ -104,19 +122,36 @@ def plane_qps(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray,
                 G_lim[p, j, c] = G3[j, 0] * T[0] + G3[j, 1] * T[1] + G3[j, 2] * T[2]
     e1 = planes.to_plane[0, 0]
     w0 = np.zeros(2)
-    w0[0] = e1[0] * vos.v_pref[0] + e1[1] * vos.v_pref[1] + e1[2] * vos.v_pref[2]  # v_pref lies in every plane
+    # v_pref lies in every plane
+    w0[0] = e1[0] * vos.v_pref[0] + e1[1] * vos.v_pref[1] + e1[2] * vos.v_pref[2]
     included, key = np.empty((R, P, V), dtype=np.bool_), np.empty((R, P))
     for r in range(R):
         for p in range(P):
             key[r, p] = np.inf
             for k in range(V):
                 included[r, p, k] = initial[k]
-    qps = PlaneQPs(np.empty((V, R, P, 2)), np.empty((V, R, P)), np.zeros((V, P), dtype=np.bool_),
-                   np.zeros((V, P), dtype=np.bool_), np.empty((V, 3, cfg.t.shape[0] + 3)), np.zeros(V, dtype=np.bool_),
-                   included, G_lim, h3, key, np.zeros((R, P), dtype=np.bool_), np.empty((R, P, 2)),
-                   w0, np.empty((V + L, 2)), np.empty(V + L), np.empty(V + L, dtype=np.int64),
-                   np.empty(V, dtype=np.bool_), np.empty((V * P, 2), dtype=np.int64), np.empty(3),
-                   row_work(cfg.t.shape[0]))
+    qps = PlaneQPs(
+        np.empty((V, R, P, 2)),
+        np.empty((V, R, P)),
+        np.zeros((V, P), dtype=np.bool_),
+        np.zeros((V, P), dtype=np.bool_),
+        np.empty((V, 3, cfg.t.shape[0] + 3)),
+        np.zeros(V, dtype=np.bool_),
+        included,
+        G_lim,
+        h3,
+        key,
+        np.zeros((R, P), dtype=np.bool_),
+        np.empty((R, P, 2)),
+        w0,
+        np.empty((V + L, 2)),
+        np.empty(V + L),
+        np.empty(V + L, dtype=np.int64),
+        np.empty(V, dtype=np.bool_),
+        np.empty((V * P, 2), dtype=np.int64),
+        np.empty(3),
+        row_work(cfg.t.shape[0]),
+    )
     n_todo = 0  # the rows of the VOs every QP starts with, on every plane
     for k in range(V):
         for p in range(P * initial[k]):
@@ -136,8 +171,9 @@ def add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, n_to
         if not qps.based[k]:
             vo_base(vos, k, planes.frame, cfg, qps.base[k])
             qps.based[k] = True
-        qps.active[k, p] = plane_rows(vos, k, p, qps.base[k], planes, cfg, qps.w0, qps.G[k, :, p], qps.h[k, :, p],
-                                      qps.work)
+        qps.active[k, p] = plane_rows(
+            vos, k, p, qps.base[k], planes, cfg, qps.w0, qps.G[k, :, p], qps.h[k, :, p], qps.work
+        )
         qps.computed[k, p] = True
 
 
@@ -147,10 +183,18 @@ def gather(qps: PlaneQPs, r: int, p: int) -> int:
     m = 0
     for k in range(qps.included.shape[2]):
         if qps.included[r, p, k] and qps.active[k, p]:
-            qps.rows[m, 0], qps.rows[m, 1], qps.rhs[m] = qps.G[k, r, p, 0], qps.G[k, r, p, 1], qps.h[k, r, p]
+            qps.rows[m, 0], qps.rows[m, 1], qps.rhs[m] = (
+                qps.G[k, r, p, 0],
+                qps.G[k, r, p, 1],
+                qps.h[k, r, p],
+            )
             m += 1
     for j in range(qps.h_lim.shape[0]):
-        qps.rows[m, 0], qps.rows[m, 1], qps.rhs[m] = qps.G_lim[p, j, 0], qps.G_lim[p, j, 1], qps.h_lim[j]
+        qps.rows[m, 0], qps.rows[m, 1], qps.rhs[m] = (
+            qps.G_lim[p, j, 0],
+            qps.G_lim[p, j, 1],
+            qps.h_lim[j],
+        )
         m += 1
     return m
 
@@ -167,8 +211,16 @@ def solve_qp(qps: PlaneQPs, r: int, p: int, bounds: Bounds) -> None:
 
 
 @kernel
-def search(vos: VOs, planes: AvoidancePlanes, qps: PlaneQPs, G3: np.ndarray, h3: np.ndarray, bounds: Bounds,
-           cfg: Config, tried: np.ndarray) -> tuple[int, int, int, int]:
+def search(
+    vos: VOs,
+    planes: AvoidancePlanes,
+    qps: PlaneQPs,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+    tried: np.ndarray,
+) -> tuple[int, int, int, int]:
     """Best-first over the QPs (step 4 of the module docstring): (round, plane) of the answer,
     or (-1, -1) when no QP gives a safe one; the QPs solved; how many answers went into
     ``tried`` (each QP answer in solve order, for the least-bad fallback).
@@ -182,7 +234,9 @@ def search(vos: VOs, planes: AvoidancePlanes, qps: PlaneQPs, G3: np.ndarray, h3:
     into, v, todo = qps.into, qps.v, qps.todo
     n_todo = 0
     solved = n_tried = 0
-    for it in range(1 + R * P * (2 + 2 * into.shape[0])):  # per QP: its solve, then each VO it gains
+    for it in range(
+        1 + R * P * (2 + 2 * into.shape[0])
+    ):  # per QP: its solve, then each VO it gains
         add_rows(qps, vos, planes, cfg, n_todo)
         n_todo = 0
         if it == 0:
@@ -266,13 +320,22 @@ def enforce_limits(v: np.ndarray, p: np.ndarray, bounds: Bounds) -> np.ndarray:
 
 
 @entry
-def py_plane_qps(vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, initial: np.ndarray, cfg: Config) -> PlaneQPs:
+def py_plane_qps(
+    vos: VOs,
+    planes: AvoidancePlanes,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    initial: np.ndarray,
+    cfg: Config,
+) -> PlaneQPs:
     """``plane_qps`` for Python callers (compiled code calls ``plane_qps``: no Python wrapper)."""
     return plane_qps(vos, planes, G3, h3, initial, cfg)
 
 
 @entry
-def py_add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, k: int, p: int) -> None:
+def py_add_rows(
+    qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, k: int, p: int
+) -> None:
     """Build VO k's rows on plane p, for Python callers."""
     qps.todo[0, 0], qps.todo[0, 1] = k, p
     add_rows(qps, vos, planes, cfg, 1)
@@ -301,20 +364,39 @@ OUT_SIZE = 7  # velocity (3), status, phi, round, solved
 
 
 @entry
-def decide(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray,
-           limits: np.ndarray, options: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray, out: np.ndarray) -> None:
+def decide(
+    p: np.ndarray,
+    v_now: np.ndarray,
+    v_pref: np.ndarray,
+    nbrs: np.ndarray,
+    prisms: np.ndarray,
+    limits: np.ndarray,
+    options: np.ndarray,
+    plane_tab: np.ndarray,
+    gen_tab: np.ndarray,
+    out: np.ndarray,
+) -> None:
     """One decision from arrays (the module docstring's steps 1–6), into ``out`` (OUT_SIZE,):
     the velocity and the fields of ``KernelOut``. ``nbrs`` (n, 8): position, velocity, r_pz,
     cooperative (1/0); ``prisms`` (m, 4): x, y, L_pz, h_pz; ``limits``: ``bounds_array``; the
     options as ``Options.packed``. Arrays in, an array out: the cheapest call from Python."""
-    res = decide_one(p, v_now, v_pref, nbrs, prisms, bounds_of(limits), config_of(options, plane_tab, gen_tab))
+    res = decide_one(
+        p, v_now, v_pref, nbrs, prisms, bounds_of(limits), config_of(options, plane_tab, gen_tab)
+    )
     out[0], out[1], out[2] = res.velocity[0], res.velocity[1], res.velocity[2]
     out[3], out[4], out[5], out[6] = res.status, res.phi, res.round, res.solved
 
 
 @inline
-def decide_one(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.ndarray, prisms: np.ndarray,
-               bounds: Bounds, cfg: Config) -> KernelOut:
+def decide_one(
+    p: np.ndarray,
+    v_now: np.ndarray,
+    v_pref: np.ndarray,
+    nbrs: np.ndarray,
+    prisms: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+) -> KernelOut:
     """``decide`` on the compiled side (``select_many`` calls it for every vehicle)."""
     vos = build_vos(p, v_now, v_pref, nbrs, prisms, bounds, cfg)  # 1
     G3, h3 = limit_rows(p, v_now, bounds)
@@ -340,4 +422,6 @@ def decide_one(p: np.ndarray, v_now: np.ndarray, v_pref: np.ndarray, nbrs: np.nd
     if found:
         return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], SAMPLED, solved)
     v = least_bad(vos, planes, tried[:n_tried], p, v_now, G3, h3, bounds, cfg)
-    return KernelOut(enforce_limits(v, p, bounds), INFEASIBLE_MIN_VIOLATION, np.nan, LEAST_BAD, solved)  # 6
+    return KernelOut(  # 6
+        enforce_limits(v, p, bounds), INFEASIBLE_MIN_VIOLATION, np.nan, LEAST_BAD, solved
+    )

@@ -5,6 +5,7 @@ angle(v - apex, axis) >= alpha (curved, not linearised), the pyramid face the st
 and the same limits, and minimises ||v - v_pref||². The answer replaces the start only when it
 passes the exact 3D check, respects the limits and is strictly nearer the preferred velocity:
 the NLP never returns anything worse than its start."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -14,7 +15,6 @@ from ..solvers import NLP, QP, ConeConstraint
 from ..status import Status
 from .common import Encounter, Outcome, SolveNLP
 from .fallback import first_safe
-
 
 #: Metres added to every protected radius in the exact cone constraints.
 RADIUS_MARGIN = 1e-3
@@ -26,8 +26,11 @@ def build_nlp(enc: Encounter, start: np.ndarray) -> NLP:
     # its tolerance, is still strictly outside the exact VO.
     sin_a = np.minimum((c.r_pz + RADIUS_MARGIN) / np.maximum(c.d_oi, 1e-12), 1.0)
     cos_a = np.sqrt(1.0 - sin_a**2)
-    cones = [ConeConstraint(apex=c.apex[i], axis=c.axis[i], cos_alpha=float(cos_a[i]))
-             for i in range(c.n) if not c.inside[i]]
+    cones = [
+        ConeConstraint(apex=c.apex[i], axis=c.axis[i], cos_alpha=float(cos_a[i]))
+        for i in range(c.n)
+        if not c.inside[i]
+    ]
     rows_G, rows_h = [], []
     if np.any(c.inside):  # escape half-spaces stay linear
         rows_G.append(c.rel[c.inside])
@@ -39,8 +42,13 @@ def build_nlp(enc: Encounter, start: np.ndarray) -> NLP:
     G3, h3 = enc.linear_bounds()
     rows_G.append(G3)
     rows_h.append(h3)
-    qp = QP(P=2.0 * np.eye(3), q=-2.0 * enc.v_pref, G=np.vstack(rows_G), h=np.concatenate(rows_h),
-            soc_radius=enc.limits.v_max)
+    qp = QP(
+        P=2.0 * np.eye(3),
+        q=-2.0 * enc.v_pref,
+        G=np.vstack(rows_G),
+        h=np.concatenate(rows_h),
+        soc_radius=enc.limits.v_max,
+    )
     return NLP(qp=qp, cones=cones, x0=start)
 
 
@@ -49,7 +57,7 @@ def select(enc: Encounter, start: Outcome, solve_nlp: SolveNLP) -> Outcome:
     if start.status != Status.OPTIMAL:
         return start
     res = solve_nlp(build_nlp(enc, start.velocity))
-    if res.ok and res.x.shape == (3,):
+    if res.ok and res.x is not None and res.x.shape == (3,):
         better = enc.deviation(res.x)[0] < enc.deviation(start.velocity)[0] - 1e-9
         if better and first_safe(enc, res.x[None]) is not None:
             return Outcome(res.x, Status.OPTIMAL, None, {"round": "nlp", "start": start.velocity})

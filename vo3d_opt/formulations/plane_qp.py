@@ -8,6 +8,7 @@ far from the preferred velocity (its speed bound is the disc itself or a polygon
 once the best safe answer beats every remaining bound the search is over, and it returns what
 solving every QP to its fixpoint would. The bound also proves infeasible QPs infeasible without
 a backend call."""
+
 from __future__ import annotations
 
 import functools
@@ -34,7 +35,10 @@ _HESSIAN.setflags(write=False)
 def speed_polygon(radius: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
     """A regular polygon inscribed in the disc |w| <= radius, as G w <= h (read-only arrays)."""
     ang = (np.arange(sides) + 0.5) * 2 * np.pi / sides
-    G, h = np.stack([np.cos(ang), np.sin(ang)], axis=-1), np.full(sides, radius * np.cos(np.pi / sides))
+    G, h = (
+        np.stack([np.cos(ang), np.sin(ang)], axis=-1),
+        np.full(sides, radius * np.cos(np.pi / sides)),
+    )
     G.setflags(write=False)
     h.setflags(write=False)
     return G, h
@@ -50,8 +54,11 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     for r in range(R):
         for p in range(P):
             py_solve_qp(qps, r, p, bounds)  # the exact optimum: a lower bound of the backend's
-    G_speed, h_speed = (np.zeros((0, 2)), np.zeros(0)) if has_cones else speed_polygon(
-        enc.limits.v_max, enc.options.polygon_sides)
+    G_speed, h_speed = (
+        (np.zeros((0, 2)), np.zeros(0))
+        if has_cones
+        else speed_polygon(enc.limits.v_max, enc.options.polygon_sides)
+    )
     q = -2.0 * qps.w0  # ||w - w0||² = wᵀw - 2 w0ᵀw + const
     best, best_dev, tried, failed, attempts = None, math.inf, [], 0, 0
     solved: set[tuple[int, bytes, bytes]] = set()
@@ -66,14 +73,17 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
         if (key := (p, G.tobytes(), h.tobytes())) in solved:
             continue
         solved.add(key)
-        res = solve(QP(P=_HESSIAN, q=q, G=G, h=h, soc_radius=enc.limits.v_max if has_cones else None))
+        res = solve(
+            QP(P=_HESSIAN, q=q, G=G, h=h, soc_radius=enc.limits.v_max if has_cones else None)
+        )
         attempts += 1
-        if not (res.ok and res.x.shape == (2,)):
+        if not (res.ok and res.x is not None and res.x.shape == (2,)):
             failed += res.status == Status.FAILED
             continue
         py_lift(planes, np.ascontiguousarray(res.x, dtype=float), p, v)
         tried.append(v.copy())
-        dev = math.hypot(res.x[0] - qps.w0[0], res.x[1] - qps.w0[1])  # |v - v_pref|: planes are isometric
+        # |v - v_pref|: planes are isometric
+        dev = math.hypot(res.x[0] - qps.w0[0], res.x[1] - qps.w0[1])
         if dev >= best_dev:  # more constraints only move it farther
             continue
         entered = enc.containing(v)[:, 0]
@@ -88,4 +98,6 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     if best is not None:
         v, p, mode = best
         return Outcome(v, Status.OPTIMAL, float(planes.phi[p]), {"round": mode, "solved": attempts})
-    return fallback(enc, planes, np.array(tried).reshape(-1, 3), all_failed=attempts > 0 and failed == attempts)
+    return fallback(
+        enc, planes, np.array(tried).reshape(-1, 3), all_failed=attempts > 0 and failed == attempts
+    )

@@ -16,6 +16,7 @@ of a VO becomes one half-plane G·w <= h on that plane:
 Blank, point and line sections constrain nothing. The exact solver and every other backend use
 these same rows.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -23,10 +24,21 @@ from typing import NamedTuple
 import numpy as np
 
 from .._jit import inline, jit, kernel
-from ..geometry.cone import outward_normal
-from ..geometry.sections import (CIRCLE, ELLIPSE, HYPERBOLA, INSIDE_CODE, PARABOLA, TRIANGLE, Section, cone_base_points,
-                                 cone_section, pyramid_base_points, pyramid_section)
 from ..geometry import AvoidancePlanes
+from ..geometry.cone import outward_normal
+from ..geometry.sections import (
+    CIRCLE,
+    ELLIPSE,
+    HYPERBOLA,
+    INSIDE_CODE,
+    PARABOLA,
+    TRIANGLE,
+    Section,
+    cone_base_points,
+    cone_section,
+    pyramid_base_points,
+    pyramid_section,
+)
 from .common import Config, VOs
 
 #: Linearisation rounds: nearest boundary point, then every section passed on its left, right.
@@ -58,7 +70,9 @@ def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray) -> tuple[int,
 
 
 @inline
-def _triangle_rows(apex: np.ndarray, chord: np.ndarray, w0: np.ndarray, G: np.ndarray, h: np.ndarray) -> bool:
+def _triangle_rows(
+    apex: np.ndarray, chord: np.ndarray, w0: np.ndarray, G: np.ndarray, h: np.ndarray
+) -> bool:
     """Each round's side of a triangle (the generators through its apex) as G[r]·w <= h[r],
     normal away from the other chord point; False when degenerate. With two candidates,
     "near" takes the nearer side, "left" / "right" the upper / lower one (as _pick does)."""
@@ -87,7 +101,8 @@ def _triangle_rows(apex: np.ndarray, chord: np.ndarray, w0: np.ndarray, G: np.nd
         dx, dy = (d0x, d0y) if i == 0 else (d1x, d1y)
         ox, oy = (d1x, d1y) if i == 0 else (d0x, d0y)
         length = np.sqrt(dx * dx + dy * dy)  # a unit normal: the margin is then in m/s
-        nx, ny = dy / length, -dx / length  # G·w <= G·apex: the side away from the other chord point
+        # G·w <= G·apex: the side away from the other chord point
+        nx, ny = dy / length, -dx / length
         if nx * ox + ny * oy < 0:
             nx, ny = -nx, -ny
         G[r, 0], G[r, 1], h[r] = nx, ny, nx * apex[0] + ny * apex[1]
@@ -95,8 +110,18 @@ def _triangle_rows(apex: np.ndarray, chord: np.ndarray, w0: np.ndarray, G: np.nd
 
 
 @inline
-def _curve_rows(vos: VOs, i: int, sec: Section, cfg: Config, w0: np.ndarray, to_plane: np.ndarray,
-                G: np.ndarray, h: np.ndarray, scratch: np.ndarray, valid: np.ndarray) -> bool:
+def _curve_rows(
+    vos: VOs,
+    i: int,
+    sec: Section,
+    cfg: Config,
+    w0: np.ndarray,
+    to_plane: np.ndarray,
+    G: np.ndarray,
+    h: np.ndarray,
+    scratch: np.ndarray,
+    valid: np.ndarray,
+) -> bool:
     """Each round's tangent-plane row of cone i's conic section (see the module docstring);
     False when the section has no boundary point. ``scratch`` (2, K + 2), ``valid`` (K + 2,)."""
     K = cfg.t.shape[0]
@@ -104,7 +129,8 @@ def _curve_rows(vos: VOs, i: int, sec: Section, cfg: Config, w0: np.ndarray, to_
     for k in range(K):  # the curve of eq. (12) (vectorisable: no branches) ...
         qx, qy = sec.curve[0, k], sec.curve[1, k]
         valid[k] = qx == qx  # not NaN
-        dist[k] = (qx - w0[0]) ** 2 + (qy - w0[1]) ** 2 if qx == qx else np.inf  # squared: only compared
+        # squared: only compared
+        dist[k] = (qx - w0[0]) ** 2 + (qy - w0[1]) ** 2 if qx == qx else np.inf
         side_y[k] = qy
     for j in range(2):  # ... and the chord points of eq. (17)
         qx, qy = sec.chord[j, 0], sec.chord[j, 1]
@@ -138,8 +164,18 @@ class RowWork(NamedTuple):
 
 @jit
 def row_work(K: int) -> RowWork:
-    return RowWork(Section(np.empty((2, K)), np.empty((2, 2)), np.empty((2, 2)), np.empty(2), np.empty(2), np.empty(3)),
-                   np.empty((2, K + 2)), np.empty(K + 2, dtype=np.bool_))
+    return RowWork(
+        Section(
+            np.empty((2, K)),
+            np.empty((2, 2)),
+            np.empty((2, 2)),
+            np.empty(2),
+            np.empty(2),
+            np.empty(3),
+        ),
+        np.empty((2, K + 2)),
+        np.empty(K + 2, dtype=np.bool_),
+    )
 
 
 @kernel
@@ -154,8 +190,18 @@ def vo_base(vos: VOs, k: int, frame: np.ndarray, cfg: Config, out: np.ndarray) -
 
 
 @kernel
-def plane_rows(vos: VOs, k: int, p: int, base: np.ndarray, planes: AvoidancePlanes, cfg: Config, w0: np.ndarray,
-               G: np.ndarray, h: np.ndarray, work: RowWork) -> bool:
+def plane_rows(
+    vos: VOs,
+    k: int,
+    p: int,
+    base: np.ndarray,
+    planes: AvoidancePlanes,
+    cfg: Config,
+    w0: np.ndarray,
+    G: np.ndarray,
+    h: np.ndarray,
+    work: RowWork,
+) -> bool:
     """Every round's row of VO k (cones first, then pyramids) on plane p, G[r]·w <= h[r]
     (G (R, 2), h (R,)); False when the section constrains nothing. ``base``: ``vo_base``."""
     n, sec = vos.cones.d_oi.shape[0], work.sec
@@ -172,7 +218,9 @@ def plane_rows(vos: VOs, k: int, p: int, base: np.ndarray, planes: AvoidancePlan
     elif kind == TRIANGLE:
         active = _triangle_rows(sec.apex, sec.chord, w0, G, h)
     elif k < n and (kind == CIRCLE or kind == ELLIPSE or kind == PARABOLA or kind == HYPERBOLA):
-        active = _curve_rows(vos, k, sec, cfg, w0, planes.to_plane[p], G, h, work.scratch, work.valid)
+        active = _curve_rows(
+            vos, k, sec, cfg, w0, planes.to_plane[p], G, h, work.scratch, work.valid
+        )
     for r in range(G.shape[0]):
         h[r] -= cfg.margin  # strictly outside: pushed out by the margin (m/s)
     return active

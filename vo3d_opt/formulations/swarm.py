@@ -97,11 +97,8 @@ def decide_vehicle(
     """``kernel.decide`` for vehicle who[d], into ``out`` (MANY_OUT_SIZE,)."""
     cfg = config_of(options, plane_tab, gen_tab)  # views, no copies: cheap per vehicle
     i, a = sw.who[d], sw.agents
-    p, v_now, v_pref = (
-        np.empty(3),
-        np.empty(3),
-        np.empty(3),
-    )  # C-contiguous, as decide_one is compiled for
+    # C-contiguous, as decide_one is compiled for
+    p, v_now, v_pref = np.empty(3), np.empty(3), np.empty(3)
     for c in range(3):
         p[c], v_now[c], v_pref[c] = a[i, c], a[i, 3 + c], a[i, 6 + c]
     nbrs, prisms = vehicle_rows(sw, d)

@@ -5,6 +5,7 @@ sphere of section 3.1.6, for n neighbours at once.
 (numba reads its fields by name); ``build_cones`` is the compiled constructor and ``vo_cones``
 its Python front end.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -54,14 +55,20 @@ class VOCones(NamedTuple):
         """C_vo of eq. (5), (n, 3)."""
         return self.apex + self.d_vo[:, None] * self.axis
 
-    def subset(self, keep: np.ndarray) -> "VOCones":
+    def subset(self, keep: np.ndarray) -> VOCones:
         """The cones selected by the boolean or index array ``keep``."""
         return VOCones(*(np.ascontiguousarray(field[keep]) for field in self))
 
     def base_points(self, t: np.ndarray) -> np.ndarray:
         """B_vo(t) of eq. (4) for angles t (K,), shape (n, K, 3)."""
-        body = np.stack([np.broadcast_to(self.d_vo[:, None], (self.n, len(t))),
-                         self.r_vo[:, None] * np.cos(t), self.r_vo[:, None] * np.sin(t)], axis=-1)
+        body = np.stack(
+            [
+                np.broadcast_to(self.d_vo[:, None], (self.n, len(t))),
+                self.r_vo[:, None] * np.cos(t),
+                self.r_vo[:, None] * np.sin(t),
+            ],
+            axis=-1,
+        )
         return body @ self.R.transpose(0, 2, 1) + self.apex[:, None, :]
 
 
@@ -88,25 +95,38 @@ def vo_cones(
     p_B = np.ascontiguousarray(p_B, dtype=float).reshape(-1, 3)
     r_pz = np.broadcast_to(np.asarray(r_pz, dtype=float), (len(p_B),)).copy()
     a = np.ascontiguousarray(V_B if apex is None else apex, dtype=float).reshape(-1, 3)
-    mode = NO_VIRTUAL_SPHERE if not virtual_sphere else (PAPER_RULE if reach is None else float(reach))
+    mode = (
+        NO_VIRTUAL_SPHERE if not virtual_sphere else (PAPER_RULE if reach is None else float(reach))
+    )
     return py_build_cones(np.asarray(p_A, dtype=float), p_B, a, r_pz, mode, float(tau_min))
 
 
 @inline
-def outward_normal(R: np.ndarray, sin_alpha: float, cos_t: float, sin_t: float) -> tuple[float, float, float]:
+def outward_normal(
+    R: np.ndarray, sin_alpha: float, cos_t: float, sin_t: float
+) -> tuple[float, float, float]:
     """The cone's unit outward normal along the generator through B_vo(t): R_{theta_el|psi_az}
     (eq. 6) applied to (-sin alpha, cos alpha cos t, cos alpha sin t) in the cone's own frame.
     The plane through the apex with this normal touches the cone along the whole generator: a
     supporting plane of the (convex) VO."""
     ca = np.sqrt(1.0 - sin_alpha * sin_alpha)
     b0, b1, b2 = -sin_alpha, ca * cos_t, ca * sin_t
-    return (R[0, 0] * b0 + R[0, 1] * b1 + R[0, 2] * b2, R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2,
-            R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2)
+    return (
+        R[0, 0] * b0 + R[0, 1] * b1 + R[0, 2] * b2,
+        R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2,
+        R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2,
+    )
 
 
 @jit
-def build_cones(p_A: np.ndarray, p_B: np.ndarray, apex: np.ndarray, r_pz: np.ndarray, reach: float,
-                tau_min: float) -> VOCones:
+def build_cones(
+    p_A: np.ndarray,
+    p_B: np.ndarray,
+    apex: np.ndarray,
+    r_pz: np.ndarray,
+    reach: float,
+    tau_min: float,
+) -> VOCones:
     """Eqs (1), (2), (6) and the virtual-sphere factor for every neighbour. ``reach``: the
     largest own speed, PAPER_RULE (NaN) for the paper's rule, NO_VIRTUAL_SPHERE (< 0) for none."""
     n = p_B.shape[0]
@@ -140,13 +160,33 @@ def build_cones(p_A: np.ndarray, p_B: np.ndarray, apex: np.ndarray, r_pz: np.nda
         d_oi[i], theta_el[i], psi_az[i] = d, th, ps
         d_vo[i], r_vo[i], tau[i] = dv * t, rv * t, t
         sin_alpha[i] = min(max(r_pz[i] / safe_d, 0.0), 1.0)
-    return VOCones(rel, apex.copy(), r_pz.copy(), d_oi, theta_el, psi_az, R, d_vo, r_vo, tau, sin_alpha,
-                   d_oi <= r_pz)
+    return VOCones(
+        rel,
+        apex.copy(),
+        r_pz.copy(),
+        d_oi,
+        theta_el,
+        psi_az,
+        R,
+        d_vo,
+        r_vo,
+        tau,
+        sin_alpha,
+        d_oi <= r_pz,
+    )
 
 
 @entry
-def py_build_cones(p_A: np.ndarray, p_B: np.ndarray, apex: np.ndarray, r_pz: np.ndarray, reach: float, tau_min: float) -> VOCones:
-    """``build_cones`` for Python callers (compiled code calls ``build_cones``: no Python wrapper)."""
+def py_build_cones(
+    p_A: np.ndarray,
+    p_B: np.ndarray,
+    apex: np.ndarray,
+    r_pz: np.ndarray,
+    reach: float,
+    tau_min: float,
+) -> VOCones:
+    """``build_cones`` for Python callers (compiled code calls ``build_cones``: no Python
+    wrapper)."""
     return build_cones(p_A, p_B, apex, r_pz, reach, tau_min)
 
 

@@ -7,6 +7,7 @@ points up; P_phi is spanned by e_x and e2(phi) = cos(phi) e_y0 + sin(phi) e_z0, 
 horizontal plane and phi runs from -90° to 90°. Eq. (8) is the rotation that takes a vector's
 (e_x, e_y0, e_z0) coordinates to (x^phi, y^phi, z^phi), z^phi = 0 being the plane itself.
 """
+
 from __future__ import annotations
 
 import functools
@@ -95,14 +96,17 @@ def build_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
 
 @entry
 def py_build_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
-    """``build_planes`` for Python callers (compiled code calls ``build_planes``: no Python wrapper)."""
+    """``build_planes`` for Python callers (compiled code calls ``build_planes``: no Python
+    wrapper)."""
     return build_planes(direction, phi)
 
 
 def avoidance_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
     """The planes P_phi for angles ``phi`` (rad) about the axis ``direction``."""
-    return py_build_planes(np.asarray(direction, dtype=float).reshape(3),
-                        np.ascontiguousarray(np.atleast_1d(np.asarray(phi, dtype=float))))
+    return py_build_planes(
+        np.asarray(direction, dtype=float).reshape(3),
+        np.ascontiguousarray(np.atleast_1d(np.asarray(phi, dtype=float))),
+    )
 
 
 @functools.lru_cache(maxsize=16)

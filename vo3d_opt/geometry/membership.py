@@ -13,6 +13,7 @@ the prism's centre for C_pz. Velocities that leave are the escape set.
 ``clearance`` measures how far outside every VO a velocity is, in m/s (its distance to the VOs
 in velocity space), for candidates that must be strictly outside by a margin.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -26,7 +27,9 @@ NO_HORIZON = -1.0
 
 
 @inline
-def closest_approach(cones: VOCones, i: int, v: np.ndarray, horizon: float) -> tuple[float, float, float]:
+def closest_approach(
+    cones: VOCones, i: int, v: np.ndarray, horizon: float
+) -> tuple[float, float, float]:
     """(closest distance to B's centre over t in [0, horizon] (horizon < 0: none), its time t*,
     the closing rate p·u) for velocity v against cone i, u = v - apex the relative velocity."""
     a, rel = cones.apex[i], cones.rel[i]
@@ -82,7 +85,9 @@ def in_pyramid(pyramids: VOPyramids, j: int, v: np.ndarray, horizon: float) -> b
 
 
 @entry
-def _in_vos_kernel(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, horizon: float, tol: float) -> np.ndarray:
+def _in_vos_kernel(
+    cones: VOCones, pyramids: VOPyramids, v: np.ndarray, horizon: float, tol: float
+) -> np.ndarray:
     n = cones.d_oi.shape[0]
     out = np.empty((n + pyramids.L_pz.shape[0], v.shape[0]), dtype=np.bool_)
     for k in range(v.shape[0]):
@@ -102,22 +107,34 @@ def _horizon(horizon: float | None) -> float:
 
 
 def _no_pyramids() -> VOPyramids:
-    return VOPyramids(np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0),
-                      np.zeros(0, dtype=bool))
+    return VOPyramids(
+        np.zeros((0, 3, 3)),
+        np.zeros((0, 3)),
+        np.zeros((0, 3)),
+        np.zeros(0),
+        np.zeros(0),
+        np.zeros(0, dtype=bool),
+    )
 
 
-def in_vos(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None) -> np.ndarray:
+def in_vos(
+    cones: VOCones, pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None
+) -> np.ndarray:
     """Boolean (n + m, M): velocity k lies in VO cone i (rows 0..n-1) or pyramid j (rows n..)."""
     return _in_vos_kernel(cones, pyramids, _velocities(v), _horizon(horizon), 0.0)
 
 
-def in_vo_cones(cones: VOCones, v: np.ndarray, *, horizon: float | None = None, tol: float = 0.0) -> np.ndarray:
+def in_vo_cones(
+    cones: VOCones, v: np.ndarray, *, horizon: float | None = None, tol: float = 0.0
+) -> np.ndarray:
     """Boolean (n, M): velocity m lies in VO cone n. ``tol`` (m) widens (>0) or shrinks (<0)
     the protected sphere, e.g. to accept boundary velocities."""
     return _in_vos_kernel(cones, _no_pyramids(), _velocities(v), _horizon(horizon), float(tol))
 
 
-def in_vo_pyramids(pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None) -> np.ndarray:
+def in_vo_pyramids(
+    pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None
+) -> np.ndarray:
     """Boolean (m, M): velocity k lies in VO pyramid m (its ray enters C_pz)."""
     from .cone import vo_cones  # an empty cone set
 
@@ -161,8 +178,9 @@ _SEARCH_STEPS = 100
 
 
 @kernel
-def _scaled_zone_distance(shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v: np.ndarray,
-                          s: float) -> float:
+def _scaled_zone_distance(
+    shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v: np.ndarray, s: float
+) -> float:
     """Distance from v to the zone scaled by s about the apex: for cone k (shape 0) the ball
     apex + s·B(rel, r_pz), for pyramid k (shape 1) the prism s·C_pz."""
     if shape == 0:
@@ -191,8 +209,9 @@ def _reach(shape: int, cones: VOCones, pyramids: VOPyramids, k: int) -> float:
 
 
 @kernel
-def _zone_clearance(shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v: np.ndarray,
-                    horizon: float) -> float:
+def _zone_clearance(
+    shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v: np.ndarray, horizon: float
+) -> float:
     """The distance (m/s) from v to the VO of zone k in velocity space (0 inside it).
 
     The VO is the union over times t in (0, horizon] of the velocities that put A in the zone at
@@ -202,7 +221,9 @@ def _zone_clearance(shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v:
     finds it. Inside the zone the VO is the closing half-space: the escape margin."""
     if shape == 0 and cones.inside[k]:
         rel, a = cones.rel[k], cones.apex[k]
-        return -((v[0] - a[0]) * rel[0] + (v[1] - a[1]) * rel[1] + (v[2] - a[2]) * rel[2]) / max(cones.d_oi[k], 1e-12)
+        return -((v[0] - a[0]) * rel[0] + (v[1] - a[1]) * rel[1] + (v[2] - a[2]) * rel[2]) / max(
+            cones.d_oi[k], 1e-12
+        )
     if shape == 1 and pyramids.inside[k]:
         h = pyramids.frame[k, 0]
         return -(h[0] * v[0] + h[1] * v[1] + h[2] * v[2])
@@ -210,11 +231,17 @@ def _zone_clearance(shape: int, cones: VOCones, pyramids: VOPyramids, k: int, v:
     # Beyond s_max the zone is farther than at lo: s·dist(0, Z) - |v - apex| > f(lo).
     f_lo = _scaled_zone_distance(shape, cones, pyramids, k, v, lo)
     reach = _reach(shape, cones, pyramids, k)
-    speed = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2) + (0.0 if shape == 1 else np.sqrt(cones.apex[k, 0] ** 2 + cones.apex[k, 1] ** 2 + cones.apex[k, 2] ** 2))
+    speed = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2) + (
+        0.0
+        if shape == 1
+        else np.sqrt(cones.apex[k, 0] ** 2 + cones.apex[k, 1] ** 2 + cones.apex[k, 2] ** 2)
+    )
     hi = max(lo, (f_lo + speed) / max(reach, 1e-12))
     for _ in range(_SEARCH_STEPS):
         m1, m2 = lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0
-        if _scaled_zone_distance(shape, cones, pyramids, k, v, m1) <= _scaled_zone_distance(shape, cones, pyramids, k, v, m2):
+        if _scaled_zone_distance(shape, cones, pyramids, k, v, m1) <= _scaled_zone_distance(
+            shape, cones, pyramids, k, v, m2
+        ):
             hi = m2
         else:
             lo = m1
@@ -240,6 +267,8 @@ def _clearances(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, horizon: fl
     return out
 
 
-def clearances(cones: VOCones, pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None) -> np.ndarray:
+def clearances(
+    cones: VOCones, pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None
+) -> np.ndarray:
     """(M,) the least distance (m/s) from each velocity to any VO (inf without VOs)."""
     return _clearances(cones, pyramids, _velocities(v), _horizon(horizon))

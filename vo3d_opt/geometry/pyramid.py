@@ -8,6 +8,7 @@ paper's base B_vo is the near face (eqs 20–22, lines L1–L4). We span the pyr
 corners of C_pz: for a vehicle below h_pz this is exactly the near-face pyramid; above h_pz the top
 face is seen too and belongs to the obstacle's shadow (see formulations/geometry.md).
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -37,7 +38,7 @@ class VOPyramids(NamedTuple):
     def n(self) -> int:
         return int(self.L_pz.shape[0])
 
-    def subset(self, keep: np.ndarray) -> "VOPyramids":
+    def subset(self, keep: np.ndarray) -> VOPyramids:
         """The pyramids selected by the boolean or index array ``keep``."""
         return VOPyramids(*(np.ascontiguousarray(field[keep]) for field in self))
 
@@ -99,7 +100,8 @@ def build_pyramids(p_A: np.ndarray, prisms: np.ndarray) -> VOPyramids:
 
 @entry
 def py_build_pyramids(p_A: np.ndarray, prisms: np.ndarray) -> VOPyramids:
-    """``build_pyramids`` for Python callers (compiled code calls ``build_pyramids``: no Python wrapper)."""
+    """``build_pyramids`` for Python callers (compiled code calls ``build_pyramids``: no Python
+    wrapper)."""
     return build_pyramids(p_A, prisms)
 
 

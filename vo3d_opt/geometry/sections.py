@@ -19,6 +19,7 @@ what the original formulas of Jenie et al. get wrong; the default applies all of
 - ``vo_lines``       3.1.5  VOlineL / VOlineR bound the removed part of the protected zone;
 - ``virtual_sphere`` 3.1.6  applied when the cone is built (``vo_cones``), listed for completeness.
 """
+
 from __future__ import annotations
 
 import functools
@@ -58,7 +59,7 @@ class Corrections(NamedTuple):
     virtual_sphere: bool = True
 
     @classmethod
-    def of(cls, names: Iterable[str] | None) -> "Corrections":
+    def of(cls, names: Iterable[str] | None) -> Corrections:
         """From a set of correction names (None: all); ValueError for an unknown name."""
         if names is None:
             return cls()
@@ -72,7 +73,8 @@ class Section(NamedTuple):
     """One VO shape on one avoidance plane, in plane coordinates (NaN where there is none).
     The arrays are written by ``cone_section`` / ``pyramid_section``."""
 
-    curve: np.ndarray  # (2, K) eq. (12): x and y where generator k meets the plane (a vertex), else NaN
+    # (2, K) eq. (12): x and y where generator k meets the plane (a vertex), else NaN
+    curve: np.ndarray
     chord: np.ndarray  # (2, 2) eq. (17): B_vo meets the plane here
     chord_cs: np.ndarray  # (2, 2) cos and sin of the generator angles of the chord points
     apex: np.ndarray  # (2,) A^phi of eq. (7)
@@ -93,14 +95,21 @@ def _crossings(apex, R, d_vo, r_vo, nx, ny, nz, cs):
     """Eqs (14)–(16) for one cone and the plane with normal n: B_vo(t) meets it where
     A + B cos t + C sin t = 0; the two roots' (cos t, sin t) into ``cs`` (2, 2), solved without
     trigonometry. False when the base circle misses the plane."""
-    A_ = d_vo * (R[0, 0] * nx + R[1, 0] * ny + R[2, 0] * nz) + apex[0] * nx + apex[1] * ny + apex[2] * nz
+    A_ = (
+        d_vo * (R[0, 0] * nx + R[1, 0] * ny + R[2, 0] * nz)
+        + apex[0] * nx
+        + apex[1] * ny
+        + apex[2] * nz
+    )
     B_ = r_vo * (R[0, 1] * nx + R[1, 1] * ny + R[2, 1] * nz)
     C_ = r_vo * (R[0, 2] * nx + R[1, 2] * ny + R[2, 2] * nz)
     rho2 = B_ * B_ + C_ * C_
     if not (rho2 > 0 and A_ * A_ <= rho2):
         return False
     root = np.sqrt(rho2 - A_ * A_)
-    for j in range(2):  # (cos, sin) = (-A (B, C) -/+ root (C, -B)) / rho²: t = atan2(C, B) -/+ acos(-A/rho)
+    for j in range(
+        2
+    ):  # (cos, sin) = (-A (B, C) -/+ root (C, -B)) / rho²: t = atan2(C, B) -/+ acos(-A/rho)
         sign = -1.0 if j == 0 else 1.0
         cs[j, 0] = (-A_ * B_ - sign * root * C_) / rho2
         cs[j, 1] = (-A_ * C_ + sign * root * B_) / rho2
@@ -120,13 +129,17 @@ def _to_plane(v, frame, c, s):
 def _framed(x, y, z, frame):
     """A world vector in the planes' (e_x, e_y0, e_z0) frame: every plane then only turns it
     about e_x (eq. 8)."""
-    return (frame[0, 0] * x + frame[0, 1] * y + frame[0, 2] * z, frame[1, 0] * x + frame[1, 1] * y + frame[1, 2] * z,
-            frame[2, 0] * x + frame[2, 1] * y + frame[2, 2] * z)
+    return (
+        frame[0, 0] * x + frame[0, 1] * y + frame[0, 2] * z,
+        frame[1, 0] * x + frame[1, 1] * y + frame[1, 2] * z,
+        frame[2, 0] * x + frame[2, 1] * y + frame[2, 2] * z,
+    )
 
 
 @kernel
-def cone_base_points(cones: VOCones, i: int, frame: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
-                     out: np.ndarray) -> None:
+def cone_base_points(
+    cones: VOCones, i: int, frame: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray, out: np.ndarray
+) -> None:
     """B_vo(t_k) of eq. (4) for every generator angle, in the planes' (e_x, e_y0, e_z0) frame,
     into ``out`` (3, K + 3), one row per axis (so that the per-plane loop vectorises); its last
     three columns are the apex, C_vo (eq. 5) and rel."""
@@ -134,24 +147,37 @@ def cone_base_points(cones: VOCones, i: int, frame: np.ndarray, cos_t: np.ndarra
     K = cos_t.shape[0]
     for k in range(K):
         ct, st = rv * cos_t[k], rv * sin_t[k]
-        out[0, k], out[1, k], out[2, k] = _framed(a[0] + R[0, 0] * dv + R[0, 1] * ct + R[0, 2] * st,
-                                                  a[1] + R[1, 0] * dv + R[1, 1] * ct + R[1, 2] * st,
-                                                  a[2] + R[2, 0] * dv + R[2, 1] * ct + R[2, 2] * st, frame)
+        out[0, k], out[1, k], out[2, k] = _framed(
+            a[0] + R[0, 0] * dv + R[0, 1] * ct + R[0, 2] * st,
+            a[1] + R[1, 0] * dv + R[1, 1] * ct + R[1, 2] * st,
+            a[2] + R[2, 0] * dv + R[2, 1] * ct + R[2, 2] * st,
+            frame,
+        )
     out[0, K], out[1, K], out[2, K] = _framed(a[0], a[1], a[2], frame)
-    out[0, K + 1], out[1, K + 1], out[2, K + 1] = _framed(a[0] + dv * R[0, 0], a[1] + dv * R[1, 0], a[2] + dv * R[2, 0],
-                                                          frame)
+    out[0, K + 1], out[1, K + 1], out[2, K + 1] = _framed(
+        a[0] + dv * R[0, 0], a[1] + dv * R[1, 0], a[2] + dv * R[2, 0], frame
+    )
     rel = cones.rel[i]
     out[0, K + 2], out[1, K + 2], out[2, K + 2] = _framed(rel[0], rel[1], rel[2], frame)
 
 
 @inline
-def cone_section(cones: VOCones, i: int, base: np.ndarray, frame: np.ndarray, c: float, s: float,
-                 corr: Corrections, sec: Section) -> int:
+def cone_section(
+    cones: VOCones,
+    i: int,
+    base: np.ndarray,
+    frame: np.ndarray,
+    c: float,
+    s: float,
+    corr: Corrections,
+    sec: Section,
+) -> int:
     """Section 3.1 for cone i on the plane with cos/sin phi = c, s: writes ``sec`` and returns
     the kind. ``base`` is ``cone_base_points`` of the cone."""
     K = base.shape[1] - 3
     apex, R, d_vo, r_vo = cones.apex[i], cones.R[i], cones.d_vo[i], cones.r_vo[i]
-    xA, yA, zA = base[0, K], c * base[1, K] + s * base[2, K], c * base[2, K] - s * base[1, K]  # eq. (7)
+    # eq. (7)
+    xA, yA, zA = base[0, K], c * base[1, K] + s * base[2, K], c * base[2, K] - s * base[1, K]
     sec.apex[0], sec.apex[1] = xA, yA
     scale = 1.0 + np.sqrt(apex[0] ** 2 + apex[1] ** 2 + apex[2] ** 2) + d_vo
     on_apex = abs(zA) <= 1e-9 * scale  # section 3.1.3: A_vo lies on the plane
@@ -171,15 +197,21 @@ def cone_section(cones: VOCones, i: int, base: np.ndarray, frame: np.ndarray, c:
         sec.curve[0, k] = (base[0, k] - xA) * t_g + xA if keep else nan
         sec.curve[1, k] = (yB - yA) * t_g + yA if keep else nan
     # Eqs (14)-(17): where the base circle meets the plane.
-    nx, ny, nz = (c * frame[2, 0] - s * frame[1, 0], c * frame[2, 1] - s * frame[1, 1],
-                  c * frame[2, 2] - s * frame[1, 2])
+    nx, ny, nz = (
+        c * frame[2, 0] - s * frame[1, 0],
+        c * frame[2, 1] - s * frame[1, 1],
+        c * frame[2, 2] - s * frame[1, 2],
+    )
     chord_ok = _crossings(apex, R, d_vo, r_vo, nx, ny, nz, sec.chord_cs)
     for j in range(2):
         if chord_ok:
             ct, st = r_vo * sec.chord_cs[j, 0], r_vo * sec.chord_cs[j, 1]
-            bx, by, bz = _framed(apex[0] + R[0, 0] * d_vo + R[0, 1] * ct + R[0, 2] * st,
-                                 apex[1] + R[1, 0] * d_vo + R[1, 1] * ct + R[1, 2] * st,
-                                 apex[2] + R[2, 0] * d_vo + R[2, 1] * ct + R[2, 2] * st, frame)
+            bx, by, bz = _framed(
+                apex[0] + R[0, 0] * d_vo + R[0, 1] * ct + R[0, 2] * st,
+                apex[1] + R[1, 0] * d_vo + R[1, 1] * ct + R[1, 2] * st,
+                apex[2] + R[2, 0] * d_vo + R[2, 1] * ct + R[2, 2] * st,
+                frame,
+            )
             sec.chord[j, 0], sec.chord[j, 1] = bx, c * by + s * bz
         else:
             sec.chord[j, 0], sec.chord[j, 1] = np.nan, np.nan
@@ -200,7 +232,11 @@ def cone_section(cones: VOCones, i: int, base: np.ndarray, frame: np.ndarray, c:
         if kind == TRIANGLE and not corr.triangle:  # the original reduces eq. (12) to A^phi
             kind = POINT
     # Eq. (13): the symmetry-line point H, where the axis line meets the plane.
-    xC, yC, zC = base[0, K + 1], c * base[1, K + 1] + s * base[2, K + 1], c * base[2, K + 1] - s * base[1, K + 1]
+    xC, yC, zC = (
+        base[0, K + 1],
+        c * base[1, K + 1] + s * base[2, K + 1],
+        c * base[2, K + 1] - s * base[1, K + 1],
+    )
     dzc = zC - zA
     if abs(dzc) <= 1e-12 * scale:  # the axis is parallel to the plane
         sec.symmetry[0], sec.symmetry[1] = xC, yC
@@ -210,7 +246,11 @@ def cone_section(cones: VOCones, i: int, base: np.ndarray, frame: np.ndarray, c:
             t_h = abs(t_h)
         sec.symmetry[0], sec.symmetry[1] = (xC - xA) * t_h + xA, (yC - yA) * t_h + yA
     # Inside the protected zone: the VO is the closing half-space (v - apex)·rel > 0.
-    xr, yr, zr = base[0, K + 2], c * base[1, K + 2] + s * base[2, K + 2], c * base[2, K + 2] - s * base[1, K + 2]
+    xr, yr, zr = (
+        base[0, K + 2],
+        c * base[1, K + 2] + s * base[2, K + 2],
+        c * base[2, K + 2] - s * base[1, K + 2],
+    )
     sec.halfplane[0], sec.halfplane[1], sec.halfplane[2] = xr, yr, xA * xr + yA * yr + zA * zr
     return INSIDE_CODE if cones.inside[i] else kind
 
@@ -235,22 +275,36 @@ def pyramid_base_points(pyramids: VOPyramids, j: int, frame: np.ndarray, out: np
         a0 = hi[0] if k & 1 else lo[0]
         a1 = hi[1] if (k >> 1) & 1 else lo[1]
         a2 = hi[2] if (k >> 2) & 1 else lo[2]
-        out[0, k], out[1, k], out[2, k] = _framed(a0 * F[0, 0] + a1 * F[1, 0] + a2 * F[2, 0],
-                                                  a0 * F[0, 1] + a1 * F[1, 1] + a2 * F[2, 1],
-                                                  a0 * F[0, 2] + a1 * F[1, 2] + a2 * F[2, 2], frame)
+        out[0, k], out[1, k], out[2, k] = _framed(
+            a0 * F[0, 0] + a1 * F[1, 0] + a2 * F[2, 0],
+            a0 * F[0, 1] + a1 * F[1, 1] + a2 * F[2, 1],
+            a0 * F[0, 2] + a1 * F[1, 2] + a2 * F[2, 2],
+            frame,
+        )
     out[0, 8], out[1, 8], out[2, 8] = _framed(F[0, 0], F[0, 1], F[0, 2], frame)
 
 
 @inline
-def pyramid_section(pyramids: VOPyramids, j: int, base: np.ndarray, c: float, s: float, sec: Section) -> int:
+def pyramid_section(
+    pyramids: VOPyramids, j: int, base: np.ndarray, c: float, s: float, sec: Section
+) -> int:
     """Section 4.2 for pyramid j on the plane with cos/sin phi = c, s: writes ``sec`` (chord:
     the two extreme points where C_pz's edges cross the plane; apex: the origin) and returns the
     kind. ``base`` is ``pyramid_base_points`` of the pyramid. Every plane contains the
     pyramid's apex (eq. 19): a triangle, a line or a point."""
     for a in range(2):
         sec.apex[a], sec.symmetry[a] = 0.0, np.nan
-        sec.chord[a, 0], sec.chord[a, 1], sec.chord_cs[a, 0], sec.chord_cs[a, 1] = np.nan, np.nan, np.nan, np.nan
-    sec.halfplane[0], sec.halfplane[1], sec.halfplane[2] = base[0, 8], c * base[1, 8] + s * base[2, 8], 0.0
+        sec.chord[a, 0], sec.chord[a, 1], sec.chord_cs[a, 0], sec.chord_cs[a, 1] = (
+            np.nan,
+            np.nan,
+            np.nan,
+            np.nan,
+        )
+    sec.halfplane[0], sec.halfplane[1], sec.halfplane[2] = (
+        base[0, 8],
+        c * base[1, 8] + s * base[2, 8],
+        0.0,
+    )
     # C_pz ∩ plane is the convex hull of the points where its edges cross the plane; the
     # extreme ones seen from the apex (the velocity origin) bound the section.
     n_cross, at_apex, sx, sy, mx, my = 0, False, 0.0, 0.0, 0.0, 0.0
@@ -321,10 +375,16 @@ class Sections(NamedTuple):
         them the section uses: the curve points found, the chord points where the base circle
         closes the section (3.1.4) or bounds a triangle (3.1.3), the apex of a triangle."""
         pts = np.concatenate([self.curve, self.chord, self.apex[:, :, None, :]], axis=2)
-        use_chord = np.isfinite(self.chord[..., 0]) & ((self.kind != POINT) & (
-            self.corrections.base_chord | (self.kind == LINE) | (self.kind == TRIANGLE)))[..., None]
-        mask = np.concatenate([np.isfinite(self.curve[..., 0]), use_chord, (self.kind == TRIANGLE)[..., None]],
-                              axis=2)
+        use_chord = (
+            np.isfinite(self.chord[..., 0])
+            & (
+                (self.kind != POINT)
+                & (self.corrections.base_chord | (self.kind == LINE) | (self.kind == TRIANGLE))
+            )[..., None]
+        )
+        mask = np.concatenate(
+            [np.isfinite(self.curve[..., 0]), use_chord, (self.kind == TRIANGLE)[..., None]], axis=2
+        )
         return pts, mask
 
     @property
@@ -346,22 +406,39 @@ class Sections(NamedTuple):
         at_apex = np.linalg.norm(xy[None] - self.apex[:, :, None, :], axis=-1) <= 1e-9
         inside &= ~(at_apex & (self.kind == TRIANGLE)[..., None])
         hp = self.halfplane
-        in_half = hp[..., None, 0] * xy[None, ..., 0] + hp[..., None, 1] * xy[None, ..., 1] > hp[..., None, 2]
+        in_half = (
+            hp[..., None, 0] * xy[None, ..., 0] + hp[..., None, 1] * xy[None, ..., 1]
+            > hp[..., None, 2]
+        )
         return np.where((self.kind == INSIDE_CODE)[..., None], in_half, inside)
 
 
 def _empty_sections(n: int, P: int, K: int, t: np.ndarray, corr: Corrections) -> Sections:
-    return Sections(kind=np.zeros((n, P), dtype=np.int64), curve=np.full((n, P, K, 2), np.nan),
-                    chord=np.full((n, P, 2, 2), np.nan), chord_cs=np.full((n, P, 2, 2), np.nan),
-                    apex=np.zeros((n, P, 2)), symmetry=np.full((n, P, 2), np.nan),
-                    halfplane=np.zeros((n, P, 3)), t=t, corrections=corr)
+    return Sections(
+        kind=np.zeros((n, P), dtype=np.int64),
+        curve=np.full((n, P, K, 2), np.nan),
+        chord=np.full((n, P, 2, 2), np.nan),
+        chord_cs=np.full((n, P, 2, 2), np.nan),
+        apex=np.zeros((n, P, 2)),
+        symmetry=np.full((n, P, 2), np.nan),
+        halfplane=np.zeros((n, P, 3)),
+        t=t,
+        corrections=corr,
+    )
 
 
 @jit
 def _section_at(out: Sections, i: int, p: int, curve: np.ndarray) -> Section:
     """Section i on plane p of ``out`` (views), with ``curve`` (2, K) as its curve: the caller
     copies it into out.curve[i, p] (K, 2) afterwards."""
-    return Section(curve, out.chord[i, p], out.chord_cs[i, p], out.apex[i, p], out.symmetry[i, p], out.halfplane[i, p])
+    return Section(
+        curve,
+        out.chord[i, p],
+        out.chord_cs[i, p],
+        out.apex[i, p],
+        out.symmetry[i, p],
+        out.halfplane[i, p],
+    )
 
 
 @entry
@@ -372,8 +449,16 @@ def _fill_cone_sections(cones: VOCones, planes: AvoidancePlanes, out: Sections) 
     for i in range(cones.d_oi.shape[0]):
         cone_base_points(cones, i, planes.frame, cos_t, sin_t, base)
         for p in range(planes.phi.shape[0]):
-            out.kind[i, p] = cone_section(cones, i, base, planes.frame, np.cos(planes.phi[p]),
-                                          np.sin(planes.phi[p]), out.corrections, _section_at(out, i, p, curve))
+            out.kind[i, p] = cone_section(
+                cones,
+                i,
+                base,
+                planes.frame,
+                np.cos(planes.phi[p]),
+                np.sin(planes.phi[p]),
+                out.corrections,
+                _section_at(out, i, p, curve),
+            )
             for k in range(K):
                 out.curve[i, p, k, 0], out.curve[i, p, k, 1] = curve[0, k], curve[1, k]
 
@@ -384,12 +469,23 @@ def _fill_pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes, out: S
     for j in range(pyramids.L_pz.shape[0]):
         pyramid_base_points(pyramids, j, planes.frame, base)
         for p in range(planes.phi.shape[0]):
-            out.kind[j, p] = pyramid_section(pyramids, j, base, np.cos(planes.phi[p]), np.sin(planes.phi[p]),
-                                             _section_at(out, j, p, curve))
+            out.kind[j, p] = pyramid_section(
+                pyramids,
+                j,
+                base,
+                np.cos(planes.phi[p]),
+                np.sin(planes.phi[p]),
+                _section_at(out, j, p, curve),
+            )
 
 
-def cone_sections(cones: VOCones, planes: AvoidancePlanes, *, corrections: Iterable[str] | None = None,
-                  n_samples: int = N_SAMPLES) -> Sections:
+def cone_sections(
+    cones: VOCones,
+    planes: AvoidancePlanes,
+    *,
+    corrections: Iterable[str] | None = None,
+    n_samples: int = N_SAMPLES,
+) -> Sections:
     """The conic sections of ``cones`` on ``planes`` (section 3.1), classified into KINDS."""
     corr = Corrections.of(corrections)
     t = generator_angles(n_samples)
@@ -437,7 +533,9 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-def _beyond_chord(poly: np.ndarray, apex: np.ndarray, chord: np.ndarray, xy: np.ndarray) -> np.ndarray:
+def _beyond_chord(
+    poly: np.ndarray, apex: np.ndarray, chord: np.ndarray, xy: np.ndarray
+) -> np.ndarray:
     """Section 3.1.5: points beyond the chord P1P2 and between VOlineL and VOlineR, the rays from
     P1 and P2 pointing away from the projected apex. (n, P, M)."""
     p1, p2 = chord[:, :, 0, :], chord[:, :, 1, :]
@@ -471,5 +569,3 @@ def _polygon_area(poly: np.ndarray) -> np.ndarray:
     nxt = np.roll(poly, -1, axis=2)
     nxt = np.where(np.isnan(nxt), poly[:, :, :1, :], nxt)
     return 0.5 * np.abs(np.sum(_cross(p, np.nan_to_num(nxt)), axis=2))
-
-

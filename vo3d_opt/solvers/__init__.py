@@ -8,14 +8,46 @@ Every backend answers "optimal" only when its x is finite and satisfies every co
 :data:`FEAS_TOL`, "infeasible" when infeasibility is proved, "failed" otherwise, and never
 raises on a well-formed problem.
 """
-from vo3d_opt.solvers.base import (FEAS_TOL, Backend, Standard, failure, make_result, require_no_cone, screen,
-                                   standardise)
+
+from vo3d_opt.solvers.base import (
+    FEAS_TOL,
+    Backend,
+    Standard,
+    failure,
+    make_result,
+    require_no_cone,
+    screen,
+    standardise,
+)
 from vo3d_opt.solvers.problem import NLP, QP, ConeConstraint, Result
-from vo3d_opt.solvers.registry import (CASADI_PLUGINS, available_qp_solvers, available_solvers, certified_infeasible,
-                                       get_backend, register_backend, unregister_backend)
+from vo3d_opt.solvers.registry import (
+    CASADI_PLUGINS,
+    available_qp_solvers,
+    available_solvers,
+    certified_infeasible,
+    get_backend,
+    register_backend,
+    unregister_backend,
+)
 
 __all__ = [
-    "Backend", "CASADI_PLUGINS", "ConeConstraint", "FEAS_TOL", "NLP", "QP", "Result", "Standard",
-    "available_qp_solvers", "available_solvers", "certified_infeasible", "failure", "get_backend",
-    "make_result", "register_backend", "require_no_cone", "screen", "standardise", "unregister_backend",
+    "Backend",
+    "CASADI_PLUGINS",
+    "ConeConstraint",
+    "FEAS_TOL",
+    "NLP",
+    "QP",
+    "Result",
+    "Standard",
+    "available_qp_solvers",
+    "available_solvers",
+    "certified_infeasible",
+    "failure",
+    "get_backend",
+    "make_result",
+    "register_backend",
+    "require_no_cone",
+    "screen",
+    "standardise",
+    "unregister_backend",
 ]

@@ -1,5 +1,6 @@
 """Dense-pattern CSC matrices shared by the sparse backends (OSQP, Clarabel): every entry is
 stored, so problems of one shape share a sparsity pattern and a solver can be updated in place."""
+
 from __future__ import annotations
 
 import functools
@@ -11,8 +12,10 @@ import scipy.sparse as sp
 def dense_csc(M: np.ndarray) -> sp.csc_matrix:
     """M as CSC storing every entry, zeros included, column by column."""
     rows, cols = M.shape
-    return sp.csc_matrix((M.ravel(order="F"), np.tile(np.arange(rows), cols),
-                          np.arange(0, rows * cols + 1, rows)), shape=M.shape)
+    return sp.csc_matrix(
+        (M.ravel(order="F"), np.tile(np.arange(rows), cols), np.arange(0, rows * cols + 1, rows)),
+        shape=M.shape,
+    )
 
 
 @functools.cache

@@ -5,6 +5,7 @@ A backend's ``solve(qp)`` standardises and screens the problem once (:class:`Sta
 into a :class:`Result` that is "optimal" only when x is finite and satisfies every constraint
 within :data:`FEAS_TOL`. A backend never raises on a well-formed problem.
 """
+
 from __future__ import annotations
 
 import functools
@@ -46,7 +47,7 @@ class Backend:
         except Exception as exc:  # noqa: BLE001 - a backend never raises on a well-formed QP
             return failure(self.name, exc)
 
-    def _solve(self, qp: QP, std: "Standard") -> Result:
+    def _solve(self, qp: QP, std: Standard) -> Result:
         """The backend's own solve of a screened QP (QP backends override it)."""
         raise NotImplementedError(f"backend {self.name!r} does not solve QPs")
 
@@ -73,7 +74,7 @@ class Standard:
     P: np.ndarray
     q: np.ndarray
     C: np.ndarray
-    l: np.ndarray
+    l: np.ndarray  # noqa: E741 - l <= C x <= u, OSQP's standard form
     u: np.ndarray
     r: float | None
     m_ineq: int
@@ -90,19 +91,25 @@ class Standard:
         ineq = np.ones(self.C.shape[0], dtype=bool)
         ineq[eq] = False
         upper, lower = ineq & np.isfinite(self.u), ineq & np.isfinite(self.l)
-        return (self.C[eq], self.u[eq], np.vstack([self.C[upper], -self.C[lower]]),
-                np.concatenate([self.u[upper], -self.l[lower]]))
+        return (
+            self.C[eq],
+            self.u[eq],
+            np.vstack([self.C[upper], -self.C[lower]]),
+            np.concatenate([self.u[upper], -self.l[lower]]),
+        )
 
     def violation(self, x: np.ndarray) -> float:
         """Largest constraint violation of x, relative to 1 + the largest finite bound.
 
         Violations up to :data:`FEAS_TOL` are returned unscaled (an upper bound), to save time.
         """
-        return _violation(self.C, self.l, self.u, np.asarray(x, dtype=float), -1.0 if self.r is None else self.r)
+        return _violation(
+            self.C, self.l, self.u, np.asarray(x, dtype=float), -1.0 if self.r is None else self.r
+        )
 
 
 @entry
-def _violation(C, l, u, x, r):
+def _violation(C, l, u, x, r):  # noqa: E741 - l as in Standard
     worst = -np.inf
     for i in range(C.shape[0]):
         cx = 0.0
@@ -166,17 +173,26 @@ def standardise(qp: QP) -> Standard:
     if (qp.G is None) != (qp.h is None) or (qp.A is None) != (qp.b is None):
         raise ValueError("QP.G and QP.h (and QP.A and QP.b) must be given together")
     r = None if qp.soc_radius is None else float(qp.soc_radius)
-    if qp.A is None and qp.lb is None and qp.ub is None and isinstance(qp.G, np.ndarray) \
-            and qp.G.dtype == float and qp.G.ndim == 2 and qp.G.shape[1] == n \
-            and isinstance(qp.h, np.ndarray) and qp.h.dtype == float and qp.h.shape == (qp.G.shape[0],):
+    if (
+        qp.A is None
+        and qp.lb is None
+        and qp.ub is None
+        and isinstance(qp.G, np.ndarray)
+        and qp.G.dtype == float
+        and qp.G.ndim == 2
+        and qp.G.shape[1] == n
+        and isinstance(qp.h, np.ndarray)
+        and qp.h.dtype == float
+        and qp.h.shape == (qp.G.shape[0],)
+    ):
         # The formulations' usual problem (inequalities only, float arrays): no conversions.
-        C, l, u = _rows(qp.G, qp.h, _eye(n)[:0], _EMPTY, *_free_bounds(n))
+        C, l, u = _rows(qp.G, qp.h, _eye(n)[:0], _EMPTY, *_free_bounds(n))  # noqa: E741
         return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u, r=r, m_ineq=qp.G.shape[0], m_eq=0)
     G, A = _matrix(qp.G, n, "G"), _matrix(qp.A, n, "A")
     h = _vector(qp.h, G.shape[0], np.inf, "h")
     b = _vector(qp.b, A.shape[0], 0.0, "b")
     lb, ub = _vector(qp.lb, n, -np.inf, "lb"), _vector(qp.ub, n, np.inf, "ub")
-    C, l, u = _rows(G, h, A, b, lb, ub)
+    C, l, u = _rows(G, h, A, b, lb, ub)  # noqa: E741 - l as in Standard
     return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u, r=r, m_ineq=G.shape[0], m_eq=A.shape[0])
 
 
@@ -197,12 +213,12 @@ def _free_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:
 def _rows(G, h, A, b, lb, ub):
     """C = [G; A; I], l = [-inf; b; lb], u = [h; b; ub]."""
     mg, ma, n = G.shape[0], A.shape[0], lb.shape[0]
-    C, l, u = np.zeros((mg + ma + n, n)), np.empty(mg + ma + n), np.empty(mg + ma + n)
+    C, l, u = np.zeros((mg + ma + n, n)), np.empty(mg + ma + n), np.empty(mg + ma + n)  # noqa: E741
     C[:mg], l[:mg], u[:mg] = G, -np.inf, h
-    C[mg:mg + ma], l[mg:mg + ma], u[mg:mg + ma] = A, b, b
+    C[mg : mg + ma], l[mg : mg + ma], u[mg : mg + ma] = A, b, b
     for j in range(n):
         C[mg + ma + j, j] = 1.0
-    l[mg + ma:], u[mg + ma:] = lb, ub
+    l[mg + ma :], u[mg + ma :] = lb, ub
     return C, l, u
 
 
@@ -212,19 +228,32 @@ def screen(std: Standard, solver: str) -> Result | None:
     Infinities are allowed only where they drop a constraint (h = +inf, lb = -inf, ub = +inf).
     Lower bounds above upper bounds, h = -inf and a negative radius are infeasible.
     """
-    code = _screen(std.P, std.q, std.C, std.l, std.u, np.nan if std.r is None else std.r,
-                   std.r is not None, std.m_ineq, std.m_eq)
+    code = _screen(
+        std.P,
+        std.q,
+        std.C,
+        std.l,
+        std.u,
+        np.nan if std.r is None else std.r,
+        std.r is not None,
+        std.m_ineq,
+        std.m_eq,
+    )
     if code == 0:
         return None
     if code == 1:
-        return Result(None, Status.FAILED, solver, "problem data contains NaN or a misplaced infinity")
+        return Result(
+            None, Status.FAILED, solver, "problem data contains NaN or a misplaced infinity"
+        )
     if code == 2:
         return Result(None, Status.FAILED, solver, "b contains an infinity")
-    return Result(None, Status.INFEASIBLE, solver, "a bound or a negative radius excludes every point")
+    return Result(
+        None, Status.INFEASIBLE, solver, "a bound or a negative radius excludes every point"
+    )
 
 
 @entry
-def _screen(P, q, C, l, u, r, has_r, m_ineq, m_eq):
+def _screen(P, q, C, l, u, r, has_r, m_ineq, m_eq):  # noqa: E741 - l as in Standard
     """0: fine; 1: NaN or a misplaced infinity; 2: an infinite b; 3: infeasible bounds."""
     finite = np.isfinite(P.sum() + q.sum() + C.sum()) and (not has_r or np.isfinite(r))
     if not finite:
@@ -247,7 +276,8 @@ def require_no_cone(backend: Backend, qp: QP) -> None:
     if qp.soc_radius is not None:
         raise ValueError(
             f"solver {backend.name!r} has no second-order cones: replace QP.soc_radius with a "
-            "polygon first (see Backend.has_cones)")
+            "polygon first (see Backend.has_cones)"
+        )
 
 
 def failure(solver: str, exc: BaseException) -> Result:
@@ -255,8 +285,9 @@ def failure(solver: str, exc: BaseException) -> Result:
     return Result(None, Status.FAILED, solver, f"{type(exc).__name__}: {exc}")
 
 
-def make_result(solver: str, std: Standard, x: np.ndarray | None, status: Status,
-                info: str = "") -> Result:
+def make_result(
+    solver: str, std: Standard, x: np.ndarray | None, status: Status, info: str = ""
+) -> Result:
     """A Result whose x is None or a finite array of shape (n,).
 
     An "optimal" claim is downgraded to "failed" when x is missing, not finite, or violates a
@@ -273,5 +304,3 @@ def make_result(solver: str, std: Standard, x: np.ndarray | None, status: Status
         elif not (v := std.violation(arr)) <= FEAS_TOL:
             status, info = Status.FAILED, f"solution violates the constraints by {v:.2e} (relative)"
     return Result(arr, status, solver, info)
-
-

@@ -10,14 +10,17 @@ cones) with all data as parameters.
 within 1e-6. When the start x0 is feasible and the solver ends somewhere worse (or fails), the
 start is returned instead, with status "failed": never a worse answer than the caller had.
 """
+
 from __future__ import annotations
+
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from vo3d_opt.solvers.base import Backend, Standard, failure, make_result, screen, standardise
-from vo3d_opt.status import Status
 from vo3d_opt.solvers.problem import NLP, QP, ConeConstraint, Result
+from vo3d_opt.status import Status
 
 #: Smoothing of the cone constraint's norm (inside the square root).
 CONE_EPS = 1e-9
@@ -26,13 +29,28 @@ NLP_TOL = 1e-6
 
 #: Quiet options per plugin.
 PLUGIN_OPTIONS: dict[str, dict[str, object]] = {
-    "ipopt": {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
-              "ipopt.tol": 1e-9, "ipopt.max_iter": 500},
-    "sqpmethod": {"print_header": False, "print_iteration": False, "print_time": False,
-                  "print_status": False, "qpsol": "qrqp", "max_iter": 200,
-                  "convexify_strategy": "regularize",
-                  "qpsol_options": {"print_iter": False, "print_header": False,
-                                    "print_info": False, "error_on_fail": False}},
+    "ipopt": {
+        "ipopt.print_level": 0,
+        "print_time": False,
+        "ipopt.sb": "yes",
+        "ipopt.tol": 1e-9,
+        "ipopt.max_iter": 500,
+    },
+    "sqpmethod": {
+        "print_header": False,
+        "print_iteration": False,
+        "print_time": False,
+        "print_status": False,
+        "qpsol": "qrqp",
+        "max_iter": 200,
+        "convexify_strategy": "regularize",
+        "qpsol_options": {
+            "print_iter": False,
+            "print_header": False,
+            "print_info": False,
+            "error_on_fail": False,
+        },
+    },
 }
 
 _INFEASIBLE = {"Infeasible_Problem_Detected"}
@@ -72,9 +90,13 @@ def _build(plugin: str, n: int, m: int, k: int) -> ca.Function:
     for i in range(k):
         d = x - apex[:, i]
         g.append(ca.dot(axis[:, i], d) - cos[i] * ca.sqrt(ca.dot(d, d) + CONE_EPS))
-    problem = {"x": x, "f": 0.5 * ca.dot(x, P @ x) + ca.dot(q, x), "g": ca.vertcat(*g),
-               "p": ca.vertcat(ca.vec(P), q, ca.vec(C), ca.vec(apex), ca.vec(axis), cos)}
-    options = {**PLUGIN_OPTIONS[plugin], "error_on_fail": False}
+    problem = {
+        "x": x,
+        "f": 0.5 * ca.dot(x, P @ x) + ca.dot(q, x),
+        "g": ca.vertcat(*g),
+        "p": ca.vertcat(ca.vec(P), q, ca.vec(C), ca.vec(apex), ca.vec(axis), cos),
+    }
+    options: dict[str, Any] = {**PLUGIN_OPTIONS[plugin], "error_on_fail": False}
     return ca.nlpsol(f"vo3d_{plugin}_{n}_{m}_{k}", plugin, problem, options)
 
 
@@ -84,8 +106,9 @@ def _params(std: Standard, cones: list[ConeConstraint]) -> np.ndarray:
     apex = np.array([c.apex for c in cones], dtype=float).reshape(k, std.n)
     axis = np.array([c.axis for c in cones], dtype=float).reshape(k, std.n)
     cos = np.array([c.cos_alpha for c in cones], dtype=float)
-    return np.concatenate([std.P.ravel(order="F"), std.q, std.C[:m].ravel(order="F"),
-                           apex.ravel(), axis.ravel(), cos])
+    return np.concatenate(
+        [std.P.ravel(order="F"), std.q, std.C[:m].ravel(order="F"), apex.ravel(), axis.ravel(), cos]
+    )
 
 
 class CasadiBackend(Backend):
@@ -113,7 +136,7 @@ class CasadiBackend(Backend):
                 raise ValueError(f"ConeConstraint apex and axis must have shape ({n},)")
         x0 = np.zeros(n) if nlp.x0 is None else np.asarray(nlp.x0, dtype=float).reshape(-1)
         if x0.shape != (n,):
-            raise ValueError(f"NLP.x0 must have shape ({n},), got {np.shape(nlp.x0)}")
+            raise ValueError(f"NLP.x0 must have shape ({n},), got {np.asarray(nlp.x0).shape}")
         if (early := screen(std, self.name)) is not None:
             return early
         cone_data = np.array([[*c.apex, *c.axis, c.cos_alpha] for c in cones], dtype=float)
@@ -132,10 +155,12 @@ class CasadiBackend(Backend):
             self._solvers[key] = _build(self._plugin, *key)
         solver = self._solvers[key]
         sol = solver(
-            x0=x0, p=_params(std, cones), lbx=std.l[m:], ubx=std.u[m:],
+            x0=x0,
+            p=_params(std, cones),
+            lbx=std.l[m:],
+            ubx=std.u[m:],
             lbg=np.concatenate([std.l[:m], np.full(1 + k, -np.inf)]),
-            ubg=np.concatenate([std.u[:m], [np.inf if std.r is None else std.r ** 2],
-                                np.zeros(k)]),
+            ubg=np.concatenate([std.u[:m], [np.inf if std.r is None else std.r**2], np.zeros(k)]),
         )
         stats = solver.stats()
         native = str(stats.get("return_status", ""))
@@ -145,15 +170,26 @@ class CasadiBackend(Backend):
         if not stats.get("success", False):
             return make_result(self.name, std, x, Status.FAILED, native)
         if not np.isfinite(x).all() or nlp_violation(std, cones, x) > NLP_TOL:
-            return make_result(self.name, std, x, Status.FAILED, f"{native}, but x violates constraints")
+            return make_result(
+                self.name, std, x, Status.FAILED, f"{native}, but x violates constraints"
+            )
         return Result(x, Status.OPTIMAL, self.name, native)
 
-    def _no_worse_than_start(self, std: Standard, cones: list[ConeConstraint], x0: np.ndarray,
-                             result: Result) -> Result:
+    def _no_worse_than_start(
+        self, std: Standard, cones: list[ConeConstraint], x0: np.ndarray, result: Result
+    ) -> Result:
         """``result``, or the feasible start x0 when the solver ended worse than it."""
         if nlp_violation(std, cones, x0) > NLP_TOL:
             return result
-        if result.ok and objective(std, result.x) <= objective(std, x0) + 1e-9:
+        if (
+            result.ok
+            and result.x is not None
+            and objective(std, result.x) <= objective(std, x0) + 1e-9
+        ):
             return result
-        return Result(x0.copy(), Status.FAILED, self.name,
-                      f"{result.status} ({result.info}); returning the feasible start x0")
+        return Result(
+            x0.copy(),
+            Status.FAILED,
+            self.name,
+            f"{result.status} ({result.info}); returning the feasible start x0",
+        )

@@ -6,15 +6,16 @@ of the :class:`~vo3d_opt.solvers.Standard` rows as ``D x <= d`` (nonnegative con
 is stored, so problems with the same row counts share a pattern and a persistent solver is
 updated in place rather than rebuilt (Clarabel is interior-point: there is no warm start).
 """
+
 from __future__ import annotations
 
 import clarabel
 import numpy as np
 
-from vo3d_opt.solvers.base import Backend, Standard, make_result
-from vo3d_opt.status import Status
-from vo3d_opt.solvers.problem import QP, Result
 from vo3d_opt.solvers._sparse import dense_csc, triu_csc, triu_index
+from vo3d_opt.solvers.base import Backend, Standard, make_result
+from vo3d_opt.solvers.problem import QP, Result
+from vo3d_opt.status import Status
 
 #: At most this many persistent solvers (one per structure); the cache is emptied when full.
 MAX_CACHED = 64
@@ -70,11 +71,18 @@ class ClarabelBackend(Backend):
         if solver is None:
             if len(self._solvers) >= MAX_CACHED:
                 self._solvers.clear()
-            cones = [cone(size) for cone, size in zip(
-                (clarabel.ZeroConeT, clarabel.NonnegativeConeT, clarabel.SecondOrderConeT),
-                sizes) if size]
-            solver = clarabel.DefaultSolver(triu_csc(std.P), std.q, dense_csc(M), b, cones,
-                                            settings())
+            cones = [
+                cone(size)
+                for cone, size in zip(
+                    (clarabel.ZeroConeT, clarabel.NonnegativeConeT, clarabel.SecondOrderConeT),
+                    sizes,
+                    strict=True,
+                )
+                if size
+            ]
+            solver = clarabel.DefaultSolver(
+                triu_csc(std.P), std.q, dense_csc(M), b, cones, settings()
+            )
             self._solvers[key] = solver
         # Always through update(), also right after set-up: a fresh solver and an updated
         # one differ in the last digits, and a run must not depend on what came before.

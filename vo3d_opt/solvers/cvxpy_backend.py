@@ -4,6 +4,7 @@ The objective is written ``½‖F x‖² + qᵀx`` with ``FᵀF = P`` (F from an
 constraints ``D x <= d`` (every finite bound of the :class:`~vo3d_opt.solvers.Standard` rows),
 ``E x = e`` and, when ``soc_radius`` is set, ``‖x‖ <= r`` (an exact cone; needs a conic solver).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -99,9 +100,9 @@ class CvxpyBackend(Backend):
             self._templates[key] = _template(*key)
         t = self._templates[key]
         t.F.value, t.q.value = square_root(std.P), std.q
-        if t.D is not None:
+        if t.D is not None and t.d is not None:  # both or neither, by the shape
             t.D.value, t.d.value = D, d
-        if t.E is not None:
+        if t.E is not None and t.e is not None:
             t.E.value, t.e.value = E, e
         if t.r is not None:
             t.r.value = std.r
@@ -110,7 +111,10 @@ class CvxpyBackend(Backend):
         t.problem.solve(solver=self._solver, warm_start=False, **self._options)
         native = t.problem.status
         status = _STATUS.get(native, Status.FAILED)
-        if (status == Status.INFEASIBLE and self._solver in UNRELIABLE_INFEASIBILITY
-                and not certified_infeasible(qp)):
+        if (
+            status == Status.INFEASIBLE
+            and self._solver in UNRELIABLE_INFEASIBILITY
+            and not certified_infeasible(qp)
+        ):
             status, native = Status.FAILED, f"{native}, but Clarabel finds the QP feasible"
         return make_result(self.name, std, t.x.value, status, native)

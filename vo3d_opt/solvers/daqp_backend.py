@@ -6,6 +6,7 @@ immutable. DAQP has no cones: the formulation substitutes a polygon for ``soc_ra
 plane QPs (2 variables, about 30 rows) a solve takes a few microseconds, which makes it the
 fastest backend here (benchmarks/bench_select.py); an active-set answer is exact to rounding.
 """
+
 from __future__ import annotations
 
 import daqp
@@ -13,16 +14,24 @@ import numpy as np
 
 from vo3d_opt._jit import entry
 from vo3d_opt.solvers.base import Backend, Standard, make_result
-from vo3d_opt.status import Status
 from vo3d_opt.solvers.problem import QP, Result
+from vo3d_opt.status import Status
 
 #: DAQP's infinity: bounds beyond it are clipped to it.
 INF = 1e30
 #: ``sense`` flag of an equality (active and immutable).
 EQUALITY = 5
 _STATUS = {1: Status.OPTIMAL, 2: Status.OPTIMAL, -1: Status.INFEASIBLE}
-_CODES = {1: "optimal", 2: "soft optimal", -1: "infeasible", -2: "cycling", -3: "unbounded",
-          -4: "iteration limit", -5: "nonconvex", -6: "overdetermined initial active set"}
+_CODES = {
+    1: "optimal",
+    2: "soft optimal",
+    -1: "infeasible",
+    -2: "cycling",
+    -3: "unbounded",
+    -4: "iteration limit",
+    -5: "nonconvex",
+    -6: "overdetermined initial active set",
+}
 
 
 class DaqpBackend(Backend):
@@ -35,12 +44,16 @@ class DaqpBackend(Backend):
 
     def _solve(self, qp: QP, std: Standard) -> Result:
         upper, lower, sense = _daqp_rows(std.l, std.u, std.n, std.m_ineq, std.m_eq)
-        x, _, flag, _ = daqp.solve(std.P, std.q, std.C[:std.m_ineq + std.m_eq], upper, lower, sense)
-        return make_result(self.name, std, x, _STATUS.get(flag, Status.FAILED), _CODES.get(flag, str(flag)))
+        x, _, flag, _ = daqp.solve(
+            std.P, std.q, std.C[: std.m_ineq + std.m_eq], upper, lower, sense
+        )
+        return make_result(
+            self.name, std, x, _STATUS.get(flag, Status.FAILED), _CODES.get(flag, str(flag))
+        )
 
 
 @entry
-def _daqp_rows(l, u, n, m_ineq, m_eq):
+def _daqp_rows(l, u, n, m_ineq, m_eq):  # noqa: E741 - l as in Standard
     """DAQP's bounds: the simple bounds (the identity rows, last in Standard) first, clipped to
     its infinity, and the ``sense`` flags marking equalities immutable."""
     m = m_ineq + m_eq
@@ -49,5 +62,5 @@ def _daqp_rows(l, u, n, m_ineq, m_eq):
         k = m + i if i < n else i - n
         upper[i], lower[i] = min(u[k], INF), max(l[k], -INF)
     sense = np.zeros(n + m, dtype=np.int32)
-    sense[n + m_ineq:] = EQUALITY
+    sense[n + m_ineq :] = EQUALITY
     return upper, lower, sense

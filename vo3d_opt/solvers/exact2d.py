@@ -20,6 +20,7 @@ On the circle the distance to w0 grows with the angle from w0's direction, and t
 are cut out by the lines, so the answer is w0's direction on the circle if allowed, else the
 allowed arc end (a line's crossing with the circle) nearest to it: O(m²), exact.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -117,8 +118,16 @@ def _on_circle(G, h, m, w0, radius, tol, out) -> bool:
 
 
 @kernel
-def nearest_in_disc(G: np.ndarray, h: np.ndarray, m: int, w0: np.ndarray, r_max: float,
-                    r_min: float, order: np.ndarray, out: np.ndarray) -> bool:
+def nearest_in_disc(
+    G: np.ndarray,
+    h: np.ndarray,
+    m: int,
+    w0: np.ndarray,
+    r_max: float,
+    r_min: float,
+    order: np.ndarray,
+    out: np.ndarray,
+) -> bool:
     """The exact optimum of the module's problem over the first ``m`` rows of G w <= h, written
     into ``out`` (2,); False when the problem is infeasible. ``order`` is scratch (>= m ints).
     ``r_max`` may be inf (no disc); ``r_min`` <= 0 means no inner bound."""
@@ -144,8 +153,16 @@ def nearest_in_disc(G: np.ndarray, h: np.ndarray, m: int, w0: np.ndarray, r_max:
 
 
 @entry
-def py_nearest_in_disc(G: np.ndarray, h: np.ndarray, m: int, w0: np.ndarray, r_max: float, r_min: float,
-                       order: np.ndarray, out: np.ndarray) -> bool:
+def py_nearest_in_disc(
+    G: np.ndarray,
+    h: np.ndarray,
+    m: int,
+    w0: np.ndarray,
+    r_max: float,
+    r_min: float,
+    order: np.ndarray,
+    out: np.ndarray,
+) -> bool:
     """``nearest_in_disc`` for Python callers (compiled code calls it directly)."""
     return nearest_in_disc(G, h, m, w0, r_max, r_min, order, out)
 
@@ -162,13 +179,18 @@ class Exact2DBackend(Backend):
     def _solve(self, qp: QP, std: Standard) -> Result:
         c = std.P[0, 0]
         if std.n != 2 or std.m_eq or not (c > 0 and std.P[0, 1] == 0 and std.P[1, 1] == c):
-            return Result(None, Status.FAILED, self.name,
-                          "exact2d solves 2-variable QPs with P = c·I, c > 0, and no equalities")
+            return Result(
+                None,
+                Status.FAILED,
+                self.name,
+                "exact2d solves 2-variable QPs with P = c·I, c > 0, and no equalities",
+            )
         _, _, D, d = std.split()
         w0 = -std.q / c
         out, order = np.empty(2), np.empty(max(len(d), 1), dtype=np.int64)
         r_max = np.inf if std.r is None else std.r
-        if not py_nearest_in_disc(np.ascontiguousarray(D), np.ascontiguousarray(d), len(d), w0, r_max, 0.0,
-                               order, out):
+        if not py_nearest_in_disc(
+            np.ascontiguousarray(D), np.ascontiguousarray(d), len(d), w0, r_max, 0.0, order, out
+        ):
             return Result(None, Status.INFEASIBLE, self.name, "the constraints leave no point")
         return make_result(self.name, std, out, Status.OPTIMAL)

@@ -9,6 +9,7 @@ OSQP 1.x prints "Polishing not needed" whatever ``verbose`` says when the optimu
 constraint (osqp/osqp#785). Such problems are answered before OSQP runs: when P is positive
 definite and the unconstrained minimiser -P⁻¹q satisfies every constraint, it is the optimum.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -61,7 +62,7 @@ class OsqpBackend(Backend):
         if (x := unconstrained_optimum(std)) is not None:
             return Result(x, Status.OPTIMAL, self.name, "unconstrained optimum is feasible")
         key = std.C.shape
-        l, u = np.maximum(std.l, -INFTY), np.minimum(std.u, INFTY)
+        l, u = np.maximum(std.l, -INFTY), np.minimum(std.u, INFTY)  # noqa: E741 - as in Standard
         solver = self._solvers.get(key)
         if solver is None:
             if len(self._solvers) >= MAX_CACHED:

@@ -3,6 +3,7 @@
 A formulation builds one of these from the geometry; a backend turns it into a :class:`Result`.
 Problems are tiny (2 or 3 variables, tens of constraints), so matrices are dense.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -68,4 +69,8 @@ class Result:
 
     @property
     def ok(self) -> bool:
-        return self.status == Status.OPTIMAL and self.x is not None and bool(np.all(np.isfinite(self.x)))
+        return (
+            self.status == Status.OPTIMAL
+            and self.x is not None
+            and bool(np.all(np.isfinite(self.x)))
+        )

@@ -6,16 +6,18 @@ the solvers that want sparse matrices. qpsolvers reports only whether a solution
 when none is, the problem is "infeasible" if Clarabel proves it so, else "failed". No cones: the
 formulation substitutes a polygon for ``soc_radius``.
 """
+
 from __future__ import annotations
 
-import numpy as np
+from typing import Any
+
 import qpsolvers
 import scipy.sparse as sp
 
 from vo3d_opt.solvers.base import Backend, Standard, make_result
-from vo3d_opt.status import Status
 from vo3d_opt.solvers.problem import QP, Result
 from vo3d_opt.solvers.registry import certified_infeasible
+from vo3d_opt.status import Status
 
 #: Extra options per solver, for answers as tight as the direct backends'. OSQP is left
 #: unpolished: OSQP 1.x prints a line per polished solve without an active set. ProxQP stays
@@ -48,14 +50,19 @@ class QpsolversBackend(Backend):
     def __init__(self, name: str, solver: str) -> None:
         self.name = name
         self._solver = solver
-        self._options = SOLVER_OPTIONS.get(solver, {})
+        self._options: dict[str, Any] = SOLVER_OPTIONS.get(solver, {})  # solver-specific **kwargs
         self._sparse = solver not in qpsolvers.dense_solvers
 
     def _solve(self, qp: QP, std: Standard) -> Result:
-        sol = qpsolvers.solve_problem(to_problem(std, self._sparse), solver=self._solver,
-                                      **self._options)
+        sol = qpsolvers.solve_problem(
+            to_problem(std, self._sparse), solver=self._solver, **self._options
+        )
         if sol.found:
             return make_result(self.name, std, sol.x, Status.OPTIMAL)
         if certified_infeasible(qp):
-            return Result(None, Status.INFEASIBLE, self.name, "no solution; Clarabel proves infeasible")
-        return Result(None, Status.FAILED, self.name, "no solution found, yet QP not proved infeasible")
+            return Result(
+                None, Status.INFEASIBLE, self.name, "no solution; Clarabel proves infeasible"
+            )
+        return Result(
+            None, Status.FAILED, self.name, "no solution found, yet QP not proved infeasible"
+        )

@@ -12,6 +12,7 @@ Accepted names:
 
 Backend modules are imported lazily, so importing this package stays cheap.
 """
+
 from __future__ import annotations
 
 import functools
@@ -87,9 +88,12 @@ def available_solvers() -> list[str]:
 
 def available_qp_solvers() -> list[str]:
     """The names in :func:`available_solvers` whose backend solves QPs (kind "qp")."""
-    return [n for n in available_solvers()
-            if (n in _REGISTERED and _REGISTERED[n].kind == "qp")
-            or (n not in _REGISTERED and not n.startswith("casadi"))]
+    return [
+        n
+        for n in available_solvers()
+        if (n in _REGISTERED and _REGISTERED[n].kind == "qp")
+        or (n not in _REGISTERED and not n.startswith("casadi"))
+    ]
 
 
 def _canonical(name: str) -> str:
@@ -101,8 +105,9 @@ def _canonical(name: str) -> str:
 
 
 def _unknown(name: str) -> ValueError:
-    return ValueError(f"unknown or uninstalled solver {name!r}; available: "
-                      + ", ".join(available_solvers()))
+    return ValueError(
+        f"unknown or uninstalled solver {name!r}; available: " + ", ".join(available_solvers())
+    )
 
 
 def _construct(name: str) -> Backend:
@@ -171,5 +176,3 @@ def register_backend(name: str, backend: Backend) -> None:
 def unregister_backend(name: str) -> None:
     """Undo :func:`register_backend` (a no-op for names never registered)."""
     _REGISTERED.pop(name, None)
-
-
