@@ -139,7 +139,10 @@ def test_zero_events_upper_bound_is_about_three_over_n():
 # --------------------------------------------------------------------------- families
 
 
-@pytest.mark.parametrize("name", sorted(f.name for f in FAMILIES.values() if not f.missing_keys()))
+RUNNABLE = sorted(f.name for f in FAMILIES.values() if not f.missing_keys())
+
+
+@pytest.mark.parametrize("name", RUNNABLE)
 def test_family_encounters_are_valid_and_reachable(name):
     for index in range(15):
         enc = make_encounter(name, 11, index)
@@ -425,7 +428,8 @@ def test_rotorpy_draws_hummingbird_in_constant_or_dryden_wind():
     speeds = [np.linalg.norm(w["velocity"]) for w in winds]
     assert max(speeds) <= 3.0 + 1e-3 and max(speeds) > 2.0
     assert all(w["velocity"][2] == 0.0 for w in winds)
-    assert all(d.params["wind_speed"] == pytest.approx(s, abs=1e-3) for d, s in zip(draws, speeds))
+    assert all(d.params["wind_speed"] == pytest.approx(s, abs=1e-3)
+               for d, s in zip(draws, speeds, strict=True))
 
 
 def test_noisy_draws_sensing_noise_latency_and_seed():

@@ -59,7 +59,9 @@ Generator = Callable[[np.random.Generator], "Draw | None"]
 class Family:
     """A named encounter generator. ``obstacle_free``: no encounter has obstacles, so RVO2-3D
     can fly it (``--method rvo2``). ``warm_keys``: scenario keys added to the workers' warm-up
-    encounter, so that it runs the same code as the family's (e.g. its ``dynamics``)."""
+    encounter, so that it runs the same code as the family's (e.g. its ``dynamics``).
+    ``needs``: the scenario keys (dotted paths) its draws use that not every build's schema
+    defines (contracts §5); the sweep refuses the family while one is missing."""
 
     name: str
     summary: str
