@@ -8,11 +8,14 @@ Three stages (all by default, or those named with ``--stages``):
 * ``sweeps``: ``vo3d sweep FAMILY --n N --seed S --workers K --out OUT_ROOT/FAMILY --json`` for
   every family of ``--families``, and ``--method rvo2`` into ``OUT_ROOT/FAMILY-rvo2`` for every
   family of ``--rvo2`` (obstacle-free ones: the same encounters), each as its own process;
-* ``table``: ``benchmarks/results_sweeps.md`` from the ``summary.json`` files under
-  ``OUT_ROOT`` and ``throughput.md`` (so the table can be rebuilt without flying anything).
+  with several ``--seeds``, seed 0 goes there and seed S into ``.../seedS``;
+* ``table``: ``benchmarks/results_sweeps.md`` from the runs found under ``OUT_ROOT`` and
+  ``throughput.md`` (so the table can be rebuilt without flying anything). The runs of one
+  family and method with different seeds are independent encounters (the stream of encounter
+  i is seeded by (seed, i)): their rows are pooled into one line, rates and bounds recomputed.
 
     python benchmarks/run_sweeps.py --n 10000 [--families pair group dense lagged]
-        [--rvo2 pair dense] [--seed 0] [--workers 2] [--out-root /work/sweep-out]
+        [--rvo2 pair dense] [--seeds 0] [--workers 2] [--out-root /work/sweep-out]
         [--stages throughput sweeps table] [--results benchmarks/results_sweeps.md]
 
 ``--n`` is one N for every family, or ``FAMILY=N`` items for per-family counts.
@@ -52,6 +55,32 @@ def counts(items: list[str], families: list[str]) -> dict[str, int]:
 def vo3d_cmd() -> list[str]:
     script = Path(sys.executable).with_name("vo3d")
     return [str(script)] if script.exists() else [sys.executable, "-m", "vo3d_opt.cli"]
+
+
+def run_dir(out_root: Path, family: str, method: str, seed: int) -> Path:
+    base = out_root / (family if method == "vo3d" else f"{family}-{method}")
+    return base if seed == 0 else base / f"seed{seed}"
+
+
+def pooled(dirs: list[Path]) -> dict[str, Any]:
+    """One summary for the runs in ``dirs`` (the same family and method, other seeds): the
+    summary of their pooled rows, wall times summed."""
+    summaries = [json.loads((d / "summary.json").read_text()) for d in dirs]
+    if len(summaries) == 1:
+        return summaries[0]
+    import pandas as pd
+
+    from vo3d_opt.sweep.stats import aggregate
+
+    first = summaries[0]
+    rows = pd.concat([pd.read_parquet(d / "encounters.parquet") for d in dirs],
+                     ignore_index=True)
+    s = aggregate(rows, family=first["family"], seed=first["seed"], method=first["method"],
+                  formulation=first["formulation"], solver=first["solver"])
+    wall = sum(x["wall_time"] for x in summaries)
+    s.update({"seed": [x["seed"] for x in summaries], "wall_time": wall,
+              "encounters_per_second": s["encounters"] / wall, "workers": first["workers"]})
+    return s
 
 
 def run_one(family: str, n: int, *, seed: int, workers: int, method: str, out: Path) -> None:
@@ -130,19 +159,22 @@ def table(out_root: Path, families: list[str], rvo2: list[str]) -> str:
     runs = [out_root / f for f in families] + [out_root / f"{f}-rvo2" for f in rvo2]
     summaries = {}
     for path in runs:
-        file = path / "summary.json"
-        if file.exists():
-            summaries[path.name] = json.loads(file.read_text())
+        dirs = [d for d in [path, *sorted(path.glob("seed*"))] if (d / "summary.json").exists()]
+        if dirs:
+            summaries[path.name] = pooled(dirs)
         else:
-            print(f"missing {file}: left out of the table", file=sys.stderr)
+            print(f"missing {path}/summary.json: left out of the table", file=sys.stderr)
     first = next(iter(summaries.values()), {})
+    seeds = sorted({x for s in summaries.values()
+                    for x in (s["seed"] if isinstance(s["seed"], list) else [s["seed"]])})
     lines = [
         "# Sweep results (`benchmarks/run_sweeps.py`)",
         "",
         f"{datetime.date.today()}, commit {commit()}; {cpu_model()}, {os.cpu_count()} CPUs "
         f"shared with other sessions (load average during the runs not controlled); "
-        f"{platform.python_implementation()} {platform.python_version()}; seed "
-        f"{first.get('seed', '?')}, {first.get('workers', '?')} local Dask workers.",
+        f"{platform.python_implementation()} {platform.python_version()}; seeds "
+        f"{', '.join(map(str, seeds))} (encounters 0..N_seed-1 of each), "
+        f"{first.get('workers', '?')} local Dask workers.",
         "",
         "Counts are encounters (and events in brackets: vehicle pairs for collisions and "
         "intrusions, agents for not arrived, samples for limit violations). Rates per encounter "
@@ -171,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--n", nargs="+", default=["10000"], help="N, or FAMILY=N items")
     p.add_argument("--families", nargs="+", default=list(FAMILIES))
     p.add_argument("--rvo2", nargs="*", default=list(RVO2), help="families also flown by RVO2-3D")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--out-root", type=Path, default=Path("/work/sweep-out"))
     p.add_argument("--stages", nargs="+", choices=("throughput", "sweeps", "table"),
@@ -182,15 +214,14 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
 
     if "throughput" in args.stages:
-        throughput(args.bench_family, args.bench_n, args.seed, args.out_root)
+        throughput(args.bench_family, args.bench_n, args.seeds[0], args.out_root)
     if "sweeps" in args.stages:
         n = counts(args.n, args.families + args.rvo2)
-        for family in args.families:
-            run_one(family, n[family], seed=args.seed, workers=args.workers, method="vo3d",
-                    out=args.out_root / family)
-        for family in args.rvo2:
-            run_one(family, n[family], seed=args.seed, workers=args.workers, method="rvo2",
-                    out=args.out_root / f"{family}-rvo2")
+        jobs = [(f, "vo3d") for f in args.families] + [(f, "rvo2") for f in args.rvo2]
+        for seed in args.seeds:
+            for family, method in jobs:
+                run_one(family, n[family], seed=seed, workers=args.workers, method=method,
+                        out=run_dir(args.out_root, family, method, seed))
     if "table" in args.stages:
         text = table(args.out_root, args.families, args.rvo2)
         args.results.write_text(text)
