@@ -453,3 +453,21 @@ def test_section5_families_run_or_are_refused_naming_their_keys(name):
             run_sweep(name, 1)
     else:
         assert encounter_problems(make_encounter(name, 0, 0).scenario) == []
+
+
+def test_encounters_that_do_not_arrive_are_written_as_failures_too(tmp_path):
+    """A crossing with too little time (every agent short of its goal, nothing else wrong)."""
+    def generate(rng: np.random.Generator) -> Draw:
+        draw = _crossing(rng, vehicle_range=55.0)
+        return Draw(params=draw.params, scenario={**draw.scenario, "max_time": 4.0})
+
+    late = Family(name="late", summary="test", obstacle_free=True, generate=generate)
+    rows = pd.DataFrame([run_encounter(late, 0, i) for i in range(2)])
+    assert (rows["reached"] == 0).all() and (rows["collisions"] == 0).all()
+    assert (rows["pz_intrusions"] == 0).all()
+    written = write_results(SweepResult(family=late, seed=0, method=Method(), rows=rows), tmp_path)
+    failures = sorted((tmp_path / "failures").glob("*.yaml"))
+    assert [p.name for p in failures] == ["late-s0-i0.yaml", "late-s0-i1.yaml"]
+    assert set(failures) <= set(written)
+    assert "reached 0 of 2" in failures[0].read_text().splitlines()[0]
+    assert load_scenario(failures[0]).max_time == 4.0
