@@ -364,6 +364,23 @@ def _obstacles(rng: np.random.Generator, count: int) -> list[dict[str, Any]] | N
     return out
 
 
+def _ring_trip(rng: np.random.Generator, taken: list[np.ndarray], need: float
+               ) -> tuple[np.ndarray, np.ndarray] | None:
+    """A start on the ring at a uniform heading and a goal across it (heading + 180 deg +-
+    GROUP_TURN), altitudes uniform in GROUP_Z, ``need`` from each other and from ``taken``."""
+    def at(heading: float) -> np.ndarray:
+        return np.array([GROUP_RING * math.cos(heading), GROUP_RING * math.sin(heading),
+                         rng.uniform(*GROUP_Z)])
+
+    s = _place(lambda: at(rng.uniform(-math.pi, math.pi)), taken, need)
+    if s is None:
+        return None
+    heading = math.atan2(s[1], s[0])
+    g = _place(lambda: at(heading + math.pi + rng.uniform(-GROUP_TURN, GROUP_TURN)),
+               [*taken, s], need)
+    return None if g is None else (s, g)
+
+
 def _ring_points(rng: np.random.Generator, n: int, r_pz: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray] | None:
     """Starts on the ring at uniform headings, goals across it, all SEPARATION * r_pz apart."""
@@ -371,20 +388,11 @@ def _ring_points(rng: np.random.Generator, n: int, r_pz: np.ndarray
     starts, goals = np.zeros((n, 3)), np.zeros((n, 3))
     need = SEPARATION * float(r_pz.max())
     for i in range(n):
-        def at(heading: float) -> np.ndarray:
-            return np.array([GROUP_RING * math.cos(heading), GROUP_RING * math.sin(heading),
-                             rng.uniform(*GROUP_Z)])
-
-        s = _place(lambda: at(rng.uniform(-math.pi, math.pi)), taken, need)
-        if s is None:
+        trip = _ring_trip(rng, taken, need)
+        if trip is None:
             return None
-        heading = math.atan2(s[1], s[0])
-        g = _place(lambda: at(heading + math.pi + rng.uniform(-GROUP_TURN, GROUP_TURN)),
-                   taken + [s], need)
-        if g is None:
-            return None
-        starts[i], goals[i] = s, g
-        taken += [s, g]
+        starts[i], goals[i] = trip
+        taken += list(trip)
     return starts, goals
 
 
@@ -531,19 +539,10 @@ def intruder(rng: np.random.Generator) -> Draw | None:
     agents = draw.scenario["agents"]
     points = [np.asarray(a[k], dtype=float) for a in agents for k in ("start", "goal")]
     need = SEPARATION * max(r_pz, max(a["r_pz"] for a in agents))
-
-    def at(heading: float) -> np.ndarray:
-        return np.array([GROUP_RING * math.cos(heading), GROUP_RING * math.sin(heading),
-                         rng.uniform(*GROUP_Z)])
-
-    start = _place(lambda: at(rng.uniform(-math.pi, math.pi)), points, need)
-    if start is None:
+    trip = _ring_trip(rng, points, need)
+    if trip is None or not _segment_clear_of_prisms(*trip, draw.scenario["obstacles"]):
         return None
-    heading = math.atan2(start[1], start[0])
-    goal = _place(lambda: at(heading + math.pi + rng.uniform(-GROUP_TURN, GROUP_TURN)),
-                  points + [start], need)
-    if goal is None or not _segment_clear_of_prisms(start, goal, draw.scenario["obstacles"]):
-        return None
+    start, goal = trip
     agents = agents + [{"id": "x0", "start": _r(start), "goal": _r(goal), "r_pz": _r(r_pz),
                         "max_speed": _r(speed, SPEED_DECIMALS), "avoids": False}]
     flight = float(np.linalg.norm(goal - start)) / speed
