@@ -17,7 +17,7 @@ import pytest
 from scipy.stats import binomtest
 
 from vo3d_opt.sim.metrics import CONTRACT_KEYS
-from vo3d_opt.sim.scenario import load_scenario
+from vo3d_opt.sim.scenario import load_scenario, scenario_from_dict
 from vo3d_opt.sweep import (
     FAMILIES,
     TIMING_COLUMNS,
@@ -139,7 +139,10 @@ def test_zero_events_upper_bound_is_about_three_over_n():
 # --------------------------------------------------------------------------- families
 
 
-@pytest.mark.parametrize("name", sorted(FAMILIES))
+RUNNABLE = sorted(f.name for f in FAMILIES.values() if not f.missing_keys())
+
+
+@pytest.mark.parametrize("name", RUNNABLE)
 def test_family_encounters_are_valid_and_reachable(name):
     for index in range(15):
         enc = make_encounter(name, 11, index)
@@ -352,3 +355,119 @@ def test_formulation_and_solver_pass_through_to_the_runs_and_the_replays():
     data = failure_scenario(result, 1)
     assert (data["formulation"], data["solver"]) == ("cone_qp", "osqp")
     assert data["agents"] == make_encounter("pair", 0, 1).scenario["agents"]
+
+
+# ------------------------------------------------- group variants (contracts §5 keys)
+
+SECTION5_FAMILIES = ("intruder", "rotorpy", "noisy")
+#: The §5 keys each family adds to its ``group`` draw (removed, the rest is a group scenario).
+ADDED_KEYS = {"lagged": ("velocity_response_tau",), "rotorpy": ("dynamics", "wind")}
+
+
+def first_draw(name: str, seed: int, index: int) -> Draw:
+    """The first draw the family's generator keeps from the stream of (seed, index), before
+    the loader's checks (which need the §5 keys for some families)."""
+    rng = encounter_rng(seed, index)
+    return next(d for d in iter(lambda: FAMILIES[name].generate(rng), 0) if d is not None)
+
+
+def without_section5(name: str, scenario: dict) -> dict:
+    """The draw with the keys the variant adds removed (a plain group scenario)."""
+    data = {k: v for k, v in scenario.items() if k not in ADDED_KEYS.get(name, ())}
+    data["sensing"] = {k: scenario["sensing"][k] for k in ("vehicle_range", "obstacle_range")}
+    data["agents"] = [{k: v for k, v in a.items() if k != "avoids"} for a in scenario["agents"]]
+    return data
+
+
+@pytest.mark.parametrize("name", ["lagged", *SECTION5_FAMILIES])
+def test_group_variants_are_deterministic_and_sound_group_scenarios(name):
+    for index in range(12):
+        a, b = first_draw(name, 4, index), first_draw(name, 4, index)
+        assert a == b  # per (seed, index) alone
+        assert a.scenario != first_draw(name, 5, index).scenario
+        data = {"name": f"{name}-{index}", **without_section5(name, a.scenario)}
+        sc = scenario_from_dict(data)  # this build's loader takes the rest
+        assert 3 <= sc.n_agents - (name == "intruder") <= 8
+        assert len(sc.obstacles) <= 6
+        json.dumps(a.scenario)  # plain data: written to YAML as it is
+
+
+def test_lagged_draws_tau_in_its_range_and_runs():
+    taus = [first_draw("lagged", 1, i).scenario["velocity_response_tau"] for i in range(60)]
+    assert 0.1 <= min(taus) and max(taus) <= 1.0 and max(taus) - min(taus) > 0.5
+    enc = make_encounter("lagged", 1, 0)
+    assert enc.load().velocity_response_tau == enc.params["tau"]
+
+
+def test_intruder_adds_one_non_avoiding_uav_clear_of_the_obstacles():
+    from vo3d_opt.sweep.families import PRISM_CLEARANCE, _prism_half_side
+
+    for index in range(30):
+        draw = first_draw("intruder", 2, index)
+        agents = draw.scenario["agents"]
+        x = agents[-1]
+        assert x["id"] == "x0" and x["avoids"] is False
+        assert all("avoids" not in a for a in agents[:-1])
+        assert 1.0 <= x["max_speed"] <= 4.0 and 5.0 <= x["r_pz"] <= 10.0
+        assert x["max_speed"] == pytest.approx(draw.params["intruder_speed"], abs=1e-6)
+        start, goal = np.array(x["start"]), np.array(x["goal"])
+        assert draw.scenario["max_time"] >= TIME_FACTOR * np.linalg.norm(goal - start) \
+            / x["max_speed"] + TIME_SLACK - 1e-9
+        track = start[:2] + np.linspace(0.0, 1.0, 2001)[:, None] * (goal - start)[:2]
+        for ob in draw.scenario["obstacles"]:  # its straight track misses every prism
+            gap = np.linalg.norm(track - np.asarray(ob["center"]), axis=1).min()
+            assert gap >= _prism_half_side(ob) + PRISM_CLEARANCE - 1e-3
+
+
+def test_rotorpy_draws_hummingbird_in_constant_or_dryden_wind():
+    draws = [first_draw("rotorpy", 3, i) for i in range(60)]
+    assert all(d.scenario["dynamics"] == {"model": "rotorpy", "vehicle": "hummingbird"}
+               for d in draws)
+    winds = [d.scenario["wind"] for d in draws]
+    assert {w["type"] for w in winds} == {"constant", "dryden"}
+    speeds = [np.linalg.norm(w["velocity"]) for w in winds]
+    assert max(speeds) <= 3.0 + 1e-3 and max(speeds) > 2.0
+    assert all(w["velocity"][2] == 0.0 for w in winds)
+    assert all(d.params["wind_speed"] == pytest.approx(s, abs=1e-3)
+               for d, s in zip(draws, speeds, strict=True))
+
+
+def test_noisy_draws_sensing_noise_latency_and_seed():
+    draws = [first_draw("noisy", 6, i) for i in range(60)]
+    sensing = [d.scenario["sensing"] for d in draws]
+    assert all(s["vehicle_range"] == 55.0 and s["obstacle_range"] == 55.0 for s in sensing)
+    assert all(0.0 <= s["position_noise"] <= 0.5 and 0.0 <= s["velocity_noise"] <= 0.3
+               for s in sensing)
+    assert {s["latency"] for s in sensing} == {0.0, 0.2, 0.4}  # whole steps of dt = 0.2 s
+    assert all(isinstance(s["seed"], int) and s["seed"] >= 0 for s in sensing)
+    assert len({s["seed"] for s in sensing}) == len(sensing)
+
+
+@pytest.mark.parametrize("name", SECTION5_FAMILIES)
+def test_section5_families_run_or_are_refused_naming_their_keys(name):
+    fam = FAMILIES[name]
+    missing = fam.missing_keys()
+    if missing:  # a loader without the §5 keys: refused before any cluster starts
+        with pytest.raises(SweepError, match=f"{name!r} needs the scenario keys "
+                                             f"{missing[0]}"):
+            run_sweep(name, 1)
+    else:
+        assert encounter_problems(make_encounter(name, 0, 0).scenario) == []
+
+
+def test_encounters_that_do_not_arrive_are_written_as_failures_too(tmp_path):
+    """A crossing with too little time (every agent short of its goal, nothing else wrong)."""
+    def generate(rng: np.random.Generator) -> Draw:
+        draw = _crossing(rng, vehicle_range=55.0)
+        return Draw(params=draw.params, scenario={**draw.scenario, "max_time": 4.0})
+
+    late = Family(name="late", summary="test", obstacle_free=True, generate=generate)
+    rows = pd.DataFrame([run_encounter(late, 0, i) for i in range(2)])
+    assert (rows["reached"] == 0).all() and (rows["collisions"] == 0).all()
+    assert (rows["pz_intrusions"] == 0).all()
+    written = write_results(SweepResult(family=late, seed=0, method=Method(), rows=rows), tmp_path)
+    failures = sorted((tmp_path / "failures").glob("*.yaml"))
+    assert [p.name for p in failures] == ["late-s0-i0.yaml", "late-s0-i1.yaml"]
+    assert set(failures) <= set(written)
+    assert "reached 0 of 2" in failures[0].read_text().splitlines()[0]
+    assert load_scenario(failures[0]).max_time == 4.0

@@ -3,7 +3,8 @@
 The last layer: it uses the simulator, the scenario loader, the selector (through the
 simulator), the metrics and the RVO2-3D baseline; nothing but the CLI imports it.
 
-* :mod:`.families`: the registry of encounter families (``pair``, ``group``, ``dense``) and
+* :mod:`.families`: the registry of encounter families (``pair``, ``group``, ``dense`` and the
+  group variants ``lagged``, ``intruder``, ``rotorpy``, ``noisy``) and
   :func:`make_encounter`, which regenerates any encounter from (family, seed, index);
 * :mod:`.flight`: :func:`run_encounter`, one encounter flown where it is called;
 * :mod:`.runner`: :func:`run_sweep`, N encounters on Dask (:mod:`.cluster` is the Dask side);

@@ -30,13 +30,15 @@ def family_lines() -> list[str]:
     """One line per family: name, whether ``--method rvo2`` can fly it, summary."""
     width = max(len(name) for name in FAMILIES)
     return [f"{f.name:<{width}}  {'rvo2 ok  ' if f.obstacle_free else 'obstacles'}  {f.summary}"
+            + (f" [needs scenario keys {', '.join(f.missing_keys())}]" if f.missing_keys() else "")
             for f in FAMILIES.values()]
 
 
 def _list(as_json: bool) -> int:
     if as_json:
         print(json.dumps([{"name": f.name, "description": f.summary,
-                           "obstacle_free": f.obstacle_free} for f in FAMILIES.values()]))
+                           "obstacle_free": f.obstacle_free, "missing_keys": f.missing_keys()}
+                          for f in FAMILIES.values()]))
     else:
         print("\n".join(family_lines()))
     return EXIT_OK

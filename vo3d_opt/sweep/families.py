@@ -22,9 +22,10 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, get_args
 
 import numpy as np
+from pydantic import BaseModel
 
 from vo3d_opt.sim.scenario import Scenario, ScenarioError, scenario_from_dict
 
@@ -58,7 +59,9 @@ Generator = Callable[[np.random.Generator], "Draw | None"]
 class Family:
     """A named encounter generator. ``obstacle_free``: no encounter has obstacles, so RVO2-3D
     can fly it (``--method rvo2``). ``warm_keys``: scenario keys added to the workers' warm-up
-    encounter, so that it runs the same code as the family's (e.g. its ``dynamics``)."""
+    encounter, so that it runs the same code as the family's (e.g. its ``dynamics``).
+    ``needs``: the scenario keys (dotted paths) its draws use that not every build's schema
+    defines (contracts §5); the sweep refuses the family while one is missing."""
 
     name: str
     summary: str
@@ -66,6 +69,12 @@ class Family:
     obstacle_free: bool
     max_attempts: int = 1000
     warm_keys: dict[str, Any] = field(default_factory=dict)
+    needs: tuple[str, ...] = ()
+
+    def missing_keys(self) -> list[str]:
+        """The scenario keys of ``needs`` (dotted paths, e.g. ``sensing.latency``) that this
+        build's scenario schema does not define: the family cannot run while any is missing."""
+        return [path for path in self.needs if not schema_has(path)]
 
 
 @dataclass(frozen=True)
@@ -84,17 +93,41 @@ class Encounter:
         return scenario_from_dict(self.scenario, source=self.scenario["name"])
 
 
+def _submodel(annotation: Any) -> type[BaseModel] | None:
+    """The pydantic model inside a field's annotation (``M``, ``list[M]``, ``M | None``...)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in get_args(annotation):
+        found = _submodel(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def schema_has(path: str) -> bool:
+    """Whether the scenario schema defines the dotted key ``path`` (``agents.avoids`` is a key
+    of every agent)."""
+    model: type[BaseModel] | None = Scenario
+    for part in path.split("."):
+        if model is None or part not in model.model_fields:
+            return False
+        model = _submodel(model.model_fields[part].annotation)
+    return True
+
+
 FAMILIES: dict[str, Family] = {}
 
 
 def register(name: str, summary: str, *, obstacle_free: bool,
-             warm_keys: dict[str, Any] | None = None) -> Callable[[Generator], Generator]:
+             warm_keys: dict[str, Any] | None = None,
+             needs: tuple[str, ...] = ()) -> Callable[[Generator], Generator]:
     """Decorator: register ``rng -> Draw`` as family ``name`` (``summary``: one line for
     ``vo3d sweep --list``; the rest as in :class:`Family`)."""
 
     def wrap(fn: Generator) -> Generator:
         FAMILIES[name] = Family(name=name, summary=summary, generate=fn,
-                                obstacle_free=obstacle_free, warm_keys=dict(warm_keys or {}))
+                                obstacle_free=obstacle_free, warm_keys=dict(warm_keys or {}),
+                                needs=tuple(needs))
         return fn
 
     return wrap
@@ -331,6 +364,23 @@ def _obstacles(rng: np.random.Generator, count: int) -> list[dict[str, Any]] | N
     return out
 
 
+def _ring_trip(rng: np.random.Generator, taken: list[np.ndarray], need: float
+               ) -> tuple[np.ndarray, np.ndarray] | None:
+    """A start on the ring at a uniform heading and a goal across it (heading + 180 deg +-
+    GROUP_TURN), altitudes uniform in GROUP_Z, ``need`` from each other and from ``taken``."""
+    def at(heading: float) -> np.ndarray:
+        return np.array([GROUP_RING * math.cos(heading), GROUP_RING * math.sin(heading),
+                         rng.uniform(*GROUP_Z)])
+
+    s = _place(lambda: at(rng.uniform(-math.pi, math.pi)), taken, need)
+    if s is None:
+        return None
+    heading = math.atan2(s[1], s[0])
+    g = _place(lambda: at(heading + math.pi + rng.uniform(-GROUP_TURN, GROUP_TURN)),
+               [*taken, s], need)
+    return None if g is None else (s, g)
+
+
 def _ring_points(rng: np.random.Generator, n: int, r_pz: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray] | None:
     """Starts on the ring at uniform headings, goals across it, all SEPARATION * r_pz apart."""
@@ -338,20 +388,11 @@ def _ring_points(rng: np.random.Generator, n: int, r_pz: np.ndarray
     starts, goals = np.zeros((n, 3)), np.zeros((n, 3))
     need = SEPARATION * float(r_pz.max())
     for i in range(n):
-        def at(heading: float) -> np.ndarray:
-            return np.array([GROUP_RING * math.cos(heading), GROUP_RING * math.sin(heading),
-                             rng.uniform(*GROUP_Z)])
-
-        s = _place(lambda: at(rng.uniform(-math.pi, math.pi)), taken, need)
-        if s is None:
+        trip = _ring_trip(rng, taken, need)
+        if trip is None:
             return None
-        heading = math.atan2(s[1], s[0])
-        g = _place(lambda: at(heading + math.pi + rng.uniform(-GROUP_TURN, GROUP_TURN)),
-                   taken + [s], need)
-        if g is None:
-            return None
-        starts[i], goals[i] = s, g
-        taken += [s, g]
+        starts[i], goals[i] = trip
+        taken += list(trip)
     return starts, goals
 
 
@@ -425,3 +466,151 @@ def dense(rng: np.random.Generator) -> Draw | None:
     params = {"agents": n, "r_pz": r, "speed_min": float(speeds.min()),
               "speed_max": float(speeds.max()), "agents_per_1000m3": 1000.0 * n / volume}
     return Draw(params=params, scenario=scenario)
+
+
+# ---------------------------------------------------- group variants (contracts §5 keys)
+#
+# Each draws a ``group`` encounter from the same stream and then the variant's own parameters,
+# so encounter i of ``lagged`` is encounter i of ``group`` (same agents and obstacles) plus a
+# time constant. ``SECTION5_KEYS`` of a family: the contract §5 keys its draws use (the sweep
+# refuses the family, naming them, when this build's scenario loader does not accept them).
+
+
+def _group_variant(rng: np.random.Generator) -> Draw | None:
+    """A ``group`` draw whose dicts the caller may edit (copies, not shared with anyone)."""
+    base = group(rng)
+    if base is None:
+        return None
+    return Draw(params=dict(base.params), scenario=dict(base.scenario))
+
+
+LAGGED_TAU = (0.1, 1.0)          # s, first-order velocity time constant, uniform
+
+
+@register("lagged", "a group encounter under first-order velocity dynamics, tau 0.1-1 s",
+          obstacle_free=False, warm_keys={"velocity_response_tau": 0.5})
+def lagged(rng: np.random.Generator) -> Draw | None:
+    """A ``group`` draw flown under first-order velocity dynamics: every vehicle's velocity
+    follows its command as ``v += (v_cmd - v) min(1, dt / tau)``, with one time constant
+    ``tau`` for the encounter, uniform 0.1-1 s. Written as the legacy key
+    ``velocity_response_tau`` (to become ``dynamics: {model: first_order, tau}``)."""
+    draw = _group_variant(rng)
+    if draw is None:
+        return None
+    tau = float(rng.uniform(*LAGGED_TAU))
+    draw.scenario["velocity_response_tau"] = _r(tau)
+    draw.params["tau"] = _r(tau)
+    return draw
+
+
+INTRUDER_SPEED = (1.0, 4.0)      # m/s, the non-cooperative UAV's speed, uniform
+INTRUDER_R_PZ = GROUP_R_PZ
+
+
+def _segment_clear_of_prisms(start: np.ndarray, goal: np.ndarray,
+                             obstacles: list[dict[str, Any]]) -> bool:
+    """Whether the straight horizontal track start -> goal keeps PRISM_CLEARANCE from every
+    obstacle's protected prism (conservative: as if every prism reached the ceiling)."""
+    a, b = start[:2], goal[:2]
+    ab = b - a
+    for ob in obstacles:
+        c = np.asarray(ob["center"], dtype=float)
+        t = float(np.clip((c - a) @ ab / (ab @ ab), 0.0, 1.0))
+        if np.linalg.norm(a + t * ab - c) < _prism_half_side(ob) + PRISM_CLEARANCE:
+            return False
+    return True
+
+
+@register("intruder", "a group encounter plus one non-cooperative UAV (avoids: false) "
+                      "crossing it straight at 1-4 m/s", obstacle_free=False,
+          needs=("agents.avoids",))
+def intruder(rng: np.random.Generator) -> Draw | None:
+    """A ``group`` draw plus one more UAV, ``x0``, that flies straight to its goal and never
+    avoids (``avoids: false``; the others see it and must keep clear). Its start is on the
+    same 60 m circle at a uniform heading, its goal across it (heading + 180 deg +- 60 deg),
+    altitudes 5-35 m, at the others' separation from their starts and goals; speed uniform
+    1-4 m/s, r_pz uniform 5-10 m. Its straight track keeps 2 m from every obstacle's protected
+    prism (else the draw is rejected: it would hit the obstacle, which is not what is tested)."""
+    draw = _group_variant(rng)
+    if draw is None:
+        return None
+    speed = float(rng.uniform(*INTRUDER_SPEED))
+    r_pz = float(rng.uniform(*INTRUDER_R_PZ))
+    agents = draw.scenario["agents"]
+    points = [np.asarray(a[k], dtype=float) for a in agents for k in ("start", "goal")]
+    need = SEPARATION * max(r_pz, max(a["r_pz"] for a in agents))
+    trip = _ring_trip(rng, points, need)
+    if trip is None or not _segment_clear_of_prisms(*trip, draw.scenario["obstacles"]):
+        return None
+    start, goal = trip
+    agents = agents + [{"id": "x0", "start": _r(start), "goal": _r(goal), "r_pz": _r(r_pz),
+                        "max_speed": _r(speed, SPEED_DECIMALS), "avoids": False}]
+    flight = float(np.linalg.norm(goal - start)) / speed
+    draw.scenario["agents"] = agents
+    draw.scenario["max_time"] = max(draw.scenario["max_time"],
+                                    float(math.ceil(TIME_FACTOR * flight + TIME_SLACK)))
+    draw.params.update({"intruder_speed": speed, "intruder_r_pz": r_pz})
+    return draw
+
+
+ROTORPY_VEHICLE = "hummingbird"
+ROTORPY_WIND_TYPES = ("constant", "dryden")   # even odds
+ROTORPY_WIND_SPEED = (0.0, 3.0)  # m/s, horizontal (mean) wind, uniform; direction uniform
+
+
+@register("rotorpy", "a group encounter flown by RotorPy quadrotors (hummingbird) in constant "
+                     "or Dryden wind, 0-3 m/s", obstacle_free=False,
+          warm_keys={"dynamics": {"model": "rotorpy", "vehicle": ROTORPY_VEHICLE},
+                     "wind": {"type": "dryden", "velocity": [1.0, 0.0, 0.0]}},
+          needs=("dynamics", "wind"))
+def rotorpy(rng: np.random.Generator) -> Draw | None:
+    """A ``group`` draw flown by RotorPy's ``hummingbird`` quadrotors (``dynamics: {model:
+    rotorpy, vehicle: hummingbird}``) in wind: ``constant`` or ``dryden`` (turbulence about a
+    mean) with even odds, the (mean) wind horizontal, its speed uniform 0-3 m/s, its direction
+    uniform."""
+    draw = _group_variant(rng)
+    if draw is None:
+        return None
+    kind = ROTORPY_WIND_TYPES[int(rng.integers(len(ROTORPY_WIND_TYPES)))]
+    speed = float(rng.uniform(*ROTORPY_WIND_SPEED))
+    direction = float(rng.uniform(-math.pi, math.pi))
+    wind = [speed * math.cos(direction), speed * math.sin(direction), 0.0]
+    draw.scenario["dynamics"] = {"model": "rotorpy", "vehicle": ROTORPY_VEHICLE}
+    draw.scenario["wind"] = {"type": kind, "velocity": _r(wind)}
+    draw.params.update({"wind_type": kind, "wind_speed": speed,
+                        "wind_direction_deg": math.degrees(direction)})
+    return draw
+
+
+NOISY_POSITION = (0.0, 0.5)      # m, 1-sigma per axis, uniform
+NOISY_VELOCITY = (0.0, 0.3)      # m/s, 1-sigma per axis, uniform
+NOISY_LATENCY_STEPS = (0, 2)     # latency = k dt, k uniform integer: 0, 0.2 or 0.4 s
+NOISY_SEEDS = 2 ** 31            # the sensing seed, uniform in [0, 2^31)
+
+
+@register("noisy", "a group encounter with Gaussian sensing noise (position 0-0.5 m, "
+                   "velocity 0-0.3 m/s) and latency 0-0.4 s", obstacle_free=False,
+          warm_keys={"sensing": {"vehicle_range": 55.0, "obstacle_range": 55.0,
+                                 "position_noise": 0.3, "velocity_noise": 0.2,
+                                 "latency": 0.2, "seed": 1}},
+          needs=("sensing.position_noise", "sensing.velocity_noise", "sensing.latency",
+                 "sensing.seed"))
+def noisy(rng: np.random.Generator) -> Draw | None:
+    """A ``group`` draw in which every sensed position and velocity carries Gaussian noise
+    (1-sigma per axis: position uniform 0-0.5 m, velocity uniform 0-0.3 m/s) and is
+    ``latency`` old, ``latency = k dt`` with k uniform in {0, 1, 2} (0-0.4 s); the noise's
+    ``seed`` is drawn too, so the encounter is reproducible."""
+    draw = _group_variant(rng)
+    if draw is None:
+        return None
+    sensing = {
+        **draw.scenario["sensing"],
+        "position_noise": _r(rng.uniform(*NOISY_POSITION)),
+        "velocity_noise": _r(rng.uniform(*NOISY_VELOCITY)),
+        "latency": _r(DT * int(rng.integers(NOISY_LATENCY_STEPS[0], NOISY_LATENCY_STEPS[1] + 1))),
+        "seed": int(rng.integers(NOISY_SEEDS)),
+    }
+    draw.scenario["sensing"] = sensing
+    draw.params.update({k: sensing[k] for k in ("position_noise", "velocity_noise", "latency")})
+    draw.params["sensing_seed"] = sensing["seed"]
+    return draw

@@ -7,9 +7,10 @@
   over the larger protected-zone radius of the pair (d / r_pz; below 1 is an intrusion), as an
   ECDF and a histogram, per family and method;
 * ``failures/<name>.yaml``: every encounter that collided or intruded (vehicle or obstacle
-  protected zone), as a scenario file that ``vo3d run`` replays to the same summary (with
-  ``--method vo3d``; for ``rvo2`` the file is the encounter, which ``vo3d run`` flies with
-  vo3d and ``vo3d_opt.baselines.run_rvo2`` with RVO2-3D).
+  protected zone), left an agent short of its goal or broke a limit, as a scenario file that
+  ``vo3d run`` replays to the same summary (with ``--method vo3d``; for ``rvo2`` the file is
+  the encounter, which ``vo3d run`` flies with vo3d and ``vo3d_opt.baselines.run_rvo2`` with
+  RVO2-3D).
 """
 from __future__ import annotations
 
@@ -28,11 +29,17 @@ _DPI = 110
 
 
 def failed_rows(rows: pd.DataFrame) -> pd.DataFrame:
-    """The encounters that ran and collided or intruded (vehicle or obstacle protected zone)."""
+    """The encounters that ran and collided, intruded (vehicle or obstacle protected zone),
+    left an agent short of its goal or broke an altitude or speed limit."""
     if "collisions" not in rows:
         return rows.iloc[:0]
-    bad = (rows["collisions"].fillna(0) > 0) | (rows["pz_intrusions"].fillna(0) > 0) \
-        | (rows["obstacle_pz_intrusions"].fillna(0) > 0)
+
+    def col(name: str) -> pd.Series:
+        return rows[name].fillna(0)
+
+    bad = (col("collisions") > 0) | (col("pz_intrusions") > 0) \
+        | (col("obstacle_pz_intrusions") > 0) | (col("reached") < col("agents")) \
+        | (col("altitude_violations") + col("speed_violations") > 0)
     return rows[bad & rows["error"].isna()]
 
 
@@ -52,7 +59,9 @@ def _header(result: SweepResult, row: pd.Series) -> str:
     lines = [f"Encounter {row['index']} of the '{result.family.name}' sweep (seed {result.seed}, "
              f"method {result.method.name}): collisions {int(row['collisions'])}, "
              f"pz_intrusions {int(row['pz_intrusions'])}, obstacle_pz_intrusions "
-             f"{int(row['obstacle_pz_intrusions'])}."]
+             f"{int(row['obstacle_pz_intrusions'])}, reached {int(row['reached'])} of "
+             f"{int(row['agents'])}, altitude_violations {int(row['altitude_violations'])}, "
+             f"speed_violations {int(row['speed_violations'])}."]
     if result.method.name == "rvo2":
         lines.append("Flown by RVO2-3D in the sweep: replay with vo3d_opt.baselines.run_rvo2; "
                      "`vo3d run` flies it with vo3d instead.")
@@ -62,7 +71,7 @@ def _header(result: SweepResult, row: pd.Series) -> str:
 
 
 def write_failures(result: SweepResult, out: Path) -> list[Path]:
-    """``out/failures/<name>.yaml`` for each encounter that collided or intruded."""
+    """``out/failures/<name>.yaml`` for each encounter of :func:`failed_rows`."""
     written = []
     for _, row in failed_rows(result.rows).iterrows():
         data = failure_scenario(result, int(row["index"]))

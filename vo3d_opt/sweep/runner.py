@@ -89,6 +89,10 @@ def validate(family: str | Family, n: int, *, seed: int = 0, workers: int = 1,
         fam = get_family(family)
     except ValueError as exc:
         raise SweepError(str(exc)) from None
+    missing = fam.missing_keys()
+    if missing:
+        raise SweepError(f"family: {fam.name!r} needs the scenario keys {', '.join(missing)} "
+                         f"(contracts §5), which this build's scenario loader does not accept")
     _check_counts(n=n, seed=seed, workers=workers, in_flight=in_flight)
     return (fam, *check_method(fam, method))
 
