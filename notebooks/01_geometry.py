@@ -222,7 +222,13 @@ save(fig, FIGURES, "vo_pyramid")
 plt.show()
 print(
     "kinds on the planes:",
-    dict(zip(np.degrees(planes.phi).round().astype(int).tolist(), psec.kind_names[0].tolist())),
+    dict(
+        zip(
+            np.degrees(planes.phi).round().astype(int).tolist(),
+            psec.kind_names[0].tolist(),
+            strict=False,
+        )
+    ),
 )
 
 # %% [markdown]
@@ -256,7 +262,7 @@ p_a = np.array([0.0, 0.0, 20.0])
 
 fig, axes = plt.subplots(2, 4, figsize=(16, 8.4))
 found = {}
-for ax, (kind, (rel, vb)) in zip(axes.ravel(), KIND_CASES.items()):
+for ax, (kind, (rel, vb)) in zip(axes.ravel(), KIND_CASES.items(), strict=False):
     c = vo_cones(
         p_a, (p_a + np.asarray(rel) @ T)[None], (np.asarray(vb) @ T)[None], 10.0, reach=REACH
     )

@@ -77,8 +77,8 @@ display(md_table(header, rows))
 
 # %%
 fig, axes = plt.subplots(1, len(runs), figsize=(5.2 * len(runs), 3.8), squeeze=False)
-for ax, (name, pair) in zip(axes[0], runs.items()):
-    for (method, (rec, s)), color in zip(pair.items(), ("tab:blue", "tab:red")):
+for ax, (name, pair) in zip(axes[0], runs.items(), strict=False):
+    for (method, (rec, s)), color in zip(pair.items(), ("tab:blue", "tab:red"), strict=False):
         d = nearest_vehicle_distance(rec).min(axis=1)
         ax.plot(
             rec.times, d, color=color, label=f"{method} (min {s['min_vehicle_distance']:.3f} m)"

@@ -10,6 +10,7 @@ run of many vehicles stays small. With more than 12 vehicles each trails only it
 path and the faint paths ahead are left out, so the picture stays readable. Written with
 matplotlib's ``PillowWriter`` (pillow comes with matplotlib).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -60,30 +61,62 @@ def _elevation_obstacles(ax, record: RunRecord) -> None:
     """Obstacles seen from the side (-y): bodies filled, protected prisms dashed."""
     sc = record.scenario
     z_top = sc.limits.altitude[1]
-    for body, sensed in zip(sc.bodies, sc.sensed):
+    for body, sensed in zip(sc.bodies, sc.sensed, strict=False):
         if isinstance(body, Cylinder):
             x0, x1 = body.center[0] - body.radius, body.center[0] + body.radius
         else:
             xs = box_corners(body)[:, 0]
             x0, x1 = xs.min(), xs.max()
         h = min(body.height, z_top * 1.05)
-        ax.add_patch(Rectangle((x0, 0.0), x1 - x0, h, facecolor=OBSTACLE_GREY if sensed else "0.82",
-                               edgecolor="0.3", linewidth=0.6))
+        ax.add_patch(
+            Rectangle(
+                (x0, 0.0),
+                x1 - x0,
+                h,
+                facecolor=OBSTACLE_GREY if sensed else "0.82",
+                edgecolor="0.3",
+                linewidth=0.6,
+            )
+        )
         if sensed:
             half = body.side / 2.0
-            ax.add_patch(Rectangle((body.center[0] - half, 0.0), 2 * half,
-                                   min(body.prism_height, z_top * 1.05), fill=False,
-                                   linestyle="--", edgecolor=PRISM_GREY, linewidth=0.8))
+            ax.add_patch(
+                Rectangle(
+                    (body.center[0] - half, 0.0),
+                    2 * half,
+                    min(body.prism_height, z_top * 1.05),
+                    fill=False,
+                    linestyle="--",
+                    edgecolor=PRISM_GREY,
+                    linewidth=0.8,
+                )
+            )
     for s in sc.spheres:
-        ax.add_patch(Circle((s.center[0], s.center[2]), s.radius, fill=False, edgecolor="0.35",
-                            linestyle="-" if s.physical else ":"))
+        ax.add_patch(
+            Circle(
+                (s.center[0], s.center[2]),
+                s.radius,
+                fill=False,
+                edgecolor="0.35",
+                linestyle="-" if s.physical else ":",
+            )
+        )
 
 
 def _zones(ax, record: RunRecord, offsets: np.ndarray, colors: list) -> EllipseCollection:
     d = 2.0 * record.scenario.r_pz
-    zones = EllipseCollection(d, d, np.zeros_like(d), units="xy", offsets=offsets,
-                              offset_transform=ax.transData, facecolors="none",
-                              edgecolors=colors, linewidths=0.8, linestyles="--")
+    zones = EllipseCollection(
+        d,
+        d,
+        np.zeros_like(d),
+        units="xy",
+        offsets=offsets,
+        offset_transform=ax.transData,
+        facecolors="none",
+        edgecolors=colors,
+        linewidths=0.8,
+        linestyles="--",
+    )
     ax.add_collection(zones)
     return zones
 
@@ -103,8 +136,13 @@ def _figure(record: RunRecord) -> tuple[Figure, dict]:
     fig = Figure(figsize=(w, h))
     FigureCanvasAgg(fig)
     top, side = fig.subplots(2, 1, sharex=True, height_ratios=[y_span, z_span])
-    fig.subplots_adjust(left=left / w, right=(left + width) / w, bottom=bottom / h,
-                        top=1 - top_ / h, hspace=2 * gap / (h - bottom - top_ - gap))
+    fig.subplots_adjust(
+        left=left / w,
+        right=(left + width) / w,
+        bottom=bottom / h,
+        top=1 - top_ / h,
+        hspace=2 * gap / (h - bottom - top_ - gap),
+    )
     colors = agent_colors(record.n_agents)
     draw_obstacles_2d(top, record)
     _elevation_obstacles(side, record)
@@ -116,8 +154,9 @@ def _figure(record: RunRecord) -> tuple[Figure, dict]:
     for ax, (a, b) in ((top, (0, 1)), (side, (0, 2))):
         for i in range(record.n_agents if few else 0):  # the paths ahead, faint
             ax.plot(p[:, i, a], p[:, i, b], color=colors[i], linewidth=0.6, alpha=0.3)
-        moving["trails"].append([ax.plot([], [], color=colors[i], linewidth=1.1)[0]
-                                 for i in range(record.n_agents)])
+        moving["trails"].append(
+            [ax.plot([], [], color=colors[i], linewidth=1.1)[0] for i in range(record.n_agents)]
+        )
         moving["zones"].append(_zones(ax, record, p[0][:, [a, b]], colors))
         moving["dots"].append(ax.scatter(p[0, :, a], p[0, :, b], c=colors, s=12, zorder=5))
         ax.set_aspect("equal", adjustable="box")
@@ -125,22 +164,44 @@ def _figure(record: RunRecord) -> tuple[Figure, dict]:
     top.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), ylabel="y (m)")
     side.set(ylim=(lo[2], hi[2]), xlabel="x (m)", ylabel="z (m)")
     handles, labels = key_handles(record, [], prisms=True)
-    handles.append(Line2D([], [], marker="o", markersize=10, markerfacecolor="none",
-                          markeredgecolor="0.2", linestyle="none"))
+    handles.append(
+        Line2D(
+            [],
+            [],
+            marker="o",
+            markersize=10,
+            markerfacecolor="none",
+            markeredgecolor="0.2",
+            linestyle="none",
+        )
+    )
     labels.append("protected zone r_pz")
     if few:
         handles = [Line2D([], [], color=c, linewidth=1.6) for c in colors] + handles
         labels = list(record.ids) + labels
-    fig.legend(handles, labels, loc="upper left", bbox_to_anchor=((left + width + 0.1) / w,
-                                                                  1 - top_ / h),
-               fontsize="small", frameon=False, borderaxespad=0.0)
+    fig.legend(
+        handles,
+        labels,
+        loc="upper left",
+        bbox_to_anchor=((left + width + 0.1) / w, 1 - top_ / h),
+        fontsize="small",
+        frameon=False,
+        borderaxespad=0.0,
+    )
     # the longest title, so that the layout leaves room for every frame's
     moving["title"] = fig.suptitle(_title(record, len(record.times) - 1), fontsize="medium")
     return fig, moving
 
 
-def write_animation(record: RunRecord, path: str | Path, *, max_frames: int = MAX_FRAMES,
-                    fps: int = FPS, dpi: int = GIF_DPI, max_bytes: int = MAX_BYTES) -> Path:
+def write_animation(
+    record: RunRecord,
+    path: str | Path,
+    *,
+    max_frames: int = MAX_FRAMES,
+    fps: int = FPS,
+    dpi: int = GIF_DPI,
+    max_bytes: int = MAX_BYTES,
+) -> Path:
     """Write the replay GIF to ``path`` (see the module's frame and size rule); the path."""
     path = Path(path)
     if path.suffix.lower() != ".gif":
@@ -181,8 +242,12 @@ class _BlitPillowWriter(PillowWriter):
 def _render(record: RunRecord, path: Path, frames: np.ndarray, *, fps: int, dpi: int) -> None:
     fig, moving = _figure(record)
     fig.set_dpi(dpi)
-    artists = [moving["title"], *moving["dots"], *moving["zones"],
-               *(line for panel in moving["trails"] for line in panel)]
+    artists = [
+        moving["title"],
+        *moving["dots"],
+        *moving["zones"],
+        *(line for panel in moving["trails"] for line in panel),
+    ]
     for artist in artists:
         artist.set_animated(True)
     canvas = cast(FigureCanvasAgg, fig.canvas)

@@ -15,6 +15,7 @@ The distance curves are sampled every ``dt``; the marked minimum is the summary'
 (:func:`vo3d_opt.sim.metrics.closest_vehicle_approach`, continuous along each step), so it may
 lie a little below the sampled curves.
 """
+
 from __future__ import annotations
 
 import math
@@ -88,8 +89,9 @@ def figure_format(path: str | Path) -> str:
     """The format a path's suffix asks for; ValueError naming ``path`` for another suffix."""
     fmt = Path(path).suffix.lower().lstrip(".")
     if fmt not in FORMATS:
-        raise ValueError(f"path: {str(path)!r} must end in one of "
-                         + ", ".join(f".{f}" for f in FORMATS))
+        raise ValueError(
+            f"path: {str(path)!r} must end in one of " + ", ".join(f".{f}" for f in FORMATS)
+        )
     return fmt
 
 
@@ -124,8 +126,12 @@ def save_figure(fig: Figure, path: str | Path, dpi: int = DEFAULT_DPI) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     # Text stays text in SVG and TrueType in PDF; no dates, so a file is reproducible.
     with rc_context({"svg.fonttype": "none", "pdf.fonttype": 42, "svg.hashsalt": "vo3d"}):
-        fig.savefig(path, dpi=check_dpi(dpi), bbox_inches=content_bbox(fig),
-                    metadata={"pdf": {"CreationDate": None}, "svg": {"Date": None}}.get(fmt))
+        fig.savefig(
+            path,
+            dpi=check_dpi(dpi),
+            bbox_inches=content_bbox(fig),
+            metadata={"pdf": {"CreationDate": None}, "svg": {"Date": None}}.get(fmt),
+        )
     return path
 
 
@@ -146,8 +152,9 @@ def prism_margin(body: Cylinder | Box) -> float:
     """The least distance (m) from the body to the boundary of its protected prism C_pz: a
     vehicle outside C_pz is at least this far from the body. C_pz turns to face the vehicle, so
     horizontally it is the disc of radius L_pz/2 (section 4.1); vertically it reaches h_pz."""
-    return float(min(body.side / 2.0 - body.footprint_extent() / 2.0,
-                     body.prism_height - body.height))
+    return float(
+        min(body.side / 2.0 - body.footprint_extent() / 2.0, body.prism_height - body.height)
+    )
 
 
 def positions_at(record: RunRecord, t: float) -> np.ndarray:
@@ -181,8 +188,9 @@ def parse_zones(text: str) -> str | tuple[float, ...]:
     try:
         times = tuple(float(x) for x in text.split(","))
     except ValueError:
-        raise ValueError(f"zones: {text!r} is neither 'closest', 'none' nor times in s such as "
-                         "'10,20.5'") from None
+        raise ValueError(
+            f"zones: {text!r} is neither 'closest', 'none' nor times in s such as '10,20.5'"
+        ) from None
     if not all(math.isfinite(t) and t >= 0 for t in times):
         raise ValueError(f"zones: times must be finite and non-negative, got {text!r}")
     return times
@@ -208,8 +216,14 @@ def zone_snapshots(record: RunRecord, zones: Zones = DEFAULT_ZONES) -> list[Zone
                 return []
             who, what = [pair.agent], "closest obstacle approach"
         idx = np.array(who)
-        return [ZoneSnapshot(pair.time, idx, positions_at(record, pair.time)[idx],
-                             f"protected zone r_pz at the\n{what} (t = {pair.time:.1f} s)")]
+        return [
+            ZoneSnapshot(
+                pair.time,
+                idx,
+                positions_at(record, pair.time)[idx],
+                f"protected zone r_pz at the\n{what} (t = {pair.time:.1f} s)",
+            )
+        ]
     out = []
     for t in zones:
         if isinstance(t, bool) or not isinstance(t, (int, float, np.floating, np.integer)):
@@ -218,8 +232,11 @@ def zone_snapshots(record: RunRecord, zones: Zones = DEFAULT_ZONES) -> list[Zone
         if not (math.isfinite(t) and t >= 0):
             raise ValueError(f"zones: times must be finite and non-negative, got {t!r}")
         idx = np.arange(record.n_agents)
-        out.append(ZoneSnapshot(t, idx, positions_at(record, t)[idx],
-                                f"protected zones r_pz at t = {t:g} s"))
+        out.append(
+            ZoneSnapshot(
+                t, idx, positions_at(record, t)[idx], f"protected zones r_pz at t = {t:g} s"
+            )
+        )
     return out
 
 
@@ -236,16 +253,31 @@ def zone_dash(k: int) -> tuple:
 
 def _zone_handle(k: int) -> Line2D:
     """A vehicle (dot) and the outline of its protected sphere as the k-th snapshot draws it."""
-    return Line2D([], [], color="0.2", linestyle=zone_dash(k), linewidth=0.9, marker="o",
-                  markersize=5, markerfacecolor="0.5", markeredgecolor="k")
+    return Line2D(
+        [],
+        [],
+        color="0.2",
+        linestyle=zone_dash(k),
+        linewidth=0.9,
+        marker="o",
+        markersize=5,
+        markerfacecolor="0.5",
+        markeredgecolor="k",
+    )
 
 
-def key_handles(record: RunRecord, snaps: Sequence[ZoneSnapshot], *, prisms: bool,
-                ) -> tuple[list, list[str]]:
+def key_handles(
+    record: RunRecord,
+    snaps: Sequence[ZoneSnapshot],
+    *,
+    prisms: bool,
+) -> tuple[list, list[str]]:
     """Legend entries explaining the markers and outlines (not the agents)."""
     sc = record.scenario
-    handles: list = [Line2D([], [], marker="o", color="0.2", linestyle="none", markersize=5),
-                     Line2D([], [], marker="x", color="0.2", linestyle="none", markersize=6)]
+    handles: list = [
+        Line2D([], [], marker="o", color="0.2", linestyle="none", markersize=5),
+        Line2D([], [], marker="x", color="0.2", linestyle="none", markersize=6),
+    ]
     labels = ["start", "goal"]
     if sc.bodies:
         handles.append(Patch(facecolor=OBSTACLE_GREY, edgecolor="0.3"))
@@ -257,8 +289,17 @@ def key_handles(record: RunRecord, snaps: Sequence[ZoneSnapshot], *, prisms: boo
             handles.append(Patch(facecolor="0.82", edgecolor="0.3"))
             labels.append("obstacle not sensed")
     if sc.spheres:
-        handles.append(Line2D([], [], marker="o", markersize=9, markerfacecolor="none",
-                              markeredgecolor="0.35", linestyle="none"))
+        handles.append(
+            Line2D(
+                [],
+                [],
+                marker="o",
+                markersize=9,
+                markerfacecolor="none",
+                markeredgecolor="0.35",
+                linestyle="none",
+            )
+        )
         labels.append("static sphere\n(dotted: not physical)")
     for k, snap in enumerate(snaps):
         handles.append(_zone_handle(k))
@@ -278,23 +319,43 @@ def _agent_colorbar(fig: Figure, record: RunRecord, colors: list, **where) -> No
     bar.set_label(f"agent ({n})", fontsize="small")
 
 
-def agent_key(fig: Figure, ax: Axes, record: RunRecord, colors: list, *, handles=None,
-              labels=None, pad: float = 0.02) -> None:
+def agent_key(
+    fig: Figure,
+    ax: Axes,
+    record: RunRecord,
+    colors: list,
+    *,
+    handles=None,
+    labels=None,
+    pad: float = 0.02,
+) -> None:
     """The agents named by a legend of their ids up to LEGEND_MAX_AGENTS, with the key
     (``handles``, ``labels``) after them; beyond, by a colour bar, the key below the axes."""
     n = record.n_agents
     handles, labels = list(handles or []), list(labels or [])
     if n <= LEGEND_MAX_AGENTS:
         agents = [Line2D([], [], color=c, linewidth=1.6) for c in colors]
-        ax.legend(agents + handles, list(record.ids) + labels, fontsize="small",
-                  loc="upper left", bbox_to_anchor=(1.0 + pad, 1.0), borderaxespad=0.0,
-                  frameon=False)
+        ax.legend(
+            agents + handles,
+            list(record.ids) + labels,
+            fontsize="small",
+            loc="upper left",
+            bbox_to_anchor=(1.0 + pad, 1.0),
+            borderaxespad=0.0,
+            frameon=False,
+        )
         return
     else:
         _agent_colorbar(fig, record, colors, ax=ax, shrink=0.8, pad=pad, fraction=0.04)
     if handles:
-        fig.legend(handles, labels, loc="outside lower center", ncols=min(3, len(handles)),
-                   fontsize="small", frameon=False)
+        fig.legend(
+            handles,
+            labels,
+            loc="outside lower center",
+            ncols=min(3, len(handles)),
+            fontsize="small",
+            frameon=False,
+        )
 
 
 # ------------------------------------------------------------------------------- 3D view
@@ -304,11 +365,23 @@ def _cylinder_3d(ax, body: Cylinder, h: float, alpha: float) -> None:
     th = np.linspace(0, 2 * np.pi, 40)
     x, y = body.center[0] + body.radius * np.cos(th), body.center[1] + body.radius * np.sin(th)
     tt, zz = np.meshgrid(th, np.array([0.0, h]))
-    ax.plot_surface(body.center[0] + body.radius * np.cos(tt),
-                    body.center[1] + body.radius * np.sin(tt), zz,
-                    color=OBSTACLE_GREY, alpha=alpha, linewidth=0, shade=True)
-    ax.add_collection3d(Poly3DCollection([np.column_stack([x, y, np.full_like(x, h)])],
-                                         facecolor=OBSTACLE_GREY, alpha=alpha, linewidth=0))
+    ax.plot_surface(
+        body.center[0] + body.radius * np.cos(tt),
+        body.center[1] + body.radius * np.sin(tt),
+        zz,
+        color=OBSTACLE_GREY,
+        alpha=alpha,
+        linewidth=0,
+        shade=True,
+    )
+    ax.add_collection3d(
+        Poly3DCollection(
+            [np.column_stack([x, y, np.full_like(x, h)])],
+            facecolor=OBSTACLE_GREY,
+            alpha=alpha,
+            linewidth=0,
+        )
+    )
 
 
 def _box_3d(ax, body: Box, h: float, alpha: float) -> None:
@@ -317,15 +390,21 @@ def _box_3d(ax, body: Box, h: float, alpha: float) -> None:
     for a in range(4):
         b = (a + 1) % 4
         faces.append(np.array([[*c[a], 0.0], [*c[b], 0.0], [*c[b], h], [*c[a], h]]))
-    ax.add_collection3d(Poly3DCollection(faces, facecolor=OBSTACLE_GREY, alpha=alpha,
-                                         edgecolor="0.35", linewidth=0.3))
+    ax.add_collection3d(
+        Poly3DCollection(
+            faces, facecolor=OBSTACLE_GREY, alpha=alpha, edgecolor="0.35", linewidth=0.3
+        )
+    )
 
 
 def _sphere_3d(ax, center, radius: float, **kw) -> None:
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 19), np.linspace(0, np.pi, 10))
-    ax.plot_wireframe(center[0] + radius * np.cos(u) * np.sin(v),
-                      center[1] + radius * np.sin(u) * np.sin(v),
-                      center[2] + radius * np.cos(v), **kw)
+    ax.plot_wireframe(
+        center[0] + radius * np.cos(u) * np.sin(v),
+        center[1] + radius * np.sin(u) * np.sin(v),
+        center[2] + radius * np.cos(v),
+        **kw,
+    )
 
 
 def scene_bounds(record: RunRecord, snaps: Sequence[ZoneSnapshot] = ()) -> np.ndarray:
@@ -337,8 +416,14 @@ def scene_bounds(record: RunRecord, snaps: Sequence[ZoneSnapshot] = ()) -> np.nd
     for body in sc.bodies:
         r = body.side / 2.0
         top = min(body.height, z_top)
-        pts.append(np.array([[body.center[0] - r, body.center[1] - r, 0.0],
-                             [body.center[0] + r, body.center[1] + r, top]]))
+        pts.append(
+            np.array(
+                [
+                    [body.center[0] - r, body.center[1] - r, 0.0],
+                    [body.center[0] + r, body.center[1] + r, top],
+                ]
+            )
+        )
     for s in sc.spheres:
         pts.append(np.asarray(s.center) + np.array([[-1.0], [1.0]]) * s.radius)
     for snap in snaps:
@@ -348,8 +433,9 @@ def scene_bounds(record: RunRecord, snaps: Sequence[ZoneSnapshot] = ()) -> np.nd
     return np.stack([allp.min(axis=0), allp.max(axis=0)])
 
 
-def _equal_limits(lo: np.ndarray, hi: np.ndarray, *, pad: float = 0.03,
-                  min_z_ratio: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
+def _equal_limits(
+    lo: np.ndarray, hi: np.ndarray, *, pad: float = 0.03, min_z_ratio: float = 0.2
+) -> tuple[np.ndarray, np.ndarray]:
     """Limits hugging [lo, hi] with a small pad; a flat scene's z range is widened (about its
     middle) to min_z_ratio of the horizontal span so the view does not collapse."""
     span = np.maximum(hi - lo, 1e-3)
@@ -372,7 +458,7 @@ def figure_trajectories_3d(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -
     ax = cast(Axes3D, fig.add_axes((0.0, 0.0, 1.0, 1.0), projection="3d", proj_type="ortho"))
     colors = agent_colors(record.n_agents)
     z_top = sc.limits.altitude[1]
-    for body, sensed in zip(sc.bodies, sc.sensed):
+    for body, sensed in zip(sc.bodies, sc.sensed, strict=False):
         h = min(body.height, z_top)
         alpha = 0.35 if sensed else 0.15
         if isinstance(body, Cylinder):
@@ -380,36 +466,78 @@ def figure_trajectories_3d(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -
         else:
             _box_3d(ax, body, h, alpha)
     for s in sc.spheres:
-        _sphere_3d(ax, s.center, s.radius, color="0.45", linewidth=0.4,
-                   alpha=0.6 if s.physical else 0.3, linestyle="-" if s.physical else ":")
+        _sphere_3d(
+            ax,
+            s.center,
+            s.radius,
+            color="0.45",
+            linewidth=0.4,
+            alpha=0.6 if s.physical else 0.3,
+            linestyle="-" if s.physical else ":",
+        )
     p = record.positions
     if record.n_agents > SWARM_AGENTS:  # one artist per kind, not per agent: seconds, not minutes
         paths = Line3DCollection(list(p.transpose(1, 0, 2)), colors=colors, linewidths=0.6)
         ax.add_collection3d(paths)
         for point, marker, size in ((p[0], "o", 4), (sc.goals, "x", 6)):
-            ax.scatter(point[:, 0], point[:, 1], point[:, 2], color=colors, marker=marker, s=size,
-                       depthshade=False)
+            ax.scatter(
+                point[:, 0],
+                point[:, 1],
+                point[:, 2],
+                color=colors,
+                marker=marker,
+                s=size,
+                depthshade=False,
+            )
     for i in range(record.n_agents if record.n_agents <= SWARM_AGENTS else 0):
         ax.plot(p[:, i, 0], p[:, i, 1], p[:, i, 2], color=colors[i], linewidth=1.2)
         for point, marker, size in ((p[0, i], "o", 14), (sc.goals[i], "x", 22)):
-            ax.scatter(point[0], point[1], point[2], color=colors[i], marker=marker, s=size,
-                       depthshade=False)
+            ax.scatter(
+                point[0],
+                point[1],
+                point[2],
+                color=colors[i],
+                marker=marker,
+                s=size,
+                depthshade=False,
+            )
     for k, snap in enumerate(snaps):
-        for i, c in zip(snap.agents, snap.positions):
-            _sphere_3d(ax, c, float(sc.r_pz[i]), color=colors[i], linewidth=0.5, alpha=0.55,
-                       linestyle=zone_dash(k))
-            ax.scatter(c[0], c[1], c[2], color=colors[i], edgecolor="k", s=30, depthshade=False,
-                       zorder=5)
-    ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]),
-           xlabel="x (m)", ylabel="y (m)", zlabel="z (m)")
+        for i, c in zip(snap.agents, snap.positions, strict=False):
+            _sphere_3d(
+                ax,
+                c,
+                float(sc.r_pz[i]),
+                color=colors[i],
+                linewidth=0.5,
+                alpha=0.55,
+                linestyle=zone_dash(k),
+            )
+            ax.scatter(
+                c[0], c[1], c[2], color=colors[i], edgecolor="k", s=30, depthshade=False, zorder=5
+            )
+    ax.set(
+        xlim=(lo[0], hi[0]),
+        ylim=(lo[1], hi[1]),
+        zlim=(lo[2], hi[2]),
+        xlabel="x (m)",
+        ylabel="y (m)",
+        zlabel="z (m)",
+    )
     ax.set_box_aspect(tuple(hi - lo))
     ax.view_init(elev=28, azim=-60)
     ax.tick_params(labelsize="small", pad=0)
     for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
         axis.set_major_locator(MaxNLocator(5 if axis is not ax.zaxis else 4))
     handles, labels = key_handles(record, snaps, prisms=False)
-    _keys_around_box(fig, ax, record, colors, handles, labels,
-                     title=f"{sc.name} ({record.formulation} / {record.solver})")
+    _keys_around_box(
+        fig,
+        ax,
+        record,
+        colors,
+        handles,
+        labels,
+        title=f"{sc.name} ({record.formulation} / {record.solver})",
+    )
     return fig
 
 
@@ -426,25 +554,48 @@ def box_3d_extent(ax) -> Bbox:
     return Bbox.union(boxes)
 
 
-def _keys_around_box(fig: Figure, ax, record: RunRecord, colors: list, handles: list,
-                     labels: list[str], *, title: str, gap: float = 0.015) -> None:
+def _keys_around_box(
+    fig: Figure,
+    ax,
+    record: RunRecord,
+    colors: list,
+    handles: list,
+    labels: list[str],
+    *,
+    title: str,
+    gap: float = 0.015,
+) -> None:
     """Title above the projected 3D box, agents (legend or colour bar) at its right, the key
     below it: placed from the drawn box, so cropping to the content leaves no empty margin."""
     fig.draw_without_rendering()
     (x0, y0), (x1, y1) = fig.transFigure.inverted().transform(box_3d_extent(ax).get_points())
     fig.text((x0 + x1) / 2, y1 + gap, title, ha="center", va="bottom", fontsize="medium")
     if record.n_agents <= LEGEND_MAX_AGENTS:
-        fig.legend([Line2D([], [], color=c, linewidth=1.6) for c in colors], record.ids,
-                   loc="upper left", bbox_to_anchor=(x1 + gap, y1), fontsize="small",
-                   frameon=False, borderaxespad=0.0)
+        fig.legend(
+            [Line2D([], [], color=c, linewidth=1.6) for c in colors],
+            record.ids,
+            loc="upper left",
+            bbox_to_anchor=(x1 + gap, y1),
+            fontsize="small",
+            frameon=False,
+            borderaxespad=0.0,
+        )
     else:
         h = y1 - y0
-        _agent_colorbar(fig, record, colors, cax=fig.add_axes((x1 + 2 * gap, y0 + 0.1 * h,
-                                                                0.022, 0.8 * h)))
+        _agent_colorbar(
+            fig, record, colors, cax=fig.add_axes((x1 + 2 * gap, y0 + 0.1 * h, 0.022, 0.8 * h))
+        )
     if handles:
-        fig.legend(handles, labels, loc="upper center", bbox_to_anchor=((x0 + x1) / 2, y0 - gap),
-                   ncols=min(3, len(handles)), fontsize="small", frameon=False,
-                   borderaxespad=0.0)
+        fig.legend(
+            handles,
+            labels,
+            loc="upper center",
+            bbox_to_anchor=((x0 + x1) / 2, y0 - gap),
+            ncols=min(3, len(handles)),
+            fontsize="small",
+            frameon=False,
+            borderaxespad=0.0,
+        )
 
 
 # ------------------------------------------------------------------------------- top view
@@ -454,18 +605,33 @@ def draw_obstacles_2d(ax: Axes, record: RunRecord) -> None:
     """Obstacles filled (lighter when not sensed), protected prisms dashed (the rotating square
     C_pz sweeps a circle of radius L_pz/2), spheres as circles (dotted: not physical)."""
     sc = record.scenario
-    for body, sensed in zip(sc.bodies, sc.sensed):
+    for body, sensed in zip(sc.bodies, sc.sensed, strict=False):
         fc = OBSTACLE_GREY if sensed else "0.82"
         if isinstance(body, Cylinder):
             ax.add_patch(Circle(_xy(body.center), body.radius, facecolor=fc, edgecolor="0.3"))
         else:
             ax.add_patch(Polygon(box_corners(body), closed=True, facecolor=fc, edgecolor="0.3"))
         if sensed:
-            ax.add_patch(Circle(_xy(body.center), body.side / 2.0, fill=False,
-                                linestyle="--", edgecolor=PRISM_GREY, linewidth=0.9))
+            ax.add_patch(
+                Circle(
+                    _xy(body.center),
+                    body.side / 2.0,
+                    fill=False,
+                    linestyle="--",
+                    edgecolor=PRISM_GREY,
+                    linewidth=0.9,
+                )
+            )
     for s in sc.spheres:
-        ax.add_patch(Circle(_xy(s.center), s.radius, fill=False, edgecolor="0.35",
-                            linestyle="-" if s.physical else ":"))
+        ax.add_patch(
+            Circle(
+                _xy(s.center),
+                s.radius,
+                fill=False,
+                edgecolor="0.35",
+                linestyle="-" if s.physical else ":",
+            )
+        )
 
 
 def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figure:
@@ -487,9 +653,17 @@ def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figur
         ax.plot(*p[0, i, :2], "o", color=colors[i], markersize=4)
         ax.plot(*sc.goals[i, :2], "x", color=colors[i], markersize=6)
     for k, snap in enumerate(snaps):
-        for i, c in zip(snap.agents, snap.positions):
-            ax.add_patch(Circle(_xy(c), float(sc.r_pz[i]), fill=False, edgecolor=colors[i],
-                                linewidth=0.9, linestyle=zone_dash(k)))
+        for i, c in zip(snap.agents, snap.positions, strict=False):
+            ax.add_patch(
+                Circle(
+                    _xy(c),
+                    float(sc.r_pz[i]),
+                    fill=False,
+                    edgecolor=colors[i],
+                    linewidth=0.9,
+                    linestyle=zone_dash(k),
+                )
+            )
             ax.plot(*c[:2], "o", color=colors[i], markeredgecolor="k", markersize=6)
     lo, hi = scene_bounds(record, snaps)
     pad = 0.03 * max(hi[0] - lo[0], hi[1] - lo[1], 1e-3)
@@ -508,8 +682,16 @@ def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figur
 # ------------------------------------------------------------------------------ distances
 
 
-def _distance_figure(record: RunRecord, d: np.ndarray, closest: Approach, other: str, *,
-                     what: str, ylabel: str, lines: dict[float, str]) -> Figure:
+def _distance_figure(
+    record: RunRecord,
+    d: np.ndarray,
+    closest: Approach,
+    other: str,
+    *,
+    what: str,
+    ylabel: str,
+    lines: dict[float, str],
+) -> Figure:
     """Per-vehicle distance curves d (samples, agents), the closest approach marked with the
     summary's figure, and horizontal reference lines {value: label}."""
     fig = new_figure((7.0, 4.2))
@@ -525,8 +707,13 @@ def _distance_figure(record: RunRecord, d: np.ndarray, closest: Approach, other:
     name = record.ids[closest.agent]
     handles.append(ax.plot(closest.time, closest.distance, "k.", markersize=9)[0])
     labels.append(f"closest approach ({name}, {other})")
-    ax.annotate(f"min {closest.distance:.3f} m", (closest.time, closest.distance),
-                textcoords="offset points", xytext=(6, -13), fontsize="small")
+    ax.annotate(
+        f"min {closest.distance:.3f} m",
+        (closest.time, closest.distance),
+        textcoords="offset points",
+        xytext=(6, -13),
+        fontsize="small",
+    )
     ax.set_ylim(bottom=0.0)
     ax.set_xlim(record.times[0], record.times[-1])
     ax.set_xlabel("time (s)")
@@ -544,17 +731,24 @@ def figure_vehicle_distance(record: RunRecord) -> Figure | None:
     if closest is None:
         return None
     lines = {float(r): f"r_pz = {r:g} m" for r in np.unique(record.scenario.r_pz)}
-    return _distance_figure(record, nearest_vehicle_distance(record), closest,
-                            record.ids[closest.other], what="vehicle-vehicle distance",
-                            ylabel="distance to nearest vehicle (m)", lines=lines)
+    return _distance_figure(
+        record,
+        nearest_vehicle_distance(record),
+        closest,
+        record.ids[closest.other],
+        what="vehicle-vehicle distance",
+        ylabel="distance to nearest vehicle (m)",
+        lines=lines,
+    )
 
 
 def obstacle_margins(record: RunRecord) -> np.ndarray:
     """The prism margin of every obstacle the metrics count (bodies, then physical spheres:
     radius + margin is their protected zone, so their margin is the gap to it)."""
     sc = record.scenario
-    return np.array([prism_margin(b) for b in sc.bodies]
-                    + [s.r_pz - s.radius for s in sc.spheres if s.physical])
+    return np.array(
+        [prism_margin(b) for b in sc.bodies] + [s.r_pz - s.radius for s in sc.spheres if s.physical]
+    )
 
 
 def figure_obstacle_distance(record: RunRecord) -> Figure | None:
@@ -571,9 +765,15 @@ def figure_obstacle_distance(record: RunRecord) -> Figure | None:
     else:
         lines = {float(m): f"prism margin = {m:g} m" for m in margins}
     other = physical_obstacle_names(record)[closest.other]
-    return _distance_figure(record, nearest_obstacle_distance(record), closest, other,
-                            what="vehicle-obstacle distance",
-                            ylabel="distance to nearest obstacle surface (m)", lines=lines)
+    return _distance_figure(
+        record,
+        nearest_obstacle_distance(record),
+        closest,
+        other,
+        what="vehicle-obstacle distance",
+        ylabel="distance to nearest obstacle surface (m)",
+        lines=lines,
+    )
 
 
 # ---------------------------------------------------------------------------- file output
@@ -583,26 +783,30 @@ def _written(fig: Figure | None, path: str | Path, dpi: int) -> Path | None:
     return None if fig is None else save_figure(fig, path, dpi)
 
 
-def plot_trajectories_3d(record: RunRecord, path: str | Path, *, dpi: int = DEFAULT_DPI,
-                         zones: Zones = DEFAULT_ZONES) -> Path:
+def plot_trajectories_3d(
+    record: RunRecord, path: str | Path, *, dpi: int = DEFAULT_DPI, zones: Zones = DEFAULT_ZONES
+) -> Path:
     """Write :func:`figure_trajectories_3d` to ``path`` (.png, .pdf or .svg)."""
     return save_figure(figure_trajectories_3d(record, zones=zones), path, dpi)
 
 
-def plot_top_view(record: RunRecord, path: str | Path, *, dpi: int = DEFAULT_DPI,
-                  zones: Zones = DEFAULT_ZONES) -> Path:
+def plot_top_view(
+    record: RunRecord, path: str | Path, *, dpi: int = DEFAULT_DPI, zones: Zones = DEFAULT_ZONES
+) -> Path:
     """Write :func:`figure_top_view` to ``path`` (.png, .pdf or .svg)."""
     return save_figure(figure_top_view(record, zones=zones), path, dpi)
 
 
-def plot_vehicle_distance(record: RunRecord, path: str | Path, *,
-                          dpi: int = DEFAULT_DPI) -> Path | None:
+def plot_vehicle_distance(
+    record: RunRecord, path: str | Path, *, dpi: int = DEFAULT_DPI
+) -> Path | None:
     """Write :func:`figure_vehicle_distance` to ``path``; None (no file) for one vehicle."""
     return _written(figure_vehicle_distance(record), path, dpi)
 
 
-def plot_obstacle_distance(record: RunRecord, path: str | Path, *,
-                           dpi: int = DEFAULT_DPI) -> Path | None:
+def plot_obstacle_distance(
+    record: RunRecord, path: str | Path, *, dpi: int = DEFAULT_DPI
+) -> Path | None:
     """Write :func:`figure_obstacle_distance` to ``path``; None (no file) without a physical
     obstacle."""
     return _written(figure_obstacle_distance(record), path, dpi)
@@ -618,8 +822,14 @@ def skipped_plots(record: RunRecord) -> dict[str, str]:
     return out
 
 
-def write_plots(record: RunRecord, out_dir: str | Path, *, fmt: str = "png",
-                dpi: int = DEFAULT_DPI, zones: Zones = DEFAULT_ZONES) -> list[Path]:
+def write_plots(
+    record: RunRecord,
+    out_dir: str | Path,
+    *,
+    fmt: str = "png",
+    dpi: int = DEFAULT_DPI,
+    zones: Zones = DEFAULT_ZONES,
+) -> list[Path]:
     """All figures into ``out_dir`` as ``fmt`` (png, pdf, svg): trajectories_3d, top_view and,
     when they have something to show, vehicle_distance (two vehicles or more) and
     obstacle_distance (physical obstacles); :func:`skipped_plots` says which were left out.
@@ -629,8 +839,10 @@ def write_plots(record: RunRecord, out_dir: str | Path, *, fmt: str = "png",
     check_dpi(dpi)
     zones = zone_snapshots(record, zones)  # once for all figures; bad zones fail here
     out = Path(out_dir)
-    written = [plot_trajectories_3d(record, out / f"trajectories_3d.{fmt}", dpi=dpi, zones=zones),
-               plot_top_view(record, out / f"top_view.{fmt}", dpi=dpi, zones=zones),
-               plot_vehicle_distance(record, out / f"vehicle_distance.{fmt}", dpi=dpi),
-               plot_obstacle_distance(record, out / f"obstacle_distance.{fmt}", dpi=dpi)]
+    written = [
+        plot_trajectories_3d(record, out / f"trajectories_3d.{fmt}", dpi=dpi, zones=zones),
+        plot_top_view(record, out / f"top_view.{fmt}", dpi=dpi, zones=zones),
+        plot_vehicle_distance(record, out / f"vehicle_distance.{fmt}", dpi=dpi),
+        plot_obstacle_distance(record, out / f"obstacle_distance.{fmt}", dpi=dpi),
+    ]
     return [p for p in written if p is not None]

@@ -4,7 +4,14 @@
 ``rvo23d`` module of the optional ``baselines`` extra (package jt-pyrvo23d). Importing this
 package does not import ``rvo23d``; :func:`rvo2.available` says whether it is installed.
 """
+
 from .rvo2 import available as rvo2_available
 from .rvo2 import run_rvo2, sphere_swap_scenario, summarize_record, summarize_rvo2
 
-__all__ = ["rvo2_available", "run_rvo2", "sphere_swap_scenario", "summarize_record", "summarize_rvo2"]
+__all__ = [
+    "rvo2_available",
+    "run_rvo2",
+    "sphere_swap_scenario",
+    "summarize_record",
+    "summarize_rvo2",
+]

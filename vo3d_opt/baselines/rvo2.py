@@ -38,6 +38,7 @@ that decided in that step, giving ``decision_times`` comparable with our per-age
 reports no infeasibility, so its decisions carry the status ``"rvo2"`` and
 :func:`summarize_rvo2` reports ``fallbacks`` as ``None`` (unknown), not 0.
 """
+
 from __future__ import annotations
 
 import math
@@ -68,8 +69,10 @@ def _rvo23d():
     try:
         import rvo23d
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError("RVO2-3D baseline needs the 'rvo23d' module: "
-                          "pip install 'vo3d-opt[baselines]' (package jt-pyrvo23d)") from exc
+        raise ImportError(
+            "RVO2-3D baseline needs the 'rvo23d' module: "
+            "pip install 'vo3d-opt[baselines]' (package jt-pyrvo23d)"
+        ) from exc
     return rvo23d
 
 
@@ -92,12 +95,20 @@ class RVO2Step:
 
     formulation = FORMULATION
 
-    def __init__(self, sc: Scenario, *, time_horizon: float | None = None,
-                 max_neighbors: int | None = None, radius_factor: float = 0.5) -> None:
+    def __init__(
+        self,
+        sc: Scenario,
+        *,
+        time_horizon: float | None = None,
+        max_neighbors: int | None = None,
+        radius_factor: float = 0.5,
+    ) -> None:
         rvo23d = _rvo23d()
         if sc.obstacles or sc.spheres:
-            raise ValueError(f"{sc.name}: the RVO2-3D baseline runs agent-only scenarios "
-                             "(no obstacles, no spheres)")
+            raise ValueError(
+                f"{sc.name}: the RVO2-3D baseline runs agent-only scenarios "
+                "(no obstacles, no spheres)"
+            )
         n, dt = sc.n_agents, float(sc.dt)
         horizon = default_time_horizon(sc) if time_horizon is None else float(time_horizon)
         if not (math.isfinite(horizon) and horizon > 0):
@@ -108,11 +119,24 @@ class RVO2Step:
         self.vrange = float(sc.sensing.vehicle_range)
         self.horizon, self.radii, self.vmax = horizon, sc.r_pz * radius_factor, sc.max_speed
         self.solver = f"rvo23d {version()}"
-        self.sim = rvo23d.PyRVOSimulator(dt, self.vrange, self.neighbours, horizon,
-                                         float(self.radii.max()), float(self.vmax.max()))
+        self.sim = rvo23d.PyRVOSimulator(
+            dt,
+            self.vrange,
+            self.neighbours,
+            horizon,
+            float(self.radii.max()),
+            float(self.vmax.max()),
+        )
         for i in range(n):
-            self.sim.addAgent(tuple(float(c) for c in sc.starts[i]), self.vrange, self.neighbours,
-                              horizon, float(self.radii[i]), float(self.vmax[i]), (0.0, 0.0, 0.0))
+            self.sim.addAgent(
+                tuple(float(c) for c in sc.starts[i]),
+                self.vrange,
+                self.neighbours,
+                horizon,
+                float(self.radii[i]),
+                float(self.vmax[i]),
+                (0.0, 0.0, 0.0),
+            )
         self.frozen = np.zeros(n, dtype=bool)
         self.step_times: list[float] = []
 
@@ -132,25 +156,41 @@ class RVO2Step:
         self.step_times.append(elapsed)
         u = np.array([sim.getAgentVelocity(i) for i in range(n)], dtype=float)
         share = np.where(snap.deciding, elapsed / max(1, int(snap.deciding.sum())), np.nan)
-        return StepDecision(commands=u, statuses=np.where(snap.deciding, STATUS, ""),
-                            decision_times=share, solve_times=share)
+        return StepDecision(
+            commands=u,
+            statuses=np.where(snap.deciding, STATUS, ""),
+            decision_times=share,
+            solve_times=share,
+        )
 
     def extra(self) -> dict[str, Any]:
         radius = self.radii.tolist() if len(np.unique(self.radii)) > 1 else float(self.radii[0])
-        return {"time_horizon": self.horizon, "max_neighbors": self.neighbours, "radius": radius,
-                "neighbor_dist": self.vrange, "step_times": np.array(self.step_times)}
+        return {
+            "time_horizon": self.horizon,
+            "max_neighbors": self.neighbours,
+            "radius": radius,
+            "neighbor_dist": self.vrange,
+            "step_times": np.array(self.step_times),
+        }
 
 
-def run_rvo2(scenario: Scenario | str, *, time_horizon: float | None = None,
-             max_neighbors: int | None = None, radius_factor: float = 0.5,
-             max_steps: int | None = None, progress: bool | None = None) -> RunRecord:
+def run_rvo2(
+    scenario: Scenario | str,
+    *,
+    time_horizon: float | None = None,
+    max_neighbors: int | None = None,
+    radius_factor: float = 0.5,
+    max_steps: int | None = None,
+    progress: bool | None = None,
+) -> RunRecord:
     """Fly an agent-only scenario with RVO2-3D in our simulation loop; returns a
     :class:`RunRecord` (formulation ``"rvo2-3d"``). ``radius_factor`` scales r_pz into RVO2's
     agent radius (0.5: pairs keep r_pz apart). ``max_steps`` caps the control steps like
     ``Simulator.run``."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    step = RVO2Step(sc, time_horizon=time_horizon, max_neighbors=max_neighbors,
-                    radius_factor=radius_factor)
+    step = RVO2Step(
+        sc, time_horizon=time_horizon, max_neighbors=max_neighbors, radius_factor=radius_factor
+    )
     return fly(sc, step, progress=progress, max_steps=max_steps)
 
 
@@ -162,7 +202,9 @@ def summarize_record(record: RunRecord) -> dict[str, Any]:
     t = record.decision_times[record.decided]
     t = t[np.isfinite(t)]
     out["compute_time_per_agent_step_us"] = float(t.sum() / t.size * 1e6) if t.size else None
-    out["steps_capped"] = bool(record.steps < record.scenario.n_steps and not record.arrived[-1].all())
+    out["steps_capped"] = bool(
+        record.steps < record.scenario.n_steps and not record.arrived[-1].all()
+    )
     return out
 
 
@@ -194,9 +236,18 @@ def _min_spacing(points: np.ndarray) -> float:
     return float(d[:, 1].min())
 
 
-def sphere_swap_scenario(n: int, *, r_pz: float = 8.0, spacing: float = 2.0, dt: float = 0.2,
-                         v_max: float = 4.0, vehicle_range: float = 55.0, radius: float = 0.5,
-                         floor: float = 5.0, max_time: float | None = None) -> Scenario:
+def sphere_swap_scenario(
+    n: int,
+    *,
+    r_pz: float = 8.0,
+    spacing: float = 2.0,
+    dt: float = 0.2,
+    v_max: float = 4.0,
+    vehicle_range: float = 55.0,
+    radius: float = 0.5,
+    floor: float = 5.0,
+    max_time: float | None = None,
+) -> Scenario:
     """An antipodal swap of ``n`` agents on a Fibonacci sphere (a 3D circle swap).
 
     The sphere's radius grows with n so that neighbouring starts (and goals) are at least
@@ -221,14 +272,20 @@ def sphere_swap_scenario(n: int, *, r_pz: float = 8.0, spacing: float = 2.0, dt:
     data = {
         "name": f"sphere-swap-{n}",
         "description": f"{n} agents on a sphere of radius {R:g} m swap to their antipodes "
-                       f"(generated by vo3d_opt.baselines.rvo2.sphere_swap_scenario).",
+        f"(generated by vo3d_opt.baselines.rvo2.sphere_swap_scenario).",
         "dt": float(dt),
         "max_time": float(max_time),
         "goal_tolerance": 1.0,
         "limits": {"speed": [0.0, float(v_max)], "altitude": [0.0, float(2 * R + 2 * floor)]},
         "sensing": {"vehicle_range": float(vehicle_range), "obstacle_range": float(vehicle_range)},
         "defaults": {"r_pz": float(r_pz), "radius": float(radius), "max_speed": float(v_max)},
-        "agents": [{"id": f"u{i:0{width}d}", "start": [float(c) for c in starts[i]],
-                    "goal": [float(c) for c in goals[i]]} for i in range(n)],
+        "agents": [
+            {
+                "id": f"u{i:0{width}d}",
+                "start": [float(c) for c in starts[i]],
+                "goal": [float(c) for c in goals[i]],
+            }
+            for i in range(n)
+        ],
     }
     return scenario_from_dict(data, source=f"<sphere_swap_scenario({n})>")

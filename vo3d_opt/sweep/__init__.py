@@ -11,6 +11,7 @@ simulator), the metrics and the RVO2-3D baseline; nothing but the CLI imports it
 * :mod:`.stats`: Clopper–Pearson bounds and the sweep's summary;
 * :mod:`.output`: ``encounters.parquet``, ``summary.json``, plots and replayable failures.
 """
+
 from vo3d_opt.sweep.families import (
     FAMILIES,
     Draw,
@@ -26,7 +27,21 @@ from vo3d_opt.sweep.runner import SweepError, SweepResult, run_sweep
 from vo3d_opt.sweep.stats import clopper_pearson, event_rate, upper_bound
 
 __all__ = [
-    "FAMILIES", "Draw", "Encounter", "Family", "Method", "SweepError", "SweepResult",
-    "TIMING_COLUMNS", "clopper_pearson", "encounter_problems", "event_rate", "get_family",
-    "make_encounter", "register", "run_encounter", "run_sweep", "upper_bound",
+    "FAMILIES",
+    "Draw",
+    "Encounter",
+    "Family",
+    "Method",
+    "SweepError",
+    "SweepResult",
+    "TIMING_COLUMNS",
+    "clopper_pearson",
+    "encounter_problems",
+    "event_rate",
+    "get_family",
+    "make_encounter",
+    "register",
+    "run_encounter",
+    "run_sweep",
+    "upper_bound",
 ]

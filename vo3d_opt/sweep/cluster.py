@@ -7,6 +7,7 @@ with ``as_completed``). A task whose workers died (``KilledWorker`` after the sc
 allowed failures) or that failed in any other way becomes a row with its ``error``: no
 encounter is dropped and the loop goes on.
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -65,9 +66,14 @@ def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> It
             client.close()
         return
     with dask.config.set({"distributed.scheduler.allowed-failures": allowed_failures}):
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR,
-                               scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+        )
     try:
         with Client(cluster) as client:
             yield client
@@ -75,24 +81,33 @@ def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> It
         cluster.close()
 
 
-def _error_row(fam: Family, seed: int, index: int, method: Method,
-               exc: BaseException) -> dict[str, Any]:
-    return {"family": fam.name, "seed": seed, "index": index, "method": method.name,
-            "error": one_line(exc), "worker": None}
+def _error_row(
+    fam: Family, seed: int, index: int, method: Method, exc: BaseException
+) -> dict[str, Any]:
+    return {
+        "family": fam.name,
+        "seed": seed,
+        "index": index,
+        "method": method.name,
+        "error": one_line(exc),
+        "worker": None,
+    }
 
 
 def _tally(counts: dict[str, int], row: dict[str, Any]) -> None:
     counts["errors"] += row.get("error") is not None
     counts["collisions"] += (row.get("collisions") or 0) > 0
-    counts["intrusions"] += ((row.get("pz_intrusions") or 0)
-                             + (row.get("obstacle_pz_intrusions") or 0)) > 0
+    counts["intrusions"] += (
+        (row.get("pz_intrusions") or 0) + (row.get("obstacle_pz_intrusions") or 0)
+    ) > 0
 
 
-def submit_all(client: Client, fam: Family, seed: int, n: int, method: Method, in_flight: int,
-               bar: tqdm) -> list[dict[str, Any]]:
+def submit_all(
+    client: Client, fam: Family, seed: int, n: int, method: Method, in_flight: int, bar: tqdm
+) -> list[dict[str, Any]]:
     """Every encounter's row (in completion order), at most ``in_flight`` tasks at a time."""
     pending = iter(range(n))
-    index_of: dict[str, int] = {}
+    index_of: dict[Any, int] = {}  # a future's key (a str for client.submit) -> encounter
     done = as_completed()
     rows: list[dict[str, Any]] = []
     counts = {"collisions": 0, "intrusions": 0, "errors": 0}

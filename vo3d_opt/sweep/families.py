@@ -10,13 +10,14 @@ A draw is kept only when it is a *valid encounter* (:func:`encounter_problems`):
 accepts it, nobody starts inside a protected zone or prism, and the starts and goals of
 different agents are at least ``SEPARATION`` times the larger protected-zone radius apart (so
 that no intrusion is forced at a start or at a hovering goal), and no start or goal lies within
-``PRISM_CLEARANCE`` of an obstacle's protected prism. Otherwise the next draw from the *same* stream is tried, so the
-rejection is deterministic. ``max_time`` leaves every agent twice its straight-line flight time
-plus 30 s.
+``PRISM_CLEARANCE`` of an obstacle's protected prism. Otherwise the next draw from the *same*
+stream is tried, so the rejection is deterministic. ``max_time`` leaves every agent twice its
+straight-line flight time plus 30 s.
 
 A family is a function ``rng -> Draw`` registered with :func:`register`; a family built on
 another one (e.g. a ``group`` plus scenario keys) calls that one's function and edits the dict.
 """
+
 from __future__ import annotations
 
 import math
@@ -118,16 +119,26 @@ def schema_has(path: str) -> bool:
 FAMILIES: dict[str, Family] = {}
 
 
-def register(name: str, summary: str, *, obstacle_free: bool,
-             warm_keys: dict[str, Any] | None = None,
-             needs: tuple[str, ...] = ()) -> Callable[[Generator], Generator]:
+def register(
+    name: str,
+    summary: str,
+    *,
+    obstacle_free: bool,
+    warm_keys: dict[str, Any] | None = None,
+    needs: tuple[str, ...] = (),
+) -> Callable[[Generator], Generator]:
     """Decorator: register ``rng -> Draw`` as family ``name`` (``summary``: one line for
     ``vo3d sweep --list``; the rest as in :class:`Family`)."""
 
     def wrap(fn: Generator) -> Generator:
-        FAMILIES[name] = Family(name=name, summary=summary, generate=fn,
-                                obstacle_free=obstacle_free, warm_keys=dict(warm_keys or {}),
-                                needs=tuple(needs))
+        FAMILIES[name] = Family(
+            name=name,
+            summary=summary,
+            generate=fn,
+            obstacle_free=obstacle_free,
+            warm_keys=dict(warm_keys or {}),
+            needs=tuple(needs),
+        )
         return fn
 
     return wrap
@@ -141,8 +152,9 @@ def get_family(name: str | Family) -> Family:
     try:
         return FAMILIES[name]
     except KeyError:
-        raise ValueError(f"family: unknown {name!r} (expected one of {', '.join(FAMILIES)})") \
-            from None
+        raise ValueError(
+            f"family: unknown {name!r} (expected one of {', '.join(FAMILIES)})"
+        ) from None
 
 
 def encounter_rng(seed: int, index: int) -> np.random.Generator:
@@ -170,17 +182,26 @@ def make_encounter(family: str | Family, seed: int, index: int) -> Encounter:
         if draw is None:
             last = ["the generator rejected its own draw"]
             continue
-        data = {"name": name,
-                "description": f"Encounter {index} of the '{fam.name}' sweep family with seed "
-                               f"{seed} (regenerate: vo3d_opt.sweep.make_encounter("
-                               f"'{fam.name}', {seed}, {index})).",
-                **draw.scenario}
+        data = {
+            "name": name,
+            "description": f"Encounter {index} of the '{fam.name}' sweep family with seed "
+            f"{seed} (regenerate: vo3d_opt.sweep.make_encounter("
+            f"'{fam.name}', {seed}, {index})).",
+            **draw.scenario,
+        }
         last = encounter_problems(data, name)
         if not last:
-            return Encounter(family=fam.name, seed=int(seed), index=int(index), attempts=attempt,
-                             params=dict(draw.params), scenario=data)
-    raise RuntimeError(f"{name}: no valid encounter in {fam.max_attempts} draws "
-                       f"(last problem: {last[0]})")
+            return Encounter(
+                family=fam.name,
+                seed=int(seed),
+                index=int(index),
+                attempts=attempt,
+                params=dict(draw.params),
+                scenario=data,
+            )
+    raise RuntimeError(
+        f"{name}: no valid encounter in {fam.max_attempts} draws (last problem: {last[0]})"
+    )
 
 
 def encounter_problems(data: dict[str, Any], source: str = "<encounter>") -> list[str]:
@@ -201,11 +222,14 @@ def encounter_problems(data: dict[str, Any], source: str = "<encounter>") -> lis
         problems.append(f"points of agents {owner[a]} and {owner[b]} are {d[a, b]:.2f} m apart")
     for k, body in enumerate(sc.bodies):
         horizontal = np.linalg.norm(points[:, :2] - np.asarray(body.center), axis=1)
-        near = (horizontal < body.side / 2 + PRISM_CLEARANCE) \
-            & (points[:, 2] < body.prism_height + PRISM_CLEARANCE)
+        near = (horizontal < body.side / 2 + PRISM_CLEARANCE) & (
+            points[:, 2] < body.prism_height + PRISM_CLEARANCE
+        )
         if near.any():
-            problems.append(f"a start or goal is within {PRISM_CLEARANCE:g} m of the protected "
-                            f"prism of obstacles[{k}]")
+            problems.append(
+                f"a start or goal is within {PRISM_CLEARANCE:g} m of the protected "
+                f"prism of obstacles[{k}]"
+            )
     return problems
 
 
@@ -224,31 +248,54 @@ def _max_time(starts: np.ndarray, goals: np.ndarray, speeds: np.ndarray) -> floa
     return float(math.ceil(TIME_FACTOR * flight.max() + TIME_SLACK))
 
 
-def _agents(starts: np.ndarray, goals: np.ndarray, r_pz: np.ndarray,
-            speeds: np.ndarray) -> list[dict[str, Any]]:
+def _agents(
+    starts: np.ndarray, goals: np.ndarray, r_pz: np.ndarray, speeds: np.ndarray
+) -> list[dict[str, Any]]:
     width = len(str(len(starts) - 1))
-    return [{"id": f"u{i:0{width}d}", "start": _r(starts[i]), "goal": _r(goals[i]),
-             "r_pz": _r(r_pz[i]), "max_speed": _r(speeds[i], SPEED_DECIMALS)}
-            for i in range(len(starts))]
+    return [
+        {
+            "id": f"u{i:0{width}d}",
+            "start": _r(starts[i]),
+            "goal": _r(goals[i]),
+            "r_pz": _r(r_pz[i]),
+            "max_speed": _r(speeds[i], SPEED_DECIMALS),
+        }
+        for i in range(len(starts))
+    ]
 
 
-def _base(*, v_max: float, altitude: tuple[float, float], starts: np.ndarray, goals: np.ndarray,
-          r_pz: np.ndarray, speeds: np.ndarray) -> dict[str, Any]:
+def _base(
+    *,
+    v_max: float,
+    altitude: tuple[float, float],
+    starts: np.ndarray,
+    goals: np.ndarray,
+    r_pz: np.ndarray,
+    speeds: np.ndarray,
+) -> dict[str, Any]:
     """The scenario keys every family shares (Table 1 sensing, radius 0.5 m, dt 0.2 s)."""
     return {
         "dt": DT,
         "max_time": _max_time(starts, goals, speeds),
         "goal_tolerance": 1.0,
-        "limits": {"speed": [0.0, float(v_max)], "altitude": [float(altitude[0]), float(altitude[1])]},
+        "limits": {
+            "speed": [0.0, float(v_max)],
+            "altitude": [float(altitude[0]), float(altitude[1])],
+        },
         "sensing": {"vehicle_range": 55.0, "obstacle_range": 55.0},
         "defaults": {"r_pz": 10.0, "radius": 0.5, "max_speed": float(v_max)},
         "agents": _agents(starts, goals, r_pz, speeds),
     }
 
 
-def _place(sample: Callable[[], np.ndarray], taken: list[np.ndarray], min_dist: float, *,
-           accept: Callable[[np.ndarray], bool] = lambda p: True, tries: int = 200
-           ) -> np.ndarray | None:
+def _place(
+    sample: Callable[[], np.ndarray],
+    taken: list[np.ndarray],
+    min_dist: float,
+    *,
+    accept: Callable[[np.ndarray], bool] = lambda p: True,
+    tries: int = 200,
+) -> np.ndarray | None:
     """A point from ``sample()`` at least ``min_dist`` from every point in ``taken`` and
     ``accept``-ed (None after ``tries`` failures: the caller then rejects its whole draw)."""
     for _ in range(tries):
@@ -270,17 +317,21 @@ def _unit_perpendicular(u: np.ndarray, angle: float) -> np.ndarray:
 
 # ------------------------------------------------------------------------------- pair
 
-PAIR_SPEED = (2.0, 6.0)          # m/s, each UAV's cruise (= max) speed, uniform
-PAIR_CLIMB = (-1.5, 1.5)         # m/s, each UAV's climb rate, uniform
-PAIR_R_PZ = (5.0, 12.0)          # m, each UAV's protected-zone radius, uniform
-PAIR_MISS = (0.0, 1.2)           # planned miss distance / max(r_pz), uniform
-PAIR_T_CPA = (20.0, 40.0)        # s from the start to the planned closest approach, uniform
-PAIR_T_AFTER = (10.0, 30.0)      # s flown past it before the goal, uniform per UAV
-PAIR_CPA_ALTITUDE = 100.0        # m; altitude range [0, 200] m
+PAIR_SPEED = (2.0, 6.0)  # m/s, each UAV's cruise (= max) speed, uniform
+PAIR_CLIMB = (-1.5, 1.5)  # m/s, each UAV's climb rate, uniform
+PAIR_R_PZ = (5.0, 12.0)  # m, each UAV's protected-zone radius, uniform
+PAIR_MISS = (0.0, 1.2)  # planned miss distance / max(r_pz), uniform
+PAIR_T_CPA = (20.0, 40.0)  # s from the start to the planned closest approach, uniform
+PAIR_T_AFTER = (10.0, 30.0)  # s flown past it before the goal, uniform per UAV
+PAIR_CPA_ALTITUDE = 100.0  # m; altitude range [0, 200] m
 
 
-@register("pair", "two UAVs on a random 3D crossing: headings, speeds 2-6 m/s, climb rates "
-                  "+-1.5 m/s, r_pz 5-12 m, planned miss distance 0-1.2 r_pz", obstacle_free=True)
+@register(
+    "pair",
+    "two UAVs on a random 3D crossing: headings, speeds 2-6 m/s, climb rates "
+    "+-1.5 m/s, r_pz 5-12 m, planned miss distance 0-1.2 r_pz",
+    obstacle_free=True,
+)
 def pair(rng: np.random.Generator) -> Draw:
     """Two UAVs flying straight at constant velocity would pass each other at a planned miss
     distance ``m`` at time ``t_cpa``: each UAV ``k`` has speed ``v_k``, climb rate ``c_k``,
@@ -300,7 +351,7 @@ def pair(rng: np.random.Generator) -> Draw:
     t_cpa = rng.uniform(*PAIR_T_CPA)
     t_after = rng.uniform(*PAIR_T_AFTER, 2)
 
-    horiz = np.sqrt(v ** 2 - climb ** 2)
+    horiz = np.sqrt(v**2 - climb**2)
     psi = np.array([psi1, psi1 + crossing])
     vel = np.stack([horiz * np.cos(psi), horiz * np.sin(psi), climb], axis=1)
     miss = miss_ratio * float(r_pz.max())
@@ -308,28 +359,43 @@ def pair(rng: np.random.Generator) -> Draw:
     cpa = np.array([0.0, 0.0, PAIR_CPA_ALTITUDE]) + np.outer([-0.5, 0.5], miss * n)
     starts = cpa - vel * t_cpa
     goals = cpa + vel * t_after[:, None]
-    scenario = _base(v_max=PAIR_SPEED[1], altitude=(0.0, 2.0 * PAIR_CPA_ALTITUDE), starts=starts,
-                     goals=goals, r_pz=r_pz, speeds=v)
-    params = {"speed_0": v[0], "speed_1": v[1], "climb_0": climb[0], "climb_1": climb[1],
-              "r_pz_0": r_pz[0], "r_pz_1": r_pz[1], "crossing_deg": math.degrees(crossing),
-              "miss_distance": miss, "miss_over_r_pz": miss_ratio, "t_cpa": t_cpa}
+    scenario = _base(
+        v_max=PAIR_SPEED[1],
+        altitude=(0.0, 2.0 * PAIR_CPA_ALTITUDE),
+        starts=starts,
+        goals=goals,
+        r_pz=r_pz,
+        speeds=v,
+    )
+    params = {
+        "speed_0": v[0],
+        "speed_1": v[1],
+        "climb_0": climb[0],
+        "climb_1": climb[1],
+        "r_pz_0": r_pz[0],
+        "r_pz_1": r_pz[1],
+        "crossing_deg": math.degrees(crossing),
+        "miss_distance": miss,
+        "miss_over_r_pz": miss_ratio,
+        "t_cpa": t_cpa,
+    }
     return Draw(params={k: float(x) for k, x in params.items()}, scenario=scenario)
 
 
 # ------------------------------------------------------------------------------ group
 
-GROUP_AGENTS = (3, 8)            # UAVs, uniform integer
-GROUP_OBSTACLES = (0, 6)         # obstacles, uniform integer; half cylinders, half boxes
-GROUP_RING = 60.0                # m: starts and goals on this circle around the origin
-GROUP_FIELD = 35.0               # m: obstacle centres uniform in [-35, 35]^2
+GROUP_AGENTS = (3, 8)  # UAVs, uniform integer
+GROUP_OBSTACLES = (0, 6)  # obstacles, uniform integer; half cylinders, half boxes
+GROUP_RING = 60.0  # m: starts and goals on this circle around the origin
+GROUP_FIELD = 35.0  # m: obstacle centres uniform in [-35, 35]^2
 GROUP_CYLINDER_RADIUS = (1.0, 5.0)
-GROUP_BOX_SIDE = (2.0, 10.0)     # each side, uniform; yaw uniform
-GROUP_HEIGHT = (20.0, 80.0)      # m; the ceiling is 40 m, so about 2/3 cannot be overflown
-GROUP_GAP = 10.0                 # m, at least, between two obstacles' protected prisms
+GROUP_BOX_SIDE = (2.0, 10.0)  # each side, uniform; yaw uniform
+GROUP_HEIGHT = (20.0, 80.0)  # m; the ceiling is 40 m, so about 2/3 cannot be overflown
+GROUP_GAP = 10.0  # m, at least, between two obstacles' protected prisms
 GROUP_R_PZ = (5.0, 10.0)
 GROUP_SPEED = (2.0, 5.0)
 GROUP_ALTITUDE = (0.0, 40.0)
-GROUP_Z = (5.0, 35.0)            # start and goal altitudes, uniform
+GROUP_Z = (5.0, 35.0)  # start and goal altitudes, uniform
 GROUP_TURN = math.radians(60.0)  # goal heading = start heading + 180 deg +- this, uniform
 
 
@@ -337,10 +403,19 @@ def _obstacle(rng: np.random.Generator) -> dict[str, Any]:
     centre = rng.uniform(-GROUP_FIELD, GROUP_FIELD, 2)
     height = rng.uniform(*GROUP_HEIGHT)
     if rng.random() < 0.5:
-        return {"type": "cylinder", "center": _r(centre), "radius": _r(rng.uniform(*GROUP_CYLINDER_RADIUS)),
-                "height": _r(height)}
-    return {"type": "box", "center": _r(centre), "size": _r(rng.uniform(*GROUP_BOX_SIDE, 2)),
-            "height": _r(height), "yaw": _r(rng.uniform(-math.pi, math.pi))}
+        return {
+            "type": "cylinder",
+            "center": _r(centre),
+            "radius": _r(rng.uniform(*GROUP_CYLINDER_RADIUS)),
+            "height": _r(height),
+        }
+    return {
+        "type": "box",
+        "center": _r(centre),
+        "size": _r(rng.uniform(*GROUP_BOX_SIDE, 2)),
+        "height": _r(height),
+        "yaw": _r(rng.uniform(-math.pi, math.pi)),
+    }
 
 
 def _prism_half_side(ob: dict[str, Any], margin: float = 2.0) -> float:
@@ -355,8 +430,11 @@ def _obstacles(rng: np.random.Generator, count: int) -> list[dict[str, Any]] | N
         for _ in range(200):
             ob = _obstacle(rng)
             c = np.asarray(ob["center"])
-            if all(np.linalg.norm(c - np.asarray(o["center"])) >= _prism_half_side(ob)
-                   + _prism_half_side(o) + GROUP_GAP for o in out):
+            if all(
+                np.linalg.norm(c - np.asarray(o["center"]))
+                >= _prism_half_side(ob) + _prism_half_side(o) + GROUP_GAP
+                for o in out
+            ):
                 out.append(ob)
                 break
         else:
@@ -364,25 +442,30 @@ def _obstacles(rng: np.random.Generator, count: int) -> list[dict[str, Any]] | N
     return out
 
 
-def _ring_trip(rng: np.random.Generator, taken: list[np.ndarray], need: float
-               ) -> tuple[np.ndarray, np.ndarray] | None:
+def _ring_trip(
+    rng: np.random.Generator, taken: list[np.ndarray], need: float
+) -> tuple[np.ndarray, np.ndarray] | None:
     """A start on the ring at a uniform heading and a goal across it (heading + 180 deg +-
     GROUP_TURN), altitudes uniform in GROUP_Z, ``need`` from each other and from ``taken``."""
+
     def at(heading: float) -> np.ndarray:
-        return np.array([GROUP_RING * math.cos(heading), GROUP_RING * math.sin(heading),
-                         rng.uniform(*GROUP_Z)])
+        return np.array(
+            [GROUP_RING * math.cos(heading), GROUP_RING * math.sin(heading), rng.uniform(*GROUP_Z)]
+        )
 
     s = _place(lambda: at(rng.uniform(-math.pi, math.pi)), taken, need)
     if s is None:
         return None
     heading = math.atan2(s[1], s[0])
-    g = _place(lambda: at(heading + math.pi + rng.uniform(-GROUP_TURN, GROUP_TURN)),
-               [*taken, s], need)
+    g = _place(
+        lambda: at(heading + math.pi + rng.uniform(-GROUP_TURN, GROUP_TURN)), [*taken, s], need
+    )
     return None if g is None else (s, g)
 
 
-def _ring_points(rng: np.random.Generator, n: int, r_pz: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray] | None:
+def _ring_points(
+    rng: np.random.Generator, n: int, r_pz: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
     """Starts on the ring at uniform headings, goals across it, all SEPARATION * r_pz apart."""
     taken: list[np.ndarray] = []
     starts, goals = np.zeros((n, 3)), np.zeros((n, 3))
@@ -396,8 +479,12 @@ def _ring_points(rng: np.random.Generator, n: int, r_pz: np.ndarray
     return starts, goals
 
 
-@register("group", "3-8 UAVs crossing a 60 m circle among 0-6 tall cylinders and boxes "
-                   "(r_pz 5-10 m, 2-5 m/s, ceiling 40 m)", obstacle_free=False)
+@register(
+    "group",
+    "3-8 UAVs crossing a 60 m circle among 0-6 tall cylinders and boxes "
+    "(r_pz 5-10 m, 2-5 m/s, ceiling 40 m)",
+    obstacle_free=False,
+)
 def group(rng: np.random.Generator) -> Draw | None:
     """``n`` UAVs (uniform 3-8) start on a circle of radius 60 m at uniform headings and
     altitudes 5-35 m and fly to the far side (heading + 180 deg +- 60 deg, altitude 5-35 m),
@@ -413,32 +500,46 @@ def group(rng: np.random.Generator) -> Draw | None:
     if obstacles is None or points is None:
         return None
     starts, goals = points
-    scenario = _base(v_max=GROUP_SPEED[1], altitude=GROUP_ALTITUDE, starts=starts, goals=goals,
-                     r_pz=r_pz, speeds=speeds)
+    scenario = _base(
+        v_max=GROUP_SPEED[1],
+        altitude=GROUP_ALTITUDE,
+        starts=starts,
+        goals=goals,
+        r_pz=r_pz,
+        speeds=speeds,
+    )
     scenario["obstacles"] = obstacles
     # protected prism (height + 2 m margin) up to the ceiling: it cannot be overflown
     tall = sum(o["height"] + 2.0 >= GROUP_ALTITUDE[1] for o in obstacles)
-    params = {"agents": n, "obstacles": m,
-              "cylinders": sum(o["type"] == "cylinder" for o in obstacles),
-              "boxes": sum(o["type"] == "box" for o in obstacles),
-              "obstacles_above_ceiling": int(tall),
-              "r_pz_min": float(r_pz.min()), "r_pz_max": float(r_pz.max()),
-              "speed_min": float(speeds.min()), "speed_max": float(speeds.max())}
+    params = {
+        "agents": n,
+        "obstacles": m,
+        "cylinders": sum(o["type"] == "cylinder" for o in obstacles),
+        "boxes": sum(o["type"] == "box" for o in obstacles),
+        "obstacles_above_ceiling": int(tall),
+        "r_pz_min": float(r_pz.min()),
+        "r_pz_max": float(r_pz.max()),
+        "speed_min": float(speeds.min()),
+        "speed_max": float(speeds.max()),
+    }
     return Draw(params=params, scenario=scenario)
 
 
 # ------------------------------------------------------------------------------ dense
 
-DENSE_AGENTS = (10, 24)          # UAVs, uniform integer
-DENSE_BOX = (60.0, 60.0, 30.0)   # m: starts and goals uniform in [-30, 30]^2 x [5, 35]
+DENSE_AGENTS = (10, 24)  # UAVs, uniform integer
+DENSE_BOX = (60.0, 60.0, 30.0)  # m: starts and goals uniform in [-30, 30]^2 x [5, 35]
 DENSE_FLOOR = 5.0
-DENSE_R_PZ = (3.0, 6.0)          # m, one value for the whole encounter, uniform
-DENSE_SPEED = (2.0, 4.0)         # m/s per UAV, uniform
-DENSE_MIN_TRIP = 20.0            # m, least start-goal distance
+DENSE_R_PZ = (3.0, 6.0)  # m, one value for the whole encounter, uniform
+DENSE_SPEED = (2.0, 4.0)  # m/s per UAV, uniform
+DENSE_MIN_TRIP = 20.0  # m, least start-goal distance
 
 
-@register("dense", "10-24 UAVs swapping places inside a 60 x 60 x 30 m box (r_pz 3-6 m, "
-                   "2-4 m/s)", obstacle_free=True)
+@register(
+    "dense",
+    "10-24 UAVs swapping places inside a 60 x 60 x 30 m box (r_pz 3-6 m, 2-4 m/s)",
+    obstacle_free=True,
+)
 def dense(rng: np.random.Generator) -> Draw | None:
     """``n`` UAVs (uniform 10-24), one r_pz for all (3-6 m), speeds 2-4 m/s each: starts and
     goals uniform in the box [-30, 30]^2 x [5, 35] m (altitude range 0-40 m), every start and
@@ -452,19 +553,35 @@ def dense(rng: np.random.Generator) -> Draw | None:
     starts, goals = np.zeros((n, 3)), np.zeros((n, 3))
     for i in range(n):
         s = _place(lambda: rng.uniform(lo, hi), taken, SEPARATION * r)
-        g = None if s is None else _place(
-            lambda: rng.uniform(lo, hi), taken, SEPARATION * r,
-            accept=lambda p: bool(np.linalg.norm(p - s) >= DENSE_MIN_TRIP))
-        if s is None or g is None:
+        if s is None:
+            return None
+        start: np.ndarray = s  # bound now: the lambda below runs inside this iteration
+
+        def far_enough(p: np.ndarray, start: np.ndarray = start) -> bool:
+            return bool(np.linalg.norm(p - start) >= DENSE_MIN_TRIP)
+
+        g = _place(lambda: rng.uniform(lo, hi), taken, SEPARATION * r, accept=far_enough)
+        if g is None:
             return None
         starts[i], goals[i] = s, g
         taken += [s, g]
     r_pz = np.full(n, r)
-    scenario = _base(v_max=DENSE_SPEED[1], altitude=(0.0, DENSE_FLOOR + DENSE_BOX[2] + 5.0),
-                     starts=starts, goals=goals, r_pz=r_pz, speeds=speeds)
+    scenario = _base(
+        v_max=DENSE_SPEED[1],
+        altitude=(0.0, DENSE_FLOOR + DENSE_BOX[2] + 5.0),
+        starts=starts,
+        goals=goals,
+        r_pz=r_pz,
+        speeds=speeds,
+    )
     volume = float(np.prod(DENSE_BOX))
-    params = {"agents": n, "r_pz": r, "speed_min": float(speeds.min()),
-              "speed_max": float(speeds.max()), "agents_per_1000m3": 1000.0 * n / volume}
+    params: dict[str, float | int | str] = {
+        "agents": n,
+        "r_pz": r,
+        "speed_min": float(speeds.min()),
+        "speed_max": float(speeds.max()),
+        "agents_per_1000m3": 1000.0 * n / volume,
+    }
     return Draw(params=params, scenario=scenario)
 
 
@@ -484,11 +601,15 @@ def _group_variant(rng: np.random.Generator) -> Draw | None:
     return Draw(params=dict(base.params), scenario=dict(base.scenario))
 
 
-LAGGED_TAU = (0.1, 1.0)          # s, first-order velocity time constant, uniform
+LAGGED_TAU = (0.1, 1.0)  # s, first-order velocity time constant, uniform
 
 
-@register("lagged", "a group encounter under first-order velocity dynamics, tau 0.1-1 s",
-          obstacle_free=False, warm_keys={"velocity_response_tau": 0.5})
+@register(
+    "lagged",
+    "a group encounter under first-order velocity dynamics, tau 0.1-1 s",
+    obstacle_free=False,
+    warm_keys={"velocity_response_tau": 0.5},
+)
 def lagged(rng: np.random.Generator) -> Draw | None:
     """A ``group`` draw flown under first-order velocity dynamics: every vehicle's velocity
     follows its command as ``v += (v_cmd - v) min(1, dt / tau)``, with one time constant
@@ -503,12 +624,13 @@ def lagged(rng: np.random.Generator) -> Draw | None:
     return draw
 
 
-INTRUDER_SPEED = (1.0, 4.0)      # m/s, the non-cooperative UAV's speed, uniform
+INTRUDER_SPEED = (1.0, 4.0)  # m/s, the non-cooperative UAV's speed, uniform
 INTRUDER_R_PZ = GROUP_R_PZ
 
 
-def _segment_clear_of_prisms(start: np.ndarray, goal: np.ndarray,
-                             obstacles: list[dict[str, Any]]) -> bool:
+def _segment_clear_of_prisms(
+    start: np.ndarray, goal: np.ndarray, obstacles: list[dict[str, Any]]
+) -> bool:
     """Whether the straight horizontal track start -> goal keeps PRISM_CLEARANCE from every
     obstacle's protected prism (conservative: as if every prism reached the ceiling)."""
     a, b = start[:2], goal[:2]
@@ -521,9 +643,13 @@ def _segment_clear_of_prisms(start: np.ndarray, goal: np.ndarray,
     return True
 
 
-@register("intruder", "a group encounter plus one non-cooperative UAV (avoids: false) "
-                      "crossing it straight at 1-4 m/s", obstacle_free=False,
-          needs=("agents.avoids",))
+@register(
+    "intruder",
+    "a group encounter plus one non-cooperative UAV (avoids: false) "
+    "crossing it straight at 1-4 m/s",
+    obstacle_free=False,
+    needs=("agents.avoids",),
+)
 def intruder(rng: np.random.Generator) -> Draw | None:
     """A ``group`` draw plus one more UAV, ``x0``, that flies straight to its goal and never
     avoids (``avoids: false``; the others see it and must keep clear). Its start is on the
@@ -543,26 +669,41 @@ def intruder(rng: np.random.Generator) -> Draw | None:
     if trip is None or not _segment_clear_of_prisms(*trip, draw.scenario["obstacles"]):
         return None
     start, goal = trip
-    agents = agents + [{"id": "x0", "start": _r(start), "goal": _r(goal), "r_pz": _r(r_pz),
-                        "max_speed": _r(speed, SPEED_DECIMALS), "avoids": False}]
+    agents = agents + [
+        {
+            "id": "x0",
+            "start": _r(start),
+            "goal": _r(goal),
+            "r_pz": _r(r_pz),
+            "max_speed": _r(speed, SPEED_DECIMALS),
+            "avoids": False,
+        }
+    ]
     flight = float(np.linalg.norm(goal - start)) / speed
     draw.scenario["agents"] = agents
-    draw.scenario["max_time"] = max(draw.scenario["max_time"],
-                                    float(math.ceil(TIME_FACTOR * flight + TIME_SLACK)))
+    draw.scenario["max_time"] = max(
+        draw.scenario["max_time"], float(math.ceil(TIME_FACTOR * flight + TIME_SLACK))
+    )
     draw.params.update({"intruder_speed": speed, "intruder_r_pz": r_pz})
     return draw
 
 
 ROTORPY_VEHICLE = "hummingbird"
-ROTORPY_WIND_TYPES = ("constant", "dryden")   # even odds
+ROTORPY_WIND_TYPES = ("constant", "dryden")  # even odds
 ROTORPY_WIND_SPEED = (0.0, 3.0)  # m/s, horizontal (mean) wind, uniform; direction uniform
 
 
-@register("rotorpy", "a group encounter flown by RotorPy quadrotors (hummingbird) in constant "
-                     "or Dryden wind, 0-3 m/s", obstacle_free=False,
-          warm_keys={"dynamics": {"model": "rotorpy", "vehicle": ROTORPY_VEHICLE},
-                     "wind": {"type": "dryden", "velocity": [1.0, 0.0, 0.0]}},
-          needs=("dynamics", "wind"))
+@register(
+    "rotorpy",
+    "a group encounter flown by RotorPy quadrotors (hummingbird) in constant "
+    "or Dryden wind, 0-3 m/s",
+    obstacle_free=False,
+    warm_keys={
+        "dynamics": {"model": "rotorpy", "vehicle": ROTORPY_VEHICLE},
+        "wind": {"type": "dryden", "velocity": [1.0, 0.0, 0.0]},
+    },
+    needs=("dynamics", "wind"),
+)
 def rotorpy(rng: np.random.Generator) -> Draw | None:
     """A ``group`` draw flown by RotorPy's ``hummingbird`` quadrotors (``dynamics: {model:
     rotorpy, vehicle: hummingbird}``) in wind: ``constant`` or ``dryden`` (turbulence about a
@@ -577,24 +718,35 @@ def rotorpy(rng: np.random.Generator) -> Draw | None:
     wind = [speed * math.cos(direction), speed * math.sin(direction), 0.0]
     draw.scenario["dynamics"] = {"model": "rotorpy", "vehicle": ROTORPY_VEHICLE}
     draw.scenario["wind"] = {"type": kind, "velocity": _r(wind)}
-    draw.params.update({"wind_type": kind, "wind_speed": speed,
-                        "wind_direction_deg": math.degrees(direction)})
+    draw.params.update(
+        {"wind_type": kind, "wind_speed": speed, "wind_direction_deg": math.degrees(direction)}
+    )
     return draw
 
 
-NOISY_POSITION = (0.0, 0.5)      # m, 1-sigma per axis, uniform
-NOISY_VELOCITY = (0.0, 0.3)      # m/s, 1-sigma per axis, uniform
-NOISY_LATENCY_STEPS = (0, 2)     # latency = k dt, k uniform integer: 0, 0.2 or 0.4 s
-NOISY_SEEDS = 2 ** 31            # the sensing seed, uniform in [0, 2^31)
+NOISY_POSITION = (0.0, 0.5)  # m, 1-sigma per axis, uniform
+NOISY_VELOCITY = (0.0, 0.3)  # m/s, 1-sigma per axis, uniform
+NOISY_LATENCY_STEPS = (0, 2)  # latency = k dt, k uniform integer: 0, 0.2 or 0.4 s
+NOISY_SEEDS = 2**31  # the sensing seed, uniform in [0, 2^31)
 
 
-@register("noisy", "a group encounter with Gaussian sensing noise (position 0-0.5 m, "
-                   "velocity 0-0.3 m/s) and latency 0-0.4 s", obstacle_free=False,
-          warm_keys={"sensing": {"vehicle_range": 55.0, "obstacle_range": 55.0,
-                                 "position_noise": 0.3, "velocity_noise": 0.2,
-                                 "latency": 0.2, "seed": 1}},
-          needs=("sensing.position_noise", "sensing.velocity_noise", "sensing.latency",
-                 "sensing.seed"))
+@register(
+    "noisy",
+    "a group encounter with Gaussian sensing noise (position 0-0.5 m, "
+    "velocity 0-0.3 m/s) and latency 0-0.4 s",
+    obstacle_free=False,
+    warm_keys={
+        "sensing": {
+            "vehicle_range": 55.0,
+            "obstacle_range": 55.0,
+            "position_noise": 0.3,
+            "velocity_noise": 0.2,
+            "latency": 0.2,
+            "seed": 1,
+        }
+    },
+    needs=("sensing.position_noise", "sensing.velocity_noise", "sensing.latency", "sensing.seed"),
+)
 def noisy(rng: np.random.Generator) -> Draw | None:
     """A ``group`` draw in which every sensed position and velocity carries Gaussian noise
     (1-sigma per axis: position uniform 0-0.5 m, velocity uniform 0-0.3 m/s) and is

@@ -6,6 +6,7 @@ summary, or the error it raised. It is a pure function of its arguments but for 
 columns (:data:`TIMING_COLUMNS`), which is why a sweep's results do not depend on how many
 workers ran it.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -24,8 +25,14 @@ from vo3d_opt.sweep.families import Family, get_family, make_encounter
 METHODS = ("vo3d", "rvo2")
 #: Columns that measure time or place, not behaviour: the only ones allowed to differ between
 #: two runs of the same encounters.
-TIMING_COLUMNS = ("decision_time_median_us", "decision_time_p99_us", "decision_time_max_us",
-                  "wall_time", "run_time", "worker")
+TIMING_COLUMNS = (
+    "decision_time_median_us",
+    "decision_time_p99_us",
+    "decision_time_max_us",
+    "wall_time",
+    "run_time",
+    "worker",
+)
 
 
 @dataclass(frozen=True)
@@ -39,6 +46,10 @@ class Method:
     solver: str | None = None
 
 
+#: The selector with its default formulation and solver.
+DEFAULT_METHOD = Method()
+
+
 def fly(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, Any]]:
     """Fly one scenario with the method; its record and its §3 summary.
 
@@ -50,8 +61,9 @@ def fly(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, Any]]:
         from vo3d_opt.baselines import run_rvo2, summarize_rvo2
 
         r_pz = float(sc.r_pz.max())
-        equal = sc.model_copy(update={"agents": [a.model_copy(update={"r_pz": r_pz})
-                                                  for a in sc.agents]})
+        equal = sc.model_copy(
+            update={"agents": [a.model_copy(update={"r_pz": r_pz}) for a in sc.agents]}
+        )
         record = dataclasses.replace(run_rvo2(equal, progress=False), scenario=sc)
         return record, summarize_rvo2(record)
     sel, formulation, solver = scenario_selector(sc, method.formulation, method.solver)
@@ -81,16 +93,22 @@ def _worker_name() -> str:
         return "local"
 
 
-def run_encounter(family: str | Family, seed: int, index: int,
-                  method: Method = Method()) -> dict[str, Any]:
+def run_encounter(
+    family: str | Family, seed: int, index: int, method: Method = Method()
+) -> dict[str, Any]:
     """Regenerate and fly encounter ``index``; one row: family, seed, index, method, attempts,
     ``param_*``, the summary's keys (``status_counts`` as JSON text),
     ``min_normalised_distance``, ``error`` (None, or the exception in one line), ``run_time``
     and ``worker``. Never raises for a failing encounter: the error is the row's."""
     t0 = time.perf_counter()
     fam = get_family(family)
-    row: dict[str, Any] = {"family": fam.name, "seed": int(seed), "index": int(index),
-                           "method": method.name, "error": None}
+    row: dict[str, Any] = {
+        "family": fam.name,
+        "seed": int(seed),
+        "index": int(index),
+        "method": method.name,
+        "error": None,
+    }
     try:
         enc = make_encounter(fam, seed, index)
         row["attempts"] = enc.attempts
@@ -107,11 +125,15 @@ def run_encounter(family: str | Family, seed: int, index: int,
 
 
 _WARM = {
-    "name": "sweep-warm-up", "dt": 0.2, "max_time": 2.0,
+    "name": "sweep-warm-up",
+    "dt": 0.2,
+    "max_time": 2.0,
     "limits": {"speed": [0.0, 4.0], "altitude": [0.0, 40.0]},
     "defaults": {"r_pz": 5.0},
-    "agents": [{"id": "a", "start": [-6.0, 0.0, 20.0], "goal": [6.0, 0.0, 20.0]},
-               {"id": "b", "start": [6.0, 0.2, 20.0], "goal": [-6.0, 0.2, 20.0]}],
+    "agents": [
+        {"id": "a", "start": [-6.0, 0.0, 20.0], "goal": [6.0, 0.0, 20.0]},
+        {"id": "b", "start": [6.0, 0.2, 20.0], "goal": [-6.0, 0.2, 20.0]},
+    ],
 }
 _WARM_OBSTACLE = {"type": "cylinder", "center": [0.0, 12.0], "radius": 1.0, "height": 30.0}
 

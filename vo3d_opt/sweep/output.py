@@ -12,6 +12,7 @@
   the encounter, which ``vo3d run`` flies with vo3d and ``vo3d_opt.baselines.run_rvo2`` with
   RVO2-3D).
 """
+
 from __future__ import annotations
 
 import json
@@ -37,9 +38,13 @@ def failed_rows(rows: pd.DataFrame) -> pd.DataFrame:
     def col(name: str) -> pd.Series:
         return rows[name].fillna(0)
 
-    bad = (col("collisions") > 0) | (col("pz_intrusions") > 0) \
-        | (col("obstacle_pz_intrusions") > 0) | (col("reached") < col("agents")) \
+    bad = (
+        (col("collisions") > 0)
+        | (col("pz_intrusions") > 0)
+        | (col("obstacle_pz_intrusions") > 0)
+        | (col("reached") < col("agents"))
         | (col("altitude_violations") + col("speed_violations") > 0)
+    )
     return rows[bad & rows["error"].isna()]
 
 
@@ -56,15 +61,19 @@ def failure_scenario(result: SweepResult, index: int) -> dict[str, Any]:
 
 
 def _header(result: SweepResult, row: pd.Series) -> str:
-    lines = [f"Encounter {row['index']} of the '{result.family.name}' sweep (seed {result.seed}, "
-             f"method {result.method.name}): collisions {int(row['collisions'])}, "
-             f"pz_intrusions {int(row['pz_intrusions'])}, obstacle_pz_intrusions "
-             f"{int(row['obstacle_pz_intrusions'])}, reached {int(row['reached'])} of "
-             f"{int(row['agents'])}, altitude_violations {int(row['altitude_violations'])}, "
-             f"speed_violations {int(row['speed_violations'])}."]
+    lines = [
+        f"Encounter {row['index']} of the '{result.family.name}' sweep (seed {result.seed}, "
+        f"method {result.method.name}): collisions {int(row['collisions'])}, "
+        f"pz_intrusions {int(row['pz_intrusions'])}, obstacle_pz_intrusions "
+        f"{int(row['obstacle_pz_intrusions'])}, reached {int(row['reached'])} of "
+        f"{int(row['agents'])}, altitude_violations {int(row['altitude_violations'])}, "
+        f"speed_violations {int(row['speed_violations'])}."
+    ]
     if result.method.name == "rvo2":
-        lines.append("Flown by RVO2-3D in the sweep: replay with vo3d_opt.baselines.run_rvo2; "
-                     "`vo3d run` flies it with vo3d instead.")
+        lines.append(
+            "Flown by RVO2-3D in the sweep: replay with vo3d_opt.baselines.run_rvo2; "
+            "`vo3d run` flies it with vo3d instead."
+        )
     else:
         lines.append("Replay: vo3d run THIS_FILE --json (the same summary but timing).")
     return "".join(f"# {line}\n" for line in lines)

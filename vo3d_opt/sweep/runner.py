@@ -5,6 +5,7 @@ one) flies a tiny encounter with the same method, so the compiled kernels are lo
 numba's cache and no encounter's timing pays for it. ``wall_time`` is the time from the first
 submission to the last row; ``setup_time`` the cluster's start and the warm-up before it.
 """
+
 from __future__ import annotations
 
 import sys
@@ -17,7 +18,7 @@ from tqdm import tqdm
 
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.families import FAMILIES, Family, get_family
-from vo3d_opt.sweep.flight import METHODS, TIMING_COLUMNS, Method, one_line
+from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, one_line
 from vo3d_opt.sweep.stats import aggregate
 
 if TYPE_CHECKING:
@@ -41,7 +42,7 @@ class SweepResult:
     family: Family
     seed: int
     method: Method
-    rows: "pd.DataFrame"
+    rows: pd.DataFrame
     summary: dict[str, Any] = field(default_factory=dict)
 
 
@@ -49,7 +50,9 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
     """(formulation, solver) names the summary reports; ``SweepError`` when the method cannot
     fly this family or names an unknown formulation or solver."""
     if method.name not in METHODS:
-        raise SweepError(f"--method: unknown {method.name!r} (expected one of {', '.join(METHODS)})")
+        raise SweepError(
+            f"--method: unknown {method.name!r} (expected one of {', '.join(METHODS)})"
+        )
     if method.name == "rvo2":
         from vo3d_opt.baselines import rvo2
 
@@ -57,16 +60,20 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
             raise SweepError("--formulation/--solver: not used by --method rvo2")
         if not family.obstacle_free:
             ok = ", ".join(f.name for f in FAMILIES.values() if f.obstacle_free)
-            raise SweepError(f"--method rvo2: family {family.name!r} has obstacles; RVO2-3D flies "
-                             f"obstacle-free families only ({ok})")
+            raise SweepError(
+                f"--method rvo2: family {family.name!r} has obstacles; RVO2-3D flies "
+                f"obstacle-free families only ({ok})"
+            )
         if not rvo2.available():
-            raise SweepError("--method rvo2: the rvo23d module is missing "
-                             "(pip install 'vo3d-opt[baselines]')")
+            raise SweepError(
+                "--method rvo2: the rvo23d module is missing (pip install 'vo3d-opt[baselines]')"
+            )
         return rvo2.FORMULATION, f"rvo23d {rvo2.version()}"
     try:
         _, formulation, solver = make_selector(method.formulation, method.solver)
     except (ValueError, TypeError) as exc:
-        what = f"formulation {method.formulation or 'default'!r}, solver {method.solver or 'default'!r}"
+        form, solver = method.formulation or "default", method.solver or "default"
+        what = f"formulation {form!r}, solver {solver!r}"
         raise SweepError(f"{what}: {' '.join(str(exc).split())}") from None
     return formulation, solver
 
@@ -77,12 +84,20 @@ def _check_counts(**values: int | None) -> None:
         if value is None and key == "in_flight":
             continue
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lows[key]:
-            raise SweepError(f"--{key.replace('_', '-')}: must be an integer >= {lows[key]}, "
-                             f"got {value!r}")
+            raise SweepError(
+                f"--{key.replace('_', '-')}: must be an integer >= {lows[key]}, got {value!r}"
+            )
 
 
-def validate(family: str | Family, n: int, *, seed: int = 0, workers: int = 1,
-             method: Method = Method(), in_flight: int | None = None) -> tuple[Family, str, str]:
+def validate(
+    family: str | Family,
+    n: int,
+    *,
+    seed: int = 0,
+    workers: int = 1,
+    method: Method = DEFAULT_METHOD,
+    in_flight: int | None = None,
+) -> tuple[Family, str, str]:
     """The family and the (formulation, solver) names of a sweep; ``SweepError`` naming the
     option when one is bad. Starts nothing."""
     try:
@@ -91,16 +106,26 @@ def validate(family: str | Family, n: int, *, seed: int = 0, workers: int = 1,
         raise SweepError(str(exc)) from None
     missing = fam.missing_keys()
     if missing:
-        raise SweepError(f"family: {fam.name!r} needs the scenario keys {', '.join(missing)} "
-                         f"(contracts §5), which this build's scenario loader does not accept")
+        raise SweepError(
+            f"family: {fam.name!r} needs the scenario keys {', '.join(missing)} "
+            f"(contracts §5), which this build's scenario loader does not accept"
+        )
     _check_counts(n=n, seed=seed, workers=workers, in_flight=in_flight)
     return (fam, *check_method(fam, method))
 
 
-def run_sweep(family: str | Family, n: int, *, seed: int = 0, workers: int = 1,
-              scheduler: str | None = None, method: Method = Method(),
-              in_flight: int | None = None, progress: bool = True,
-              allowed_failures: int = ALLOWED_FAILURES) -> SweepResult:
+def run_sweep(
+    family: str | Family,
+    n: int,
+    *,
+    seed: int = 0,
+    workers: int = 1,
+    scheduler: str | None = None,
+    method: Method = DEFAULT_METHOD,
+    in_flight: int | None = None,
+    progress: bool = True,
+    allowed_failures: int = ALLOWED_FAILURES,
+) -> SweepResult:
     """Fly encounters 0..n-1 of ``family`` with ``seed`` on a Dask cluster: a local one of
     ``workers`` processes (one thread each), or the existing one at ``scheduler``.
 
@@ -112,8 +137,9 @@ def run_sweep(family: str | Family, n: int, *, seed: int = 0, workers: int = 1,
 
     from vo3d_opt.sweep import cluster
 
-    fam, formulation, solver = validate(family, n, seed=seed, workers=workers, method=method,
-                                        in_flight=in_flight)
+    fam, formulation, solver = validate(
+        family, n, seed=seed, workers=workers, method=method, in_flight=in_flight
+    )
     t_setup = time.perf_counter()
     try:
         with cluster.client_for(workers, scheduler, allowed_failures) as client:
@@ -124,28 +150,44 @@ def run_sweep(family: str | Family, n: int, *, seed: int = 0, workers: int = 1,
             threads = int(sum(client.nthreads().values()))
             setup_time = time.perf_counter() - t_setup
             t0 = time.perf_counter()
-            with tqdm(total=n, desc=f"sweep {fam.name}", unit="enc", file=sys.stderr,
-                      disable=not progress, smoothing=0.05) as bar:
-                rows = cluster.submit_all(client, fam, int(seed), n, method,
-                                          in_flight or max(8, 4 * threads), bar)
+            with tqdm(
+                total=n,
+                desc=f"sweep {fam.name}",
+                unit="enc",
+                file=sys.stderr,
+                disable=not progress,
+                smoothing=0.05,
+            ) as bar:
+                rows = cluster.submit_all(
+                    client, fam, int(seed), n, method, in_flight or max(8, 4 * threads), bar
+                )
             wall = time.perf_counter() - t0
     except cluster.ConnectError as exc:
         raise SweepError(f"--scheduler: {exc}") from None
     df = pd.DataFrame(rows).sort_values("index", kind="stable").reset_index(drop=True)
-    summary = aggregate(df, family=fam.name, seed=int(seed), method=method.name,
-                        formulation=formulation, solver=solver)
-    summary.update({
-        "wall_time": round(wall, 3), "setup_time": round(setup_time, 3),
-        "encounters_per_second": round(n / wall, 4) if wall > 0 else None,
-        "workers": threads, "scheduler": scheduler or "local",
-    })
+    summary = aggregate(
+        df,
+        family=fam.name,
+        seed=int(seed),
+        method=method.name,
+        formulation=formulation,
+        solver=solver,
+    )
+    summary.update(
+        {
+            "wall_time": round(wall, 3),
+            "setup_time": round(setup_time, 3),
+            "encounters_per_second": round(n / wall, 4) if wall > 0 else None,
+            "workers": threads,
+            "scheduler": scheduler or "local",
+        }
+    )
     return SweepResult(family=fam, seed=int(seed), method=method, rows=df, summary=summary)
 
 
-def rows_equal(a: "pd.DataFrame", b: "pd.DataFrame") -> bool:
+def rows_equal(a: pd.DataFrame, b: pd.DataFrame) -> bool:
     """Whether two sweeps' rows agree in every column but :data:`TIMING_COLUMNS`."""
     cols = [c for c in a.columns if c not in TIMING_COLUMNS]
     if sorted(cols) != sorted(c for c in b.columns if c not in TIMING_COLUMNS):
         return False
     return a[cols].reset_index(drop=True).equals(b[cols].reset_index(drop=True))
-

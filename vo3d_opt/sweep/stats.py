@@ -6,6 +6,7 @@ interval ``ci95`` and the one-sided 95 % upper bound ``upper95``: the rate is be
 confidence. With 0 events in n, ``upper95 = 1 - 0.05**(1/n)``, about 3/n (the "rule of three");
 the contract's ``collision_rate_upper95`` is this bound for collisions.
 """
+
 from __future__ import annotations
 
 import math
@@ -46,27 +47,33 @@ def event_rate(k: int, n: int) -> dict[str, Any]:
     if n == 0:
         return {"events": int(k), "encounters": 0, "rate": None, "ci95": None, "upper95": None}
     lo, hi = clopper_pearson(k, n)
-    return {"events": int(k), "encounters": int(n), "rate": k / n, "ci95": [lo, hi],
-            "upper95": upper_bound(k, n)}
+    return {
+        "events": int(k),
+        "encounters": int(n),
+        "rate": k / n,
+        "ci95": [lo, hi],
+        "upper95": upper_bound(k, n),
+    }
 
 
-def _total(df: "pd.DataFrame", col: str) -> int:
+def _total(df: pd.DataFrame, col: str) -> int:
     return int(df[col].fillna(0).sum()) if col in df else 0
 
 
-def _count(mask: "pd.Series") -> int:
+def _count(mask: pd.Series) -> int:
     return int(mask.fillna(False).astype(bool).sum())
 
 
-def _min(df: "pd.DataFrame", col: str) -> float | None:
+def _min(df: pd.DataFrame, col: str) -> float | None:
     if col not in df or df[col].isna().all():
         return None
     value = float(df[col].min())
     return value if math.isfinite(value) else None
 
 
-def aggregate(df: "pd.DataFrame", *, family: str, seed: int, method: str, formulation: str,
-              solver: str) -> dict[str, Any]:
+def aggregate(
+    df: pd.DataFrame, *, family: str, seed: int, method: str, formulation: str, solver: str
+) -> dict[str, Any]:
     """The sweep's summary from its rows (one per encounter, ``error`` None when it ran).
 
     Contract §6 keys: ``collisions``, ``pz_intrusions`` (vehicle pairs plus vehicle–obstacle
@@ -126,6 +133,8 @@ def aggregate(df: "pd.DataFrame", *, family: str, seed: int, method: str, formul
         "min_vehicle_distance": _min(ok, "min_vehicle_distance"),
         "min_normalised_distance": _min(ok, "min_normalised_distance"),
         "min_obstacle_distance": _min(ok, "min_obstacle_distance"),
-        "errors": [{"index": int(i), "error": str(e)}
-                   for i, e in zip(errors["index"], errors["error"])],
+        "errors": [
+            {"index": int(i), "error": str(e)}
+            for i, e in zip(errors["index"], errors["error"], strict=False)
+        ],
     }
