@@ -15,7 +15,11 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
   (both stray) + ``k σ_p`` (the sensed position's error) + ``v_max latency`` (the other flew
   on since it was sensed) + ``k σ_v (dt + latency)`` (a wrong sensed velocity, extrapolated);
   ``k`` = :data:`NOISE_QUANTILE`;
-* ``obstacle_margin`` (m): ``tracking`` (obstacles stand still and are known exactly);
+* ``obstacle_margin`` (m): the clearance a vehicle's centre needs from an obstacle's surface,
+  ``tracking + radius`` (obstacles stand still and are known exactly); an obstacle's prism is
+  widened only by what this exceeds the prism's own margin (:func:`inflated`): the prism
+  keeps the body off the obstacle, and a lagging vehicle may enter the prism's margin
+  (``obstacle_pz_intrusions`` counts it) but not the obstacle;
 * ``altitude_margin`` (m): ``max(v_max tau_eff, tracking)``: room to stop from full vertical
   speed, and the altitude a manoeuvre may cost; at most what keeps every start and goal inside.
 
@@ -101,7 +105,7 @@ def derive_margins(sc: Scenario) -> Margins:
     noise = NOISE_QUANTILE * (sens.position_noise + sens.velocity_noise * (dt + sens.latency))
     derived_buffer = 2.0 * v_max * dt + 2.0 * tracking + noise + v_max * sens.latency
     pz_buffer = _pick(sc.selector_options.get("pz_buffer", sc.safety.pz_buffer), derived_buffer)
-    obstacle = _pick(sc.safety.obstacle_margin, tracking)
+    obstacle = _pick(sc.safety.obstacle_margin, tracking + float(np.max(sc.radius)))
     cap = _altitude_cap(sc)
     altitude = _pick(sc.safety.altitude_margin, min(max(v_max * tau, tracking), cap))
     why = {
@@ -110,7 +114,7 @@ def derive_margins(sc: Scenario) -> Margins:
         "tracking": f"velocity gap {gap:.3g} m/s x tau_eff {tau:.3g} s",
         "pz_buffer": (f"2 v_max dt {2 * v_max * dt:.3g} + 2 tracking {2 * tracking:.3g} + noise "
                       f"{noise:.3g} + latency {v_max * sens.latency:.3g}"),
-        "obstacle_margin": "tracking",
+        "obstacle_margin": "tracking + vehicle radius",
         "altitude_margin": f"max(v_max tau_eff, tracking), at most {cap:.3g} (starts and goals)",
     }
     return Margins(tau_eff=tau, acceleration=accel, tracking=tracking, pz_buffer=pz_buffer,
@@ -129,8 +133,17 @@ def planning_limits(limits: Limits, m: Margins) -> Limits:
                                      "acceleration": m.acceleration})
 
 
-def inflated(body: Cylinder | Box, extra: float) -> Cylinder | Box:
-    """The obstacle with its protected prism ``extra`` m wider on each side and taller."""
+def prism_clearance(body: Cylinder | Box) -> float:
+    """The least distance from the obstacle's protected prism to its surface (m): outside the
+    prism a point is at least this far from the obstacle (horizontally the prism faces the
+    vehicle at ``L_pz / 2`` from the axis, and the footprint lies within ``extent / 2``)."""
+    return min(0.5 * (body.side - body.footprint_extent()), body.prism_height - body.height)
+
+
+def inflated(body: Cylinder | Box, clearance: float) -> Cylinder | Box:
+    """The obstacle with its protected prism widened (each side) and raised by what
+    ``clearance`` (m) exceeds :func:`prism_clearance`: unchanged when the prism is enough."""
+    extra = clearance - prism_clearance(body)
     if extra <= 0:
         return body
     if body.L_pz is None and body.h_pz is None:
