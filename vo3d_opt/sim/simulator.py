@@ -13,8 +13,16 @@ time step." Here, every ``dt`` (:func:`fly`):
    (:class:`vo3d_opt.sim.deciders.SwarmSelect`, what ``run_scenario`` and ``vo3d run`` use),
    any ``SelectorLike`` called once per agent (:class:`~vo3d_opt.sim.deciders.PerAgentSelect`),
    or RVO2-3D (:class:`vo3d_opt.baselines.rvo2.RVO2Step`);
-3. **integrate**: ``vo3d_opt.sim.dynamics`` (``kinematic``: ``p += v_cmd dt``; ``first_order``
-   with ``velocity_response_tau``: ``v += (v_cmd - v) min(1, dt / tau)``, ``p += v dt``).
+3. **integrate**: ``vo3d_opt.sim.dynamics``, the scenario's ``dynamics`` and ``wind``
+   (``kinematic``: ``p += v_cmd dt``; ``first_order`` (or ``velocity_response_tau``):
+   ``v += (v_cmd - v) min(1, dt / tau)``, ``p += v dt``; ``rotorpy``: RotorPy multirotors,
+   whose sub-step samples are recorded in ``RunRecord.samples`` and judged by the metrics).
+
+Agents with ``avoids: false`` never decide: they fly their preferred (straight-to-goal)
+velocity and the others see them as non-cooperative, as arrived ones. With sensing noise or
+latency each agent decides from its own view of the others (``deciders.decision_step``). The
+selector plans with the margins ``vo3d_opt.sim.safety`` derives from the scenario (acceleration
+bound, pz_buffer, altitude margin, obstacle prisms; ``formulations/real_world.md``).
 
 What an agent senses (both selector steps apply the same rules; ``vo3d_opt.swarm`` documents
 them): the other vehicles within ``sensing.vehicle_range`` (centre distance), as neighbours with
