@@ -16,11 +16,13 @@ from vo3d_opt.sim.deciders import PerAgentSelect, decision_step
 from vo3d_opt.sim.metrics import CONTRACT_KEYS, summarize
 from vo3d_opt.sim.safety import (
     NOISE_QUANTILE,
+    clamps_commands,
     derive_margins,
     inflated,
     planning_limits,
     prism_clearance,
     response_time,
+    within_reach,
 )
 from vo3d_opt.sim.scenario import (
     ScenarioError,
@@ -293,3 +295,26 @@ def test_rotorpy_in_a_wind_in_the_loop_judged_on_its_sub_steps():
     rec.samples[per + 2, 0, 2] = rec.samples[per + 3, 0, 2] = -0.5
     rec.cache.clear()
     assert summarize(rec)["altitude_violations"] == 1
+
+
+def test_rotorpy_commands_stay_within_what_its_velocity_loop_follows_without_flipping():
+    # RotorPy's cmd_vel asks for the force m (g - k_v (v - v_cmd)): a gap of g / k_v above the
+    # command points it sideways. The bound keeps half of that per period, and the simulator
+    # clamps the selector's fallbacks to it.
+    sc = small(dynamics={"model": "rotorpy", "vehicle": "hummingbird"})
+    m = derive_margins(sc)
+    assert m.acceleration == pytest.approx(0.5 * 9.81 / (10.0 * 0.2))
+    reach = m.acceleration * 0.2
+    tau = response_time(sc.vehicle_dynamics)
+    assert m.altitude_margin == pytest.approx(
+        4.0 * tau + 16.0 / (2 * m.acceleration * (1 - math.exp(-0.2 / tau))))
+    v = np.array([[4.0, 0.0, 0.0], [0.0, 0.0, 3.0], [0.0, 0.0, 0.0]])
+    u = np.array([[-4.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.3, -0.2, 0.1]])
+    out = within_reach(u, v, m.acceleration, 0.2, np.full(3, 4.0))
+    np.testing.assert_allclose(out[0], [4.0 - reach, 0.0, 0.0])
+    np.testing.assert_allclose(out[1], [0.0, 0.0, 3.0 - reach])
+    np.testing.assert_allclose(out[2], u[2])  # within reach: unchanged
+    fast = within_reach(np.array([[4.0, 1.0, 0.0]]), np.array([[4.0, 0.0, 0.0]]), 10.0, 0.2,
+                        np.array([4.0]))
+    assert np.linalg.norm(fast) == pytest.approx(4.0)  # and never above the speed limit
+    assert not clamps_commands(small(dynamics={"model": "first_order", "tau": 1.0}))

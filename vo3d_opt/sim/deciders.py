@@ -17,7 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from vo3d_opt.sim.safety import derive_margins, inflated, planning_limits
+from vo3d_opt.sim.safety import (
+    clamps_commands,
+    derive_margins,
+    inflated,
+    planning_limits,
+    within_reach,
+)
 from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
 from vo3d_opt.sim.sensing import Sensor
 from vo3d_opt.sim.simulator import SelectorLike, Snapshot, StepDecision
@@ -43,6 +49,16 @@ class _SelectorStep:
         self.margins = derive_margins(sc)
         self.limits = planning_limits(sc.limits, self.margins)
         self.bodies = [inflated(b, self.margins.obstacle_margin) for b in sc.bodies]
+        self.clamp = clamps_commands(sc) and self.margins.acceleration is not None
+
+    def reachable(self, commands: np.ndarray, snap: Snapshot) -> np.ndarray:
+        """The commands, clamped to the acceleration bound around each vehicle's real velocity
+        when the vehicle model needs it (``safety.clamps_commands``)."""
+        if not self.clamp:
+            return commands
+        return within_reach(np.asarray(commands, dtype=float), snap.velocities,
+                            float(self.margins.acceleration), float(self.scenario.dt),
+                            self.scenario.max_speed)
 
     def agent_limits(self, i: int) -> Limits:
         """Agent ``i``'s planning limits (its own speed cap)."""
@@ -88,7 +104,7 @@ class SwarmSelect(_SelectorStep):
             threads=self.threads,
         )
         return StepDecision(
-            commands=out.velocities,
+            commands=self.reachable(out.velocities, snap),
             statuses=out.statuses,
             decision_times=out.times,
             solve_times=out.times,
@@ -187,7 +203,7 @@ class PerAgentSelect(_SelectorStep):
             statuses[i] = str(d.status)
             stimes[i] = float(getattr(d, "solve_time", np.nan))
         return StepDecision(
-            commands=u, statuses=statuses, decision_times=dtimes, solve_times=stimes
+            commands=self.reachable(u, snap), statuses=statuses, decision_times=dtimes, solve_times=stimes
         )
 
     def extra(self) -> dict[str, Any]:

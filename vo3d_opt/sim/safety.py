@@ -8,7 +8,9 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
   RotorPy's ``1/k_v + kd_att/kp_att`` (velocity loop plus attitude loop; 0.186 s for the
   hummingbird, whose measured reversal lags 1.37 m behind an 8 m/s velocity change: 0.171 s);
 * ``acceleration`` (m/s² per axis, the selector's ``Limits.acceleration``): ``v_max / tau_eff``,
-  capped by what the rotors can give (RotorPy: ``g (T/W - 1)``); none for kinematic vehicles;
+  capped by what the rotors can give (RotorPy: ``g (T/W - 1)``) and by what RotorPy's velocity
+  loop follows without flipping (``GAP_SHARE g / (k_v dt)``, 2.45 m/s²); none for kinematic
+  vehicles. Under RotorPy the commands are also clamped to it (:func:`within_reach`);
 * ``tracking`` (m): how far a vehicle strays from the straight line the selector planned:
   the velocity gap times ``tau_eff``, the gap at most ``min(2 v_max, √3 a dt)``;
 * ``pz_buffer`` (m): ``2 v_max dt`` (both move before the next decision) + ``2 tracking``
@@ -21,7 +23,9 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
   keeps the body off the obstacle, and a lagging vehicle may enter the prism's margin
   (``obstacle_pz_intrusions`` counts it) but not the obstacle;
 * ``altitude_margin`` (m): ``max(v_max tau_eff, tracking)``: room to stop from full vertical
-  speed, and the altitude a manoeuvre may cost; at most what keeps every start and goal inside.
+  speed, and the altitude a manoeuvre may cost; with clamped commands (RotorPy) the braking
+  distance ``v_max tau_eff + v_max² / (2 a (1 - exp(-dt/tau_eff)))``; at most what keeps every
+  start and goal inside.
 
 Every value can be overridden by the scenario's ``safety`` mapping, and ``pz_buffer`` /
 ``acceleration`` by ``selector_options.pz_buffer`` / ``limits.acceleration``.
@@ -42,6 +46,11 @@ G = 9.81
 NOISE_QUANTILE = 3.76
 #: Altitude margins stop this short of the nearest start or goal (m), so both stay plannable.
 ALTITUDE_CLEARANCE = 1e-3
+#: RotorPy's velocity controller asks for the force ``m (g - k_v e)`` for a velocity gap ``e``;
+#: a gap of ``g / k_v`` (0.98 m/s) above the command points that force sideways or down and the
+#: vehicle flips and falls (measured in paper case 1). The acceleration bound keeps each
+#: period's gap within this share of ``g / k_v``: vertical force within 0.5-1.5 g, tilt < 35°.
+GAP_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -68,6 +77,16 @@ def response_time(dyn: DynamicsConfig) -> float:
     return 1.0 / float(p.get("k_v", 10.0)) + float(p.get("kd_att", 0.0)) / float(p.get("kp_att", 1.0))
 
 
+def controller_acceleration(dyn: DynamicsConfig, dt: float) -> float:
+    """RotorPy: the per-axis acceleration (m/s²) whose velocity change per period, handed to
+    the ``cmd_vel`` P loop (gain ``k_v``), is :data:`GAP_SHARE` of ``g / k_v``:
+    ``GAP_SHARE g / (k_v dt)``; unbounded (inf) for the other models."""
+    if dyn.model != "rotorpy":
+        return math.inf
+    k_v = float(vehicle_params(dyn.vehicle or "hummingbird").get("k_v", 10.0))
+    return GAP_SHARE * G / (k_v * dt)
+
+
 def thrust_acceleration(dyn: DynamicsConfig) -> float:
     """The largest acceleration (m/s²) the rotors give on every axis: climbing, ``g (T/W - 1)``
     (the tightest); unbounded (inf) for the kinematic and first-order models."""
@@ -84,8 +103,10 @@ def _acceleration(sc: Scenario, tau: float, v_max: float) -> tuple[float | None,
         return (None if given == 0 else float(given)), "given"
     if tau == 0:
         return None, "kinematic: takes any velocity at once"
-    a = min(v_max / tau, thrust_acceleration(sc.vehicle_dynamics))
-    return a, f"min(v_max / tau_eff = {v_max / tau:.3g}, thrust {thrust_acceleration(sc.vehicle_dynamics):.3g})"
+    dyn = sc.vehicle_dynamics
+    thrust, tilt = thrust_acceleration(dyn), controller_acceleration(dyn, float(sc.dt))
+    return (min(v_max / tau, thrust, tilt),
+            f"min(v_max / tau_eff {v_max / tau:.3g}, thrust {thrust:.3g}, controller {tilt:.3g})")
 
 
 def _altitude_cap(sc: Scenario) -> float:
@@ -107,7 +128,13 @@ def derive_margins(sc: Scenario) -> Margins:
     pz_buffer = _pick(sc.selector_options.get("pz_buffer", sc.safety.pz_buffer), derived_buffer)
     obstacle = _pick(sc.safety.obstacle_margin, tracking + float(np.max(sc.radius)))
     cap = _altitude_cap(sc)
-    altitude = _pick(sc.safety.altitude_margin, min(max(v_max * tau, tracking), cap))
+    stop = max(v_max * tau, tracking)
+    if clamps_commands(sc) and accel is not None:
+        # braking is bounded too, and the vehicle reaches only 1 - exp(-dt/tau_eff) of each
+        # period's change within it: the distance to stop from full speed
+        reached = accel * (1.0 - math.exp(-dt / tau))
+        stop = v_max * tau + v_max**2 / (2.0 * reached)
+    altitude = _pick(sc.safety.altitude_margin, min(stop, cap))
     why = {
         "tau_eff": f"{sc.vehicle_dynamics.model} response time",
         "acceleration": why_a,
@@ -115,10 +142,32 @@ def derive_margins(sc: Scenario) -> Margins:
         "pz_buffer": (f"2 v_max dt {2 * v_max * dt:.3g} + 2 tracking {2 * tracking:.3g} + noise "
                       f"{noise:.3g} + latency {v_max * sens.latency:.3g}"),
         "obstacle_margin": "tracking + vehicle radius",
-        "altitude_margin": f"max(v_max tau_eff, tracking), at most {cap:.3g} (starts and goals)",
+        "altitude_margin": (f"stopping room {stop:.3g}, at most {cap:.3g} (starts and goals)"),
     }
     return Margins(tau_eff=tau, acceleration=accel, tracking=tracking, pz_buffer=pz_buffer,
                    obstacle_margin=obstacle, altitude_margin=altitude, why=why)
+
+
+def clamps_commands(sc: Scenario) -> bool:
+    """Whether the commands are clamped to the acceleration bound (:func:`within_reach`): for
+    vehicles whose controller turns a velocity gap into attitude (``rotorpy``). A first-order
+    vehicle follows any command linearly, so a fallback's jump (which the selector may return
+    outside the bound, e.g. to keep the altitude limits) harms nothing there."""
+    return sc.vehicle_dynamics.model == "rotorpy"
+
+
+def within_reach(commands: np.ndarray, velocities: np.ndarray, acceleration: float,
+                 dt: float, max_speed: np.ndarray) -> np.ndarray:
+    """Commands (N, 3) moved into the box ``|u - v| <= acceleration dt`` per axis around the
+    real velocities (N, 3), then scaled to at most ``max_speed`` (N,): the selector keeps the
+    box when it finds a velocity outside every VO, but its least-bad fallbacks may jump
+    (measured under RotorPy: a hummingbird handed a 4 m/s gap at once flips and falls 37 m)."""
+    reach = acceleration * dt
+    u = velocities + np.clip(commands - velocities, -reach, reach)
+    speed = np.linalg.norm(u, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(speed > max_speed, max_speed / speed, 1.0)
+    return u * scale[:, None]
 
 
 def _pick(given: float | None, derived: float) -> float:
