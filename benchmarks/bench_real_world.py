@@ -42,7 +42,8 @@ HUMMINGBIRD = {"dynamics": {"model": "rotorpy", "vehicle": "hummingbird"}}
 NO_MARGINS = {"acceleration": 0.0, "altitude_margin": 0.0, "obstacle_margin": 0.0}
 #: RotorPy is not run on these (its cost per vehicle-period, measured, is reported instead):
 #: at about 0.1-0.3 s per vehicle and period on this shared machine they take hours.
-ROTORPY_SKIPPED = ("cylinder-forest", "sphere-swap-16", "random-crossing-50", "random-crossing-1000")
+ROTORPY_SKIPPED = (
+    "cylinder-forest", "sphere-swap-16", "random-crossing-50", "random-crossing-1000")
 #: The wind runs: the two-vehicle paper cases (RotorPy's cost, as above).
 WIND = ["paper-case2-two-uav-six-obstacles", "paper-case3-two-uav-two-cylinders"]
 
@@ -69,7 +70,8 @@ def conditions(names: list[str]) -> list[Condition]:
         Condition("ideal (kinematic)", {}, small),
         Condition("first_order tau 0.5 s", first_order[0.5], small),
         Condition("first_order tau 1 s", first_order[1.0], small),
-        Condition("first_order tau 1 s, margins off", {**first_order[1.0], "safety": NO_MARGINS}, small),
+        Condition("first_order tau 1 s, margins off",
+                  {**first_order[1.0], "safety": NO_MARGINS}, small),
         Condition("noise 0.5 m / 0.3 m/s, latency 0.2 s", {"sensing": noisy}, paper[:1]),
         Condition("noise + latency, first_order tau 0.5 s", {**first_order[0.5], "sensing": noisy},
                   paper[:1]),
@@ -138,7 +140,8 @@ def rotorpy_step_cost(sc: Scenario, sample: int = 10) -> float:
     return (time.perf_counter() - t0) / sample * sc.n_agents
 
 
-HEADER = ("| condition | scenario | arrived | collisions | pz intrusions | obstacle pz intrusions | "
+HEADER = ("| condition | scenario | arrived | collisions | pz intrusions | "
+          "obstacle pz intrusions | "
           "altitude violations | min vehicle dist. m | min obstacle dist. m | path vs ideal | "
           "arrival vs ideal | fallbacks | pz_buffer m | acceleration m/s² | altitude margin m | "
           "wall s |\n|" + "---|" * 16)

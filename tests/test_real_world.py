@@ -147,7 +147,8 @@ def test_the_margins_can_be_overridden_and_the_altitude_margin_keeps_starts_plan
     # a start 1 m above the floor caps the altitude margin below 1 m
     low = copy.deepcopy(SMALL)
     low["agents"][0]["start"] = [-20.0, 0.0, 1.0]
-    m_low = derive_margins(scenario_from_dict({**low, "dynamics": {"model": "first_order", "tau": 1.0}}))
+    low["dynamics"] = {"model": "first_order", "tau": 1.0}
+    m_low = derive_margins(scenario_from_dict(low))
     assert 0.99 <= m_low.altitude_margin < 1.0
 
 

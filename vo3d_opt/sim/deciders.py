@@ -203,7 +203,8 @@ class PerAgentSelect(_SelectorStep):
             statuses[i] = str(d.status)
             stimes[i] = float(getattr(d, "solve_time", np.nan))
         return StepDecision(
-            commands=self.reachable(u, snap), statuses=statuses, decision_times=dtimes, solve_times=stimes
+            commands=self.reachable(u, snap), statuses=statuses, decision_times=dtimes,
+            solve_times=stimes
         )
 
     def extra(self) -> dict[str, Any]:

@@ -32,8 +32,9 @@ import math
 import sys
 import types
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal, Mapping
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, model_validator
@@ -64,7 +65,7 @@ class WindConfig(_Config):
     altitude: Positive = 2.0
 
     @model_validator(mode="after")
-    def _sigma_only_for_dryden(self) -> "WindConfig":
+    def _sigma_only_for_dryden(self) -> WindConfig:
         if self.sigma is not None and self.type != "dryden":
             raise_problems("wind", [(("sigma",), "only for type dryden", self.sigma)])
         if self.sigma is not None and np.any(self.sigma < 0):
@@ -81,7 +82,7 @@ class DynamicsConfig(_Config):
     substep_rate: Positive | None = None
 
     @model_validator(mode="after")
-    def _keys_of_the_model(self) -> "DynamicsConfig":
+    def _keys_of_the_model(self) -> DynamicsConfig:
         problems = []
         if self.model == "first_order" and self.tau is None:
             problems.append((("tau",), "required for model first_order", None))

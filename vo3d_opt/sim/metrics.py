@@ -2,11 +2,11 @@
 
 The metrics judge the vehicles' real trajectory: the control steps, or the dynamics' finer
 samples when it records them (``RunRecord.track``: rotorpy's sub-steps); "step" below means one
-segment between two samples. Distances between two vehicles are evaluated *continuously*: within a step both fly straight
-lines, so their relative motion is linear and the closest approach on each segment is exact
-(a sampled-only check could miss a pass between two samples). Distances to obstacles are
-evaluated at the samples and at three interior points of every segment. A 1e-6 tolerance
-absorbs rounding in every threshold (distance, altitude, speed).
+segment between two samples. Distances between two vehicles are evaluated *continuously*: within
+a step both fly straight lines, so their relative motion is linear and the closest approach on
+each segment is exact (a sampled-only check could miss a pass between two samples). Distances to
+obstacles are evaluated at the samples and at three interior points of every segment. A 1e-6
+tolerance absorbs rounding in every threshold (distance, altitude, speed).
 
 Swarms: the summary never forms every vehicle pair. :func:`close_pairs` finds, step by step with
 a k-d tree, the pairs that come closer than the largest protected-zone (or collision) distance

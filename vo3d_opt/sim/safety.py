@@ -74,7 +74,8 @@ def response_time(dyn: DynamicsConfig) -> float:
     if dyn.model == "first_order":
         return float(dyn.tau)
     p = vehicle_params(dyn.vehicle or "hummingbird")
-    return 1.0 / float(p.get("k_v", 10.0)) + float(p.get("kd_att", 0.0)) / float(p.get("kp_att", 1.0))
+    k_v, kp, kd = (float(p.get(k, d)) for k, d in (("k_v", 10.0), ("kp_att", 1.0), ("kd_att", 0.0)))
+    return 1.0 / k_v + kd / kp
 
 
 def controller_acceleration(dyn: DynamicsConfig, dt: float) -> float:
@@ -113,7 +114,8 @@ def _altitude_cap(sc: Scenario) -> float:
     """The largest margin that keeps every start and goal within the planning altitudes."""
     z = np.concatenate([sc.starts[:, 2], sc.goals[:, 2]])
     lo, hi = sc.limits.altitude
-    return max(0.0, float(min(np.min(z - lo), np.min(hi - z), 0.5 * (hi - lo))) - ALTITUDE_CLEARANCE)
+    room = float(min(np.min(z - lo), np.min(hi - z), 0.5 * (hi - lo)))
+    return max(0.0, room - ALTITUDE_CLEARANCE)
 
 
 def derive_margins(sc: Scenario) -> Margins:
