@@ -157,12 +157,45 @@ def _rows(jobs: list[tuple[str, str, Scenario, bool]],
             for k, (cond, name, _, _) in enumerate(jobs) if k in results]
 
 
+def condensed(path: Path) -> str:
+    """One row per condition of a results file: the README's table (sums over its scenarios,
+    the smallest distances, the median cost)."""
+    rows = [[c.strip() for c in line.strip().strip("|").split("|")]
+            for line in path.read_text(encoding="utf-8").splitlines()
+            if line.startswith("| ") and not line.startswith("| condition")]
+    out = ["| condition | scenarios | arrived | collisions | pz intrusions | altitude violations | "
+           "min vehicle dist. m | min obstacle dist. m | path vs ideal (median) | "
+           "arrival vs ideal (median) |", "|" + "---|" * 10]
+    for cond in dict.fromkeys(r[0] for r in rows):
+        rs = [r for r in rows if r[0] == cond]
+        got = [tuple(map(int, r[2].split("/"))) for r in rs]
+
+        def least(col: int, rs: list[list[str]] = rs) -> str:
+            vals = [float(r[col]) for r in rs if r[col] != "–"]
+            return f"{min(vals):.2f}" if vals else "–"
+
+        def median(col: int, rs: list[list[str]] = rs) -> str:
+            vals = [float(r[col]) for r in rs if r[col] != "–"]
+            return f"{np.median(vals):.3f}" if vals else "–"
+
+        out.append(f"| {cond} | {len(rs)} | {sum(a for a, _ in got)}/{sum(b for _, b in got)} | "
+                   f"{sum(int(r[3]) for r in rs)} | {sum(int(r[4]) for r in rs)} | "
+                   f"{sum(int(r[6]) for r in rs)} | {least(7)} | {least(8)} | {median(9)} | "
+                   f"{median(10)} |")
+    return "\n".join(out)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="two small scenarios, to try the script")
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--jobs", type=int, default=2, help="runs at once (processes)")
+    ap.add_argument("--readme", action="store_true",
+                    help="print the README's condensed table of --out (runs nothing)")
     args = ap.parse_args()
+    if args.readme:
+        print(condensed(args.out))
+        return
     names = [f.stem for f in bundled_files()]
     if args.quick:
         names = ["paper-case3-two-uav-two-cylinders", "intruder-crossing-four"]
