@@ -17,9 +17,17 @@ from typing import Any
 
 import numpy as np
 
+from vo3d_opt.sim.safety import (
+    clamps_commands,
+    derive_margins,
+    inflated,
+    planning_limits,
+    within_reach,
+)
 from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
+from vo3d_opt.sim.sensing import Sensor
 from vo3d_opt.sim.simulator import SelectorLike, Snapshot, StepDecision
-from vo3d_opt.types import AgentState, Neighbor
+from vo3d_opt.types import AgentState, Limits, Neighbor
 
 
 def sphere_table(sc: Scenario) -> np.ndarray:
@@ -30,12 +38,38 @@ def sphere_table(sc: Scenario) -> np.ndarray:
 
 class _SelectorStep:
     """A decision step that runs ``selector`` on scenario ``sc``; ``formulation`` and
-    ``solver`` name it in the record."""
+    ``solver`` name it in the record. The selector plans in the world of
+    ``vo3d_opt.sim.safety``: the altitude range shrunk by the altitude margin, the derived
+    acceleration bound, every sensed obstacle's prism inflated by the obstacle margin."""
 
     def __init__(self, sc: Scenario, selector: Any, *, formulation: str = "custom",
                  solver: str = "custom") -> None:
         self.scenario, self.selector = sc, selector
         self.formulation, self.solver = formulation, solver
+        self.margins = derive_margins(sc)
+        self.limits = planning_limits(sc.limits, self.margins)
+        self.bodies = [inflated(b, self.margins.obstacle_margin) for b in sc.bodies]
+        self.clamp = clamps_commands(sc) and self.margins.acceleration is not None
+
+    def reachable(self, commands: np.ndarray, snap: Snapshot) -> np.ndarray:
+        """The commands, clamped to the acceleration bound around each vehicle's real velocity
+        when the vehicle model needs it (``safety.clamps_commands``)."""
+        if not self.clamp:
+            return commands
+        return within_reach(np.asarray(commands, dtype=float), snap.velocities,
+                            float(self.margins.acceleration), float(self.scenario.dt),
+                            self.scenario.max_speed)
+
+    def agent_limits(self, i: int) -> Limits:
+        """Agent ``i``'s planning limits (its own speed cap)."""
+        sc = self.scenario
+        return self.limits.model_copy(update={"speed": (sc.limits.v_min, float(sc.max_speed[i]))})
+
+    def extra(self) -> dict[str, Any]:
+        m = self.margins
+        return {"margins": {"acceleration": m.acceleration, "pz_buffer": m.pz_buffer,
+                            "tracking": m.tracking, "obstacle_margin": m.obstacle_margin,
+                            "altitude_margin": m.altitude_margin}}
 
 
 class SwarmSelect(_SelectorStep):
@@ -47,7 +81,7 @@ class SwarmSelect(_SelectorStep):
                  threads: int | None = None) -> None:
         super().__init__(sc, selector, formulation=formulation, solver=solver)
         self.max_neighbors, self.threads = max_neighbors, threads
-        self.obstacles = [b for b, seen in zip(sc.bodies, sc.sensed, strict=True) if seen]
+        self.obstacles = [b for b, seen in zip(self.bodies, sc.sensed, strict=True) if seen]
         self.spheres = sphere_table(sc)
         self.compiled = bool(getattr(selector, "compiled", False))
 
@@ -59,7 +93,7 @@ class SwarmSelect(_SelectorStep):
             snap.preferred,
             sc.r_pz,
             self.obstacles,
-            sc.limits,
+            self.limits,
             sc.dt,
             sc.sensing.vehicle_range,
             self.max_neighbors,
@@ -70,7 +104,7 @@ class SwarmSelect(_SelectorStep):
             threads=self.threads,
         )
         return StepDecision(
-            commands=out.velocities,
+            commands=self.reachable(out.velocities, snap),
             statuses=out.statuses,
             decision_times=out.times,
             solve_times=out.times,
@@ -78,6 +112,7 @@ class SwarmSelect(_SelectorStep):
 
     def extra(self) -> dict[str, Any]:
         return {
+            **super().extra(),
             "decision_step": "select_many",
             "compiled": self.compiled,
             "max_neighbors": self.max_neighbors,
@@ -86,12 +121,16 @@ class SwarmSelect(_SelectorStep):
 
 class PerAgentSelect(_SelectorStep):
     """Each deciding agent by its own ``select`` call, in id order, with the neighbours (in
-    index order, then the spheres) and the obstacles it senses."""
+    index order, then the spheres) and the obstacles it senses. With a ``sensor``
+    (``vo3d_opt.sim.sensing.Sensor``; what :func:`decision_step` gives a scenario with sensing
+    noise or latency), each agent sees the others as the sensor reports them to it (late,
+    noisy; range by the sensed centre distance) and itself exactly."""
 
     def __init__(self, sc: Scenario, selector: SelectorLike, *, formulation: str = "custom",
-                 solver: str = "custom") -> None:
+                 solver: str = "custom", sensor: Sensor | None = None) -> None:
         super().__init__(sc, selector, formulation=formulation, solver=solver)
-        self.limits = [sc.agent_limits(i) for i in range(sc.n_agents)]
+        self.sensor = sensor
+        self.own_limits = [self.agent_limits(i) for i in range(sc.n_agents)]
         self.sensed_idx = np.flatnonzero(sc.sensed) if sc.obstacles else np.zeros(0, dtype=int)
         self.spheres = sc.sphere_neighbors()
         self.order = sorted(range(sc.n_agents), key=lambda i: sc.ids[i])
@@ -126,30 +165,36 @@ class PerAgentSelect(_SelectorStep):
         r_pz, vrange, orange = sc.r_pz, sc.sensing.vehicle_range, sc.sensing.obstacle_range
         n = p.shape[0]
         centre, obst, sph = self._sensed(p)
+        if self.sensor is not None:
+            self.sensor.push(p, v)
         u, statuses = np.zeros((n, 3)), np.full(n, "", dtype=object)
         dtimes, stimes = np.full(n, np.nan), np.full(n, np.nan)
         for i in self.order:
             if done[i]:
                 continue
+            seen_p, seen_v, near = p, v, centre[i]
+            if self.sensor is not None:
+                seen_p, seen_v = self.sensor.sensed(i)
+                near = np.linalg.norm(seen_p - p[i], axis=1)
             neighbors = [
                 Neighbor(
-                    position=p[j],
-                    velocity=v[j],
+                    position=seen_p[j],
+                    velocity=seen_v[j],
                     r_pz=float(max(r_pz[i], r_pz[j])),
                     cooperative=not done[j],
                 )  # an arrived agent hovers: it does not avoid
-                for j in np.flatnonzero(centre[i] <= vrange)
+                for j in np.flatnonzero(near <= vrange)
                 if j != i
             ]
             neighbors += [self.spheres[s] for s in np.flatnonzero(sph[i] <= orange)]
-            obstacles = [sc.bodies[self.sensed_idx[m]] for m in np.flatnonzero(obst[i] <= orange)]
+            obstacles = [self.bodies[self.sensed_idx[m]] for m in np.flatnonzero(obst[i] <= orange)]
             t0 = time.perf_counter()
             d = self.selector.select(
                 own=AgentState(position=p[i], velocity=v[i]),
                 preferred_velocity=snap.preferred[i],
                 neighbors=neighbors,
                 obstacles=obstacles,
-                limits=self.limits[i],
+                limits=self.own_limits[i],
                 dt=sc.dt,
             )
             dtimes[i] = time.perf_counter() - t0
@@ -158,11 +203,13 @@ class PerAgentSelect(_SelectorStep):
             statuses[i] = str(d.status)
             stimes[i] = float(getattr(d, "solve_time", np.nan))
         return StepDecision(
-            commands=u, statuses=statuses, decision_times=dtimes, solve_times=stimes
+            commands=self.reachable(u, snap), statuses=statuses, decision_times=dtimes,
+            solve_times=stimes
         )
 
     def extra(self) -> dict[str, Any]:
-        return {"decision_step": "select"}
+        return {**super().extra(), "decision_step": "select",
+                "sensing": "perfect" if self.sensor is None else "noisy/late"}
 
 
 def decision_step(
@@ -174,8 +221,17 @@ def decision_step(
     max_neighbors: int | None = None,
     threads: int | None = None,
 ) -> SwarmSelect | PerAgentSelect:
-    """``SwarmSelect`` for a selector with ``select_many`` (a ``VelocitySelector``), else
-    ``PerAgentSelect``."""
+    """``SwarmSelect`` for a selector with ``select_many`` (a ``VelocitySelector``) when every
+    vehicle senses the same true snapshot, else ``PerAgentSelect`` (with a ``Sensor`` when the
+    scenario's sensing has noise or latency: each vehicle then sees the others differently,
+    which one ``select_many`` call cannot express)."""
+    if not sc.sensing.perfect:
+        if max_neighbors is not None:
+            raise ValueError("max_neighbors: only with noiseless, immediate sensing")
+        s = sc.sensing
+        sensor = Sensor(sc.n_agents, sc.dt, position_noise=s.position_noise,
+                        velocity_noise=s.velocity_noise, latency=s.latency, seed=s.seed)
+        return PerAgentSelect(sc, selector, formulation=formulation, solver=solver, sensor=sensor)
     if callable(getattr(selector, "select_many", None)):
         return SwarmSelect(
             sc,

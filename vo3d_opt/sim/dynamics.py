@@ -32,13 +32,14 @@ import math
 import sys
 import types
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal, Mapping
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, model_validator
 
-from vo3d_opt.types import Positive, Vec3
+from vo3d_opt.types import Positive, Vec3, raise_problems
 
 #: Sub-steps per second of the ``rotorpy`` model unless the caller says otherwise: 50 Hz is the
 #: lowest measured rate at which both vehicles are stable and their step responses stay close
@@ -64,11 +65,11 @@ class WindConfig(_Config):
     altitude: Positive = 2.0
 
     @model_validator(mode="after")
-    def _sigma_only_for_dryden(self) -> "WindConfig":
+    def _sigma_only_for_dryden(self) -> WindConfig:
         if self.sigma is not None and self.type != "dryden":
-            raise ValueError("sigma: only for type dryden")
+            raise_problems("wind", [(("sigma",), "only for type dryden", self.sigma)])
         if self.sigma is not None and np.any(self.sigma < 0):
-            raise ValueError("sigma: must be >= 0")
+            raise_problems("wind", [(("sigma",), "must be >= 0", self.sigma)])
         return self
 
 
@@ -81,15 +82,15 @@ class DynamicsConfig(_Config):
     substep_rate: Positive | None = None
 
     @model_validator(mode="after")
-    def _keys_of_the_model(self) -> "DynamicsConfig":
+    def _keys_of_the_model(self) -> DynamicsConfig:
+        problems = []
         if self.model == "first_order" and self.tau is None:
-            raise ValueError("tau: required for model first_order")
-        if self.model != "first_order" and self.tau is not None:
-            raise ValueError("tau: only for model first_order")
-        if self.model != "rotorpy" and self.vehicle is not None:
-            raise ValueError("vehicle: only for model rotorpy")
-        if self.model != "rotorpy" and self.substep_rate is not None:
-            raise ValueError("substep_rate: only for model rotorpy")
+            problems.append((("tau",), "required for model first_order", None))
+        for key, owner in (("tau", "first_order"), ("vehicle", "rotorpy"),
+                           ("substep_rate", "rotorpy")):
+            if self.model != owner and getattr(self, key) is not None:
+                problems.append(((key,), f"only for model {owner}", getattr(self, key)))
+        raise_problems("dynamics", problems)  # each at its own key: dynamics.tau: ...
         return self
 
 

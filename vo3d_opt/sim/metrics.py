@@ -1,10 +1,12 @@
 """Safety and timing summary of a run (contract §3) and the distance series behind the plots.
 
-Distances between two vehicles are evaluated *continuously*: within a step both fly straight
-lines, so their relative motion is linear and the closest approach on each segment is exact
-(a sampled-only check could miss a pass between two samples). Distances to obstacles are
-evaluated at the samples and at three interior points of every segment. A 1e-6 tolerance
-absorbs rounding in every threshold (distance, altitude, speed).
+The metrics judge the vehicles' real trajectory: the control steps, or the dynamics' finer
+samples when it records them (``RunRecord.track``: rotorpy's sub-steps); "step" below means one
+segment between two samples. Distances between two vehicles are evaluated *continuously*: within
+a step both fly straight lines, so their relative motion is linear and the closest approach on
+each segment is exact (a sampled-only check could miss a pass between two samples). Distances to
+obstacles are evaluated at the samples and at three interior points of every segment. A 1e-6
+tolerance absorbs rounding in every threshold (distance, altitude, speed).
 
 Swarms: the summary never forms every vehicle pair. :func:`close_pairs` finds, step by step with
 a k-d tree, the pairs that come closer than the largest protected-zone (or collision) distance
@@ -156,7 +158,7 @@ def obstacle_min_distances(record: RunRecord, positions: np.ndarray | None = Non
     """(N, M) smallest centre-to-surface distance and (N, M) 'entered the protected zone', over
     the M physical obstacles, for the record's positions (or the ``positions`` given); a chunk
     of steps at a time."""
-    positions = record.positions if positions is None else positions
+    positions = record.track[1] if positions is None else positions
     obstacles = _physical_obstacles(record)
     n = positions.shape[1]
     dist = np.full((n, len(obstacles)), np.inf)
@@ -249,7 +251,7 @@ def record_close_pairs(record: RunRecord) -> tuple[np.ndarray, np.ndarray, np.nd
     """:func:`close_pairs` of the record at :func:`pz_threshold`, computed once per record."""
     cache = record.cache
     if "close_pairs" not in cache:
-        cache["close_pairs"] = close_pairs(record.positions, pz_threshold(record))
+        cache["close_pairs"] = close_pairs(record.track[1], pz_threshold(record))
     return cache["close_pairs"]
 
 
@@ -263,8 +265,9 @@ def closest_vehicle_approach(record: RunRecord, pairs: tuple[np.ndarray, ...] | 
         return None
     k = int(np.argmin(dmin))
     i, j = int(ii[k]), int(jj[k])
-    rel = record.positions[:, i] - record.positions[:, j]
-    return Approach(float(dmin[k]), _closest_time(rel, record.times), i, j)
+    times, track = record.track
+    rel = track[:, i] - track[:, j]
+    return Approach(float(dmin[k]), _closest_time(rel, times), i, j)
 
 
 def closest_obstacle_approach(record: RunRecord, odist: np.ndarray | None = None,
@@ -278,10 +281,11 @@ def closest_obstacle_approach(record: RunRecord, odist: np.ndarray | None = None
         return None
     i, m = (int(x) for x in np.unravel_index(np.argmin(odist), odist.shape))
     kind, ob = _physical_obstacles(record)[m]
-    pts = _with_subsamples(record.positions[:, i])
+    times, track = record.track
+    pts = _with_subsamples(track[:, i])
     d = (ob.surface_distance(pts) if kind == "body"
          else sphere_surface_distance(np.asarray(ob.center, dtype=float), ob.radius, pts))
-    t = _with_subsamples(record.times)[int(np.argmin(d))]
+    t = _with_subsamples(times)[int(np.argmin(d))]
     return Approach(float(odist[i, m]), float(t), i, m)
 
 
@@ -292,20 +296,35 @@ def physical_obstacle_names(record: RunRecord) -> list[str]:
             + [f"spheres[{k}]" for k, s in enumerate(sc.spheres) if s.physical])
 
 
+def _per_step(bad: np.ndarray, per: int) -> int:
+    """(vehicle, step) samples with a bad sample: ``bad`` (1 + T per, N), row 0 the start and
+    rows 1 + k per .. (k + 1) per the samples within step k."""
+    within = bad[1:].reshape(-1, per, bad.shape[1]).any(axis=1)
+    return int(np.count_nonzero(bad[0]) + np.count_nonzero(within))
+
+
 def _limits_and_paths(record: RunRecord) -> tuple[int, int, np.ndarray]:
-    """Altitude and speed violations, and each vehicle's path length, a chunk of steps at a time."""
+    """Altitude and speed violations, and each vehicle's path length, a chunk of steps at a
+    time. With sub-step samples (rotorpy) a (vehicle, step) violates a limit when any sample
+    within the step does, and the path is measured along the samples."""
     sc = record.scenario
     z_lo, z_hi = sc.limits.altitude
     v_lo = sc.limits.speed[0]
-    z = record.positions[..., 2]
-    altitude = int(np.count_nonzero((z < z_lo - TOL) | (z > z_hi + TOL)))
+    per = record.substeps
+    _, track = record.track
+    z = track[..., 2]
+    altitude = _per_step((z < z_lo - TOL) | (z > z_hi + TOL), per)
     speed_bad, path = 0, np.zeros(record.n_agents)
     for a in range(0, record.steps, _CHUNK):
         speed = np.linalg.norm(record.velocities[a: a + _CHUNK], axis=-1)
         slow = record.decided[a: a + _CHUNK] & (speed < v_lo - TOL)
+        if record.sample_velocities is not None:  # the fastest sample within each step
+            fine = np.linalg.norm(record.sample_velocities[a * per + 1: (a + _CHUNK) * per + 1],
+                                  axis=-1)
+            speed = fine.reshape(-1, per, fine.shape[1]).max(axis=1)
         bad = (speed > sc.max_speed[None, :] + TOL) | slow
         speed_bad += int(np.count_nonzero(bad))
-        steps = np.diff(record.positions[a: a + _CHUNK + 1], axis=0)
+        steps = np.diff(track[a * per: (a + _CHUNK) * per + 1], axis=0)
         path += np.linalg.norm(steps, axis=-1).sum(axis=0)
     return altitude, speed_bad, path
 
@@ -321,7 +340,7 @@ def summarize(record: RunRecord) -> dict[str, Any]:
     pz_limit = np.maximum(r_pz[ii], r_pz[jj])
     vehicle_pz = int(np.count_nonzero(dmin < pz_limit - TOL))
     vehicle_coll = int(np.count_nonzero(dmin < radius[ii] + radius[jj] - TOL))
-    si, sj, start_d = close_pairs(record.positions[:1], pz_threshold(record))
+    si, sj, start_d = close_pairs(record.positions[:1], pz_threshold(record))  # t = 0
     starts_pz = int(np.count_nonzero(start_d < np.maximum(r_pz[si], r_pz[sj]) - TOL))
 
     odist, entered = obstacle_min_distances(record)

@@ -13,8 +13,16 @@ time step." Here, every ``dt`` (:func:`fly`):
    (:class:`vo3d_opt.sim.deciders.SwarmSelect`, what ``run_scenario`` and ``vo3d run`` use),
    any ``SelectorLike`` called once per agent (:class:`~vo3d_opt.sim.deciders.PerAgentSelect`),
    or RVO2-3D (:class:`vo3d_opt.baselines.rvo2.RVO2Step`);
-3. **integrate**: ``vo3d_opt.sim.dynamics`` (``kinematic``: ``p += v_cmd dt``; ``first_order``
-   with ``velocity_response_tau``: ``v += (v_cmd - v) min(1, dt / tau)``, ``p += v dt``).
+3. **integrate**: ``vo3d_opt.sim.dynamics``, the scenario's ``dynamics`` and ``wind``
+   (``kinematic``: ``p += v_cmd dt``; ``first_order`` (or ``velocity_response_tau``):
+   ``v += (v_cmd - v) min(1, dt / tau)``, ``p += v dt``; ``rotorpy``: RotorPy multirotors,
+   whose sub-step samples are recorded in ``RunRecord.samples`` and judged by the metrics).
+
+Agents with ``avoids: false`` never decide: they fly their preferred (straight-to-goal)
+velocity and the others see them as non-cooperative, as arrived ones. With sensing noise or
+latency each agent decides from its own view of the others (``deciders.decision_step``). The
+selector plans with the margins ``vo3d_opt.sim.safety`` derives from the scenario (acceleration
+bound, pz_buffer, altitude margin, obstacle prisms; ``formulations/real_world.md``).
 
 What an agent senses (both selector steps apply the same rules; ``vo3d_opt.swarm`` documents
 them): the other vehicles within ``sensing.vehicle_range`` (centre distance), as neighbours with
@@ -134,6 +142,11 @@ class RunRecord:
     arrived: np.ndarray
     wall_time: float = 0.0
     extra: dict[str, Any] = field(default_factory=dict)
+    #: The real trajectory between the control steps when the dynamics sample it more finely
+    #: (rotorpy's sub-steps): positions and velocities (T S + 1, N, 3), row ``k S`` the state
+    #: at ``times[k]``; None when the steps are the samples (kinematic, first_order).
+    samples: np.ndarray | None = None
+    sample_velocities: np.ndarray | None = None
     #: What the metrics computed once for this record (``metrics.record_close_pairs``).
     cache: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
 
@@ -149,6 +162,20 @@ class RunRecord:
     @property
     def n_agents(self) -> int:
         return int(self.positions.shape[1])
+
+    @property
+    def substeps(self) -> int:
+        """Samples of the real trajectory per control step (1 without ``samples``)."""
+        return 1 if self.samples is None else (self.samples.shape[0] - 1) // max(self.steps, 1)
+
+    @property
+    def track(self) -> tuple[np.ndarray, np.ndarray]:
+        """The real trajectory the metrics judge: (times (S,), positions (S, N, 3)): the
+        sub-step samples when recorded, else the steps."""
+        if self.samples is None:
+            return self.times, self.positions
+        h = self.dt / self.substeps
+        return np.arange(self.samples.shape[0]) * h, self.samples
 
     @property
     def ids(self) -> list[str]:
@@ -192,6 +219,22 @@ class RunBuffers:
         self.dtimes = np.empty((total, n))
         self.stimes = np.empty((total, n))
         self.arrived = np.zeros((total + 1, n), dtype=bool)
+        self.samples: np.ndarray | None = None
+        self.sample_vel: np.ndarray | None = None
+
+    def put_samples(self, k: int, sample_positions: np.ndarray,
+                    sample_velocities: np.ndarray) -> None:
+        """Step k's sub-step samples (S, N, 3) each, kept only when S > 1."""
+        s = sample_positions.shape[0]
+        if s < 2:
+            return
+        if self.samples is None:
+            total, n = self.vel.shape[0], self.vel.shape[1]
+            self.samples = np.empty((total * s + 1, n, 3))
+            self.sample_vel = np.zeros((total * s + 1, n, 3))
+            self.samples[0] = self.pos[0]
+        self.samples[k * s + 1: (k + 1) * s + 1] = sample_positions
+        self.sample_vel[k * s + 1: (k + 1) * s + 1] = sample_velocities
 
     def put_statuses(self, k: int, statuses: np.ndarray, mask: np.ndarray) -> None:
         """Row k of the statuses: ``statuses`` where ``mask``, "" elsewhere."""
@@ -215,15 +258,21 @@ class RunBuffers:
             commands=self.cmd[:s], preferred=self.pref[:s], decided=self.decided[:s],
             statuses=statuses, decision_times=self.dtimes[:s],
             solve_times=self.stimes[:s], arrived=self.arrived[: s + 1], wall_time=wall,
-            extra=extra or {},
+            extra=extra or {}, samples=self._cut(self.samples, s),
+            sample_velocities=self._cut(self.sample_vel, s),
         )
+
+    def _cut(self, arr: np.ndarray | None, steps: int) -> np.ndarray | None:
+        if arr is None:
+            return None
+        per = (arr.shape[0] - 1) // self.vel.shape[0]
+        return arr[: steps * per + 1]
 
 
 def scenario_dynamics(sc: Scenario) -> Dynamics:
-    """The scenario's dynamics: ``first_order`` with ``velocity_response_tau`` when set, else
-    ``kinematic``."""
-    tau = sc.velocity_response_tau
-    return make_dynamics(None if tau is None else {"model": "first_order", "tau": tau})
+    """The scenario's dynamics and wind (contract §5; ``velocity_response_tau`` is
+    ``first_order``); the Dryden gusts are seeded with ``sensing.seed``."""
+    return make_dynamics(sc.vehicle_dynamics, sc.wind, seed=sc.sensing.seed)
 
 
 def scenario_goal_velocity(sc: Scenario) -> Callable[[np.ndarray], np.ndarray]:
@@ -263,6 +312,7 @@ def fly(sc: Scenario, step: DecisionStep, *,
     positions (N, 3) → preferred velocities (N, 3), default the scenario's goal rule;
     ``dynamics``: default :func:`scenario_dynamics`; ``progress`` None = a bar only on a TTY."""
     n, dt, tol = sc.n_agents, float(sc.dt), sc.goal_tolerance
+    straight = ~sc.avoids  # avoids: false: fly the preferred (goal) velocity, never decide
     total = sc.n_steps if max_steps is None else min(max_steps, sc.n_steps)
     prefer = preferred_velocity or scenario_goal_velocity(sc)
     dyn = dynamics or scenario_dynamics(sc)
@@ -282,11 +332,12 @@ def fly(sc: Scenario, step: DecisionStep, *,
             steps = k + 1
             w = np.asarray(prefer(p), dtype=float)
             w[done] = 0.0
-            deciding = ~done
+            deciding = ~done & ~straight
             snap = Snapshot(k=k, t=k * dt, positions=p, velocities=v, preferred=w,
                             deciding=deciding)
             out = step.decide(snap)
             u, statuses = _checked_commands(out, deciding)
+            u[straight] = w[straight]
             buf.pref[k], buf.cmd[k], buf.decided[k] = w, u, deciding
             buf.put_statuses(k, statuses, deciding)
             buf.dtimes[k] = np.where(deciding, out.decision_times, np.nan)
@@ -294,6 +345,7 @@ def fly(sc: Scenario, step: DecisionStep, *,
             flown = dyn.step(u, dt)
             p = flown.positions
             buf.vel[k] = flown.velocities
+            buf.put_samples(k, flown.sample_positions, flown.sample_velocities)
             arrived = ~done & (np.linalg.norm(p - sc.goals, axis=1) <= tol)
             done = done | arrived
             dyn.hold(arrived)  # an arrived agent hovers from now on: the others see it still
@@ -361,11 +413,14 @@ def default_selector_options(sc: Scenario) -> dict[str, Any]:
     All agents run the same selector, so each may assume the other takes half of a pairwise
     avoidance (``reciprocal``); and since each decides from a snapshot that the others change
     within the next step, every neighbour's sphere is planned ``pz_buffer`` larger: twice the
-    distance a vehicle covers in one step at full speed. Without these the paper's
-    non-reciprocal selection lets vehicles slide along each other's zones and dip into them
-    (see README, "Safety in simulation")."""
-    v_max = float(np.max(sc.max_speed))
-    return {"reciprocal": True, "pz_buffer": 2.0 * v_max * sc.dt}
+    distance a vehicle covers in one step at full speed, plus what the scenario's dynamics
+    and sensing add (``vo3d_opt.sim.safety``: tracking error, noise, latency; the scenario's
+    ``safety.pz_buffer`` overrides it). Without these the paper's non-reciprocal selection
+    lets vehicles slide along each other's zones and dip into them (see README, "Safety in
+    simulation")."""
+    from vo3d_opt.sim.safety import derive_margins
+
+    return {"reciprocal": True, "pz_buffer": derive_margins(sc).pz_buffer}
 
 
 def scenario_selector(sc: Scenario, formulation: str | None = None, solver: str | None = None

@@ -10,6 +10,7 @@ from vo3d_opt.sim.scenario.loader import (
     load_scenario,
     resolve,
     scenario_from_dict,
+    scenario_variant,
 )
 from vo3d_opt.sim.scenario.schema import (
     AgentSpec,
@@ -39,5 +40,6 @@ __all__ = [
     "prism_contains",
     "resolve",
     "scenario_from_dict",
+    "scenario_variant",
     "sphere_surface_distance",
 ]

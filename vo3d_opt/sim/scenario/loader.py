@@ -236,3 +236,16 @@ def _suggestion(name: str) -> str:
     names = close_names(name)
     found = f"; bundled scenarios with a close name: {', '.join(names)}" if names else ""
     return f"{found} (`vo3d list` lists the bundled scenarios)"
+
+
+def scenario_variant(sc: Scenario, **keys: Any) -> Scenario:
+    """``sc`` with some top-level keys replaced and validated again (errors name ``sc``'s
+    file): a mapping given for a mapping key (``sensing``, ``safety``, ``limits``, ...) is
+    merged into it; ``dynamics`` replaces ``velocity_response_tau`` (its alias)."""
+    data = sc.model_dump(exclude_none=True)
+    for key, value in keys.items():
+        old = data.get(key)
+        data[key] = {**old, **value} if isinstance(old, dict) and isinstance(value, dict) else value
+    if "dynamics" in keys:
+        data.pop("velocity_response_tau", None)
+    return scenario_from_dict(data, sc.source)

@@ -40,6 +40,14 @@ Extensions beyond the contract (all optional):
   obstacle). ``margin`` defaults to ``types.PZ_MARGIN``.
 * ``velocity_response_tau`` (s): first-order velocity response ``v += (v_cmd - v) * dt / tau``
   (clamped to a full step when ``dt >= tau``); off (ideal kinematics) when omitted.
+* ``dynamics``, ``wind``, ``sensing.position_noise`` / ``velocity_noise`` / ``latency`` /
+  ``seed`` and the agents' ``avoids`` (contract §5; ``vo3d_opt.sim.dynamics``,
+  ``vo3d_opt.sim.sensing``); ``dynamics.substep_rate`` (Hz, rotorpy) and ``wind.sigma`` /
+  ``wind.altitude`` (Dryden) extend it. ``velocity_response_tau`` is an alias of ``dynamics:
+  {model: first_order, tau: ...}`` (not both).
+* ``safety``: overrides of the margins the simulator derives for those conditions
+  (``acceleration``, ``pz_buffer``, ``altitude_margin``, ``obstacle_margin``;
+  ``vo3d_opt.sim.safety``).
 * ``formulation``, ``solver``: defaults for ``vo3d run`` when the command line gives none.
 * ``selector_options``: a mapping passed as extra keyword arguments to ``VelocitySelector``.
 
@@ -65,6 +73,7 @@ from typing import Annotated, Any, ClassVar, Literal
 import numpy as np
 from pydantic import ConfigDict, Field, PrivateAttr, StrictBool, field_validator, model_validator
 
+from vo3d_opt.sim.dynamics import DynamicsConfig, WindConfig
 from vo3d_opt.types import (
     PZ_MARGIN,
     Box,
@@ -88,10 +97,35 @@ class Spec(Model):
 
 
 class SensingSpec(Spec):
-    """Sensing ranges of Table 1: vehicles by centre distance, obstacles by nearest point."""
+    """Sensing ranges of Table 1 (vehicles by centre distance, obstacles by nearest point) and
+    what a vehicle senses of the others (contract §5): Gaussian noise per axis (1-sigma, m and
+    m/s), latency (s, a multiple of ``dt``: checked by the scenario) and the noise's seed."""
 
     vehicle_range: Positive = 55.0
     obstacle_range: Positive = 55.0
+    position_noise: NonNegative = 0.0
+    velocity_noise: NonNegative = 0.0
+    latency: NonNegative = 0.0
+    seed: Annotated[int, Field(ge=0, strict=True)] = 0
+
+    @property
+    def perfect(self) -> bool:
+        """No noise and no latency: every vehicle senses the same true snapshot."""
+        return self.position_noise == 0 and self.velocity_noise == 0 and self.latency == 0
+
+
+class SafetySpec(Spec):
+    """Overrides of what the simulator derives from the scenario to stay safe under its
+    dynamics and sensing (``vo3d_opt.sim.safety``, ``formulations/real_world.md``); each None
+    (the default) is derived, 0 switches that inflation off. ``acceleration``: m/s² per axis
+    (the selector's ``Limits.acceleration``; None derived, 0 none); ``pz_buffer``: m (the
+    selector's option); ``altitude_margin``: m kept from each altitude bound while planning;
+    ``obstacle_margin``: m added to every obstacle's protected prism while planning."""
+
+    acceleration: NonNegative | None = None
+    pz_buffer: NonNegative | None = None
+    altitude_margin: NonNegative | None = None
+    obstacle_margin: NonNegative | None = None
 
 
 class DefaultsSpec(Spec):
@@ -111,6 +145,7 @@ class AgentSpec(Spec):
     r_pz: Positive | None = None
     radius: Positive | None = None
     max_speed: Positive | None = None
+    avoids: StrictBool = True  # false: flies straight to its goal, never avoids (contract §5)
 
 
 class _Placed:
@@ -177,6 +212,9 @@ class Scenario(Spec):
     obstacles: list[ObstacleSpec] = []
     spheres: list[SphereSpec] = []
     velocity_response_tau: Positive | None = None
+    dynamics: DynamicsConfig | None = None
+    wind: WindConfig | None = None
+    safety: SafetySpec = SafetySpec()
     formulation: Text | None = None
     solver: Text | None = None
     selector_options: dict[str, Any] = {}
@@ -226,6 +264,7 @@ class Scenario(Spec):
         """Problems between keys, each at the key it concerns, in file order."""
         return (
             self._timing_problems()
+            + self._real_world_problems()
             + self._step_problems()
             + self._agent_problems()
             + self._overlap_problems()
@@ -250,6 +289,24 @@ class Scenario(Spec):
                     self.defaults.max_speed,
                 )
             )
+        return out
+
+    def _real_world_problems(self) -> list[Problem]:
+        """The keys of contract §5 that depend on others: one way to name the dynamics, wind
+        only with RotorPy, a latency of whole steps."""
+        out: list[Problem] = []
+        if self.dynamics is not None and self.velocity_response_tau is not None:
+            out.append((("velocity_response_tau",),
+                        "give either velocity_response_tau (an alias of dynamics model "
+                        "first_order) or dynamics, not both", self.velocity_response_tau))
+        if self.wind is not None and self.vehicle_dynamics.model != "rotorpy":
+            out.append((("wind",), f"only with dynamics model rotorpy, not "
+                        f"{self.vehicle_dynamics.model}", self.wind.type))
+        steps = self.sensing.latency / self.dt
+        if abs(steps - round(steps)) > 1e-6:
+            out.append((("sensing", "latency"),
+                        f"must be a multiple of dt = {self.dt:g} s, got {self.sensing.latency:g}",
+                        self.sensing.latency))
         return out
 
     def _step_problems(self) -> list[Problem]:
@@ -394,6 +451,21 @@ class Scenario(Spec):
         return np.minimum(self._per_agent("max_speed"), self.limits.v_max)
 
     @property
+    def avoids(self) -> np.ndarray:
+        """(N,) bool: which agents avoid (``avoids: false`` ones fly straight to their goal)."""
+        return np.array([a.avoids for a in self.agents], dtype=bool)
+
+    @property
+    def vehicle_dynamics(self) -> DynamicsConfig:
+        """The ``dynamics`` mapping in effect: the given one, ``first_order`` with
+        ``velocity_response_tau`` (its alias), or the default ``kinematic``."""
+        if self.dynamics is not None:
+            return self.dynamics
+        if self.velocity_response_tau is not None:
+            return DynamicsConfig(model="first_order", tau=self.velocity_response_tau)
+        return DynamicsConfig()
+
+    @property
     def n_steps(self) -> int:
         """Most control periods the run may take (max_time / dt, rounded up)."""
         return max(1, int(math.ceil(self.max_time / self.dt - 1e-9)))
@@ -503,6 +575,7 @@ __all__ = [
     "DefaultsSpec",
     "ObstacleSpec",
     "Scenario",
+    "SafetySpec",
     "SensingSpec",
     "SphereSpec",
     "Spec",

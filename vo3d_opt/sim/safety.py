@@ -1,0 +1,203 @@
+"""Margins that keep the selector safe under the scenario's dynamics and sensing (issue 12).
+
+The selector plans as if every vehicle took its new velocity at once and sensed the others
+exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the difference
+(``formulations/real_world.md`` gives the reasoning and the cost):
+
+* ``tau_eff`` (s): the vehicle's velocity response time: 0 kinematic, ``tau`` first_order,
+  RotorPy's ``1/k_v + kd_att/kp_att`` (velocity loop plus attitude loop; 0.186 s for the
+  hummingbird, whose measured reversal lags 1.37 m behind an 8 m/s velocity change: 0.171 s);
+* ``acceleration`` (m/s² per axis, the selector's ``Limits.acceleration``): ``v_max / tau_eff``,
+  capped by what the rotors can give (RotorPy: ``g (T/W - 1)``) and by what RotorPy's velocity
+  loop follows without flipping (``GAP_SHARE g / (k_v dt)``, 2.45 m/s²); none for kinematic
+  vehicles. Under RotorPy the commands are also clamped to it (:func:`within_reach`);
+* ``tracking`` (m): how far a vehicle strays from the straight line the selector planned:
+  the velocity gap times ``tau_eff``, the gap at most ``min(2 v_max, √3 a dt)``;
+* ``pz_buffer`` (m): ``2 v_max dt`` (both move before the next decision) + ``2 tracking``
+  (both stray) + ``k σ_p`` (the sensed position's error) + ``v_max latency`` (the other flew
+  on since it was sensed) + ``k σ_v (dt + latency)`` (a wrong sensed velocity, extrapolated);
+  ``k`` = :data:`NOISE_QUANTILE`;
+* ``obstacle_margin`` (m): the clearance a vehicle's centre needs from an obstacle's surface,
+  ``tracking + radius`` (obstacles stand still and are known exactly); an obstacle's prism is
+  widened only by what this exceeds the prism's own margin (:func:`inflated`): the prism
+  keeps the body off the obstacle, and a lagging vehicle may enter the prism's margin
+  (``obstacle_pz_intrusions`` counts it) but not the obstacle;
+* ``altitude_margin`` (m): ``max(v_max tau_eff, tracking)``: room to stop from full vertical
+  speed, and the altitude a manoeuvre may cost; with clamped commands (RotorPy) the braking
+  distance ``v_max tau_eff + v_max² / (2 a (1 - exp(-dt/tau_eff)))``; at most what keeps every
+  start and goal inside.
+
+Every value can be overridden by the scenario's ``safety`` mapping, and ``pz_buffer`` /
+``acceleration`` by ``selector_options.pz_buffer`` / ``limits.acceleration``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vo3d_opt.sim.dynamics import DynamicsConfig, vehicle_params
+from vo3d_opt.sim.scenario import Scenario
+from vo3d_opt.types import Box, Cylinder, Limits
+
+G = 9.81
+#: 99.7 % of the norm of a 3-D standard Gaussian (chi with 3 degrees of freedom) lies below this.
+NOISE_QUANTILE = 3.76
+#: Altitude margins stop this short of the nearest start or goal (m), so both stay plannable.
+ALTITUDE_CLEARANCE = 1e-3
+#: RotorPy's velocity controller asks for the force ``m (g - k_v e)`` for a velocity gap ``e``;
+#: a gap of ``g / k_v`` (0.98 m/s) above the command points that force sideways or down and the
+#: vehicle flips and falls (measured in paper case 1). The acceleration bound keeps each
+#: period's gap within this share of ``g / k_v``: vertical force within 0.5-1.5 g, tilt < 35°.
+GAP_SHARE = 0.5
+
+
+@dataclass(frozen=True)
+class Margins:
+    """What the simulator hands the selector for a scenario (see the module docstring).
+    ``acceleration`` None: no acceleration bound. ``why``: one line per derived value."""
+
+    tau_eff: float
+    acceleration: float | None
+    tracking: float
+    pz_buffer: float
+    obstacle_margin: float
+    altitude_margin: float
+    why: dict[str, str] = field(default_factory=dict, compare=False)
+
+
+def response_time(dyn: DynamicsConfig) -> float:
+    """The velocity response time ``tau_eff`` (s) of the vehicle model."""
+    if dyn.model == "kinematic":
+        return 0.0
+    if dyn.model == "first_order":
+        return float(dyn.tau)
+    p = vehicle_params(dyn.vehicle or "hummingbird")
+    k_v, kp, kd = (float(p.get(k, d)) for k, d in (("k_v", 10.0), ("kp_att", 1.0), ("kd_att", 0.0)))
+    return 1.0 / k_v + kd / kp
+
+
+def controller_acceleration(dyn: DynamicsConfig, dt: float) -> float:
+    """RotorPy: the per-axis acceleration (m/s²) whose velocity change per period, handed to
+    the ``cmd_vel`` P loop (gain ``k_v``), is :data:`GAP_SHARE` of ``g / k_v``:
+    ``GAP_SHARE g / (k_v dt)``; unbounded (inf) for the other models."""
+    if dyn.model != "rotorpy":
+        return math.inf
+    k_v = float(vehicle_params(dyn.vehicle or "hummingbird").get("k_v", 10.0))
+    return GAP_SHARE * G / (k_v * dt)
+
+
+def thrust_acceleration(dyn: DynamicsConfig) -> float:
+    """The largest acceleration (m/s²) the rotors give on every axis: climbing, ``g (T/W - 1)``
+    (the tightest); unbounded (inf) for the kinematic and first-order models."""
+    if dyn.model != "rotorpy":
+        return math.inf
+    p = vehicle_params(dyn.vehicle or "hummingbird")
+    thrust = p["num_rotors"] * p["k_eta"] * p["rotor_speed_max"] ** 2
+    return max(thrust / p["mass"] - G, 0.0)
+
+
+def _acceleration(sc: Scenario, tau: float, v_max: float) -> tuple[float | None, str]:
+    given = sc.safety.acceleration if sc.limits.acceleration is None else sc.limits.acceleration
+    if given is not None:
+        return (None if given == 0 else float(given)), "given"
+    if tau == 0:
+        return None, "kinematic: takes any velocity at once"
+    dyn = sc.vehicle_dynamics
+    thrust, tilt = thrust_acceleration(dyn), controller_acceleration(dyn, float(sc.dt))
+    return (min(v_max / tau, thrust, tilt),
+            f"min(v_max / tau_eff {v_max / tau:.3g}, thrust {thrust:.3g}, controller {tilt:.3g})")
+
+
+def _altitude_cap(sc: Scenario) -> float:
+    """The largest margin that keeps every start and goal within the planning altitudes."""
+    z = np.concatenate([sc.starts[:, 2], sc.goals[:, 2]])
+    lo, hi = sc.limits.altitude
+    room = float(min(np.min(z - lo), np.min(hi - z), 0.5 * (hi - lo)))
+    return max(0.0, room - ALTITUDE_CLEARANCE)
+
+
+def derive_margins(sc: Scenario) -> Margins:
+    """The margins of the module docstring for scenario ``sc`` (overrides applied)."""
+    dt, v_max, sens = float(sc.dt), float(np.max(sc.max_speed)), sc.sensing
+    tau = response_time(sc.vehicle_dynamics)
+    accel, why_a = _acceleration(sc, tau, v_max)
+    gap = 2.0 * v_max if accel is None else min(2.0 * v_max, math.sqrt(3.0) * accel * dt)
+    tracking = gap * tau
+    noise = NOISE_QUANTILE * (sens.position_noise + sens.velocity_noise * (dt + sens.latency))
+    derived_buffer = 2.0 * v_max * dt + 2.0 * tracking + noise + v_max * sens.latency
+    pz_buffer = _pick(sc.selector_options.get("pz_buffer", sc.safety.pz_buffer), derived_buffer)
+    obstacle = _pick(sc.safety.obstacle_margin, tracking + float(np.max(sc.radius)))
+    cap = _altitude_cap(sc)
+    stop = max(v_max * tau, tracking)
+    if clamps_commands(sc) and accel is not None:
+        # braking is bounded too, and the vehicle reaches only 1 - exp(-dt/tau_eff) of each
+        # period's change within it: the distance to stop from full speed
+        reached = accel * (1.0 - math.exp(-dt / tau))
+        stop = v_max * tau + v_max**2 / (2.0 * reached)
+    altitude = _pick(sc.safety.altitude_margin, min(stop, cap))
+    why = {
+        "tau_eff": f"{sc.vehicle_dynamics.model} response time",
+        "acceleration": why_a,
+        "tracking": f"velocity gap {gap:.3g} m/s x tau_eff {tau:.3g} s",
+        "pz_buffer": (f"2 v_max dt {2 * v_max * dt:.3g} + 2 tracking {2 * tracking:.3g} + noise "
+                      f"{noise:.3g} + latency {v_max * sens.latency:.3g}"),
+        "obstacle_margin": "tracking + vehicle radius",
+        "altitude_margin": (f"stopping room {stop:.3g}, at most {cap:.3g} (starts and goals)"),
+    }
+    return Margins(tau_eff=tau, acceleration=accel, tracking=tracking, pz_buffer=pz_buffer,
+                   obstacle_margin=obstacle, altitude_margin=altitude, why=why)
+
+
+def clamps_commands(sc: Scenario) -> bool:
+    """Whether the commands are clamped to the acceleration bound (:func:`within_reach`): for
+    vehicles whose controller turns a velocity gap into attitude (``rotorpy``). A first-order
+    vehicle follows any command linearly, so a fallback's jump (which the selector may return
+    outside the bound, e.g. to keep the altitude limits) harms nothing there."""
+    return sc.vehicle_dynamics.model == "rotorpy"
+
+
+def within_reach(commands: np.ndarray, velocities: np.ndarray, acceleration: float,
+                 dt: float, max_speed: np.ndarray) -> np.ndarray:
+    """Commands (N, 3) moved into the box ``|u - v| <= acceleration dt`` per axis around the
+    real velocities (N, 3), then scaled to at most ``max_speed`` (N,): the selector keeps the
+    box when it finds a velocity outside every VO, but its least-bad fallbacks may jump
+    (measured under RotorPy: a hummingbird handed a 4 m/s gap at once flips and falls 37 m)."""
+    reach = acceleration * dt
+    u = velocities + np.clip(commands - velocities, -reach, reach)
+    speed = np.linalg.norm(u, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(speed > max_speed, max_speed / speed, 1.0)
+    return u * scale[:, None]
+
+
+def _pick(given: float | None, derived: float) -> float:
+    return float(derived if given is None else given)
+
+
+def planning_limits(limits: Limits, m: Margins) -> Limits:
+    """The limits the selector plans with: the altitude range shrunk by ``altitude_margin`` on
+    both sides, ``acceleration`` from the margins."""
+    lo, hi = limits.altitude
+    return limits.model_copy(update={"altitude": (lo + m.altitude_margin, hi - m.altitude_margin),
+                                     "acceleration": m.acceleration})
+
+
+def prism_clearance(body: Cylinder | Box) -> float:
+    """The least distance from the obstacle's protected prism to its surface (m): outside the
+    prism a point is at least this far from the obstacle (horizontally the prism faces the
+    vehicle at ``L_pz / 2`` from the axis, and the footprint lies within ``extent / 2``)."""
+    return min(0.5 * (body.side - body.footprint_extent()), body.prism_height - body.height)
+
+
+def inflated(body: Cylinder | Box, clearance: float) -> Cylinder | Box:
+    """The obstacle with its protected prism widened (each side) and raised by what
+    ``clearance`` (m) exceeds :func:`prism_clearance`: unchanged when the prism is enough."""
+    extra = clearance - prism_clearance(body)
+    if extra <= 0:
+        return body
+    if body.L_pz is None and body.h_pz is None:
+        return body.model_copy(update={"margin": body.margin + extra})
+    return body.model_copy(update={"L_pz": body.side + 2.0 * extra,
+                                   "h_pz": body.prism_height + extra})
