@@ -42,8 +42,9 @@ class _SelectorStep:
     ``vo3d_opt.sim.safety``: the altitude range shrunk by the altitude margin, the derived
     acceleration bound, every sensed obstacle's prism inflated by the obstacle margin."""
 
-    def __init__(self, sc: Scenario, selector: Any, *, formulation: str = "custom",
-                 solver: str = "custom") -> None:
+    def __init__(
+        self, sc: Scenario, selector: Any, *, formulation: str = "custom", solver: str = "custom"
+    ) -> None:
         self.scenario, self.selector = sc, selector
         self.formulation, self.solver = formulation, solver
         self.margins = derive_margins(sc)
@@ -54,11 +55,15 @@ class _SelectorStep:
     def reachable(self, commands: np.ndarray, snap: Snapshot) -> np.ndarray:
         """The commands, clamped to the acceleration bound around each vehicle's real velocity
         when the vehicle model needs it (``safety.clamps_commands``)."""
-        if not self.clamp:
+        if not self.clamp or self.margins.acceleration is None:
             return commands
-        return within_reach(np.asarray(commands, dtype=float), snap.velocities,
-                            float(self.margins.acceleration), float(self.scenario.dt),
-                            self.scenario.max_speed)
+        return within_reach(
+            np.asarray(commands, dtype=float),
+            snap.velocities,
+            float(self.margins.acceleration),
+            float(self.scenario.dt),
+            self.scenario.max_speed,
+        )
 
     def agent_limits(self, i: int) -> Limits:
         """Agent ``i``'s planning limits (its own speed cap)."""
@@ -67,18 +72,31 @@ class _SelectorStep:
 
     def extra(self) -> dict[str, Any]:
         m = self.margins
-        return {"margins": {"acceleration": m.acceleration, "pz_buffer": m.pz_buffer,
-                            "tracking": m.tracking, "obstacle_margin": m.obstacle_margin,
-                            "altitude_margin": m.altitude_margin}}
+        return {
+            "margins": {
+                "acceleration": m.acceleration,
+                "pz_buffer": m.pz_buffer,
+                "tracking": m.tracking,
+                "obstacle_margin": m.obstacle_margin,
+                "altitude_margin": m.altitude_margin,
+            }
+        }
 
 
 class SwarmSelect(_SelectorStep):
     """Every deciding agent by one ``select_many`` call per step. ``max_neighbors``: each agent
     considers only its k nearest vehicles in range; ``threads``: ``select_many``'s."""
 
-    def __init__(self, sc: Scenario, selector: Any, *, formulation: str = "custom",
-                 solver: str = "custom", max_neighbors: int | None = None,
-                 threads: int | None = None) -> None:
+    def __init__(
+        self,
+        sc: Scenario,
+        selector: Any,
+        *,
+        formulation: str = "custom",
+        solver: str = "custom",
+        max_neighbors: int | None = None,
+        threads: int | None = None,
+    ) -> None:
         super().__init__(sc, selector, formulation=formulation, solver=solver)
         self.max_neighbors, self.threads = max_neighbors, threads
         self.obstacles = [b for b, seen in zip(self.bodies, sc.sensed, strict=True) if seen]
@@ -126,8 +144,15 @@ class PerAgentSelect(_SelectorStep):
     noise or latency), each agent sees the others as the sensor reports them to it (late,
     noisy; range by the sensed centre distance) and itself exactly."""
 
-    def __init__(self, sc: Scenario, selector: SelectorLike, *, formulation: str = "custom",
-                 solver: str = "custom", sensor: Sensor | None = None) -> None:
+    def __init__(
+        self,
+        sc: Scenario,
+        selector: SelectorLike,
+        *,
+        formulation: str = "custom",
+        solver: str = "custom",
+        sensor: Sensor | None = None,
+    ) -> None:
         super().__init__(sc, selector, formulation=formulation, solver=solver)
         self.sensor = sensor
         self.own_limits = [self.agent_limits(i) for i in range(sc.n_agents)]
@@ -203,13 +228,18 @@ class PerAgentSelect(_SelectorStep):
             statuses[i] = str(d.status)
             stimes[i] = float(getattr(d, "solve_time", np.nan))
         return StepDecision(
-            commands=self.reachable(u, snap), statuses=statuses, decision_times=dtimes,
-            solve_times=stimes
+            commands=self.reachable(u, snap),
+            statuses=statuses,
+            decision_times=dtimes,
+            solve_times=stimes,
         )
 
     def extra(self) -> dict[str, Any]:
-        return {**super().extra(), "decision_step": "select",
-                "sensing": "perfect" if self.sensor is None else "noisy/late"}
+        return {
+            **super().extra(),
+            "decision_step": "select",
+            "sensing": "perfect" if self.sensor is None else "noisy/late",
+        }
 
 
 def decision_step(
@@ -229,8 +259,14 @@ def decision_step(
         if max_neighbors is not None:
             raise ValueError("max_neighbors: only with noiseless, immediate sensing")
         s = sc.sensing
-        sensor = Sensor(sc.n_agents, sc.dt, position_noise=s.position_noise,
-                        velocity_noise=s.velocity_noise, latency=s.latency, seed=s.seed)
+        sensor = Sensor(
+            sc.n_agents,
+            sc.dt,
+            position_noise=s.position_noise,
+            velocity_noise=s.velocity_noise,
+            latency=s.latency,
+            seed=s.seed,
+        )
         return PerAgentSelect(sc, selector, formulation=formulation, solver=solver, sensor=sensor)
     if callable(getattr(selector, "select_many", None)):
         return SwarmSelect(

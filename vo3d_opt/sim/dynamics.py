@@ -26,6 +26,7 @@ Within one period ``kinematic`` and ``first_order`` move in a straight line at c
 (their single sample is the period's end); ``rotorpy`` samples every sub-step, between which the
 path is close to straight at the default rate.
 """
+
 from __future__ import annotations
 
 import math
@@ -86,8 +87,11 @@ class DynamicsConfig(_Config):
         problems = []
         if self.model == "first_order" and self.tau is None:
             problems.append((("tau",), "required for model first_order", None))
-        for key, owner in (("tau", "first_order"), ("vehicle", "rotorpy"),
-                           ("substep_rate", "rotorpy")):
+        for key, owner in (
+            ("tau", "first_order"),
+            ("vehicle", "rotorpy"),
+            ("substep_rate", "rotorpy"),
+        ):
             if self.model != owner and getattr(self, key) is not None:
                 problems.append(((key,), f"only for model {owner}", getattr(self, key)))
         raise_problems("dynamics", problems)  # each at its own key: dynamics.tau: ...
@@ -156,8 +160,11 @@ class Dynamics(ABC):
             raise ValueError(f"positions: must have shape (N, 3), got {p.shape}")
         self.n = p.shape[0]
         self._p = _check_array(p, "positions", self.n).copy()
-        self._v = (np.zeros((self.n, 3)) if velocities is None
-                   else _check_array(velocities, "velocities", self.n).copy())
+        self._v = (
+            np.zeros((self.n, 3))
+            if velocities is None
+            else _check_array(velocities, "velocities", self.n).copy()
+        )
         self._held = np.zeros(self.n, dtype=bool)
         self._reset_model()
 
@@ -176,10 +183,10 @@ class Dynamics(ABC):
         u = _check_array(commands, "commands", self.n)
         return self._step(u, _check_dt(dt))
 
-    def _reset_model(self) -> None:
+    def _reset_model(self) -> None:  # noqa: B027 - a hook: most models have nothing to reset
         """Model state beyond positions and velocities (none by default)."""
 
-    def _hold_model(self, mask: np.ndarray) -> None:
+    def _hold_model(self, mask: np.ndarray) -> None:  # noqa: B027 - a hook, like _reset_model
         """Stop the model state of the vehicles in ``mask`` (nothing more by default)."""
 
     @abstractmethod
@@ -191,8 +198,13 @@ class Dynamics(ABC):
         self._v = v
         self._p = self._p + v * dt
         p, v = self._p.copy(), self._v.copy()
-        return StepResult(positions=p, velocities=v, sample_times=np.array([dt]),
-                          sample_positions=p[None].copy(), sample_velocities=v[None].copy())
+        return StepResult(
+            positions=p,
+            velocities=v,
+            sample_times=np.array([dt]),
+            sample_positions=p[None].copy(),
+            sample_velocities=v[None].copy(),
+        )
 
 
 class KinematicDynamics(Dynamics):
@@ -265,12 +277,13 @@ def dryden_gust_class() -> type:
     and is taken out of ``sys.modules`` again at once, so nothing else ever sees it."""
     try:
         from rotorpy.wind.dryden_winds import DrydenGust
+
         return DrydenGust
     except ImportError as exc:
         if exc.name != "torch":
             raise
     placeholder = types.ModuleType("torch")
-    placeholder.tensor = lambda *args, **kwargs: None  # the batched classes' default arguments
+    placeholder.tensor = lambda *args, **kwargs: None  # type: ignore[attr-defined]  # the batched classes' default arguments
     sys.modules["torch"] = placeholder
     try:
         from rotorpy.wind.dryden_winds import DrydenGust
@@ -284,14 +297,17 @@ def make_wind(config: WindConfig | None, dt: float) -> Any:
     sub-step (Dryden's discretisation)."""
     if config is None:
         from rotorpy.wind.default_winds import NoWind
+
         return NoWind()
     if config.type == "constant":
         from rotorpy.wind.default_winds import ConstantWind
+
         return ConstantWind(*config.velocity.tolist())
     DrydenGust = dryden_gust_class()
     sigma = np.ones(3) if config.sigma is None else np.array(config.sigma)
-    return DrydenGust(dt=dt, avg_wind=np.array(config.velocity), sig_wind=sigma,
-                      altitude=config.altitude)
+    return DrydenGust(
+        dt=dt, avg_wind=np.array(config.velocity), sig_wind=sigma, altitude=config.altitude
+    )
 
 
 class RotorPyDynamics(Dynamics):
@@ -309,25 +325,42 @@ class RotorPyDynamics(Dynamics):
 
     model = "rotorpy"
 
-    def __init__(self, vehicle: str = "hummingbird", *, wind: WindConfig | Mapping | None = None,
-                 substep_rate: float = DEFAULT_SUBSTEP_RATE, seed: int = 0,
-                 integrator_kwargs: Mapping[str, Any] | None = None) -> None:
+    def __init__(
+        self,
+        vehicle: str = "hummingbird",
+        *,
+        wind: WindConfig | Mapping | None = None,
+        substep_rate: float = DEFAULT_SUBSTEP_RATE,
+        seed: int = 0,
+        integrator_kwargs: Mapping[str, Any] | None = None,
+    ) -> None:
         super().__init__()
         from rotorpy.vehicles.multirotor import Multirotor
 
-        if not (isinstance(substep_rate, (int, float)) and math.isfinite(substep_rate)
-                and substep_rate > 0):
-            raise ValueError(f"substep_rate: must be a positive finite number, got {substep_rate!r}")
+        if not (
+            isinstance(substep_rate, (int, float))
+            and math.isfinite(substep_rate)
+            and substep_rate > 0
+        ):
+            raise ValueError(
+                f"substep_rate: must be a positive finite number, got {substep_rate!r}"
+            )
         if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
             raise ValueError(f"seed: must be a non-negative integer, got {seed!r}")
         self.vehicle = vehicle
         self.params = vehicle_params(vehicle)
-        self.wind = None if wind is None else (
-            wind if isinstance(wind, WindConfig) else WindConfig.model_validate(dict(wind)))
+        self.wind = (
+            None
+            if wind is None
+            else (wind if isinstance(wind, WindConfig) else WindConfig.model_validate(dict(wind)))
+        )
         self.substep_rate = float(substep_rate)
         self.seed = int(seed)
-        self.multirotor = Multirotor(self.params, control_abstraction="cmd_vel",
-                                     integrator_kwargs=dict(integrator_kwargs or {"method": "RK45"}))
+        self.multirotor = Multirotor(
+            self.params,
+            control_abstraction="cmd_vel",
+            integrator_kwargs=dict(integrator_kwargs or {"method": "RK45"}),
+        )
         self.hover_speed = hover_rotor_speed(self.params)
         self.t = 0.0
         self.states: list[dict[str, np.ndarray]] = []
@@ -339,9 +372,14 @@ class RotorPyDynamics(Dynamics):
         return max(1, math.ceil(dt * self.substep_rate - 1e-9))
 
     def _hover_state(self, p: np.ndarray, v: np.ndarray) -> dict[str, np.ndarray]:
-        return {"x": p.copy(), "v": v.copy(), "q": np.array([0.0, 0.0, 0.0, 1.0]),
-                "w": np.zeros(3), "wind": np.zeros(3),
-                "rotor_speeds": np.full(self.params["num_rotors"], self.hover_speed)}
+        return {
+            "x": p.copy(),
+            "v": v.copy(),
+            "q": np.array([0.0, 0.0, 0.0, 1.0]),
+            "w": np.zeros(3),
+            "wind": np.zeros(3),
+            "rotor_speeds": np.full(self.params["num_rotors"], self.hover_speed),
+        }
 
     def _reset_model(self) -> None:
         self.t = 0.0
@@ -377,27 +415,47 @@ class RotorPyDynamics(Dynamics):
         p_out[:, self._held] = self._p[self._held]
         v_out[:, self._held] = 0.0
         self._p, self._v = p_out[-1].copy(), v_out[-1].copy()
-        return StepResult(positions=p_out[-1].copy(), velocities=v_out[-1].copy(),
-                          sample_times=h * np.arange(1, s + 1), sample_positions=p_out,
-                          sample_velocities=v_out)
+        return StepResult(
+            positions=p_out[-1].copy(),
+            velocities=v_out[-1].copy(),
+            sample_times=h * np.arange(1, s + 1),
+            sample_positions=p_out,
+            sample_velocities=v_out,
+        )
 
 
-def make_dynamics(dynamics: DynamicsConfig | Mapping[str, Any] | None = None,
-                  wind: WindConfig | Mapping[str, Any] | None = None, *, seed: int = 0,
-                  **rotorpy_options: Any) -> Dynamics:
+def make_dynamics(
+    dynamics: DynamicsConfig | Mapping[str, Any] | None = None,
+    wind: WindConfig | Mapping[str, Any] | None = None,
+    *,
+    seed: int = 0,
+    **rotorpy_options: Any,
+) -> Dynamics:
     """The model of a scenario's ``dynamics`` and ``wind`` mappings (contract §5; None: the
     defaults, ``kinematic`` and no wind). ``seed`` fixes the Dryden gusts; ``rotorpy_options``
     (``integrator_kwargs``) go to :class:`RotorPyDynamics`. Bad values raise ``ValueError``
     naming the key."""
-    cfg = dynamics if isinstance(dynamics, DynamicsConfig) else DynamicsConfig.model_validate(
-        dict(dynamics or {}))
-    wcfg = wind if (wind is None or isinstance(wind, WindConfig)) else WindConfig.model_validate(
-        dict(wind))
+    cfg = (
+        dynamics
+        if isinstance(dynamics, DynamicsConfig)
+        else DynamicsConfig.model_validate(dict(dynamics or {}))
+    )
+    wcfg = (
+        wind
+        if (wind is None or isinstance(wind, WindConfig))
+        else WindConfig.model_validate(dict(wind))
+    )
     if wcfg is not None and cfg.model != "rotorpy":
         raise ValueError(f"wind: only with dynamics model rotorpy, not {cfg.model}")
     if cfg.model == "kinematic":
         return KinematicDynamics()
     if cfg.model == "first_order":
+        assert cfg.tau is not None  # DynamicsConfig requires tau for first_order
         return FirstOrderDynamics(cfg.tau)
-    return RotorPyDynamics(cfg.vehicle or "hummingbird", wind=wcfg, seed=seed,
-                           substep_rate=cfg.substep_rate or DEFAULT_SUBSTEP_RATE, **rotorpy_options)
+    return RotorPyDynamics(
+        cfg.vehicle or "hummingbird",
+        wind=wcfg,
+        seed=seed,
+        substep_rate=cfg.substep_rate or DEFAULT_SUBSTEP_RATE,
+        **rotorpy_options,
+    )

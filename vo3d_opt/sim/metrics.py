@@ -22,6 +22,7 @@ in the intrusions), ``arrival_time_max`` (s, null unless all arrived), ``path_le
 (flown path over straight start–goal distance, mean over arrived agents), ``decision_time_max_us``
 and ``wall_time`` (s).
 """
+
 from __future__ import annotations
 
 from collections import Counter
@@ -43,9 +44,22 @@ _CHUNK = 256
 _CHUNK_ELEMENTS = 8_000_000
 
 CONTRACT_KEYS = (
-    "scenario", "formulation", "solver", "agents", "steps", "time", "reached", "all_reached",
-    "min_vehicle_distance", "min_obstacle_distance", "pz_intrusions", "collisions",
-    "altitude_violations", "speed_violations", "fallbacks", "decision_time_median_us",
+    "scenario",
+    "formulation",
+    "solver",
+    "agents",
+    "steps",
+    "time",
+    "reached",
+    "all_reached",
+    "min_vehicle_distance",
+    "min_obstacle_distance",
+    "pz_intrusions",
+    "collisions",
+    "altitude_violations",
+    "speed_violations",
+    "fallbacks",
+    "decision_time_median_us",
     "decision_time_p99_us",
 )
 
@@ -90,8 +104,10 @@ def _segment_min(p0: np.ndarray, p1: np.ndarray, ii: np.ndarray, jj: np.ndarray)
     return np.minimum(ends, np.linalg.norm(r0 + t[:, None] * w, axis=-1))
 
 
-def close_pairs(positions: np.ndarray, threshold: float,
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def close_pairs(
+    positions: np.ndarray,
+    threshold: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(i, j, dmin), i < j: every vehicle pair whose closest approach over the run (continuous
     along the straight segments) is below ``threshold``, and the closest pair of the run
     whatever its distance (first, when it is not below ``threshold``); dmin is exact, as
@@ -153,8 +169,10 @@ def _physical_obstacles(record: RunRecord) -> list[tuple[str, Any]]:
     return out
 
 
-def obstacle_min_distances(record: RunRecord, positions: np.ndarray | None = None,
-                           ) -> tuple[np.ndarray, np.ndarray]:
+def obstacle_min_distances(
+    record: RunRecord,
+    positions: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """(N, M) smallest centre-to-surface distance and (N, M) 'entered the protected zone', over
     the M physical obstacles, for the record's positions (or the ``positions`` given); a chunk
     of steps at a time."""
@@ -166,7 +184,7 @@ def obstacle_min_distances(record: RunRecord, positions: np.ndarray | None = Non
     if not obstacles:
         return dist, entered
     for a in range(0, max(positions.shape[0] - 1, 1), _CHUNK):
-        pts = _with_subsamples(positions[a: a + _CHUNK + 1])
+        pts = _with_subsamples(positions[a : a + _CHUNK + 1])
         for m, (kind, ob) in enumerate(obstacles):
             d, e = _obstacle_distance(kind, ob, pts)
             dist[:, m] = np.minimum(dist[:, m], d.min(axis=0))
@@ -185,8 +203,10 @@ def _obstacle_distance(kind: str, ob: Any, pts: np.ndarray) -> tuple[np.ndarray,
         shrunk[..., 2] += TOL
         return ob.surface_distance(pts), prism_contains(ob, shrunk)
     centre = np.asarray(ob.center, dtype=float)
-    return (sphere_surface_distance(centre, ob.radius, pts),
-            np.linalg.norm(pts - centre, axis=-1) < ob.r_pz - TOL)
+    return (
+        sphere_surface_distance(centre, ob.radius, pts),
+        np.linalg.norm(pts - centre, axis=-1) < ob.r_pz - TOL,
+    )
 
 
 def nearest_vehicle_distance(record: RunRecord) -> np.ndarray:
@@ -205,8 +225,11 @@ def nearest_obstacle_distance(record: RunRecord) -> np.ndarray:
     p = record.positions
     out = np.full(p.shape[:2], np.inf)
     for kind, ob in _physical_obstacles(record):
-        d = (ob.surface_distance(p) if kind == "body"
-             else sphere_surface_distance(np.asarray(ob.center), ob.radius, p))
+        d = (
+            ob.surface_distance(p)
+            if kind == "body"
+            else sphere_surface_distance(np.asarray(ob.center), ob.radius, p)
+        )
         out = np.minimum(out, d)
     return out
 
@@ -255,8 +278,10 @@ def record_close_pairs(record: RunRecord) -> tuple[np.ndarray, np.ndarray, np.nd
     return cache["close_pairs"]
 
 
-def closest_vehicle_approach(record: RunRecord, pairs: tuple[np.ndarray, ...] | None = None,
-                             ) -> Approach | None:
+def closest_vehicle_approach(
+    record: RunRecord,
+    pairs: tuple[np.ndarray, ...] | None = None,
+) -> Approach | None:
     """The closest vehicle pair over the run (continuous, as in the summary); None with fewer
     than two vehicles. ``pairs``: (i, j, dmin) of pairs including the closest one
     (:func:`close_pairs` or :func:`pair_min_distances`), when already computed."""
@@ -270,8 +295,10 @@ def closest_vehicle_approach(record: RunRecord, pairs: tuple[np.ndarray, ...] | 
     return Approach(float(dmin[k]), _closest_time(rel, times), i, j)
 
 
-def closest_obstacle_approach(record: RunRecord, odist: np.ndarray | None = None,
-                              ) -> Approach | None:
+def closest_obstacle_approach(
+    record: RunRecord,
+    odist: np.ndarray | None = None,
+) -> Approach | None:
     """The closest vehicle-obstacle approach over the run (samples and interior points, as in
     the summary); None without physical obstacles. ``odist``: :func:`obstacle_min_distances`'
     distances, when already computed."""
@@ -283,8 +310,11 @@ def closest_obstacle_approach(record: RunRecord, odist: np.ndarray | None = None
     kind, ob = _physical_obstacles(record)[m]
     times, track = record.track
     pts = _with_subsamples(track[:, i])
-    d = (ob.surface_distance(pts) if kind == "body"
-         else sphere_surface_distance(np.asarray(ob.center, dtype=float), ob.radius, pts))
+    d = (
+        ob.surface_distance(pts)
+        if kind == "body"
+        else sphere_surface_distance(np.asarray(ob.center, dtype=float), ob.radius, pts)
+    )
     t = _with_subsamples(times)[int(np.argmin(d))]
     return Approach(float(odist[i, m]), float(t), i, m)
 
@@ -292,8 +322,9 @@ def closest_obstacle_approach(record: RunRecord, odist: np.ndarray | None = None
 def physical_obstacle_names(record: RunRecord) -> list[str]:
     """Names of the obstacles the metrics count, in their order: 'obstacles[k]', 'spheres[k]'."""
     sc = record.scenario
-    return ([f"obstacles[{k}]" for k in range(len(sc.bodies))]
-            + [f"spheres[{k}]" for k, s in enumerate(sc.spheres) if s.physical])
+    return [f"obstacles[{k}]" for k in range(len(sc.bodies))] + [
+        f"spheres[{k}]" for k, s in enumerate(sc.spheres) if s.physical
+    ]
 
 
 def _per_step(bad: np.ndarray, per: int) -> int:
@@ -316,15 +347,16 @@ def _limits_and_paths(record: RunRecord) -> tuple[int, int, np.ndarray]:
     altitude = _per_step((z < z_lo - TOL) | (z > z_hi + TOL), per)
     speed_bad, path = 0, np.zeros(record.n_agents)
     for a in range(0, record.steps, _CHUNK):
-        speed = np.linalg.norm(record.velocities[a: a + _CHUNK], axis=-1)
-        slow = record.decided[a: a + _CHUNK] & (speed < v_lo - TOL)
+        speed = np.linalg.norm(record.velocities[a : a + _CHUNK], axis=-1)
+        slow = record.decided[a : a + _CHUNK] & (speed < v_lo - TOL)
         if record.sample_velocities is not None:  # the fastest sample within each step
-            fine = np.linalg.norm(record.sample_velocities[a * per + 1: (a + _CHUNK) * per + 1],
-                                  axis=-1)
+            fine = np.linalg.norm(
+                record.sample_velocities[a * per + 1 : (a + _CHUNK) * per + 1], axis=-1
+            )
             speed = fine.reshape(-1, per, fine.shape[1]).max(axis=1)
         bad = (speed > sc.max_speed[None, :] + TOL) | slow
         speed_bad += int(np.count_nonzero(bad))
-        steps = np.diff(track[a * per: (a + _CHUNK) * per + 1], axis=0)
+        steps = np.diff(track[a * per : (a + _CHUNK) * per + 1], axis=0)
         path += np.linalg.norm(steps, axis=-1).sum(axis=0)
     return altitude, speed_bad, path
 
@@ -389,8 +421,9 @@ def summarize(record: RunRecord) -> dict[str, Any]:
         "obstacle_pz_intrusions": obstacle_pz,
         "starts_inside_pz": starts_pz,
         "arrival_time_max": float(np.nanmax(arrival)) if reached_mask.all() else None,
-        "path_length_ratio": (float(np.mean(steps_flown[ratio_ok] / straight[ratio_ok]))
-                              if ratio_ok.any() else None),
+        "path_length_ratio": (
+            float(np.mean(steps_flown[ratio_ok] / straight[ratio_ok])) if ratio_ok.any() else None
+        ),
         "decision_time_max_us": float(times_us.max()) if times_us.size else None,
         "wall_time": round(float(record.wall_time), 6),
     }

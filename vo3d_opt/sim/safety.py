@@ -30,6 +30,7 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
 Every value can be overridden by the scenario's ``safety`` mapping, and ``pz_buffer`` /
 ``acceleration`` by ``selector_options.pz_buffer`` / ``limits.acceleration``.
 """
+
 from __future__ import annotations
 
 import math
@@ -72,6 +73,7 @@ def response_time(dyn: DynamicsConfig) -> float:
     if dyn.model == "kinematic":
         return 0.0
     if dyn.model == "first_order":
+        assert dyn.tau is not None  # DynamicsConfig requires tau for first_order
         return float(dyn.tau)
     p = vehicle_params(dyn.vehicle or "hummingbird")
     k_v, kp, kd = (float(p.get(k, d)) for k, d in (("k_v", 10.0), ("kp_att", 1.0), ("kd_att", 0.0)))
@@ -106,8 +108,10 @@ def _acceleration(sc: Scenario, tau: float, v_max: float) -> tuple[float | None,
         return None, "kinematic: takes any velocity at once"
     dyn = sc.vehicle_dynamics
     thrust, tilt = thrust_acceleration(dyn), controller_acceleration(dyn, float(sc.dt))
-    return (min(v_max / tau, thrust, tilt),
-            f"min(v_max / tau_eff {v_max / tau:.3g}, thrust {thrust:.3g}, controller {tilt:.3g})")
+    return (
+        min(v_max / tau, thrust, tilt),
+        f"min(v_max / tau_eff {v_max / tau:.3g}, thrust {thrust:.3g}, controller {tilt:.3g})",
+    )
 
 
 def _altitude_cap(sc: Scenario) -> float:
@@ -141,13 +145,22 @@ def derive_margins(sc: Scenario) -> Margins:
         "tau_eff": f"{sc.vehicle_dynamics.model} response time",
         "acceleration": why_a,
         "tracking": f"velocity gap {gap:.3g} m/s x tau_eff {tau:.3g} s",
-        "pz_buffer": (f"2 v_max dt {2 * v_max * dt:.3g} + 2 tracking {2 * tracking:.3g} + noise "
-                      f"{noise:.3g} + latency {v_max * sens.latency:.3g}"),
+        "pz_buffer": (
+            f"2 v_max dt {2 * v_max * dt:.3g} + 2 tracking {2 * tracking:.3g} + noise "
+            f"{noise:.3g} + latency {v_max * sens.latency:.3g}"
+        ),
         "obstacle_margin": "tracking + vehicle radius",
         "altitude_margin": (f"stopping room {stop:.3g}, at most {cap:.3g} (starts and goals)"),
     }
-    return Margins(tau_eff=tau, acceleration=accel, tracking=tracking, pz_buffer=pz_buffer,
-                   obstacle_margin=obstacle, altitude_margin=altitude, why=why)
+    return Margins(
+        tau_eff=tau,
+        acceleration=accel,
+        tracking=tracking,
+        pz_buffer=pz_buffer,
+        obstacle_margin=obstacle,
+        altitude_margin=altitude,
+        why=why,
+    )
 
 
 def clamps_commands(sc: Scenario) -> bool:
@@ -158,8 +171,13 @@ def clamps_commands(sc: Scenario) -> bool:
     return sc.vehicle_dynamics.model == "rotorpy"
 
 
-def within_reach(commands: np.ndarray, velocities: np.ndarray, acceleration: float,
-                 dt: float, max_speed: np.ndarray) -> np.ndarray:
+def within_reach(
+    commands: np.ndarray,
+    velocities: np.ndarray,
+    acceleration: float,
+    dt: float,
+    max_speed: np.ndarray,
+) -> np.ndarray:
     """Commands (N, 3) moved into the box ``|u - v| <= acceleration dt`` per axis around the
     real velocities (N, 3), then scaled to at most ``max_speed`` (N,): the selector keeps the
     box when it finds a velocity outside every VO, but its least-bad fallbacks may jump
@@ -180,8 +198,12 @@ def planning_limits(limits: Limits, m: Margins) -> Limits:
     """The limits the selector plans with: the altitude range shrunk by ``altitude_margin`` on
     both sides, ``acceleration`` from the margins."""
     lo, hi = limits.altitude
-    return limits.model_copy(update={"altitude": (lo + m.altitude_margin, hi - m.altitude_margin),
-                                     "acceleration": m.acceleration})
+    return limits.model_copy(
+        update={
+            "altitude": (lo + m.altitude_margin, hi - m.altitude_margin),
+            "acceleration": m.acceleration,
+        }
+    )
 
 
 def prism_clearance(body: Cylinder | Box) -> float:
@@ -199,5 +221,6 @@ def inflated(body: Cylinder | Box, clearance: float) -> Cylinder | Box:
         return body
     if body.L_pz is None and body.h_pz is None:
         return body.model_copy(update={"margin": body.margin + extra})
-    return body.model_copy(update={"L_pz": body.side + 2.0 * extra,
-                                   "h_pz": body.prism_height + extra})
+    return body.model_copy(
+        update={"L_pz": body.side + 2.0 * extra, "h_pz": body.prism_height + extra}
+    )

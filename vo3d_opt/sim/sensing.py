@@ -17,6 +17,7 @@
   that ask pay: 6 N normal draws per ``sensed`` call (measured in benchmarks/bench_dynamics.py).
 * A vehicle's own row is its exact current state.
 """
+
 from __future__ import annotations
 
 import math
@@ -45,8 +46,16 @@ def latency_steps(latency: float, dt: float) -> int:
 class Sensor:
     """Noisy, late views of N vehicles' states; ``push`` the truth once per step."""
 
-    def __init__(self, n: int, dt: float, *, position_noise: float = 0.0,
-                 velocity_noise: float = 0.0, latency: float = 0.0, seed: int = 0) -> None:
+    def __init__(
+        self,
+        n: int,
+        dt: float,
+        *,
+        position_noise: float = 0.0,
+        velocity_noise: float = 0.0,
+        latency: float = 0.0,
+        seed: int = 0,
+    ) -> None:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"n: must be a positive integer, got {n!r}")
         if _non_negative(dt, "dt") == 0:
@@ -72,8 +81,10 @@ class Sensor:
     def push(self, positions: Any, velocities: Any) -> None:
         """Record the true state (N, 3) each of the current step."""
         slot = self.pushes % (self.lag + 1)
-        for name, value, buf in (("positions", positions, self._p),
-                                 ("velocities", velocities, self._v)):
+        for name, value, buf in (
+            ("positions", positions, self._p),
+            ("velocities", velocities, self._v),
+        ):
             arr = np.asarray(value, dtype=float)
             if arr.shape != (self.n, 3):
                 raise ValueError(f"{name}: must have shape ({self.n}, 3), got {arr.shape}")

@@ -40,6 +40,7 @@ seen by the others, and no longer decides. The run stops when all agents have ar
 ``max_time``. The loop never clips a decision: the metrics report any limit it breaks (a
 non-finite command becomes 0 with the status ``invalid_velocity (...)``).
 """
+
 from __future__ import annotations
 
 import sys
@@ -72,8 +73,16 @@ class Decision(Protocol):
 class SelectorLike(Protocol):
     """Anything with ``VelocitySelector.select``'s signature (contract §1)."""
 
-    def select(self, *, own: AgentState, preferred_velocity: Any, neighbors: list[Neighbor],
-               obstacles: list[Any], limits: Limits, dt: float) -> Decision: ...
+    def select(
+        self,
+        *,
+        own: AgentState,
+        preferred_velocity: Any,
+        neighbors: list[Neighbor],
+        obstacles: list[Any],
+        limits: Limits,
+        dt: float,
+    ) -> Decision: ...
 
 
 @dataclass(frozen=True)
@@ -222,8 +231,9 @@ class RunBuffers:
         self.samples: np.ndarray | None = None
         self.sample_vel: np.ndarray | None = None
 
-    def put_samples(self, k: int, sample_positions: np.ndarray,
-                    sample_velocities: np.ndarray) -> None:
+    def put_samples(
+        self, k: int, sample_positions: np.ndarray, sample_velocities: np.ndarray
+    ) -> None:
         """Step k's sub-step samples (S, N, 3) each, kept only when S > 1."""
         s = sample_positions.shape[0]
         if s < 2:
@@ -233,8 +243,9 @@ class RunBuffers:
             self.samples = np.empty((total * s + 1, n, 3))
             self.sample_vel = np.zeros((total * s + 1, n, 3))
             self.samples[0] = self.pos[0]
-        self.samples[k * s + 1: (k + 1) * s + 1] = sample_positions
-        self.sample_vel[k * s + 1: (k + 1) * s + 1] = sample_velocities
+        assert self.sample_vel is not None  # allocated with self.samples
+        self.samples[k * s + 1 : (k + 1) * s + 1] = sample_positions
+        self.sample_vel[k * s + 1 : (k + 1) * s + 1] = sample_velocities
 
     def put_statuses(self, k: int, statuses: np.ndarray, mask: np.ndarray) -> None:
         """Row k of the statuses: ``statuses`` where ``mask``, "" elsewhere."""
@@ -248,17 +259,34 @@ class RunBuffers:
             lookup[c] = self.status_names.index(name)
         self.status_codes[k, mask] = lookup[codes]
 
-    def record(self, sc: Scenario, formulation: str, solver: str, steps: int, wall: float,
-               extra: dict[str, Any] | None = None) -> RunRecord:
+    def record(
+        self,
+        sc: Scenario,
+        formulation: str,
+        solver: str,
+        steps: int,
+        wall: float,
+        extra: dict[str, Any] | None = None,
+    ) -> RunRecord:
         s = steps
         statuses = np.array(self.status_names, dtype=object)[self.status_codes[:s]]
         return RunRecord(
-            scenario=sc, formulation=formulation, solver=solver,
-            times=np.arange(s + 1) * sc.dt, positions=self.pos[: s + 1], velocities=self.vel[:s],
-            commands=self.cmd[:s], preferred=self.pref[:s], decided=self.decided[:s],
-            statuses=statuses, decision_times=self.dtimes[:s],
-            solve_times=self.stimes[:s], arrived=self.arrived[: s + 1], wall_time=wall,
-            extra=extra or {}, samples=self._cut(self.samples, s),
+            scenario=sc,
+            formulation=formulation,
+            solver=solver,
+            times=np.arange(s + 1) * sc.dt,
+            positions=self.pos[: s + 1],
+            velocities=self.vel[:s],
+            commands=self.cmd[:s],
+            preferred=self.pref[:s],
+            decided=self.decided[:s],
+            statuses=statuses,
+            decision_times=self.dtimes[:s],
+            solve_times=self.stimes[:s],
+            arrived=self.arrived[: s + 1],
+            wall_time=wall,
+            extra=extra or {},
+            samples=self._cut(self.samples, s),
             sample_velocities=self._cut(self.sample_vel, s),
         )
 
@@ -299,14 +327,27 @@ def _checked_commands(out: StepDecision, deciding: np.ndarray) -> tuple[np.ndarr
 def _progress_bar(sc: Scenario, total: int, progress: bool | None) -> tqdm:
     """Steps against the most the run may take, with the arrivals alongside (``finish`` sets
     the total to the steps flown when everyone arrived early, so the bar ends at 100 %)."""
-    return tqdm(total=total, desc=sc.name, unit="step", file=sys.stderr, delay=1.0, leave=False,
-                dynamic_ncols=True, disable=(None if progress is None else not progress))
+    return tqdm(
+        total=total,
+        desc=sc.name,
+        unit="step",
+        file=sys.stderr,
+        delay=1.0,
+        leave=False,
+        dynamic_ncols=True,
+        disable=(None if progress is None else not progress),
+    )
 
 
-def fly(sc: Scenario, step: DecisionStep, *,
-        preferred_velocity: Callable[[np.ndarray], np.ndarray] | None = None,
-        dynamics: Dynamics | None = None, progress: bool | None = None,
-        max_steps: int | None = None) -> RunRecord:
+def fly(
+    sc: Scenario,
+    step: DecisionStep,
+    *,
+    preferred_velocity: Callable[[np.ndarray], np.ndarray] | None = None,
+    dynamics: Dynamics | None = None,
+    progress: bool | None = None,
+    max_steps: int | None = None,
+) -> RunRecord:
     """The one simulation loop (the module docstring): sense → ``step.decide`` → integrate,
     until every agent arrived or ``max_time`` (or ``max_steps``). ``preferred_velocity``:
     positions (N, 3) → preferred velocities (N, 3), default the scenario's goal rule;
@@ -333,8 +374,9 @@ def fly(sc: Scenario, step: DecisionStep, *,
             w = np.asarray(prefer(p), dtype=float)
             w[done] = 0.0
             deciding = ~done & ~straight
-            snap = Snapshot(k=k, t=k * dt, positions=p, velocities=v, preferred=w,
-                            deciding=deciding)
+            snap = Snapshot(
+                k=k, t=k * dt, positions=p, velocities=v, preferred=w, deciding=deciding
+            )
             out = step.decide(snap)
             u, statuses = _checked_commands(out, deciding)
             u[straight] = w[straight]
@@ -362,8 +404,9 @@ def fly(sc: Scenario, step: DecisionStep, *,
     return buf.record(sc, step.formulation, step.solver, steps, wall, step.extra())
 
 
-def make_selector(formulation: str | None = None, solver: str | None = None,
-                  options: dict[str, Any] | None = None) -> tuple[Any, str, str]:
+def make_selector(
+    formulation: str | None = None, solver: str | None = None, options: dict[str, Any] | None = None
+) -> tuple[Any, str, str]:
     """Build ``vo3d_opt.selector.VelocitySelector``; returns (selector, formulation, solver).
 
     Unknown formulations or solvers raise ``ValueError`` (from the selector's constructor).
@@ -392,15 +435,28 @@ class Simulator:
     ``max_neighbors`` (the k nearest vehicles in range) and ``threads`` go to ``select_many``.
     """
 
-    def __init__(self, scenario: Scenario, selector: SelectorLike, *, formulation: str = "custom",
-                 solver: str = "custom", max_neighbors: int | None = None,
-                 threads: int | None = None) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        selector: SelectorLike,
+        *,
+        formulation: str = "custom",
+        solver: str = "custom",
+        max_neighbors: int | None = None,
+        threads: int | None = None,
+    ) -> None:
         from vo3d_opt.sim.deciders import decision_step
 
         self.scenario = scenario
         self.selector = selector
-        self.step = decision_step(scenario, selector, formulation=formulation, solver=solver,
-                                  max_neighbors=max_neighbors, threads=threads)
+        self.step = decision_step(
+            scenario,
+            selector,
+            formulation=formulation,
+            solver=solver,
+            max_neighbors=max_neighbors,
+            threads=threads,
+        )
 
     def run(self, *, progress: bool | None = None, max_steps: int | None = None) -> RunRecord:
         """Simulate until every agent arrived or ``max_time``; ``progress`` None = only on a TTY."""
@@ -423,24 +479,41 @@ def default_selector_options(sc: Scenario) -> dict[str, Any]:
     return {"reciprocal": True, "pz_buffer": derive_margins(sc).pz_buffer}
 
 
-def scenario_selector(sc: Scenario, formulation: str | None = None, solver: str | None = None
-                      ) -> tuple[Any, str, str]:
+def scenario_selector(
+    sc: Scenario, formulation: str | None = None, solver: str | None = None
+) -> tuple[Any, str, str]:
     """The selector a scenario runs with: the given or the scenario's formulation and solver,
     and ``default_selector_options`` overridden by the scenario's ``selector_options``."""
-    return make_selector(formulation or sc.formulation, solver or sc.solver,
-                         {**default_selector_options(sc), **sc.selector_options})
+    return make_selector(
+        formulation or sc.formulation,
+        solver or sc.solver,
+        {**default_selector_options(sc), **sc.selector_options},
+    )
 
 
-def run_scenario(scenario: Scenario | str | Path, selector: SelectorLike | None = None, *,
-                 formulation: str | None = None, solver: str | None = None,
-                 progress: bool | None = None, max_steps: int | None = None,
-                 max_neighbors: int | None = None, threads: int | None = None) -> RunRecord:
+def run_scenario(
+    scenario: Scenario | str | Path,
+    selector: SelectorLike | None = None,
+    *,
+    formulation: str | None = None,
+    solver: str | None = None,
+    progress: bool | None = None,
+    max_steps: int | None = None,
+    max_neighbors: int | None = None,
+    threads: int | None = None,
+) -> RunRecord:
     """Load (if a path) and run a scenario. Without ``selector``, build a ``VelocitySelector``
     from ``formulation``/``solver`` (falling back to the scenario's, then to plane_qp and the
     selector's default solver); ``ValueError`` for unknown names."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     if selector is None:
         selector, formulation, solver = scenario_selector(sc, formulation, solver)
-    sim = Simulator(sc, selector, formulation=formulation or "custom", solver=solver or "custom",
-                    max_neighbors=max_neighbors, threads=threads)
+    sim = Simulator(
+        sc,
+        selector,
+        formulation=formulation or "custom",
+        solver=solver or "custom",
+        max_neighbors=max_neighbors,
+        threads=threads,
+    )
     return sim.run(progress=progress, max_steps=max_steps)

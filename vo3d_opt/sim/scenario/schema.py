@@ -296,17 +296,31 @@ class Scenario(Spec):
         only with RotorPy, a latency of whole steps."""
         out: list[Problem] = []
         if self.dynamics is not None and self.velocity_response_tau is not None:
-            out.append((("velocity_response_tau",),
-                        "give either velocity_response_tau (an alias of dynamics model "
-                        "first_order) or dynamics, not both", self.velocity_response_tau))
+            out.append(
+                (
+                    ("velocity_response_tau",),
+                    "give either velocity_response_tau (an alias of dynamics model "
+                    "first_order) or dynamics, not both",
+                    self.velocity_response_tau,
+                )
+            )
         if self.wind is not None and self.vehicle_dynamics.model != "rotorpy":
-            out.append((("wind",), f"only with dynamics model rotorpy, not "
-                        f"{self.vehicle_dynamics.model}", self.wind.type))
+            out.append(
+                (
+                    ("wind",),
+                    f"only with dynamics model rotorpy, not {self.vehicle_dynamics.model}",
+                    self.wind.type,
+                )
+            )
         steps = self.sensing.latency / self.dt
         if abs(steps - round(steps)) > 1e-6:
-            out.append((("sensing", "latency"),
-                        f"must be a multiple of dt = {self.dt:g} s, got {self.sensing.latency:g}",
-                        self.sensing.latency))
+            out.append(
+                (
+                    ("sensing", "latency"),
+                    f"must be a multiple of dt = {self.dt:g} s, got {self.sensing.latency:g}",
+                    self.sensing.latency,
+                )
+            )
         return out
 
     def _step_problems(self) -> list[Problem]:
