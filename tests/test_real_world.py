@@ -277,7 +277,7 @@ def test_rotorpy_in_a_wind_in_the_loop_judged_on_its_sub_steps():
     data["defaults"]["r_pz"] = 3.0
     data["agents"][0]["start"], data["agents"][1]["start"] = [-12.0, 0.0, 10.0], [12.0, 0.5, 10.0]
     data["agents"][0]["goal"], data["agents"][1]["goal"] = [12.0, 0.0, 10.0], [-12.0, 0.5, 10.0]
-    sc = scenario_from_dict({**data, "max_time": 20.0,
+    sc = scenario_from_dict({**data, "max_time": 30.0,  # arrives at 23.2 s here
                              "dynamics": {"model": "rotorpy", "vehicle": "hummingbird",
                                           "substep_rate": 50.0},
                              "wind": {"type": "constant", "velocity": [0.0, 3.0, 0.0]}})
