@@ -117,15 +117,6 @@ def _crossings(apex, R, d_vo, r_vo, nx, ny, nz, cs):
 
 
 @inline
-def _to_plane(v, frame, c, s):
-    """Eq. (8): world vector -> (x^phi, y^phi, z^phi) on the plane with cos/sin phi = c, s."""
-    f0 = frame[0, 0] * v[0] + frame[0, 1] * v[1] + frame[0, 2] * v[2]
-    f1 = frame[1, 0] * v[0] + frame[1, 1] * v[1] + frame[1, 2] * v[2]
-    f2 = frame[2, 0] * v[0] + frame[2, 1] * v[1] + frame[2, 2] * v[2]
-    return f0, c * f1 + s * f2, c * f2 - s * f1
-
-
-@inline
 def _framed(x, y, z, frame):
     """A world vector in the planes' (e_x, e_y0, e_z0) frame: every plane then only turns it
     about e_x (eq. 8)."""
