@@ -268,3 +268,30 @@ def test_unknown_names_list_what_is_available():
         VelocitySelector(plane_step_deg=0)
     with pytest.raises(ValueError, match="colour"):
         VelocitySelector(colour="red")
+
+
+@pytest.mark.parametrize("formulation", ["plane_qp", "sampled"])
+def test_a_prism_reaching_the_ceiling_is_not_flown_over(formulation):
+    """A box whose protected prism (top 33 m) reaches the 32.5 m ceiling, straight ahead of a
+    UAV at 30 m that would like to climb: going over it, one step at a time within the altitude
+    limit, ends squeezed between ceiling and prism (sweep 'lagged' encounter 647). The answer
+    must be safe against the same box standing 1 km tall, i.e. go round it."""
+    box = dict(center=(25.0, 0.0), size=(6.0, 6.0), height=31.0)
+    kw = dict(
+        own=AgentState(position=(0.0, 0.0, 30.0), velocity=(4.0, 0.0, 0.5)),
+        preferred_velocity=(3.8, 0.0, 0.8),
+        neighbors=[],
+        obstacles=[Box(**box)],
+        limits=Limits(speed=(0.0, 4.0), altitude=(0.0, 32.5)),
+        dt=0.2,
+    )
+    v = VelocitySelector(formulation).select(**kw).velocity
+    assert_within_limits(kw, v)
+    tall = {**kw, "obstacles": [Box(**{**box, "height": 1000.0})]}
+    assert not exact(tall).unsafe(v)[0]
+    # with room above the prism, flying over stays allowed: about the preferred velocity,
+    # which the 1 km box would stop
+    roomy = {**kw, "limits": Limits(speed=(0.0, 4.0), altitude=(0.0, 40.0))}
+    v = VelocitySelector(formulation).select(**roomy).velocity
+    assert np.linalg.norm(v - (3.8, 0.0, 0.8)) < 0.2
+    assert exact({**roomy, "obstacles": tall["obstacles"]}).unsafe(v)[0]

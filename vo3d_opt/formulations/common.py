@@ -45,6 +45,9 @@ LIMIT_TOL = 1e-6
 BUFFER_GAP_SHARE = 0.9
 #: Cap on the time to intrusion (s) when comparing least-bad candidates ("never").
 NEVER = 1e9
+#: A prism whose top reaches the ceiling is planned this much (m) above the vehicle and the
+#: ceiling: no velocity's ray passes over it.
+OVER_THE_CEILING = 1e3
 
 Solve = Callable[[QP], Result]
 SolveNLP = Callable[[NLP], Result]
@@ -216,6 +219,9 @@ def build_vos(
     - The virtual sphere (3.1.6) is sized for every speed up to v_max.
     - A cone that no velocity within the speed limit reaches can neither hold an answer nor
       constrain one: left out of every formulation (and of the exact check, equivalently).
+    - A prism whose top h_pz reaches the ceiling z_max cannot be flown over: it is planned as
+      reaching far above (else a climb 'over' it, allowed one step at a time by the altitude
+      rows, ends squeezed between the ceiling and the prism: sweep 'lagged' encounter 647).
     """
     speed = np.sqrt(v_pref[0] ** 2 + v_pref[1] ** 2 + v_pref[2] ** 2)
     pref = np.empty(3)
@@ -254,6 +260,8 @@ def build_vos(
         if cfg.horizon < 0.0 or dist - prisms[j, 2] / np.sqrt(2.0) <= cfg.horizon * bounds.v_max:
             for k in range(4):
                 near[m, k] = prisms[j, k]
+            if prisms[j, 3] >= bounds.z_max:
+                near[m, 3] = max(prisms[j, 3], p[2]) + OVER_THE_CEILING
             m += 1
     return VOs(cones, build_pyramids(p, near[:m]), pref)
 
