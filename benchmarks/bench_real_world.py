@@ -41,9 +41,8 @@ HUMMINGBIRD = {"dynamics": {"model": "rotorpy", "vehicle": "hummingbird"}}
 #: pz_buffer of ideal kinematics (2 v_max dt) is set per scenario in :func:`variant`.
 NO_MARGINS = {"acceleration": 0.0, "altitude_margin": 0.0, "obstacle_margin": 0.0}
 #: RotorPy is not run on these (its cost per vehicle-period, measured, is reported instead):
-#: at about 0.1-0.3 s per vehicle and period on this shared machine they take hours.
-ROTORPY_SKIPPED = (
-    "cylinder-forest", "sphere-swap-16", "random-crossing-50", "random-crossing-1000")
+#: a thousand vehicles integrated one by one take hours.
+ROTORPY_SKIPPED = ("random-crossing-1000",)
 #: The wind runs: the two-vehicle paper cases (RotorPy's cost, as above).
 WIND = ["paper-case2-two-uav-six-obstacles", "paper-case3-two-uav-two-cylinders"]
 

@@ -2,7 +2,7 @@
 
 :class:`RVO2Step` is a decision step of our one simulation loop
 (:func:`vo3d_opt.sim.simulator.fly`), so both methods sense, get their preferred velocities
-(:func:`vo3d_opt.sim.traffic.goal_velocity`) and are integrated by the same code, and the very
+(:class:`vo3d_opt.sim.traffic.GoalWithDetours`) and are integrated by the same code, and the very
 same metrics (:func:`vo3d_opt.sim.metrics.summarize`) judge both:
 
 * every ``dt`` RVO2's agents are set to the loop's snapshot (positions, velocities) and

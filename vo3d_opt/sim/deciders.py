@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 
 from vo3d_opt.sim.safety import (
-    clamps_commands,
     derive_margins,
     inflated,
     planning_limits,
@@ -50,20 +49,27 @@ class _SelectorStep:
         self.margins = derive_margins(sc)
         self.limits = planning_limits(sc.limits, self.margins)
         self.bodies = [inflated(b, self.margins.obstacle_margin) for b in sc.bodies]
-        self.clamp = clamps_commands(sc) and self.margins.acceleration is not None
+        self.previous: np.ndarray | None = None  # the last commands (rate-limited models)
 
     def reachable(self, commands: np.ndarray, snap: Snapshot) -> np.ndarray:
-        """The commands, clamped to the acceleration bound around each vehicle's real velocity
-        when the vehicle model needs it (``safety.clamps_commands``)."""
-        if not self.clamp or self.margins.acceleration is None:
+        """The commands, rate-limited around each vehicle's previous command (at first its
+        real velocity) when the vehicle model needs it (``safety.command_rate``)."""
+        rate = self.margins.command_rate
+        if rate is None:
             return commands
-        return within_reach(
+        previous = self.previous
+        if previous is None or snap.k == 0:  # a new run
+            previous = snap.velocities
+        u = within_reach(
             np.asarray(commands, dtype=float),
-            snap.velocities,
-            float(self.margins.acceleration),
+            previous,
+            float(rate),
             float(self.scenario.dt),
             self.scenario.max_speed,
         )
+        u[~snap.deciding] = 0.0  # arrived: held in hover
+        self.previous = u
+        return u
 
     def agent_limits(self, i: int) -> Limits:
         """Agent ``i``'s planning limits (its own speed cap)."""
@@ -75,6 +81,7 @@ class _SelectorStep:
         return {
             "margins": {
                 "acceleration": m.acceleration,
+                "command_rate": m.command_rate,
                 "pz_buffer": m.pz_buffer,
                 "tracking": m.tracking,
                 "obstacle_margin": m.obstacle_margin,

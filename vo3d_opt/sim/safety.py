@@ -9,8 +9,8 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
   hummingbird, whose measured reversal lags 1.37 m behind an 8 m/s velocity change: 0.171 s);
 * ``acceleration`` (m/s² per axis, the selector's ``Limits.acceleration``): ``v_max / tau_eff``,
   capped by what the rotors can give (RotorPy: ``g (T/W - 1)``) and by what RotorPy's velocity
-  loop follows without flipping (``GAP_SHARE g / (k_v dt)``, 2.45 m/s²); none for kinematic
-  vehicles. Under RotorPy the commands are also clamped to it (:func:`within_reach`);
+  loop follows without flipping or climbing (``GAP_SHARE g / (k_v dt)``, 1.23 m/s²); none for
+  kinematic vehicles. Under RotorPy the commands are also clamped to it (:func:`within_reach`);
 * ``tracking`` (m): how far a vehicle strays from the straight line the selector planned:
   the velocity gap times ``tau_eff``, the gap at most ``min(2 v_max, √3 a dt)``;
 * ``pz_buffer`` (m): ``2 v_max dt`` (both move before the next decision) + ``2 tracking``
@@ -23,8 +23,8 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
   keeps the body off the obstacle, and a lagging vehicle may enter the prism's margin
   (``obstacle_pz_intrusions`` counts it) but not the obstacle;
 * ``altitude_margin`` (m): ``max(v_max tau_eff, tracking)``: room to stop from full vertical
-  speed, and the altitude a manoeuvre may cost; with clamped commands (RotorPy) the braking
-  distance ``v_max tau_eff + v_max² / (2 a (1 - exp(-dt/tau_eff)))``; at most what keeps every
+  speed, and the altitude a manoeuvre may cost; with rate-limited commands (RotorPy) the
+  braking distance ``v_max tau_eff + v_max² / (2 command_rate)``; at most what keeps every
   start and goal inside.
 
 Every value can be overridden by the scenario's ``safety`` mapping, and ``pz_buffer`` /
@@ -49,9 +49,15 @@ NOISE_QUANTILE = 3.76
 ALTITUDE_CLEARANCE = 1e-3
 #: RotorPy's velocity controller asks for the force ``m (g - k_v e)`` for a velocity gap ``e``;
 #: a gap of ``g / k_v`` (0.98 m/s) above the command points that force sideways or down and the
-#: vehicle flips and falls (measured in paper case 1). The acceleration bound keeps each
-#: period's gap within this share of ``g / k_v``: vertical force within 0.5-1.5 g, tilt < 35°.
+#: vehicle flips and falls (measured in paper case 1). The selector's acceleration bound keeps
+#: each period's change within this share of ``g / k_v`` (2.45 m/s² for the hummingbird).
 GAP_SHARE = 0.5
+#: ... but commands changing that fast still throw the hummingbird up to 8 m off its altitude
+#: on purely horizontal manoeuvres; changing by a quarter of ``g / k_v`` per period (1.23 m/s²),
+#: 0.13 m at most (``benchmarks/results_acceleration_bound.md``). The simulator rate-limits the
+#: commands to this share (:func:`within_reach`); the selector keeps the larger bound around the
+#: real velocity, which leaves room for the steady gap a P loop keeps in a wind.
+COMMAND_SHARE = 0.25
 
 
 @dataclass(frozen=True)
@@ -62,6 +68,8 @@ class Margins:
     tau_eff: float
     acceleration: float | None
     tracking: float
+    #: m/s² per axis: how fast the simulator lets commands change (None: not rate-limited)
+    command_rate: float | None
     pz_buffer: float
     obstacle_margin: float
     altitude_margin: float
@@ -88,6 +96,17 @@ def controller_acceleration(dyn: DynamicsConfig, dt: float) -> float:
         return math.inf
     k_v = float(vehicle_params(dyn.vehicle or "hummingbird").get("k_v", 10.0))
     return GAP_SHARE * G / (k_v * dt)
+
+
+def command_rate(sc: Scenario) -> float | None:
+    """m/s² per axis: the rate limit on the commands of vehicles whose controller turns a
+    velocity gap into attitude (RotorPy: :data:`COMMAND_SHARE` ``g / (k_v dt)``, at most the
+    selector's bound); None for the others."""
+    if not clamps_commands(sc):
+        return None
+    dyn = sc.vehicle_dynamics
+    k_v = float(vehicle_params(dyn.vehicle or "hummingbird").get("k_v", 10.0))
+    return COMMAND_SHARE * G / (k_v * float(sc.dt))
 
 
 def thrust_acceleration(dyn: DynamicsConfig) -> float:
@@ -135,15 +154,19 @@ def derive_margins(sc: Scenario) -> Margins:
     obstacle = _pick(sc.safety.obstacle_margin, tracking + float(np.max(sc.radius)))
     cap = _altitude_cap(sc)
     stop = max(v_max * tau, tracking)
-    if clamps_commands(sc) and accel is not None:
-        # braking is bounded too, and the vehicle reaches only 1 - exp(-dt/tau_eff) of each
-        # period's change within it: the distance to stop from full speed
-        reached = accel * (1.0 - math.exp(-dt / tau))
-        stop = v_max * tau + v_max**2 / (2.0 * reached)
+    rate = command_rate(sc) if accel is not None else None
+    if rate is not None and accel is not None:
+        rate = min(rate, accel)
+        # braking is rate-limited too, and the vehicle lags tau_eff behind its commands: the
+        # distance to stop from full speed
+        stop = v_max * tau + v_max**2 / (2.0 * rate)
     altitude = _pick(sc.safety.altitude_margin, min(stop, cap))
     why = {
         "tau_eff": f"{sc.vehicle_dynamics.model} response time",
         "acceleration": why_a,
+        "command_rate": (
+            "not rate-limited" if rate is None else f"COMMAND_SHARE g / (k_v dt) {rate:.3g}"
+        ),
         "tracking": f"velocity gap {gap:.3g} m/s x tau_eff {tau:.3g} s",
         "pz_buffer": (
             f"2 v_max dt {2 * v_max * dt:.3g} + 2 tracking {2 * tracking:.3g} + noise "
@@ -155,6 +178,7 @@ def derive_margins(sc: Scenario) -> Margins:
     return Margins(
         tau_eff=tau,
         acceleration=accel,
+        command_rate=rate,
         tracking=tracking,
         pz_buffer=pz_buffer,
         obstacle_margin=obstacle,
@@ -173,17 +197,19 @@ def clamps_commands(sc: Scenario) -> bool:
 
 def within_reach(
     commands: np.ndarray,
-    velocities: np.ndarray,
-    acceleration: float,
+    previous: np.ndarray,
+    rate: float,
     dt: float,
     max_speed: np.ndarray,
 ) -> np.ndarray:
-    """Commands (N, 3) moved into the box ``|u - v| <= acceleration dt`` per axis around the
-    real velocities (N, 3), then scaled to at most ``max_speed`` (N,): the selector keeps the
-    box when it finds a velocity outside every VO, but its least-bad fallbacks may jump
-    (measured under RotorPy: a hummingbird handed a 4 m/s gap at once flips and falls 37 m)."""
-    reach = acceleration * dt
-    u = velocities + np.clip(commands - velocities, -reach, reach)
+    """Commands (N, 3) moved into the box ``|u - u_prev| <= rate dt`` per axis around the
+    previous commands (N, 3), then scaled to at most ``max_speed`` (N,). A rate limit, not a
+    bound on the gap to the real velocity: the gap a P loop keeps in a steady wind stays
+    possible (clamped to the real velocity, a hummingbird flew 1.9 m/s into a 3 m/s wind when
+    asked for 4), while the asked-for force changes slowly (faster changes throw it off its
+    altitude; a 4 m/s jump at once flips it: measured, ``formulations/real_world.md``)."""
+    reach = rate * dt
+    u = previous + np.clip(commands - previous, -reach, reach)
     speed = np.linalg.norm(u, axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = np.where(speed > max_speed, max_speed / speed, 1.0)

@@ -6,8 +6,9 @@ time step." Here, every ``dt`` (:func:`fly`):
 
 1. **sense**: the snapshot of the previous step (positions, velocities), the same for everyone,
    so the order of the decisions does not matter; each agent's preferred velocity comes from a
-   plain function of the positions (default :func:`vo3d_opt.sim.traffic.goal_velocity`: towards
-   the goal at ``min(v_max, distance / dt)``; 0 for arrived agents);
+   function of the positions (default :class:`vo3d_opt.sim.traffic.GoalWithDetours`: towards
+   the goal at ``min(v_max, distance / dt)``, turned right for a while after an agent has
+   stalled for 4 s; 0 for arrived agents);
 2. **decide**: a pluggable :class:`DecisionStep` turns the snapshot into one command per agent
    that has not arrived: our selector for the whole swarm in one ``select_many`` call
    (:class:`vo3d_opt.sim.deciders.SwarmSelect`, what ``run_scenario`` and ``vo3d run`` use),
@@ -55,7 +56,7 @@ from tqdm import tqdm
 
 from vo3d_opt.sim.dynamics import Dynamics, make_dynamics
 from vo3d_opt.sim.scenario import Scenario, load_scenario
-from vo3d_opt.sim.traffic import goal_velocity
+from vo3d_opt.sim.traffic import GoalWithDetours
 from vo3d_opt.types import AgentState, Limits, Neighbor
 
 #: Default formulation when neither the caller nor the scenario names one (contract §1).
@@ -304,10 +305,10 @@ def scenario_dynamics(sc: Scenario) -> Dynamics:
 
 
 def scenario_goal_velocity(sc: Scenario) -> Callable[[np.ndarray], np.ndarray]:
-    """The scenario's preferred-velocity rule as a plain function of the positions (N, 3):
-    :func:`~vo3d_opt.sim.traffic.goal_velocity` towards each agent's goal."""
-    goals, v_max, dt = sc.goals, sc.max_speed, float(sc.dt)
-    return lambda positions: goal_velocity(positions, goals, v_max, dt)
+    """The scenario's preferred-velocity rule as a function of the positions (N, 3), one per
+    run (it keeps state): :func:`~vo3d_opt.sim.traffic.goal_velocity` towards each agent's goal,
+    with :class:`~vo3d_opt.sim.traffic.GoalWithDetours`' way out of deadlocks."""
+    return GoalWithDetours(sc.goals, sc.max_speed, float(sc.dt))
 
 
 def _checked_commands(out: StepDecision, deciding: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -33,3 +33,69 @@ def goal_velocity(positions: Any, goals: Any, max_speed: Any, dt: float) -> np.n
     with np.errstate(invalid="ignore", divide="ignore"):
         unit = np.where(dist[:, None] > 0, to_goal / dist[:, None], 0.0)
     return unit * speed[:, None]
+
+
+#: An agent is stalled when, over ``STALL_TIME`` s, it got closer to its goal by less than
+#: ``STALL_PROGRESS`` of what its top speed would have flown.
+STALL_TIME = 4.0
+STALL_PROGRESS = 0.05
+
+
+class GoalWithDetours:
+    """:func:`goal_velocity`, with a way out of the VO method's deadlocks (a local rule cannot
+    see round a wall of hovering or waiting vehicles: ``dense`` sweep encounter 576): an agent
+    that has stalled for ``stall_time`` s prefers, for the next ``stall_time`` s, its goal
+    direction turned ``detour_deg`` to the right about the vertical, at full speed (all turn
+    the same way, as traffic keeps right); then the goal again. The selector still keeps every
+    zone clear: a detour changes only what the agent would like.
+
+    Called once per control step with the positions (N, 3), as the simulator does; stateful
+    (one instance per run)."""
+
+    def __init__(
+        self,
+        goals: Any,
+        max_speed: Any,
+        dt: float,
+        *,
+        stall_time: float = STALL_TIME,
+        detour_deg: float = 90.0,
+    ) -> None:
+        self.goals = np.asarray(goals, dtype=float)
+        n = self.goals.shape[0]
+        self.v_max = np.broadcast_to(np.asarray(max_speed, dtype=float), (n,)).copy()
+        self.dt, self.stall_time = float(dt), float(stall_time)
+        self.turn = np.deg2rad(detour_deg)
+        self.t = 0.0
+        self.ref_dist = np.full(n, np.inf)  # distance to goal at the last check
+        self.ref_t = np.zeros(n)
+        self.detour_until = np.full(n, -np.inf)
+
+    def __call__(self, positions: Any) -> np.ndarray:
+        p = np.asarray(positions, dtype=float)
+        w = goal_velocity(p, self.goals, self.v_max, self.dt)
+        dist = np.linalg.norm(self.goals - p, axis=1)
+        on = self.t < self.detour_until
+        fresh = np.isinf(self.ref_dist) & ~on  # start, or a detour just ended: judge afresh
+        self.ref_dist[fresh], self.ref_t[fresh] = dist[fresh], self.t
+        check = ~on & (self.t - self.ref_t >= self.stall_time - 1e-9)
+        gained = self.ref_dist - dist
+        stalled = check & (gained < STALL_PROGRESS * self.v_max * self.stall_time)
+        self.detour_until[stalled] = self.t + self.stall_time
+        self.ref_dist[stalled] = np.inf
+        kept = check & ~stalled
+        self.ref_dist[kept], self.ref_t[kept] = dist[kept], self.t
+        on |= stalled
+        if on.any():
+            w[on] = self._detour(w[on], self.v_max[on])
+        self.t += self.dt
+        return w
+
+    def _detour(self, w: np.ndarray, v_max: np.ndarray) -> np.ndarray:
+        """The goal directions of ``w`` turned right about the vertical, at ``v_max``."""
+        c, s = np.cos(self.turn), np.sin(self.turn)
+        x, y = w[:, 0], w[:, 1]
+        turned = np.stack([c * x + s * y, -s * x + c * y, w[:, 2]], axis=1)
+        norm = np.linalg.norm(turned, axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(norm[:, None] > 0, turned * (v_max / norm)[:, None], 0.0)

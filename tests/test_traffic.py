@@ -1,0 +1,50 @@
+"""The simulator's preferred velocities: straight at the goal, and the detour out of a stall."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vo3d_opt.sim.traffic import STALL_TIME, GoalWithDetours, goal_velocity
+
+DT = 0.2
+GOALS = np.array([[100.0, 0.0, 20.0], [0.0, 100.0, 10.0]])
+
+
+def fly_rule(rule: GoalWithDetours, positions: list[np.ndarray]) -> np.ndarray:
+    return np.array([rule(p) for p in positions])
+
+
+def test_an_agent_that_keeps_moving_towards_its_goal_never_detours():
+    rule = GoalWithDetours(GOALS, 4.0, DT)
+    p, out = np.zeros((2, 3)), []
+    for _ in range(200):  # 40 s at 1 m/s: a quarter of top speed, well above the stall share
+        w = rule(p)
+        out.append(np.allclose(w, goal_velocity(p, GOALS, 4.0, DT)))
+        p = p + 0.25 * w * DT
+    assert all(out)
+
+
+def test_a_stalled_agent_turns_right_at_full_speed_then_seeks_its_goal_again():
+    rule = GoalWithDetours(GOALS, 4.0, DT)
+    p = np.array([[0.0, 0.0, 20.0], [0.0, 0.0, 10.0]])
+    still = fly_rule(rule, [p] * int(3 * STALL_TIME / DT + 1))  # held in place for 3 periods
+    steps = np.arange(still.shape[0]) * DT
+    straight = goal_velocity(p, GOALS, 4.0, DT)
+    detour = (steps >= STALL_TIME - 1e-9) & (steps < 2 * STALL_TIME - 1e-9)
+    # first the goal, then the goal direction turned 90° clockwise seen from above
+    before = steps < STALL_TIME - 1e-9
+    np.testing.assert_allclose(still[before], np.broadcast_to(straight, (before.sum(), 2, 3)))
+    right = np.array([[0.0, -4.0, 0.0], [4.0, 0.0, 0.0]])
+    np.testing.assert_allclose(still[detour], np.broadcast_to(right, (detour.sum(), 2, 3)),
+                               atol=1e-12)
+    # after the detour the goal again, and it is judged afresh for a whole stall time
+    after = (steps >= 2 * STALL_TIME - 1e-9) & (steps < 3 * STALL_TIME - 1e-9)
+    np.testing.assert_allclose(still[after], np.broadcast_to(straight, (after.sum(), 2, 3)))
+
+
+def test_the_detour_keeps_the_vertical_part_and_the_top_speed():
+    rule = GoalWithDetours(GOALS[:1], 3.0, DT, stall_time=1.0)
+    p = np.array([[0.0, 0.0, 0.0]])  # the goal is up and ahead
+    w = fly_rule(rule, [p] * 6)[-1, 0]
+    assert np.linalg.norm(w) == pytest.approx(3.0)
+    assert w[0] == pytest.approx(0.0, abs=1e-12) and w[1] < 0 and w[2] > 0
