@@ -361,7 +361,7 @@ def test_formulation_and_solver_pass_through_to_the_runs_and_the_replays():
 
 SECTION5_FAMILIES = ("intruder", "rotorpy", "noisy")
 #: The §5 keys each family adds to its ``group`` draw (removed, the rest is a group scenario).
-ADDED_KEYS = {"lagged": ("velocity_response_tau",), "rotorpy": ("dynamics", "wind")}
+ADDED_KEYS = {"lagged": ("dynamics",), "rotorpy": ("dynamics", "wind")}
 
 
 def first_draw(name: str, seed: int, index: int) -> Draw:
@@ -393,10 +393,11 @@ def test_group_variants_are_deterministic_and_sound_group_scenarios(name):
 
 
 def test_lagged_draws_tau_in_its_range_and_runs():
-    taus = [first_draw("lagged", 1, i).scenario["velocity_response_tau"] for i in range(60)]
+    taus = [first_draw("lagged", 1, i).scenario["dynamics"]["tau"] for i in range(60)]
     assert 0.1 <= min(taus) and max(taus) <= 1.0 and max(taus) - min(taus) > 0.5
     enc = make_encounter("lagged", 1, 0)
-    assert enc.load().velocity_response_tau == enc.params["tau"]
+    dyn = enc.load().vehicle_dynamics
+    assert dyn.model == "first_order" and dyn.tau == enc.params["tau"]
 
 
 def test_intruder_adds_one_non_avoiding_uav_clear_of_the_obstacles():

@@ -608,18 +608,18 @@ LAGGED_TAU = (0.1, 1.0)  # s, first-order velocity time constant, uniform
     "lagged",
     "a group encounter under first-order velocity dynamics, tau 0.1-1 s",
     obstacle_free=False,
-    warm_keys={"velocity_response_tau": 0.5},
+    warm_keys={"dynamics": {"model": "first_order", "tau": 0.5}},
 )
 def lagged(rng: np.random.Generator) -> Draw | None:
     """A ``group`` draw flown under first-order velocity dynamics: every vehicle's velocity
     follows its command as ``v += (v_cmd - v) min(1, dt / tau)``, with one time constant
-    ``tau`` for the encounter, uniform 0.1-1 s. Written as the legacy key
-    ``velocity_response_tau`` (to become ``dynamics: {model: first_order, tau}``)."""
+    ``tau`` for the encounter, uniform 0.1-1 s, written as contracts §5's
+    ``dynamics: {model: first_order, tau}``."""
     draw = _group_variant(rng)
     if draw is None:
         return None
     tau = float(rng.uniform(*LAGGED_TAU))
-    draw.scenario["velocity_response_tau"] = _r(tau)
+    draw.scenario["dynamics"] = {"model": "first_order", "tau": _r(tau)}
     draw.params["tau"] = _r(tau)
     return draw
 
