@@ -48,3 +48,10 @@ def test_the_detour_keeps_the_vertical_part_and_the_top_speed():
     w = fly_rule(rule, [p] * 6)[-1, 0]
     assert np.linalg.norm(w) == pytest.approx(3.0)
     assert w[0] == pytest.approx(0.0, abs=1e-12) and w[1] < 0 and w[2] > 0
+
+
+@pytest.mark.parametrize("kwargs,name", [({"stall_time": 0.0}, "stall_time"),
+                                         ({"detour_deg": float("nan")}, "detour_deg")])
+def test_bad_detour_settings_are_refused_naming_them(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        GoalWithDetours(GOALS, 4.0, DT, **kwargs)

@@ -61,6 +61,12 @@ class GoalWithDetours:
         stall_time: float = STALL_TIME,
         detour_deg: float = 90.0,
     ) -> None:
+        if not (np.isfinite(stall_time) and stall_time > 0):
+            raise ValueError(
+                f"stall_time: must be a positive number of seconds, got {stall_time!r}"
+            )
+        if not np.isfinite(detour_deg):
+            raise ValueError(f"detour_deg: must be a finite angle, got {detour_deg!r}")
         self.goals = np.asarray(goals, dtype=float)
         n = self.goals.shape[0]
         self.v_max = np.broadcast_to(np.asarray(max_speed, dtype=float), (n,)).copy()
