@@ -55,3 +55,14 @@ def test_the_detour_keeps_the_vertical_part_and_the_top_speed():
 def test_bad_detour_settings_are_refused_naming_them(kwargs, name):
     with pytest.raises(ValueError, match=name):
         GoalWithDetours(GOALS, 4.0, DT, **kwargs)
+
+
+def test_an_agent_circling_its_goal_is_not_stalled():
+    """Under a 1 s lag an agent may overshoot its goal and circle it for a while (the
+    first-order random-crossing-1000 once left one so): it makes no progress but moves, and a
+    detour would only send it further off."""
+    rule = GoalWithDetours(GOALS[:1], 4.0, DT)
+    angles = np.arange(100) * 0.1  # 3 m from the goal, 0.3 m per period (1.5 m/s)
+    ring = GOALS[0] + 3.0 * np.stack([np.cos(angles), np.sin(angles), 0 * angles], axis=1)
+    w = fly_rule(rule, [q[None] for q in ring])[:, 0]
+    np.testing.assert_allclose(w, goal_velocity(ring, np.tile(GOALS[0], (100, 1)), 4.0, DT))

@@ -36,18 +36,21 @@ def goal_velocity(positions: Any, goals: Any, max_speed: Any, dt: float) -> np.n
 
 
 #: An agent is stalled when, over ``STALL_TIME`` s, it got closer to its goal by less than
-#: ``STALL_PROGRESS`` of what its top speed would have flown.
+#: ``STALL_PROGRESS`` of what its top speed would have flown, and moved less than
+#: ``STALL_MOTION`` of it (one that circles its goal, overshooting it under a lag, is not
+#: stalled: a detour would only send it further off).
 STALL_TIME = 4.0
 STALL_PROGRESS = 0.05
+STALL_MOTION = 0.25
 
 
 class GoalWithDetours:
     """:func:`goal_velocity`, with a way out of the VO method's deadlocks (a local rule cannot
     see round a wall of hovering or waiting vehicles: ``dense`` sweep encounter 576): an agent
-    that has stalled for ``stall_time`` s prefers, for the next ``stall_time`` s, its goal
-    direction turned ``detour_deg`` to the right about the vertical, at full speed (all turn
-    the same way, as traffic keeps right); then the goal again. The selector still keeps every
-    zone clear: a detour changes only what the agent would like.
+    that has stalled (``STALL_PROGRESS``) over ``stall_time`` s prefers, for the next
+    ``stall_time`` s, its goal direction turned ``detour_deg`` to the right about the vertical,
+    at full speed (all turn the same way, as traffic keeps right); then the goal again. The
+    selector still keeps every zone clear: a detour changes only what the agent would like.
 
     Called once per control step with the positions (N, 3), as the simulator does; stateful
     (one instance per run)."""
@@ -74,6 +77,7 @@ class GoalWithDetours:
         self.turn = np.deg2rad(detour_deg)
         self.t = 0.0
         self.ref_dist = np.full(n, np.inf)  # distance to goal at the last check
+        self.ref_pos = np.zeros((n, 3))  # and position
         self.ref_t = np.zeros(n)
         self.detour_until = np.full(n, -np.inf)
 
@@ -83,19 +87,24 @@ class GoalWithDetours:
         dist = np.linalg.norm(self.goals - p, axis=1)
         on = self.t < self.detour_until
         fresh = np.isinf(self.ref_dist) & ~on  # start, or a detour just ended: judge afresh
-        self.ref_dist[fresh], self.ref_t[fresh] = dist[fresh], self.t
+        self._mark(fresh, p, dist)
         check = ~on & (self.t - self.ref_t >= self.stall_time - 1e-9)
+        reach = self.v_max * self.stall_time
         gained = self.ref_dist - dist
-        stalled = check & (gained < STALL_PROGRESS * self.v_max * self.stall_time)
+        moved = np.linalg.norm(p - self.ref_pos, axis=1)
+        stalled = check & (gained < STALL_PROGRESS * reach) & (moved < STALL_MOTION * reach)
         self.detour_until[stalled] = self.t + self.stall_time
         self.ref_dist[stalled] = np.inf
-        kept = check & ~stalled
-        self.ref_dist[kept], self.ref_t[kept] = dist[kept], self.t
+        self._mark(check & ~stalled, p, dist)
         on |= stalled
         if on.any():
             w[on] = self._detour(w[on], self.v_max[on])
         self.t += self.dt
         return w
+
+    def _mark(self, which: np.ndarray, p: np.ndarray, dist: np.ndarray) -> None:
+        """Start the next window of the agents ``which`` here and now."""
+        self.ref_dist[which], self.ref_pos[which], self.ref_t[which] = dist[which], p[which], self.t
 
     def _detour(self, w: np.ndarray, v_max: np.ndarray) -> np.ndarray:
         """The goal directions of ``w`` turned right about the vertical, at ``v_max``."""
