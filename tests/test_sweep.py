@@ -480,7 +480,8 @@ FAILURES = Path(__file__).parent / "data" / "sweep-failures"
 
 
 @pytest.mark.parametrize(
-    "name", ["lagged-s0-i413", "lagged-s0-i809", "lagged-s0-i647", "dense-s0-i576"]
+    "name",
+    ["lagged-s0-i413", "lagged-s0-i809", "lagged-s0-i647", "dense-s0-i576", "lagged-s0-i317"],
 )
 def test_sweep_failures_are_fixed(name):
     """`lagged` seed 0 before the margins derived from the scenario (sim/safety.py): encounter
@@ -489,7 +490,9 @@ def test_sweep_failures_are_fixed(name):
     climbed over a box whose prism reached the ceiling and, squeezed, slid down its side to
     0.17 m from it; a prism reaching the ceiling is now gone round. In `dense` 576 one agent
     stopped for good 8 m from its goal, wedged among three that had arrived and hover; it now
-    takes the simulator's detour after stalling (sim/traffic.GoalWithDetours) and arrives."""
+    takes the simulator's detour after stalling (sim/traffic.GoalWithDetours) and arrives. In
+    `lagged` 317 (found with the first detour rule) an agent stalled 1-3 m from its goal was
+    sent off again and again; no detour within r_pz of the goal."""
     from vo3d_opt.sim.metrics import summarize
     from vo3d_opt.sim.simulator import run_scenario
 

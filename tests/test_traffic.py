@@ -66,3 +66,12 @@ def test_an_agent_circling_its_goal_is_not_stalled():
     ring = GOALS[0] + 3.0 * np.stack([np.cos(angles), np.sin(angles), 0 * angles], axis=1)
     w = fly_rule(rule, [q[None] for q in ring])[:, 0]
     np.testing.assert_allclose(w, goal_velocity(ring, np.tile(GOALS[0], (100, 1)), 4.0, DT))
+
+
+def test_an_agent_stalled_near_its_goal_waits_instead_of_detouring():
+    rule = GoalWithDetours(GOALS, 4.0, DT, near=[10.0, 1.0])
+    p = GOALS - np.array([[5.0, 0.0, 0.0], [5.0, 0.0, 0.0]])  # both 5 m short, held there
+    w = fly_rule(rule, [p] * int(1.5 * STALL_TIME / DT))
+    straight = goal_velocity(p, GOALS, 4.0, DT)
+    np.testing.assert_allclose(w[:, 0], np.broadcast_to(straight[0], (w.shape[0], 3)))
+    assert not np.allclose(w[-1, 1], straight[1])  # beyond its 1 m: the detour

@@ -51,6 +51,9 @@ class GoalWithDetours:
     ``stall_time`` s, its goal direction turned ``detour_deg`` to the right about the vertical,
     at full speed (all turn the same way, as traffic keeps right); then the goal again. The
     selector still keeps every zone clear: a detour changes only what the agent would like.
+    Within ``near`` (m, per agent; the simulator passes its r_pz) of its goal an agent never
+    detours: what blocks it is at the goal, and a detour there would only send it off again
+    and again (``lagged`` encounter 317 never arrived so).
 
     Called once per control step with the positions (N, 3), as the simulator does; stateful
     (one instance per run)."""
@@ -63,6 +66,7 @@ class GoalWithDetours:
         *,
         stall_time: float = STALL_TIME,
         detour_deg: float = 90.0,
+        near: Any = 0.0,
     ) -> None:
         if not (np.isfinite(stall_time) and stall_time > 0):
             raise ValueError(
@@ -73,6 +77,7 @@ class GoalWithDetours:
         self.goals = np.asarray(goals, dtype=float)
         n = self.goals.shape[0]
         self.v_max = np.broadcast_to(np.asarray(max_speed, dtype=float), (n,)).copy()
+        self.near = np.broadcast_to(np.asarray(near, dtype=float), (n,)).copy()
         self.dt, self.stall_time = float(dt), float(stall_time)
         self.turn = np.deg2rad(detour_deg)
         self.t = 0.0
@@ -93,6 +98,7 @@ class GoalWithDetours:
         gained = self.ref_dist - dist
         moved = np.linalg.norm(p - self.ref_pos, axis=1)
         stalled = check & (gained < STALL_PROGRESS * reach) & (moved < STALL_MOTION * reach)
+        stalled &= dist > self.near  # at its goal's door, waiting is the way in
         self.detour_until[stalled] = self.t + self.stall_time
         self.ref_dist[stalled] = np.inf
         self._mark(check & ~stalled, p, dist)
