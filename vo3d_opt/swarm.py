@@ -280,13 +280,18 @@ def neighbor_lists(
     for r in range(D):
         c = start[r + 1] - start[r]
         if c > _SMALL_ROW:  # a crowd: sorting with allocations is cheaper than insertion
+            # Every sort a stable merge sort (one compiled sort, not three: numba's quicksort
+            # and np.sort each compile for seconds); a row's indices are distinct, so sorting
+            # them by any method gives the same order.
             row, d = idx[start[r] : start[r + 1]], near[start[r] : start[r + 1]]
-            by_index = np.argsort(row)
+            by_index = np.argsort(row, kind="mergesort")
             row, d = row[by_index], d[by_index]
             if 0 <= k < c:
-                row = np.sort(row[np.argsort(d, kind="mergesort")[:k]])  # stable: ties by index
+                row = row[np.argsort(d, kind="mergesort")[:k]]  # stable: ties by index
+                row = row[np.argsort(row, kind="mergesort")]
             c = row.shape[0]
-            out[m : m + c] = row
+            for q in range(c):  # a loop, not a slice assignment: no shape check to compile
+                out[m + q] = row[q]
         else:
             for q in range(c):  # by index, then (stable) by distance: ties keep the lower index
                 key_i[q], key_d[q] = idx[start[r] + q], near[start[r] + q]
@@ -295,7 +300,8 @@ def neighbor_lists(
                 _insertion(key_i, key_d, c, True)
                 c = k
                 _insertion(key_i, key_d, c, False)
-            out[m : m + c] = key_i[:c]
+            for q in range(c):
+                out[m + q] = key_i[q]
         span[r, 0] = m
         m += c
         span[r, 1] = m

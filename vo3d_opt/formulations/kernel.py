@@ -34,7 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import entry, inline, jit, kernel
+from .._jit import entry, inline, inline_alloc, jit, kernel
 from ..geometry import AvoidancePlanes
 from ..solvers.exact2d import nearest_in_disc
 from .common import (
@@ -152,7 +152,9 @@ def plane_qps(
         np.empty(3),
         row_work(cfg.t.shape[0]),
     )
-    n_todo = 0  # the rows of the VOs every QP starts with, on every plane
+    # the rows of the VOs every QP starts with, on every plane; an int64 from the start, else
+    # numba compiles add_rows for the literal 0 too while it infers this loop's types
+    n_todo = np.int64(0)
     for k in range(V):
         for p in range(P * initial[k]):
             qps.todo[n_todo, 0], qps.todo[n_todo, 1], n_todo = k, p, n_todo + 1
@@ -161,7 +163,9 @@ def plane_qps(
 
 
 @kernel
-def add_rows(qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, n_todo: int) -> None:
+def add_rows(
+    qps: PlaneQPs, vos: VOs, planes: AvoidancePlanes, cfg: Config, n_todo: int | np.int64
+) -> None:
     """Build the rows of the first ``n_todo`` (VO, plane) pairs of qps.todo (every round), each
     once. One call for the whole list: the arguments are large."""
     for q in range(n_todo):
@@ -232,13 +236,13 @@ def search(
     enters, on that answer's plane)."""
     R, P = qps.key.shape
     into, v, todo = qps.into, qps.v, qps.todo
-    n_todo = 0
+    n_todo = np.int64(0)  # not the literal 0: see plane_qps
     solved = n_tried = 0
     for it in range(
         1 + R * P * (2 + 2 * into.shape[0])
     ):  # per QP: its solve, then each VO it gains
         add_rows(qps, vos, planes, cfg, n_todo)
-        n_todo = 0
+        n_todo = np.int64(0)
         if it == 0:
             for r in range(R):
                 for p in range(P):
@@ -380,14 +384,22 @@ def decide(
     the velocity and the fields of ``KernelOut``. ``nbrs`` (n, 8): position, velocity, r_pz,
     cooperative (1/0); ``prisms`` (m, 4): x, y, L_pz, h_pz; ``limits``: ``bounds_array``; the
     options as ``Options.packed``. Arrays in, an array out: the cheapest call from Python."""
+    # Writable copies (select passes AgentState's read-only arrays): decide_one's callees are
+    # then compiled once, for select_many's writable arrays too, not twice.
     res = decide_one(
-        p, v_now, v_pref, nbrs, prisms, bounds_of(limits), config_of(options, plane_tab, gen_tab)
+        p.copy(),
+        v_now.copy(),
+        v_pref.copy(),
+        nbrs,
+        prisms,
+        bounds_of(limits),
+        config_of(options, plane_tab, gen_tab),
     )
     out[0], out[1], out[2] = res.velocity[0], res.velocity[1], res.velocity[2]
     out[3], out[4], out[5], out[6] = res.status, res.phi, res.round, res.solved
 
 
-@inline
+@inline_alloc
 def decide_one(
     p: np.ndarray,
     v_now: np.ndarray,

@@ -19,17 +19,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
-from .._jit import _COMMON, entry
+from .._jit import entry, inline_alloc
 from .common import bounds_of, config_of
 from .kernel import OUT_SIZE, decide_one
-
-#: Inlined into ``decide_range`` at numba's IR level (allocating, unlike ``_jit.inline``): no
-#: LLVM module of their own, each of which would link and generate code for ``decide_one``'s
-#: whole call tree again (a few seconds of compilation each).
-inline_alloc = numba.njit(**_COMMON, no_cpython_wrapper=True, inline="always")  # type: ignore[call-overload]
 
 #: Columns of ``Swarm.agents``: position (3), velocity (3), preferred velocity (3), r_pz,
 #: cooperative (1: it decides, 0: it keeps its velocity whatever the others do).
