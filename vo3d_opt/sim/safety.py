@@ -9,8 +9,11 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
   hummingbird, whose measured reversal lags 1.37 m behind an 8 m/s velocity change: 0.171 s);
 * ``acceleration`` (m/s² per axis, the selector's ``Limits.acceleration``): ``v_max / tau_eff``,
   capped by what the rotors can give (RotorPy: ``g (T/W - 1)``) and by what RotorPy's velocity
-  loop follows without flipping or climbing (``GAP_SHARE g / (k_v dt)``, 1.23 m/s²); none for
-  kinematic vehicles. Under RotorPy the commands are also clamped to it (:func:`within_reach`);
+  loop follows without flipping (``GAP_SHARE g / (k_v dt)``, 2.45 m/s²); none for kinematic
+  vehicles;
+* ``command_rate`` (m/s² per axis, RotorPy only): how fast the simulator lets a command change
+  (``COMMAND_SHARE g / (k_v dt)``, 1.23 m/s², :func:`within_reach`): faster changes throw the
+  hummingbird off its altitude even in horizontal manoeuvres;
 * ``tracking`` (m): how far a vehicle strays from the straight line the selector planned:
   the velocity gap times ``tau_eff``, the gap at most ``min(2 v_max, √3 a dt)``;
 * ``pz_buffer`` (m): ``2 v_max dt`` (both move before the next decision) + ``2 tracking``
@@ -52,11 +55,11 @@ ALTITUDE_CLEARANCE = 1e-3
 #: vehicle flips and falls (measured in paper case 1). The selector's acceleration bound keeps
 #: each period's change within this share of ``g / k_v`` (2.45 m/s² for the hummingbird).
 GAP_SHARE = 0.5
-#: ... but commands changing that fast still throw the hummingbird up to 8 m off its altitude
-#: on purely horizontal manoeuvres; changing by a quarter of ``g / k_v`` per period (1.23 m/s²),
-#: 0.13 m at most (``benchmarks/results_acceleration_bound.md``). The simulator rate-limits the
-#: commands to this share (:func:`within_reach`); the selector keeps the larger bound around the
-#: real velocity, which leaves room for the steady gap a P loop keeps in a wind.
+#: ... but commands changing that fast still throw the hummingbird metres off its altitude on
+#: purely horizontal manoeuvres (2.6 m); changing by a quarter of ``g / k_v`` per period (1.23
+#: m/s²), 0.13 m at most (``benchmarks/results_acceleration_bound.md``). The simulator
+#: rate-limits the commands to this share (:func:`within_reach`); the selector keeps the larger
+#: bound around the real velocity, which leaves room for the steady gap a P loop keeps in a wind.
 COMMAND_SHARE = 0.25
 
 
