@@ -103,9 +103,10 @@ def controller_acceleration(dyn: DynamicsConfig, dt: float) -> float:
 
 def command_rate(sc: Scenario) -> float | None:
     """m/s² per axis: the rate limit on the commands of vehicles whose controller turns a
-    velocity gap into attitude (RotorPy: :data:`COMMAND_SHARE` ``g / (k_v dt)``, at most the
-    selector's bound); None for the others."""
-    if not clamps_commands(sc):
+    velocity gap into attitude (RotorPy: :data:`COMMAND_SHARE` ``g / (k_v dt)``); None for the
+    others (a first-order vehicle follows any command linearly, so a fallback's jump, e.g. to
+    keep the altitude limits, harms nothing there)."""
+    if sc.vehicle_dynamics.model != "rotorpy":
         return None
     dyn = sc.vehicle_dynamics
     k_v = float(vehicle_params(dyn.vehicle or "hummingbird").get("k_v", 10.0))
@@ -157,8 +158,10 @@ def derive_margins(sc: Scenario) -> Margins:
     obstacle = _pick(sc.safety.obstacle_margin, tracking + float(np.max(sc.radius)))
     cap = _altitude_cap(sc)
     stop = max(v_max * tau, tracking)
-    rate = command_rate(sc) if accel is not None else None
-    if rate is not None and accel is not None:
+    rate = command_rate(sc)
+    if rate is None or accel is None:  # no acceleration bound: no rate limit either
+        rate = None
+    else:
         rate = min(rate, accel)
         # braking is rate-limited too, and the vehicle lags tau_eff behind its commands: the
         # distance to stop from full speed
@@ -188,14 +191,6 @@ def derive_margins(sc: Scenario) -> Margins:
         altitude_margin=altitude,
         why=why,
     )
-
-
-def clamps_commands(sc: Scenario) -> bool:
-    """Whether the commands are clamped to the acceleration bound (:func:`within_reach`): for
-    vehicles whose controller turns a velocity gap into attitude (``rotorpy``). A first-order
-    vehicle follows any command linearly, so a fallback's jump (which the selector may return
-    outside the bound, e.g. to keep the altitude limits) harms nothing there."""
-    return sc.vehicle_dynamics.model == "rotorpy"
 
 
 def within_reach(
