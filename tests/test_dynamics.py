@@ -81,6 +81,8 @@ def test_first_order_ignores_commands_of_held_vehicles():
     ({"model": "first_order", "tau": 0.5, "vehicle": "crazyflie"}, None, "vehicle"),
     ({"model": "rotorpy", "substep_rate": -5}, None, "substep_rate"),
     ({"model": "rotorpy", "speed": 3}, None, "speed"),
+    ({"model": "rotorpy", "command_ramp": "yes"}, None, "command_ramp"),
+    ({"model": "first_order", "tau": 0.5, "command_ramp": True}, None, "command_ramp"),
     ({"model": "kinematic"}, {"type": "constant", "velocity": [1, 0, 0]}, "wind"),
     ({"model": "rotorpy"}, {"type": "tornado", "velocity": [1, 0, 0]}, "type"),
     ({"model": "rotorpy"}, {"type": "constant", "velocity": [1, 0]}, "velocity"),
@@ -200,3 +202,46 @@ def test_rotorpy_dryden_gusts_repeat_for_a_seed_and_leave_numpy_alone():
     # the gusts move the vehicles, differently from each other
     drift = a[-1] - np.array([[0.0, 0.0, 2.0], [3.0, 0.0, 2.0]])
     assert np.abs(drift).max() > 0.005 and not np.allclose(drift[0], drift[1])
+
+
+#: The commands of paper case 1's UAV 2 (index 1) under RotorPy, its first 19 periods (rounded
+#: to mm/s): rate-limited to 0.245 m/s per axis and period, yet as set-point steps they
+#: saturated the rotors at period 16 (45 degrees of tilt, 4.75 m/s for at most 3.92 asked).
+CASE1_COMMANDS = np.array([
+    [-0.245, -0.245, 0.245], [-0.491, -0.491, 0.491], [-0.736, -0.736, 0.584],
+    [-0.981, -0.981, 0.573], [-1.226, -1.226, 0.573], [-1.472, -1.472, 0.568],
+    [-1.717, -1.717, 0.759], [-1.962, -1.962, 0.892], [-2.207, -1.952, 0.829],
+    [-2.452, -1.707, 0.584], [-2.698, -1.539, 0.543], [-2.943, -1.539, 0.788],
+    [-3.188, -1.736, 0.543], [-3.434, -1.715, 0.788], [-3.188, -1.96, 0.543],
+    [-2.943, -1.715, 0.298], [-3.188, -1.96, 0.053], [-2.943, -1.715, 0.298],
+    [-2.698, -1.47, 0.053]])
+
+
+@pytest.mark.parametrize("ramp", [True, False])
+def test_rotorpy_ramped_set_points_keep_case_1_within_its_commanded_speed(ramp):
+    dyn = make_dynamics({"model": "rotorpy", "command_ramp": ramp})
+    dyn.reset(np.array([[0.0, 0.0, 20.0]]))
+    fastest = max(np.linalg.norm(dyn.step(u[None], DT).sample_velocities, axis=-1).max()
+                  for u in CASE1_COMMANDS)
+    asked = np.linalg.norm(CASE1_COMMANDS, axis=1).max()
+    if ramp:
+        assert fastest <= asked
+    else:  # the set-point steps: what the ramp is for
+        assert fastest > asked + 0.5
+
+
+def test_rotorpy_ramp_reaches_the_command_by_the_period_end_and_holds_it():
+    ramped = make_dynamics({"model": "rotorpy"})
+    stepped = make_dynamics({"model": "rotorpy", "command_ramp": False})
+    for dyn in (ramped, stepped):
+        dyn.reset(np.array([[0.0, 0.0, 10.0]]))
+    u = np.array([[1.0, 0.0, 0.0]])
+    a, b = ramped.step(u, DT), stepped.step(u, DT)
+    # the first sub-step asks for 1/20 of the command: the ramped vehicle starts slower
+    assert a.sample_velocities[0, 0, 0] < 0.2 * b.sample_velocities[0, 0, 0]
+    np.testing.assert_allclose(ramped.setpoints, u)
+    for _ in range(20):
+        a = ramped.step(u, DT)
+    np.testing.assert_allclose(a.velocities[0], u[0], atol=0.05)
+    ramped.hold([True])
+    assert np.all(ramped.setpoints == 0.0)

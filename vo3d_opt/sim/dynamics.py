@@ -5,7 +5,7 @@ Every model integrates N vehicles at once and keeps their state between control 
     dyn = make_dynamics({"model": "rotorpy", "vehicle": "hummingbird"},
                         wind={"type": "dryden", "velocity": [2, 0, 0]}, seed=1)
     dyn.reset(starts)                          # (N, 3) positions, velocities 0 (hovering)
-    out = dyn.step(commands, dt)               # (N, 3) commanded velocities, held for dt
+    out = dyn.step(commands, dt)               # (N, 3) commanded velocities for the period
     out.positions, out.velocities              # (N, 3) each: the real state at the period's end
     out.sample_positions                       # (S, N, 3): the state at each sub-step end
     dyn.hold(arrived)                          # these stop dead where they are from now on
@@ -20,7 +20,12 @@ Models (the vehicle, its velocity controller and the wind are kept apart as in R
   integrated in ``ceil(dt * substep_rate)`` equal sub-steps per period, the wind
   (RotorPy's ``ConstantWind`` or ``DrydenGust``) updated before each sub-step as RotorPy's
   ``simulate`` does. The controller's rotor command is held over a sub-step, so the sub-step
-  rate decides stability: see ``formulations/dynamics.md`` for the measured figures.
+  rate decides stability: see ``formulations/dynamics.md`` for the measured figures. The
+  velocity set-point moves from the last command to the new one over the period, a step per
+  sub-step (``command_ramp``, on by default), as an autopilot smooths its set-points: RotorPy's
+  stiff velocity loop (``k_v`` 10) turns a set-point step into an attitude step, and a step of
+  0.25 m/s per axis on top of the usual lag saturated the hummingbird's rotors in paper case 1
+  (45 degrees of tilt, 28 degrees of yaw, 4.7 m/s for a 3.7 m/s command).
 
 Within one period ``kinematic`` and ``first_order`` move in a straight line at constant velocity
 (their single sample is the period's end); ``rotorpy`` samples every sub-step, between which the
@@ -38,7 +43,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, model_validator
+from pydantic import BaseModel, ConfigDict, StrictBool, model_validator
 
 from vo3d_opt.types import Positive, Vec3, raise_problems
 
@@ -75,12 +80,19 @@ class WindConfig(_Config):
 
 
 class DynamicsConfig(_Config):
-    """The ``dynamics`` mapping of contract §5; ``substep_rate`` (Hz, ``rotorpy``) extends it."""
+    """The ``dynamics`` mapping of contract §5; ``substep_rate`` (Hz) and ``command_ramp``
+    (default true), both ``rotorpy`` only, extend it."""
 
     model: Literal["kinematic", "first_order", "rotorpy"] = "kinematic"
     vehicle: Literal["hummingbird", "crazyflie"] | None = None
     tau: Positive | None = None
     substep_rate: Positive | None = None
+    command_ramp: StrictBool | None = None
+
+    @property
+    def ramped(self) -> bool:
+        """Whether the velocity set-point is ramped over each period (rotorpy's default)."""
+        return self.model == "rotorpy" and self.command_ramp is not False
 
     @model_validator(mode="after")
     def _keys_of_the_model(self) -> DynamicsConfig:
@@ -91,6 +103,7 @@ class DynamicsConfig(_Config):
             ("tau", "first_order"),
             ("vehicle", "rotorpy"),
             ("substep_rate", "rotorpy"),
+            ("command_ramp", "rotorpy"),
         ):
             if self.model != owner and getattr(self, key) is not None:
                 problems.append(((key,), f"only for model {owner}", getattr(self, key)))
@@ -314,7 +327,9 @@ class RotorPyDynamics(Dynamics):
     """Each vehicle a RotorPy ``Multirotor`` flying RotorPy's ``cmd_vel`` velocity controller.
 
     ``substep_rate`` (Hz): sub-steps per second (the period is cut into ``ceil(dt * rate)``
-    equal ones). ``wind``: a :class:`WindConfig` (or its mapping) or None; each vehicle gets its
+    equal ones). ``command_ramp``: the velocity set-point goes from the last command to the new
+    one in equal steps, one per sub-step (the module docstring says why); False: the new command
+    at once. ``wind``: a :class:`WindConfig` (or its mapping) or None; each vehicle gets its
     own wind object (independent Dryden gusts: the relative motion between vehicles, which
     matters for separation, is the largest). ``seed`` fixes the gusts. ``integrator_kwargs``
     go to RotorPy (``scipy.integrate.solve_ivp``; RotorPy's default RK45 when None).
@@ -331,6 +346,7 @@ class RotorPyDynamics(Dynamics):
         *,
         wind: WindConfig | Mapping | None = None,
         substep_rate: float = DEFAULT_SUBSTEP_RATE,
+        command_ramp: bool = True,
         seed: int = 0,
         integrator_kwargs: Mapping[str, Any] | None = None,
     ) -> None:
@@ -355,6 +371,7 @@ class RotorPyDynamics(Dynamics):
             else (wind if isinstance(wind, WindConfig) else WindConfig.model_validate(dict(wind)))
         )
         self.substep_rate = float(substep_rate)
+        self.command_ramp = bool(command_ramp)
         self.seed = int(seed)
         self.multirotor = Multirotor(
             self.params,
@@ -364,6 +381,7 @@ class RotorPyDynamics(Dynamics):
         self.hover_speed = hover_rotor_speed(self.params)
         self.t = 0.0
         self.states: list[dict[str, np.ndarray]] = []
+        self.setpoints = np.zeros((0, 3))  # (N, 3) the velocity set-point each vehicle flies now
         self.winds: list[Any] = []
         self._rng = _GlobalRNG(self.seed)
 
@@ -385,12 +403,14 @@ class RotorPyDynamics(Dynamics):
         self.t = 0.0
         self._rng = _GlobalRNG(self.seed)
         self.states = [self._hover_state(self._p[i], self._v[i]) for i in range(self.n)]
+        self.setpoints = self._v.copy()
         with self._rng:  # Dryden draws its first gust at construction
             self.winds = [make_wind(self.wind, 1.0 / self.substep_rate) for _ in range(self.n)]
 
     def _hold_model(self, mask: np.ndarray) -> None:
         for i in np.flatnonzero(mask):
             self.states[i] = self._hover_state(self._p[i], np.zeros(3))
+        self.setpoints[mask] = 0.0
 
     def _step(self, u: np.ndarray, dt: float) -> StepResult:
         s = self.substeps(dt)
@@ -398,20 +418,22 @@ class RotorPyDynamics(Dynamics):
         p_out = np.empty((s, self.n, 3))
         v_out = np.empty((s, self.n, 3))
         active = np.flatnonzero(~self._held)
-        controls = [{"cmd_v": u[i].copy()} for i in range(self.n)]
+        start = self.setpoints if self.command_ramp else u
         with self._rng:
             for w in self.winds:
                 if hasattr(w, "dt"):
                     w.dt = h  # Dryden's discretisation follows the sub-step
             for k in range(s):
                 t = self.t + k * h
+                cmd_v = start + (u - start) * ((k + 1) / s)  # the set-point of this sub-step
                 for i in active:
                     state = self.states[i]
                     state["wind"] = np.asarray(self.winds[i].update(t, state["x"]), dtype=float)
-                    self.states[i] = self.multirotor.step(state, controls[i], h)
+                    self.states[i] = self.multirotor.step(state, {"cmd_v": cmd_v[i]}, h)
                 p_out[k] = [st["x"] for st in self.states]
                 v_out[k] = [st["v"] for st in self.states]
         self.t += dt
+        self.setpoints = np.where(self._held[:, None], 0.0, u)
         p_out[:, self._held] = self._p[self._held]
         v_out[:, self._held] = 0.0
         self._p, self._v = p_out[-1].copy(), v_out[-1].copy()
@@ -457,5 +479,6 @@ def make_dynamics(
         wind=wcfg,
         seed=seed,
         substep_rate=cfg.substep_rate or DEFAULT_SUBSTEP_RATE,
+        command_ramp=cfg.ramped,
         **rotorpy_options,
     )

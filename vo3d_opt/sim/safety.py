@@ -6,14 +6,16 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
 
 * ``tau_eff`` (s): the vehicle's velocity response time: 0 kinematic, ``tau`` first_order,
   RotorPy's ``1/k_v + kd_att/kp_att`` (velocity loop plus attitude loop; 0.186 s for the
-  hummingbird, whose measured reversal lags 1.37 m behind an 8 m/s velocity change: 0.171 s);
+  hummingbird) plus ``dt / 2`` when the set-point is ramped over the period (its mean delay;
+  0.286 s in all at dt 0.2 s; ``tests/test_real_world.py`` flies a reversal and measures it);
 * ``acceleration`` (m/s² per axis, the selector's ``Limits.acceleration``): ``v_max / tau_eff``,
   capped by what the rotors can give (RotorPy: ``g (T/W - 1)``) and by what RotorPy's velocity
   loop follows without flipping (``GAP_SHARE g / (k_v dt)``, 2.45 m/s²); none for kinematic
   vehicles;
 * ``command_rate`` (m/s² per axis, RotorPy only): how fast the simulator lets a command change
-  (``COMMAND_SHARE g / (k_v dt)``, 1.23 m/s², :func:`within_reach`): faster changes throw the
-  hummingbird off its altitude even in horizontal manoeuvres;
+  (``COMMAND_SHARE g / (k_v dt)``, 1.23 m/s², :func:`within_reach`), each command then ramped
+  over its period (``dynamics.command_ramp``): faster or stepped changes throw the hummingbird
+  off its altitude or over the speed limit;
 * ``tracking`` (m): how far a vehicle strays from the straight line the selector planned:
   the velocity gap times ``tau_eff``, the gap at most ``min(2 v_max, √3 a dt)``;
 * ``pz_buffer`` (m): ``2 v_max dt`` (both move before the next decision) + ``2 tracking``
@@ -55,11 +57,15 @@ ALTITUDE_CLEARANCE = 1e-3
 #: vehicle flips and falls (measured in paper case 1). The selector's acceleration bound keeps
 #: each period's change within this share of ``g / k_v`` (2.45 m/s² for the hummingbird).
 GAP_SHARE = 0.5
-#: ... but commands changing that fast still throw the hummingbird metres off its altitude on
-#: purely horizontal manoeuvres (2.6 m); changing by a quarter of ``g / k_v`` per period (1.23
-#: m/s²), 0.13 m at most (``benchmarks/results_acceleration_bound.md``). The simulator
-#: rate-limits the commands to this share (:func:`within_reach`); the selector keeps the larger
-#: bound around the real velocity, which leaves room for the steady gap a P loop keeps in a wind.
+#: ... and the simulator lets each command change by a quarter of it per period (1.23 m/s²,
+#: :func:`within_reach`), ramped over the period as it hands it to RotorPy
+#: (``dynamics.command_ramp``). Stepped at the start of each period, commands changing by half
+#: threw the hummingbird 2.6 m off its altitude on purely horizontal manoeuvres, a quarter 0.13
+#: m; ramped, 0.02 m at either rate (``benchmarks/results_acceleration_bound.md``). But at half,
+#: even ramped, ``ceiling-squeeze-four-uav`` braked out of its altitude band (3 samples) and
+#: over the speed limit (5): a quarter it is. The selector's bound is around the real velocity,
+#: the rate limit around the previous command: in a steady wind a P loop keeps a steady gap
+#: between the two.
 COMMAND_SHARE = 0.25
 
 
@@ -79,8 +85,8 @@ class Margins:
     why: dict[str, str] = field(default_factory=dict, compare=False)
 
 
-def response_time(dyn: DynamicsConfig) -> float:
-    """The velocity response time ``tau_eff`` (s) of the vehicle model."""
+def response_time(dyn: DynamicsConfig, dt: float) -> float:
+    """The velocity response time ``tau_eff`` (s) of the vehicle model, commanded every ``dt``."""
     if dyn.model == "kinematic":
         return 0.0
     if dyn.model == "first_order":
@@ -88,7 +94,8 @@ def response_time(dyn: DynamicsConfig) -> float:
         return float(dyn.tau)
     p = vehicle_params(dyn.vehicle or "hummingbird")
     k_v, kp, kd = (float(p.get(k, d)) for k, d in (("k_v", 10.0), ("kp_att", 1.0), ("kd_att", 0.0)))
-    return 1.0 / k_v + kd / kp
+    # a ramped set-point reaches each command dt / 2 later on average
+    return 1.0 / k_v + kd / kp + (0.5 * dt if dyn.ramped else 0.0)
 
 
 def controller_acceleration(dyn: DynamicsConfig, dt: float) -> float:
@@ -148,7 +155,7 @@ def _altitude_cap(sc: Scenario) -> float:
 def derive_margins(sc: Scenario) -> Margins:
     """The margins of the module docstring for scenario ``sc`` (overrides applied)."""
     dt, v_max, sens = float(sc.dt), float(np.max(sc.max_speed)), sc.sensing
-    tau = response_time(sc.vehicle_dynamics)
+    tau = response_time(sc.vehicle_dynamics, dt)
     accel, why_a = _acceleration(sc, tau, v_max)
     gap = 2.0 * v_max if accel is None else min(2.0 * v_max, math.sqrt(3.0) * accel * dt)
     tracking = gap * tau
