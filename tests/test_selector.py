@@ -295,3 +295,29 @@ def test_a_prism_reaching_the_ceiling_is_not_flown_over(formulation):
     v = VelocitySelector(formulation).select(**roomy).velocity
     assert np.linalg.norm(v - (3.8, 0.0, 0.8)) < 0.2
     assert exact({**roomy, "obstacles": tall["obstacles"]}).unsafe(v)[0]
+
+
+def test_nothing_to_avoid_but_the_preferred_velocity_breaks_the_limits():
+    """No neighbour, no obstacle, a UAV 0.1 m under the ceiling that would like to climb at
+    4 m/s: no VO at all, yet the preferred velocity is not allowed, so the plane QPs run with
+    no VO rows (the compiled kernel once wrote past its work list here: a crash in the lagged
+    sweep). The answer keeps the ceiling, nearest the preferred velocity: level at full speed
+    minus what the climb costs; select_many gives the same for a swarm of such UAVs."""
+    kw = dict(
+        own=AgentState(position=(0.0, 0.0, 39.9), velocity=(0.0, 0.0, 0.0)),
+        preferred_velocity=(2.0, 0.0, 3.0),
+        limits=Limits(speed=(0.0, 4.0), altitude=(0.0, 40.0)),
+        dt=0.2,
+    )
+    sel = VelocitySelector()
+    d = sel.select(**kw)
+    assert d.status == "optimal"
+    assert_within_limits({**kw, "neighbors": [], "obstacles": []}, d.velocity)
+    assert d.velocity[2] == pytest.approx(0.5, abs=0.06)  # (40 - 39.9) / dt
+    assert d.velocity[0] == pytest.approx(2.0, abs=0.06)
+    many = sel.select_many(np.array([[0.0, 0.0, 39.9], [100.0, 0.0, 39.9]]), np.zeros((2, 3)),
+                           np.array([[2.0, 0.0, 3.0], [2.0, 0.0, 3.0]]), 5.0,
+                           limits=kw["limits"], dt=0.2)
+    assert list(many.statuses) == ["optimal", "optimal"]
+    for v in many.velocities:
+        np.testing.assert_allclose(v, d.velocity, atol=1e-9)

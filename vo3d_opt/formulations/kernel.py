@@ -91,6 +91,7 @@ class PlaneQPs(NamedTuple):
     h_lim: np.ndarray  # (L,)
     key: np.ndarray  # (R, P)
     exact: np.ndarray  # (R, P) bool: key is the QP's optimum (else a lower bound)
+    complete: np.ndarray  # (P,) bool: the plane has the rows of every VO its QPs start with
     sol: np.ndarray  # (R, P, 2)
     w0: np.ndarray  # (2,) the preferred velocity in plane coordinates (the same on every plane)
     rows: np.ndarray  # (V + L, 2) scratch: one QP's rows ...
@@ -110,9 +111,14 @@ def plane_qps(
     h3: np.ndarray,
     initial: np.ndarray,
     cfg: Config,
+    lazy: bool,
 ) -> PlaneQPs:
     """The QPs of one decision, each starting with the rows of the ``initial`` VOs (those
-    holding the preferred velocity, and the zones A is inside) on every plane."""
+    holding the preferred velocity, and the zones A is inside) on every plane. ``lazy``: build
+    them on plane 0 only, and elsewhere only the probe's (the initial VO farthest from w0 on
+    plane 0): ``search`` completes a plane when one of its QPs first comes up (a lower bound
+    from the probe alone is still a lower bound, so no answer changes; planes that never come
+    up are never built: the rows are most of a decision's cost)."""
     V, R, P, L = initial.shape[0], len(ROUNDS), cfg.phi.shape[0], G3.shape[0]
     G_lim = np.empty((P, L, 2))
     for p in range(P):  # the 3D limit rows G3 v <= h3 on P_phi: G3 @ [e1, e2(phi)]
@@ -142,6 +148,7 @@ def plane_qps(
         h3,
         key,
         np.zeros((R, P), dtype=np.bool_),
+        np.ones(P, dtype=np.bool_),
         np.empty((R, P, 2)),
         w0,
         np.empty((V + L, 2)),
@@ -152,13 +159,29 @@ def plane_qps(
         np.empty(3),
         row_work(cfg.t.shape[0]),
     )
-    # the rows of the VOs every QP starts with, on every plane; an int64 from the start, else
-    # numba compiles add_rows for the literal 0 too while it infers this loop's types
+    # the rows of the VOs every QP starts with, on every plane (lazy: on plane 0); an int64
+    # from the start, else numba compiles add_rows for the literal 0 too while it infers this
+    # loop's types
     n_todo = np.int64(0)
     for k in range(V):
-        for p in range(P * initial[k]):
+        for p in range((1 if lazy else P) * initial[k]):
             qps.todo[n_todo, 0], qps.todo[n_todo, 1], n_todo = k, p, n_todo + 1
     add_rows(qps, vos, planes, cfg, n_todo)
+    if lazy and n_todo > 1:
+        probe, far = qps.todo[0, 0], -np.inf
+        for q in range(n_todo):
+            k = qps.todo[q, 0]
+            d = _beyond(qps, k, 0, 0) if qps.active[k, 0] else -np.inf
+            if d > far:
+                probe, far = k, d
+        for p in range(1, P):
+            qps.todo[p - 1, 0], qps.todo[p - 1, 1] = probe, p
+            qps.complete[p] = False
+        add_rows(qps, vos, planes, cfg, np.int64(P - 1))
+    elif lazy and n_todo == 1:  # one initial VO: every plane is complete once it is built
+        for p in range(1, P):
+            qps.todo[p - 1, 0], qps.todo[p - 1, 1] = qps.todo[0, 0], p
+        add_rows(qps, vos, planes, cfg, np.int64(P - 1))
     return qps
 
 
@@ -250,6 +273,16 @@ def search(
         r, p = _argmin(qps.key)
         if qps.key[r, p] == np.inf:
             break
+        if not qps.complete[p]:  # its bound is the probe's alone: build the rest, bound again
+            for k in range(into.shape[0]):
+                if qps.included[r, p, k] and not qps.computed[k, p]:
+                    todo[n_todo, 0], todo[n_todo, 1], n_todo = k, p, n_todo + 1
+            add_rows(qps, vos, planes, cfg, n_todo)
+            n_todo = np.int64(0)
+            for rr in range(R):
+                qps.key[rr, p] = _bound(qps, rr, p)
+            qps.complete[p] = True
+            continue
         if not qps.exact[r, p]:
             solve_qp(qps, r, p, bounds)
             qps.exact[r, p] = True
@@ -278,15 +311,22 @@ def search(
 @inline
 def _bound(qps: PlaneQPs, r: int, p: int) -> float:
     """A lower bound on QP (r, p)'s deviation: its feasible set lies inside each of its
-    half-planes, so it is at least as far from w0 as the farthest of them."""
-    wx, wy, lb = qps.w0[0], qps.w0[1], 0.0
+    half-planes (those built: see ``plane_qps``), so it is at least as far from w0 as the
+    farthest of them."""
+    lb = 0.0
     for k in range(qps.included.shape[2]):
         if qps.included[r, p, k] and qps.active[k, p]:
-            gx, gy = qps.G[k, r, p, 0], qps.G[k, r, p, 1]
-            over = gx * wx + gy * wy - qps.h[k, r, p]
+            over = _beyond(qps, k, r, p)
             if over > 0.0:
-                lb = max(lb, over / np.sqrt(gx * gx + gy * gy))
+                lb = max(lb, over)
     return lb
+
+
+@inline
+def _beyond(qps: PlaneQPs, k: int, r: int, p: int) -> float:
+    """How far w0 lies beyond VO k's half-plane of QP (r, p) (negative: inside it)."""
+    gx, gy = qps.G[k, r, p, 0], qps.G[k, r, p, 1]
+    return (gx * qps.w0[0] + gy * qps.w0[1] - qps.h[k, r, p]) / np.sqrt(gx * gx + gy * gy)
 
 
 @inline
@@ -332,8 +372,9 @@ def py_plane_qps(
     initial: np.ndarray,
     cfg: Config,
 ) -> PlaneQPs:
-    """``plane_qps`` for Python callers (compiled code calls ``plane_qps``: no Python wrapper)."""
-    return plane_qps(vos, planes, G3, h3, initial, cfg)
+    """``plane_qps`` for Python callers, every plane built (compiled code calls ``plane_qps``:
+    no Python wrapper)."""
+    return plane_qps(vos, planes, G3, h3, initial, cfg, False)
 
 
 @entry
@@ -422,7 +463,7 @@ def decide_one(
     if status == OPTIMAL and not pref_in and within_limits(vos.v_pref, G3, h3, bounds):  # 2
         return KernelOut(enforce_limits(vos.v_pref, p, bounds), OPTIMAL, np.nan, PREFERRED, 0)
     planes = decision_planes(vos, v_now, cfg)  # 3
-    qps = plane_qps(vos, planes, G3, h3, initial, cfg)
+    qps = plane_qps(vos, planes, G3, h3, initial, cfg, True)
     R, P = qps.key.shape
     tried = np.empty((R * P * (V + 1), 3))  # at most every QP once, then once per VO it gains
     r, plane, solved, n_tried = search(vos, planes, qps, G3, h3, bounds, cfg, tried)  # 4
