@@ -376,3 +376,20 @@ def test_rotorpy_keeps_its_altitude_through_horizontal_manoeuvres_at_the_command
     assert worst_excursion(rate, True) < 0.25
     assert worst_excursion(2 * rate, False) > 0.5
     assert worst_excursion(2 * rate, True) < 0.25
+
+
+def test_rotorpy_commands_of_an_agent_that_does_not_avoid_are_rate_limited_too():
+    # The rate limit belongs to the vehicle's velocity loop, not to the selector: an intruder
+    # flying straight at its top speed also takes its command in gradually (a step from hover
+    # to 4 m/s once put the bundled intruder over the speed limit).
+    data = copy.deepcopy(SMALL)
+    data["agents"][1]["avoids"] = False
+    data["agents"][1]["start"] = [20.0, 30.0, 10.0]  # far apart: nobody needs to avoid
+    data["agents"][1]["goal"] = [-20.0, 30.0, 10.0]
+    sc = scenario_from_dict({**data, "dynamics": {"model": "rotorpy"}}, "intruder.yaml")
+    rec = run_scenario(sc, progress=False, max_steps=25)
+    rate = derive_margins(sc).command_rate
+    steps = np.diff(np.concatenate([np.zeros((1, 2, 3)), rec.commands[: rec.steps]]), axis=0)
+    assert np.abs(steps).max() <= rate * sc.dt + 1e-12
+    np.testing.assert_allclose(rec.commands[24, 1], [-4.0, 0.0, 0.0], atol=0.01)  # full speed
+    assert summarize(rec)["speed_violations"] == 0

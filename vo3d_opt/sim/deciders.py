@@ -21,7 +21,6 @@ from vo3d_opt.sim.safety import (
     derive_margins,
     inflated,
     planning_limits,
-    within_reach,
 )
 from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
 from vo3d_opt.sim.sensing import Sensor
@@ -49,27 +48,6 @@ class _SelectorStep:
         self.margins = derive_margins(sc)
         self.limits = planning_limits(sc.limits, self.margins)
         self.bodies = [inflated(b, self.margins.obstacle_margin) for b in sc.bodies]
-        self.previous: np.ndarray | None = None  # the last commands (rate-limited models)
-
-    def reachable(self, commands: np.ndarray, snap: Snapshot) -> np.ndarray:
-        """The commands, rate-limited around each vehicle's previous command (at first its
-        real velocity) when the vehicle model needs it (``safety.command_rate``)."""
-        rate = self.margins.command_rate
-        if rate is None:
-            return commands
-        previous = self.previous
-        if previous is None or snap.k == 0:  # a new run
-            previous = snap.velocities
-        u = within_reach(
-            np.asarray(commands, dtype=float),
-            previous,
-            float(rate),
-            float(self.scenario.dt),
-            self.scenario.max_speed,
-        )
-        u[~snap.deciding] = 0.0  # arrived: held in hover
-        self.previous = u
-        return u
 
     def agent_limits(self, i: int) -> Limits:
         """Agent ``i``'s planning limits (its own speed cap)."""
@@ -129,7 +107,7 @@ class SwarmSelect(_SelectorStep):
             threads=self.threads,
         )
         return StepDecision(
-            commands=self.reachable(out.velocities, snap),
+            commands=out.velocities,
             statuses=out.statuses,
             decision_times=out.times,
             solve_times=out.times,
@@ -235,7 +213,7 @@ class PerAgentSelect(_SelectorStep):
             statuses[i] = str(d.status)
             stimes[i] = float(getattr(d, "solve_time", np.nan))
         return StepDecision(
-            commands=self.reachable(u, snap),
+            commands=u,
             statuses=statuses,
             decision_times=dtimes,
             solve_times=stimes,

@@ -17,7 +17,8 @@ time step." Here, every ``dt`` (:func:`fly`):
 3. **integrate**: ``vo3d_opt.sim.dynamics``, the scenario's ``dynamics`` and ``wind``
    (``kinematic``: ``p += v_cmd dt``; ``first_order`` (or ``velocity_response_tau``):
    ``v += (v_cmd - v) min(1, dt / tau)``, ``p += v dt``; ``rotorpy``: RotorPy multirotors,
-   whose sub-step samples are recorded in ``RunRecord.samples`` and judged by the metrics).
+   whose sub-step samples are recorded in ``RunRecord.samples`` and judged by the metrics;
+   their commands, whoever gave them, change at most ``safety.command_rate`` per period).
 
 Agents with ``avoids: false`` never decide: they fly their preferred (straight-to-goal)
 velocity and the others see them as non-cooperative, as arrived ones. With sensing noise or
@@ -55,6 +56,7 @@ import numpy as np
 from tqdm import tqdm
 
 from vo3d_opt.sim.dynamics import Dynamics, make_dynamics
+from vo3d_opt.sim.safety import command_rate, within_reach
 from vo3d_opt.sim.scenario import Scenario, load_scenario
 from vo3d_opt.sim.traffic import GoalWithDetours
 from vo3d_opt.types import AgentState, Limits, Neighbor
@@ -361,6 +363,8 @@ def fly(
     dyn.reset(sc.starts)
     buf = RunBuffers(total, n, same_commands=dyn.model == "kinematic")
     p, v = dyn.positions, dyn.velocities
+    rate = command_rate(sc)
+    last = v  # the commands before: rate-limited models change them gradually from these
     done = np.linalg.norm(p - sc.goals, axis=1) <= tol
     dyn.hold(done)
     buf.pos[0], buf.arrived[0] = p, done
@@ -381,6 +385,10 @@ def fly(
             out = step.decide(snap)
             u, statuses = _checked_commands(out, deciding)
             u[straight] = w[straight]
+            if rate is not None:  # the vehicle's command interface, whoever decided: RotorPy's
+                u = within_reach(u, last, rate, dt, sc.max_speed)  # velocity loop (safety.py)
+                u[done] = 0.0  # held in hover
+                last = u
             buf.pref[k], buf.cmd[k], buf.decided[k] = w, u, deciding
             buf.put_statuses(k, statuses, deciding)
             buf.dtimes[k] = np.where(deciding, out.decision_times, np.nan)

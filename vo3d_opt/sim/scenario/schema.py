@@ -43,8 +43,9 @@ Extensions beyond the contract (all optional):
 * ``dynamics``, ``wind``, ``sensing.position_noise`` / ``velocity_noise`` / ``latency`` /
   ``seed`` and the agents' ``avoids`` (contract §5; ``vo3d_opt.sim.dynamics``,
   ``vo3d_opt.sim.sensing``); ``dynamics.substep_rate`` (Hz) and ``dynamics.command_ramp``
-  (rotorpy) and ``wind.sigma`` / ``wind.altitude`` (Dryden) extend it. ``velocity_response_tau`` is an alias of ``dynamics:
-  {model: first_order, tau: ...}`` (not both).
+  (rotorpy) and ``wind.sigma`` / ``wind.altitude`` (Dryden) extend it.
+  ``velocity_response_tau`` is an alias of ``dynamics: {model: first_order, tau: ...}`` (not
+  both).
 * ``safety``: overrides of the margins the simulator derives for those conditions
   (``acceleration``, ``pz_buffer``, ``altitude_margin``, ``obstacle_margin``;
   ``vo3d_opt.sim.safety``).
