@@ -12,7 +12,7 @@ from encounters import encounters
 from vo3d_opt import AgentState, Cylinder, Limits, Neighbor, VelocitySelector
 from vo3d_opt.formulations import plane_qp
 from vo3d_opt.formulations.common import Options, prepare, py_decision_planes
-from vo3d_opt.formulations.kernel import py_add_rows, py_gather, py_lift, py_plane_qps
+from vo3d_opt.formulations.kernel import py_add_rows, py_gather, py_lift, py_plane_qps, py_search
 from vo3d_opt.formulations.rows import ROUNDS
 from vo3d_opt.solvers import QP, get_backend
 from vo3d_opt.status import Status
@@ -26,7 +26,7 @@ def _exhaustive(enc, solve, has_cones):
     cfg = enc.options.config
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)
     G3, h3 = enc.linear_bounds()
-    qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg)
+    qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg, False)
     G_speed, h_speed = (np.zeros((0, 2)), np.zeros(0)) if has_cones else plane_qp.speed_polygon(
         enc.limits.v_max, enc.options.polygon_sides)
     best, v = np.inf, np.empty(3)
@@ -101,3 +101,30 @@ def test_an_answer_does_not_depend_on_other_planes():
         d = VelocitySelector(solver=name, margin=0.5).select(**kw)
         expected = _exhaustive(enc, backend.solve, backend.has_cones)
         assert np.linalg.norm(d.velocity - enc.v_pref) == pytest.approx(expected, abs=1e-6)
+
+
+@settings(max_examples=80, **SETTINGS)
+@given(kw=encounters(max_neighbors=16))
+def test_rows_on_demand_give_the_same_search_bit_for_bit(kw):
+    """The kernel builds the rows of the VOs every QP starts with on plane 0 and elsewhere the
+    probe's only, completing a plane when one of its QPs first comes up. A bound from fewer
+    half-planes is still a lower bound, so the search must solve the same QPs in the same
+    order as with every plane built: the same answer, QP count, tried answers, bit for bit."""
+    kw = _conflict(kw)
+    enc = prepare(kw["own"], kw["preferred_velocity"], kw["neighbors"], kw["obstacles"], kw["limits"],
+                  kw["dt"], Options())
+    cfg = enc.options.config
+    planes = py_decision_planes(enc.vos, enc.v_now, cfg)
+    G3, h3 = enc.linear_bounds()
+    runs = []
+    for lazy in (True, False):
+        qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg, lazy)
+        R, P = qps.key.shape
+        tried = np.full((R * P * (qps.included.shape[2] + 1), 3), np.nan)
+        out = py_search(enc.vos, planes, qps, G3, h3, enc.bounds, cfg, tried)
+        runs.append((out, tried, qps.sol))
+    (a, tried_a, sol_a), (b, tried_b, sol_b) = runs
+    assert a == b
+    np.testing.assert_array_equal(tried_a[: a[3]], tried_b[: b[3]])
+    if a[0] >= 0:
+        np.testing.assert_array_equal(sol_a[a[0], a[1]], sol_b[b[0], b[1]])

@@ -393,3 +393,10 @@ def test_rotorpy_commands_of_an_agent_that_does_not_avoid_are_rate_limited_too()
     assert np.abs(steps).max() <= rate * sc.dt + 1e-12
     np.testing.assert_allclose(rec.commands[24, 1], [-4.0, 0.0, 0.0], atol=0.01)  # full speed
     assert summarize(rec)["speed_violations"] == 0
+    # a scenario's own acceleration bound below the command rate is the rate the loop keeps
+    slow = scenario_from_dict({**data, "dynamics": {"model": "rotorpy"},
+                               "safety": {"acceleration": 0.5}}, "intruder.yaml")
+    rec = run_scenario(slow, progress=False, max_steps=5)
+    assert rec.extra["margins"]["command_rate"] == 0.5
+    steps = np.diff(np.concatenate([np.zeros((1, 2, 3)), rec.commands[: rec.steps]]), axis=0)
+    assert np.abs(steps).max() <= 0.5 * sc.dt + 1e-12

@@ -255,8 +255,9 @@ def search(
     A QP's key starts as a cheap lower bound (the farthest of its half-planes from the
     preferred velocity) and becomes its exact optimum once it is the least key and solved, so
     QPs that can never win are not solved at all. Rows are built as QPs need them (a work list
-    of (VO, plane) pairs: the VOs every QP starts with on every plane, then those an answer
-    enters, on that answer's plane)."""
+    of (VO, plane) pairs): the VOs every QP starts with, on a plane not yet complete (see
+    ``plane_qps``) when one of its QPs first has the least key, before it is solved; then those
+    an answer enters, on that answer's plane."""
     R, P = qps.key.shape
     into, v, todo = qps.into, qps.v, qps.todo
     n_todo = np.int64(0)  # not the literal 0: see plane_qps
@@ -274,6 +275,7 @@ def search(
         if qps.key[r, p] == np.inf:
             break
         if not qps.complete[p]:  # its bound is the probe's alone: build the rest, bound again
+            # (no QP on p is solved yet, so every round's included VOs are still the initial ones)
             for k in range(into.shape[0]):
                 if qps.included[r, p, k] and not qps.computed[k, p]:
                     todo[n_todo, 0], todo[n_todo, 1], n_todo = k, p, n_todo + 1
@@ -371,10 +373,26 @@ def py_plane_qps(
     h3: np.ndarray,
     initial: np.ndarray,
     cfg: Config,
+    lazy: bool,
 ) -> PlaneQPs:
-    """``plane_qps`` for Python callers, every plane built (compiled code calls ``plane_qps``:
-    no Python wrapper)."""
-    return plane_qps(vos, planes, G3, h3, initial, cfg, False)
+    """``plane_qps`` for Python callers (compiled code calls ``plane_qps``: no Python wrapper);
+    every plane built unless ``lazy``."""
+    return plane_qps(vos, planes, G3, h3, initial, cfg, lazy)
+
+
+@entry
+def py_search(
+    vos: VOs,
+    planes: AvoidancePlanes,
+    qps: PlaneQPs,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+    tried: np.ndarray,
+) -> tuple[int, int, int, int]:
+    """``search`` for Python callers (tests: lazy and complete rows give the same search)."""
+    return search(vos, planes, qps, G3, h3, bounds, cfg, tried)
 
 
 @entry

@@ -49,7 +49,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     cfg, bounds = enc.options.config, enc.bounds
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)
     G3, h3 = enc.linear_bounds()
-    qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg)
+    qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg, False)
     R, P = qps.key.shape
     for r in range(R):
         for p in range(P):

@@ -6,8 +6,9 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
 
 * ``tau_eff`` (s): the vehicle's velocity response time: 0 kinematic, ``tau`` first_order,
   RotorPy's ``1/k_v + kd_att/kp_att`` (velocity loop plus attitude loop; 0.186 s for the
-  hummingbird) plus ``dt / 2`` when the set-point is ramped over the period (its mean delay;
-  0.286 s in all at dt 0.2 s; ``tests/test_real_world.py`` flies a reversal and measures it);
+  hummingbird) plus ``dt / 2`` when the set-point is ramped over the period (a bound on its
+  mean delay, ``(s - 1) / (2 s) dt`` with ``s`` sub-steps; 0.286 s in all at dt 0.2 s;
+  ``tests/test_real_world.py`` flies a reversal and measures it);
 * ``acceleration`` (m/s² per axis, the selector's ``Limits.acceleration``): ``v_max / tau_eff``,
   capped by what the rotors can give (RotorPy: ``g (T/W - 1)``) and by what RotorPy's velocity
   loop follows without flipping (``GAP_SHARE g / (k_v dt)``, 2.45 m/s²); none for kinematic

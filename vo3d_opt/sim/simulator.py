@@ -56,7 +56,7 @@ import numpy as np
 from tqdm import tqdm
 
 from vo3d_opt.sim.dynamics import Dynamics, make_dynamics
-from vo3d_opt.sim.safety import command_rate, within_reach
+from vo3d_opt.sim.safety import derive_margins, within_reach
 from vo3d_opt.sim.scenario import Scenario, load_scenario
 from vo3d_opt.sim.traffic import GoalWithDetours
 from vo3d_opt.types import AgentState, Limits, Neighbor
@@ -363,7 +363,7 @@ def fly(
     dyn.reset(sc.starts)
     buf = RunBuffers(total, n, same_commands=dyn.model == "kinematic")
     p, v = dyn.positions, dyn.velocities
-    rate = command_rate(sc)
+    rate = derive_margins(sc).command_rate  # None: commands may change at once
     last = v  # the commands before: rate-limited models change them gradually from these
     done = np.linalg.norm(p - sc.goals, axis=1) <= tol
     dyn.hold(done)
