@@ -95,7 +95,7 @@ def response_time(dyn: DynamicsConfig, dt: float) -> float:
         return float(dyn.tau)
     p = vehicle_params(dyn.vehicle or "hummingbird")
     k_v, kp, kd = (float(p.get(k, d)) for k, d in (("k_v", 10.0), ("kp_att", 1.0), ("kd_att", 0.0)))
-    # a ramped set-point reaches each command dt / 2 later on average
+    # a ramped set-point reaches each command at most dt / 2 later on average
     return 1.0 / k_v + kd / kp + (0.5 * dt if dyn.ramped else 0.0)
 
 
