@@ -75,3 +75,12 @@ def test_an_agent_stalled_near_its_goal_waits_instead_of_detouring():
     straight = goal_velocity(p, GOALS, 4.0, DT)
     np.testing.assert_allclose(w[:, 0], np.broadcast_to(straight[0], (w.shape[0], 3)))
     assert not np.allclose(w[-1, 1], straight[1])  # beyond its 1 m: the detour
+
+
+def test_only_an_agent_stalled_within_near_of_its_goal_is_waiting():
+    rule = GoalWithDetours(GOALS, 4.0, DT, near=[10.0, 1.0])
+    p = GOALS - np.array([[5.0, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    fly_rule(rule, [p] * int(0.5 * STALL_TIME / DT))
+    assert not rule.waiting.any()  # not stalled yet
+    fly_rule(rule, [p] * int(STALL_TIME / DT))
+    np.testing.assert_array_equal(rule.waiting, [True, False])

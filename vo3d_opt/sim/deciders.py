@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from vo3d_opt.sim.landing import Landing
 from vo3d_opt.sim.safety import (
     derive_margins,
     inflated,
@@ -38,7 +39,8 @@ class _SelectorStep:
     """A decision step that runs ``selector`` on scenario ``sc``; ``formulation`` and
     ``solver`` name it in the record. The selector plans in the world of
     ``vo3d_opt.sim.safety``: the altitude range shrunk by the altitude margin, the derived
-    acceleration bound, every sensed obstacle's prism inflated by the obstacle margin."""
+    acceleration bound, every sensed obstacle's prism inflated by the obstacle margin. An
+    agent waiting at its goal's door is landed when the step is clear (``sim.landing``)."""
 
     def __init__(
         self, sc: Scenario, selector: Any, *, formulation: str = "custom", solver: str = "custom"
@@ -48,6 +50,23 @@ class _SelectorStep:
         self.margins = derive_margins(sc)
         self.limits = planning_limits(sc.limits, self.margins)
         self.bodies = [inflated(b, self.margins.obstacle_margin) for b in sc.bodies]
+        self.landing = Landing.for_scenario(sc, self.limits, self.bodies, self.margins.pz_buffer)
+        self.landings = 0
+
+    def _land(self, snap: Snapshot, out: StepDecision) -> StepDecision:
+        """``out`` with the landing steps of the waiting agents (``sim.landing``); the others'
+        commands as the simulator will fly them: 0 when hovering, the preferred velocity for
+        agents that do not avoid."""
+        if snap.waiting is None or not snap.waiting.any():
+            return out
+        u = np.array(out.commands, dtype=float).reshape(-1, 3)
+        u[~snap.deciding] = snap.preferred[~snap.deciding]
+        landed = self.landing.apply(
+            snap.positions, snap.velocities, snap.preferred, u, snap.waiting, snap.deciding
+        )
+        self.landings += int(landed.sum())
+        out.commands = u
+        return out
 
     def agent_limits(self, i: int) -> Limits:
         """Agent ``i``'s planning limits (its own speed cap)."""
@@ -57,6 +76,7 @@ class _SelectorStep:
     def extra(self) -> dict[str, Any]:
         m = self.margins
         return {
+            "landings": self.landings,
             "margins": {
                 "acceleration": m.acceleration,
                 "command_rate": m.command_rate,
@@ -64,7 +84,7 @@ class _SelectorStep:
                 "tracking": m.tracking,
                 "obstacle_margin": m.obstacle_margin,
                 "altitude_margin": m.altitude_margin,
-            }
+            },
         }
 
 
@@ -106,11 +126,14 @@ class SwarmSelect(_SelectorStep):
             max_speed=sc.max_speed,
             threads=self.threads,
         )
-        return StepDecision(
-            commands=out.velocities,
-            statuses=out.statuses,
-            decision_times=out.times,
-            solve_times=out.times,
+        return self._land(
+            snap,
+            StepDecision(
+                commands=out.velocities,
+                statuses=out.statuses,
+                decision_times=out.times,
+                solve_times=out.times,
+            ),
         )
 
     def extra(self) -> dict[str, Any]:
@@ -212,11 +235,9 @@ class PerAgentSelect(_SelectorStep):
             u[i] = out if out.shape == (3,) else np.nan
             statuses[i] = str(d.status)
             stimes[i] = float(getattr(d, "solve_time", np.nan))
-        return StepDecision(
-            commands=u,
-            statuses=statuses,
-            decision_times=dtimes,
-            solve_times=stimes,
+        return self._land(
+            snap,
+            StepDecision(commands=u, statuses=statuses, decision_times=dtimes, solve_times=stimes),
         )
 
     def extra(self) -> dict[str, Any]:

@@ -92,7 +92,9 @@ class SelectorLike(Protocol):
 class Snapshot:
     """What the agents sense at step ``k`` (time ``t``): everyone's ``positions`` and
     ``velocities`` (N, 3), their ``preferred`` velocities (N, 3; 0 for arrived agents) and which
-    of them decide (``deciding`` (N,): those that have not arrived)."""
+    of them decide (``deciding`` (N,): those that have not arrived); ``waiting`` (N,) the
+    deciding agents that stalled at their goal's door, when the preferred-velocity rule says
+    (``GoalWithDetours.waiting``; None otherwise)."""
 
     k: int
     t: float
@@ -100,6 +102,7 @@ class Snapshot:
     velocities: np.ndarray
     preferred: np.ndarray
     deciding: np.ndarray
+    waiting: np.ndarray | None = None
 
 
 @dataclass
@@ -379,8 +382,15 @@ def fly(
             w = np.asarray(prefer(p), dtype=float)
             w[done] = 0.0
             deciding = ~done & ~straight
+            waiting = getattr(prefer, "waiting", None)
             snap = Snapshot(
-                k=k, t=k * dt, positions=p, velocities=v, preferred=w, deciding=deciding
+                k=k,
+                t=k * dt,
+                positions=p,
+                velocities=v,
+                preferred=w,
+                deciding=deciding,
+                waiting=None if waiting is None else waiting & deciding,
             )
             out = step.decide(snap)
             u, statuses = _checked_commands(out, deciding)

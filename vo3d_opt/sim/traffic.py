@@ -53,7 +53,8 @@ class GoalWithDetours:
     selector still keeps every zone clear: a detour changes only what the agent would like.
     Within ``near`` (m, per agent; the simulator passes its r_pz) of its goal an agent never
     detours: what blocks it is at the goal, and a detour there would only send it off again
-    and again (``lagged`` encounter 317 never arrived so).
+    and again (``lagged`` encounter 317 never arrived so). Such an agent is ``waiting`` (N,)
+    from then on until it arrives: the simulator may land it (``vo3d_opt.sim.landing``).
 
     Called once per control step with the positions (N, 3), as the simulator does; stateful
     (one instance per run)."""
@@ -85,6 +86,7 @@ class GoalWithDetours:
         self.ref_pos = np.zeros((n, 3))  # and position
         self.ref_t = np.zeros(n)
         self.detour_until = np.full(n, -np.inf)
+        self.waiting = np.zeros(n, dtype=bool)
 
     def __call__(self, positions: Any) -> np.ndarray:
         p = np.asarray(positions, dtype=float)
@@ -98,6 +100,7 @@ class GoalWithDetours:
         gained = self.ref_dist - dist
         moved = np.linalg.norm(p - self.ref_pos, axis=1)
         stalled = check & (gained < STALL_PROGRESS * reach) & (moved < STALL_MOTION * reach)
+        self.waiting |= stalled & (dist <= self.near)
         stalled &= dist > self.near  # at its goal's door, waiting is the way in
         self.detour_until[stalled] = self.t + self.stall_time
         self.ref_dist[stalled] = np.inf
