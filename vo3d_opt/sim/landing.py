@@ -22,8 +22,11 @@ instead of the selector's answer whenever that step keeps clear, over the whole 
 * every sensed obstacle's inflated protected prism, and the planning altitude range;
 
 and within the acceleration bound (scaled back along the way to the preferred velocity if
-not). Steps that are not clear are the selector's. Only waiting agents are affected: every run
-in which no agent stalls at its goal's door flies exactly as before.
+not). Steps that are not clear are the selector's. The check reads the snapshot's true
+states (under noisy or late sensing every radius keeps the buffer's noise and latency share);
+the simulator's rate limit (RotorPy) still applies to the step afterwards. Only waiting
+agents are affected: every run in which no agent stalls at its goal's door flies exactly as
+before.
 """
 
 from __future__ import annotations
