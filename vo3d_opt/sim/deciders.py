@@ -19,7 +19,7 @@ import numpy as np
 
 from vo3d_opt.sim.safety import (
     derive_margins,
-    inflated,
+    planning_bodies,
     planning_limits,
 )
 from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
@@ -38,7 +38,8 @@ class _SelectorStep:
     """A decision step that runs ``selector`` on scenario ``sc``; ``formulation`` and
     ``solver`` name it in the record. The selector plans in the world of
     ``vo3d_opt.sim.safety``: the altitude range shrunk by the altitude margin, the derived
-    acceleration bound, every sensed obstacle's prism inflated by the obstacle margin."""
+    acceleration bound, every sensed obstacle's prism inflated by the obstacle margin and its
+    top raised by the prism rise."""
 
     def __init__(
         self, sc: Scenario, selector: Any, *, formulation: str = "custom", solver: str = "custom"
@@ -47,7 +48,7 @@ class _SelectorStep:
         self.formulation, self.solver = formulation, solver
         self.margins = derive_margins(sc)
         self.limits = planning_limits(sc.limits, self.margins)
-        self.bodies = [inflated(b, self.margins.obstacle_margin) for b in sc.bodies]
+        self.bodies = planning_bodies(sc, self.margins)
 
     def agent_limits(self, i: int) -> Limits:
         """Agent ``i``'s planning limits (its own speed cap)."""
@@ -64,6 +65,7 @@ class _SelectorStep:
                 "tracking": m.tracking,
                 "obstacle_margin": m.obstacle_margin,
                 "altitude_margin": m.altitude_margin,
+                "prism_rise": m.prism_rise,
             }
         }
 
