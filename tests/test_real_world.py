@@ -20,6 +20,7 @@ from vo3d_opt.sim.safety import (
     NOISE_QUANTILE,
     derive_margins,
     inflated,
+    planning_bodies,
     planning_limits,
     prism_clearance,
     response_time,
@@ -122,13 +123,14 @@ def test_the_margins_are_derived_as_documented():
     noise = NOISE_QUANTILE * (0.5 + 0.3 * (dt + 0.4))
     assert m.pz_buffer == pytest.approx(2 * v * dt + 2 * m.tracking + noise + v * 0.4)
     assert m.obstacle_margin == pytest.approx(m.tracking + 0.5)
+    assert m.prism_rise == pytest.approx(m.tracking)
     assert m.altitude_margin == pytest.approx(max(v * 1.0, m.tracking))
     lim = planning_limits(sc.limits, m)
     assert lim.altitude == pytest.approx((m.altitude_margin, 20.0 - m.altitude_margin))
     assert lim.acceleration == pytest.approx(m.acceleration)
     # ideal kinematics: nothing beyond the discretisation buffer of the kinematic simulator
     k = derive_margins(small())
-    assert (k.acceleration, k.tracking, k.altitude_margin) == (None, 0.0, 0.0)
+    assert (k.acceleration, k.tracking, k.altitude_margin, k.prism_rise) == (None, 0.0, 0.0, 0.0)
     assert k.pz_buffer == pytest.approx(2 * v * dt)
 
 
@@ -200,6 +202,32 @@ def test_an_obstacle_prism_is_widened_only_beyond_its_own_margin(body):
     outside = (np.linalg.norm(pts[:, :2] - wide.center, axis=1) >= wide.side / 2) | (
         pts[:, 2] >= wide.prism_height)
     assert np.all(body.surface_distance(pts[outside]) >= own + 1.5 - 1e-9)
+    # a rise beyond the widening raises the top only
+    top = inflated(body, own + 0.5, rise=1.2)
+    assert top.side == pytest.approx(inflated(body, own + 0.5).side)
+    assert top.prism_height == pytest.approx(body.prism_height + 1.2)
+    assert inflated(body, own + 0.5, rise=0.1) == inflated(body, own + 0.5)
+
+
+def test_prism_tops_are_raised_by_the_tracking_error_but_not_over_a_goal():
+    """A lagging vehicle strays up to ``tracking`` below a ray grazing a prism's flat top
+    (sweep `lagged` encounter 1893, tests/test_sweep.py): the selector plans with every top
+    raised by it, but never over a start or goal above the prism (it would be unreachable)."""
+    low = {"type": "cylinder", "center": [0.0, 0.0], "radius": 1.0, "height": 6.0}
+    far = {"type": "box", "center": [0.0, 30.0], "size": [2.0, 2.0], "height": 6.0}
+    lagged = {"dynamics": {"model": "first_order", "tau": 1.0}, "obstacles": [low, far]}
+    sc = small(**lagged)
+    m = derive_margins(sc)
+    plan = planning_bodies(sc, m)
+    assert [b.prism_height for b in plan] == pytest.approx([8.0 + m.tracking] * 2)
+    assert [b.side for b in plan] == pytest.approx([b.side for b in sc.bodies])
+    goal_above = copy.deepcopy(SMALL["agents"])
+    goal_above[0]["goal"] = [0.5, 0.0, 8.3]  # 0.3 m above the cylinder's prism
+    plan = planning_bodies(small(**lagged, agents=goal_above), m)
+    assert plan[0].prism_height == pytest.approx(8.3 - ALTITUDE_CLEARANCE)
+    assert plan[1].prism_height == pytest.approx(8.0 + m.tracking)
+    given = small(**lagged, safety={"obstacle_margin": 2.5})
+    assert derive_margins(given).prism_rise == 0.0
 
 
 # ---------------------------------------------------------------------------- traffic

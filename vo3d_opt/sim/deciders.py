@@ -20,7 +20,7 @@ import numpy as np
 from vo3d_opt.sim.landing import Landing
 from vo3d_opt.sim.safety import (
     derive_margins,
-    inflated,
+    planning_bodies,
     planning_limits,
 )
 from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
@@ -39,8 +39,9 @@ class _SelectorStep:
     """A decision step that runs ``selector`` on scenario ``sc``; ``formulation`` and
     ``solver`` name it in the record. The selector plans in the world of
     ``vo3d_opt.sim.safety``: the altitude range shrunk by the altitude margin, the derived
-    acceleration bound, every sensed obstacle's prism inflated by the obstacle margin. An
-    agent waiting at its goal's door is landed when the step is clear (``sim.landing``)."""
+    acceleration bound, every sensed obstacle's prism inflated by the obstacle margin and its
+    top raised by the prism rise. An agent waiting at its goal's door is landed when the step
+    is clear (``sim.landing``)."""
 
     def __init__(
         self, sc: Scenario, selector: Any, *, formulation: str = "custom", solver: str = "custom"
@@ -49,7 +50,7 @@ class _SelectorStep:
         self.formulation, self.solver = formulation, solver
         self.margins = derive_margins(sc)
         self.limits = planning_limits(sc.limits, self.margins)
-        self.bodies = [inflated(b, self.margins.obstacle_margin) for b in sc.bodies]
+        self.bodies = planning_bodies(sc, self.margins)
         self.landing = Landing.for_scenario(sc, self.limits, self.bodies, self.margins.pz_buffer)
         self.landings = 0
 
@@ -84,6 +85,7 @@ class _SelectorStep:
                 "tracking": m.tracking,
                 "obstacle_margin": m.obstacle_margin,
                 "altitude_margin": m.altitude_margin,
+                "prism_rise": m.prism_rise,
             },
         }
 

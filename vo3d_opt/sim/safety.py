@@ -26,8 +26,12 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
 * ``obstacle_margin`` (m): the clearance a vehicle's centre needs from an obstacle's surface,
   ``tracking + radius`` (obstacles stand still and are known exactly); an obstacle's prism is
   widened only by what this exceeds the prism's own margin (:func:`inflated`): the prism
-  keeps the body off the obstacle, and a lagging vehicle may enter the prism's margin
-  (``obstacle_pz_intrusions`` counts it) but not the obstacle;
+  keeps the body off the obstacle;
+* ``prism_rise`` (m): ``tracking``, by which every prism's top is raised while planning
+  (:func:`planning_bodies`; not over a start or goal above the prism): the top is flat, so a
+  ray grazing it has no room for a lagging vehicle to fall below it, while the sides are
+  planned as the square turned to face the vehicle, which leaves room around the protected
+  disc; 0 when the scenario gives ``safety.obstacle_margin``;
 * ``altitude_margin`` (m): ``max(v_max tau_eff, tracking)``: room to stop from full vertical
   speed, and the altitude a manoeuvre may cost; with rate-limited commands (RotorPy) the
   braking distance ``v_max tau_eff + v_max² / (2 command_rate)``; at most what keeps every
@@ -83,6 +87,7 @@ class Margins:
     pz_buffer: float
     obstacle_margin: float
     altitude_margin: float
+    prism_rise: float
     why: dict[str, str] = field(default_factory=dict, compare=False)
 
 
@@ -164,6 +169,7 @@ def derive_margins(sc: Scenario) -> Margins:
     derived_buffer = 2.0 * v_max * dt + 2.0 * tracking + noise + v_max * sens.latency
     pz_buffer = _pick(sc.selector_options.get("pz_buffer", sc.safety.pz_buffer), derived_buffer)
     obstacle = _pick(sc.safety.obstacle_margin, tracking + float(np.max(sc.radius)))
+    rise = tracking if sc.safety.obstacle_margin is None else 0.0
     cap = _altitude_cap(sc)
     stop = max(v_max * tau, tracking)
     rate = command_rate(sc)
@@ -187,6 +193,7 @@ def derive_margins(sc: Scenario) -> Margins:
             f"{noise:.3g} + latency {v_max * sens.latency:.3g}"
         ),
         "obstacle_margin": "tracking + vehicle radius",
+        "prism_rise": "tracking" if sc.safety.obstacle_margin is None else "given obstacle_margin",
         "altitude_margin": (f"stopping room {stop:.3g}, at most {cap:.3g} (starts and goals)"),
     }
     return Margins(
@@ -197,6 +204,7 @@ def derive_margins(sc: Scenario) -> Margins:
         pz_buffer=pz_buffer,
         obstacle_margin=obstacle,
         altitude_margin=altitude,
+        prism_rise=rise,
         why=why,
     )
 
@@ -245,14 +253,29 @@ def prism_clearance(body: Cylinder | Box) -> float:
     return min(0.5 * (body.side - body.footprint_extent()), body.prism_height - body.height)
 
 
-def inflated(body: Cylinder | Box, clearance: float) -> Cylinder | Box:
+def inflated(body: Cylinder | Box, clearance: float, rise: float = 0.0) -> Cylinder | Box:
     """The obstacle with its protected prism widened (each side) and raised by what
-    ``clearance`` (m) exceeds :func:`prism_clearance`: unchanged when the prism is enough."""
-    extra = clearance - prism_clearance(body)
-    if extra <= 0:
+    ``clearance`` (m) exceeds :func:`prism_clearance`, its top raised by at least ``rise`` (m):
+    unchanged when the prism is enough."""
+    extra = max(clearance - prism_clearance(body), 0.0)
+    up = max(extra, rise)
+    if up <= 0:
         return body
-    if body.L_pz is None and body.h_pz is None:
+    if up == extra and body.L_pz is None and body.h_pz is None:
         return body.model_copy(update={"margin": body.margin + extra})
-    return body.model_copy(
-        update={"L_pz": body.side + 2.0 * extra, "h_pz": body.prism_height + extra}
-    )
+    return body.model_copy(update={"L_pz": body.side + 2.0 * extra, "h_pz": body.prism_height + up})
+
+
+def planning_bodies(sc: Scenario, m: Margins) -> list[Cylinder | Box]:
+    """The scenario's obstacles as the selector plans with them: :func:`inflated` by
+    ``m.obstacle_margin`` and ``m.prism_rise``, the rise stopping :data:`ALTITUDE_CLEARANCE`
+    short of any start or goal above a prism (so that it stays reachable)."""
+    ends = np.concatenate([sc.starts, sc.goals])
+    out = []
+    for body in sc.bodies:
+        wide = inflated(body, m.obstacle_margin)
+        over = np.linalg.norm(ends[:, :2] - np.asarray(wide.center), axis=1) < wide.side / 2
+        above = ends[over, 2] - wide.prism_height
+        room = float(np.min(above[above >= 0], initial=math.inf)) - ALTITUDE_CLEARANCE
+        out.append(inflated(body, m.obstacle_margin, min(m.prism_rise, room)))
+    return out

@@ -121,7 +121,8 @@ class SafetySpec(Spec):
     (the default) is derived, 0 switches that inflation off. ``acceleration``: m/s² per axis
     (the selector's ``Limits.acceleration``; None derived, 0 none); ``pz_buffer``: m (the
     selector's option); ``altitude_margin``: m kept from each altitude bound while planning;
-    ``obstacle_margin``: m added to every obstacle's protected prism while planning."""
+    ``obstacle_margin``: m added to every obstacle's protected prism while planning (given,
+    it alone sizes them: the prism tops are not raised by the tracking error either)."""
 
     acceleration: NonNegative | None = None
     pz_buffer: NonNegative | None = None
