@@ -84,3 +84,13 @@ def test_only_an_agent_stalled_within_near_of_its_goal_is_waiting():
     assert not rule.waiting.any()  # not stalled yet
     fly_rule(rule, [p] * int(STALL_TIME / DT))
     np.testing.assert_array_equal(rule.waiting, [True, False])
+
+
+def test_an_agent_pushed_off_its_goals_door_is_no_longer_waiting():
+    rule = GoalWithDetours(GOALS, 4.0, DT, near=[10.0, 10.0])
+    p = GOALS - np.array([[5.0, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    fly_rule(rule, [p] * int(1.5 * STALL_TIME / DT))
+    assert rule.waiting.all()
+    pushed = p - np.array([[0.0, 0.0, 0.0], [20.0, 0.0, 0.0]])
+    fly_rule(rule, [pushed])
+    np.testing.assert_array_equal(rule.waiting, [True, False])

@@ -63,7 +63,12 @@ class _SelectorStep:
         u = np.array(out.commands, dtype=float).reshape(-1, 3)
         u[~snap.deciding] = snap.preferred[~snap.deciding]
         landed = self.landing.apply(
-            snap.positions, snap.velocities, snap.preferred, u, snap.waiting, snap.deciding
+            positions=snap.positions,
+            velocities=snap.velocities,
+            preferred=snap.preferred,
+            commands=u,
+            waiting=snap.waiting,
+            deciding=snap.deciding,
         )
         self.landings += int(landed.sum())
         out.commands = u

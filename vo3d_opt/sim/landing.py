@@ -50,10 +50,7 @@ PRISM_SAMPLES = 17
 class Landing:
     """What a landing step must keep clear of, fixed for a run (see the module docstring)."""
 
-    goals: np.ndarray  # (N, 3)
-    tolerance: float
     dt: float
-    max_speed: np.ndarray  # (N,)
     r_pz: np.ndarray  # (N,)
     pz_buffer: float
     still_pad: float  # m beyond r_pz for vehicles that do not decide (module docstring)
@@ -66,10 +63,7 @@ class Landing:
         cls, sc: Scenario, limits: Limits, bodies: list[Cylinder | Box], pz_buffer: float
     ) -> Landing:
         return cls(
-            goals=sc.goals,
-            tolerance=float(sc.goal_tolerance),
             dt=float(sc.dt),
-            max_speed=sc.max_speed,
             r_pz=sc.r_pz,
             pz_buffer=float(pz_buffer),
             still_pad=max(float(pz_buffer) - 2.0 * float(np.max(sc.max_speed)) * float(sc.dt), 0.0)
@@ -81,6 +75,7 @@ class Landing:
 
     def apply(
         self,
+        *,
         positions: np.ndarray,
         velocities: np.ndarray,
         preferred: np.ndarray,
@@ -90,13 +85,15 @@ class Landing:
     ) -> np.ndarray:
         """The agents (bool (N,)) whose command became their landing step; ``commands`` (N, 3)
         is changed in place. Agents are taken in index order, each checked against the others'
-        commands as they stand (an earlier landing included)."""
+        commands as they stand (an earlier landing included; a non-finite one as 0, which the
+        simulator flies instead)."""
         p = positions
+        moves = np.where(np.isfinite(commands).all(axis=1)[:, None], commands, 0.0)
         landed = np.zeros(p.shape[0], dtype=bool)
         for i in np.flatnonzero(waiting):
             u = self._within_acceleration(preferred[i], velocities[i])
-            if self._clear(int(i), p, u, commands, deciding):
-                commands[i], landed[i] = u, True
+            if self._clear(int(i), p, u, moves, deciding):
+                commands[i], moves[i], landed[i] = u, u, True
         return landed
 
     def _within_acceleration(self, w: np.ndarray, v: np.ndarray) -> np.ndarray:

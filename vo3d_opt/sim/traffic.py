@@ -54,7 +54,8 @@ class GoalWithDetours:
     Within ``near`` (m, per agent; the simulator passes its r_pz) of its goal an agent never
     detours: what blocks it is at the goal, and a detour there would only send it off again
     and again (``lagged`` encounter 317 never arrived so). Such an agent is ``waiting`` (N,)
-    from then on until it arrives: the simulator may land it (``vo3d_opt.sim.landing``).
+    from then on while it stays within ``near``: the simulator may land it
+    (``vo3d_opt.sim.landing``).
 
     Called once per control step with the positions (N, 3), as the simulator does; stateful
     (one instance per run)."""
@@ -101,6 +102,7 @@ class GoalWithDetours:
         moved = np.linalg.norm(p - self.ref_pos, axis=1)
         stalled = check & (gained < STALL_PROGRESS * reach) & (moved < STALL_MOTION * reach)
         self.waiting |= stalled & (dist <= self.near)
+        self.waiting &= dist <= self.near  # pushed off its goal's door: the VO's again
         stalled &= dist > self.near  # at its goal's door, waiting is the way in
         self.detour_until[stalled] = self.t + self.stall_time
         self.ref_dist[stalled] = np.inf
