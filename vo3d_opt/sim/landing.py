@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vo3d_opt.formulations.common import BUFFER_GAP_SHARE
+from vo3d_opt.sim.metrics import segment_min
 from vo3d_opt.sim.scenario import Scenario, prism_contains
 from vo3d_opt.types import Box, Cylinder, Limits
 
@@ -121,16 +122,8 @@ class Landing:
         need = r_pz + np.where(
             moving, np.minimum(self.pz_buffer, BUFFER_GAP_SHARE * gap), self.still_pad
         )
-        if np.any(_closest(p[i] - centres, (u - moves) * self.dt) < need):
+        r0 = p[i] - centres
+        if np.any(segment_min(r0, r0 + (u - moves) * self.dt) < need):
             return False
         path = p[i] + np.linspace(0.0, 1.0, PRISM_SAMPLES)[:, None] * (u * self.dt)
         return not any(prism_contains(b, path).any() for b in self.bodies)
-
-
-def _closest(r0: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """Least norm of ``r0 + s step`` over s in [0, 1], row by row (M, 3)."""
-    ss = np.einsum("mk,mk->m", step, step)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = np.where(ss > 0, -np.einsum("mk,mk->m", r0, step) / ss, 0.0)
-    s = np.clip(s, 0.0, 1.0)
-    return np.linalg.norm(r0 + s[:, None] * step, axis=1)

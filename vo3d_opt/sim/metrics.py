@@ -92,9 +92,13 @@ def pair_min_distances(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
 
 
 def _segment_min(p0: np.ndarray, p1: np.ndarray, ii: np.ndarray, jj: np.ndarray) -> np.ndarray:
-    """Closest approach of pairs (ii, jj) over one straight segment from p0 to p1 (N, 3) each:
-    the same arithmetic as :func:`pair_min_distances`."""
-    r0, r1 = p0[ii] - p0[jj], p1[ii] - p1[jj]
+    """Closest approach of pairs (ii, jj) over one straight segment from p0 to p1 (N, 3) each."""
+    return segment_min(p0[ii] - p0[jj], p1[ii] - p1[jj])
+
+
+def segment_min(r0: np.ndarray, r1: np.ndarray) -> np.ndarray:
+    """Least norm over a straight segment from ``r0`` to ``r1`` (P, 3) each, row by row (relative
+    positions at the ends of a period): the same arithmetic as :func:`pair_min_distances`."""
     w = r1 - r0
     ww = np.einsum("pk,pk->p", w, w)
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -101,8 +101,8 @@ class GoalWithDetours:
         gained = self.ref_dist - dist
         moved = np.linalg.norm(p - self.ref_pos, axis=1)
         stalled = check & (gained < STALL_PROGRESS * reach) & (moved < STALL_MOTION * reach)
-        self.waiting |= stalled & (dist <= self.near)
-        self.waiting &= dist <= self.near  # pushed off its goal's door: the VO's again
+        # at its goal's door and stalled: waiting, until it arrives or is pushed off again
+        self.waiting = (self.waiting | stalled) & (dist <= self.near)
         stalled &= dist > self.near  # at its goal's door, waiting is the way in
         self.detour_until[stalled] = self.t + self.stall_time
         self.ref_dist[stalled] = np.inf
