@@ -339,7 +339,7 @@ def _zone_time(vos: VOs, k: int, v: np.ndarray) -> float:
     return np.inf
 
 
-@kernel
+@inline
 def time_to_intrusion(vos: VOs, v: np.ndarray, floor: float, hint: np.ndarray) -> float:
     """The earliest time (s) any protected zone would be entered at velocity v (inf: never; 0:
     inside and closing). The least-bad velocity maximises it. Once the time is known to be

@@ -81,7 +81,7 @@ def _in_any(vos: VOs, v: np.ndarray, horizon: float, hint: np.ndarray) -> bool:
     return False
 
 
-@kernel
+@inline
 def safe_by_margin(
     vos: VOs,
     v: np.ndarray,

@@ -265,8 +265,9 @@ def search(
     for it in range(
         1 + R * P * (2 + 2 * into.shape[0])
     ):  # per QP: its solve, then each VO it gains
-        add_rows(qps, vos, planes, cfg, n_todo)
-        n_todo = np.int64(0)
+        if n_todo > 0:  # a call passes every array of qps, vos and planes: skip it when idle
+            add_rows(qps, vos, planes, cfg, n_todo)
+            n_todo = np.int64(0)
         if it == 0:
             for r in range(R):
                 for p in range(P):
