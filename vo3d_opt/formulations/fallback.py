@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._jit import entry, inline, jit, kernel
+from .._jit import entry, inline, jit
 from ..geometry import AvoidancePlanes
 from ..geometry.membership import clearance, in_cone, in_pyramid
 from ..status import Status
