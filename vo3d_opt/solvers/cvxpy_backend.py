@@ -25,7 +25,8 @@ SOLVER_OPTIONS: dict[str, dict[str, float | int | bool]] = {
     "CLARABEL": dict(tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10),
     # CVXOPT's defaults (abstol 1e-7, reltol 1e-6, feastol 1e-7) stop up to ~1e-4 away; at
     # 1e-9 it needs 3 refinement steps of the KKT solves, else some QPs end in a solver error;
-    # feastol 1e-9 still ends 2 of the tests' QPs so on an AMD EPYC (none on an Intel Xeon)
+    # at feastol 1e-9, 2 of the tests' QPs still end in a solver error on an AMD EPYC (none on
+    # an Intel Xeon)
     "CVXOPT": dict(abstol=1e-9, reltol=1e-9, feastol=1e-8, refinement=3),
 }
 
