@@ -347,12 +347,13 @@ def time_to_intrusion(vos: VOs, v: np.ndarray, floor: float, hint: np.ndarray) -
     zone that showed it goes into hint[0], where the next call starts: in a crowd most
     velocities are beaten by the same zone."""
     count, t = vos.cones.d_oi.shape[0] + vos.pyramids.L_pz.shape[0], np.inf
-    for q in range(count):
-        k = (hint[0] + q) % count
+    k = hint[0]
+    for _ in range(count):  # k wraps round by hand: a modulo per velocity costs more
         t = min(t, _zone_time(vos, k, v))
         if t < floor or t == 0.0:
             hint[0] = k
             return t
+        k = k + 1 if k + 1 < count else 0
     return t
 
 

@@ -68,8 +68,8 @@ def _in_any(vos: VOs, v: np.ndarray, horizon: float, hint: np.ndarray) -> bool:
     skips most of the checks without changing any answer."""
     n = vos.cones.d_oi.shape[0]
     count = n + vos.pyramids.L_pz.shape[0]
-    for q in range(count):
-        k = (hint[0] + q) % count
+    k = hint[0]
+    for _ in range(count):  # k wraps round by hand: a modulo per point costs more than a check
         inside = (
             in_cone(vos.cones, k, v, horizon, 0.0)
             if k < n
@@ -78,6 +78,7 @@ def _in_any(vos: VOs, v: np.ndarray, horizon: float, hint: np.ndarray) -> bool:
         if inside:
             hint[0] = k
             return True
+        k = k + 1 if k + 1 < count else 0
     return False
 
 
@@ -105,9 +106,8 @@ def grid_search(
 ) -> tuple[bool, np.ndarray, int]:
     """The grid velocity nearest the preferred one that ``safe_by_margin`` accepts: (found,
     velocity, plane index). Grid points equally far from it are tried plane by plane."""
-    grid = polar_grid(bounds, cfg)
-    e1 = planes.to_plane[0, 0]
-    w0 = e1[0] * vos.v_pref[0] + e1[1] * vos.v_pref[1] + e1[2] * vos.v_pref[2]
+    grid, T = polar_grid(bounds, cfg), planes.to_plane
+    w0 = T[0, 0, 0] * vos.v_pref[0] + T[0, 0, 1] * vos.v_pref[1] + T[0, 0, 2] * vos.v_pref[2]
     dev = np.empty(grid.shape[0])
     for g in range(grid.shape[0]):  # |v - v_pref|: the planes are isometric
         dev[g] = np.sqrt((grid[g, 0] - w0) ** 2 + grid[g, 1] ** 2)
@@ -120,11 +120,10 @@ def grid_search(
         while b < order.shape[0] and dev[order[b]] <= dev[order[a]] + 1e-12:
             b += 1
         for p in range(planes.phi.shape[0]):
-            e2 = planes.to_plane[p, 1]
             for q in range(a, b):
                 x, y = grid[order[q], 0], grid[order[q], 1]
-                for c in range(3):
-                    v[c] = x * e1[c] + y * e2[c]
+                for c in range(3):  # e1 is the same on every plane
+                    v[c] = x * T[0, 0, c] + y * T[p, 1, c]
                 if safe_by_margin(vos, v, G3, h3, bounds, cfg, hint):
                     return True, v, p
         a = b
@@ -149,12 +148,35 @@ def _consider(
     # A velocity whose intrusion comes before the best one's cannot win: its time is only
     # computed far enough to know that (the answer is the same, most grid points cost less).
     t = -min(time_to_intrusion(vos, v, -key[0], hint), NEVER)
+    if t > key[0]:
+        return
     dev = np.sqrt(
         (v[0] - vos.v_pref[0]) ** 2 + (v[1] - vos.v_pref[1]) ** 2 + (v[2] - vos.v_pref[2]) ** 2
     )
     if t < key[0] or (t == key[0] and dev < key[1]):
         best[0], best[1], best[2] = v[0], v[1], v[2]
         key[0], key[1] = t, dev
+
+
+@inline
+def _clip_consider(
+    vos: VOs,
+    v: np.ndarray,
+    clip: bool,
+    v_now: np.ndarray,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    best: np.ndarray,
+    key: np.ndarray,
+    hint: np.ndarray,
+) -> None:
+    """``_consider`` v, first clipped into the reachable box |v - v_now| <= a·dt if ``clip``."""
+    if clip:
+        dv = bounds.acceleration * bounds.dt
+        for c in range(3):
+            v[c] = min(max(v[c], v_now[c] - dv), v_now[c] + dv)
+    _consider(vos, v, G3, h3, bounds, best, key, hint)
 
 
 @jit
@@ -174,29 +196,29 @@ def least_bad(
     preferred velocity). With an acceleration limit each is also tried clipped into the
     reachable box (few grid points lie in it). None within the limits (e.g. v_min > 0 and
     zero): the limits' own closest point to hovering."""
-    grid = polar_grid(bounds, cfg)
-    P, M, k = planes.phi.shape[0], grid.shape[0], tried.shape[0]
+    grid, T = polar_grid(bounds, cfg), planes.to_plane
     best, key, hint = np.empty(3), np.empty(2), np.zeros(1, dtype=np.int64)
     best[0], key[0], key[1] = np.nan, np.inf, np.inf
     v = np.empty(3)
-    dv = bounds.acceleration * bounds.dt
-    passes = 1 if np.isnan(dv) else 2
-    for pass_ in range(passes):
-        for q in range(k + P * M + 2):
+    for pass_ in range(1 if np.isnan(bounds.acceleration) else 2):
+        clip = pass_ == 1  # the second pass: each clipped into the reachable box
+        # in this order: the tried answers, the grid plane by plane, zero, v_now (plain loops:
+        # an index split into plane and point by division costs more than the check)
+        for q in range(tried.shape[0]):
             for c in range(3):
-                if q < k:
-                    v[c] = tried[q, c]
-                elif q < k + P * M:
-                    pl, g = (q - k) // M, (q - k) % M
-                    v[c] = (
-                        grid[g, 0] * planes.to_plane[pl, 0, c]
-                        + grid[g, 1] * planes.to_plane[pl, 1, c]
-                    )
-                else:
-                    v[c] = 0.0 if q == k + P * M else v_now[c]
-                if pass_ == 1:
-                    v[c] = min(max(v[c], v_now[c] - dv), v_now[c] + dv)
-            _consider(vos, v, G3, h3, bounds, best, key, hint)
+                v[c] = tried[q, c]
+            _clip_consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
+        for pl in range(planes.phi.shape[0]):
+            for g in range(grid.shape[0]):
+                for c in range(3):
+                    v[c] = grid[g, 0] * T[pl, 0, c] + grid[g, 1] * T[pl, 1, c]
+                _clip_consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
+        for c in range(3):
+            v[c] = 0.0
+        _clip_consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
+        for c in range(3):
+            v[c] = v_now[c]
+        _clip_consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
     if np.isnan(best[0]):
         lo, hi = vz_range(p[2], bounds)
         best[0], best[1], best[2] = 0.0, 0.0, min(max(0.0, lo), hi)
