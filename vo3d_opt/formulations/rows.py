@@ -46,22 +46,27 @@ ROUNDS = ("near", "left", "right")
 
 
 @inline
-def _pick(dist: np.ndarray, side_y: np.ndarray, valid: np.ndarray) -> tuple[int, int, int]:
-    """The boundary candidate each round linearises at: "near" the nearest valid one; "left"
-    / "right" the nearest in the upper / lower half of the section (by in-plane y about the
-    candidates' mean), or the nearest when that half is empty."""
-    count, total = 0, 0.0
-    for k in range(dist.shape[0]):
-        if valid[k]:
-            count, total = count + 1, total + side_y[k]
-    centre = total / max(count, 1)
-    near, left, right = 0, -1, -1
-    d_near, d_left, d_right = np.inf, np.inf, np.inf
-    for k in range(dist.shape[0]):
-        if not valid[k]:
-            continue
+def _pick(sec: Section, K: int, w0: np.ndarray, scratch: np.ndarray) -> tuple[int, int, int]:
+    """The boundary candidate each round linearises at, among the curve points of eq. (12)
+    (0..K-1) and the chord points of eq. (17) (K, K + 1): "near" the nearest, "left" / "right"
+    the nearest in the upper / lower half of the section (by in-plane y about the candidates'
+    mean), or the nearest when that half is empty. A candidate exists if its x is not NaN.
+    Two passes (the mean, then the halves); ``scratch`` (2, K + 2)."""
+    dist, side_y = scratch[0], scratch[1]
+    count, total, near, d_near = 0, 0.0, 0, np.inf
+    for k in range(K + 2):
+        qx = sec.curve[0, k] if k < K else sec.chord[k - K, 0]
+        qy = sec.curve[1, k] if k < K else sec.chord[k - K, 1]
+        side_y[k] = qy
+        # squared: only compared; inf (never picked) for a candidate that does not exist
+        dist[k] = (qx - w0[0]) ** 2 + (qy - w0[1]) ** 2 if qx == qx else np.inf
+        if qx == qx:
+            count, total = count + 1, total + qy
         if dist[k] < d_near:
             near, d_near = k, dist[k]
+    centre = total / max(count, 1)
+    left, right, d_left, d_right = -1, -1, np.inf, np.inf
+    for k in range(K + 2):
         if side_y[k] >= centre and dist[k] < d_left:
             left, d_left = k, dist[k]
         if side_y[k] <= centre and dist[k] < d_right:
@@ -120,27 +125,11 @@ def _curve_rows(
     G: np.ndarray,
     h: np.ndarray,
     scratch: np.ndarray,
-    valid: np.ndarray,
 ) -> bool:
-    """Each round's tangent-plane row of cone i's conic section (see the module docstring);
-    False when the section has no boundary point. ``scratch`` (2, K + 2), ``valid`` (K + 2,)."""
+    """Each round's tangent-plane row of cone i's conic section (see the module docstring).
+    ``scratch`` (2, K + 2)."""
     K = cfg.t.shape[0]
-    dist, side_y = scratch[0], scratch[1]
-    for k in range(K):  # the curve of eq. (12) (vectorisable: no branches) ...
-        qx, qy = sec.curve[0, k], sec.curve[1, k]
-        valid[k] = qx == qx  # not NaN
-        # squared: only compared
-        dist[k] = (qx - w0[0]) ** 2 + (qy - w0[1]) ** 2 if qx == qx else np.inf
-        side_y[k] = qy
-    for j in range(2):  # ... and the chord points of eq. (17)
-        qx, qy = sec.chord[j, 0], sec.chord[j, 1]
-        valid[K + j] = qx == qx
-        dist[K + j] = (qx - w0[0]) ** 2 + (qy - w0[1]) ** 2 if qx == qx else np.inf
-        side_y[K + j] = qy
-    any_valid = False
-    for k in range(K + 2):
-        any_valid |= valid[k]
-    picks = _pick(dist, side_y, valid)
+    picks = _pick(sec, K, w0, scratch)
     c, e1, e2 = vos.cones, to_plane[0], to_plane[1]
     for r in range(G.shape[0]):
         # The cone's tangent plane along that generator (outward normal N), on P_phi: N·v >= N·apex.
@@ -159,7 +148,6 @@ class RowWork(NamedTuple):
 
     sec: Section  # one section at a time
     scratch: np.ndarray  # (2, K + 2) distances and sides of the boundary candidates
-    valid: np.ndarray  # (K + 2,) which candidates exist
 
 
 @jit
@@ -174,7 +162,6 @@ def row_work(K: int) -> RowWork:
             np.empty(3),
         ),
         np.empty((2, K + 2)),
-        np.empty(K + 2, dtype=np.bool_),
     )
 
 
@@ -218,9 +205,7 @@ def plane_rows(
     elif kind == TRIANGLE:
         active = _triangle_rows(sec.apex, sec.chord, w0, G, h)
     elif k < n and (kind == CIRCLE or kind == ELLIPSE or kind == PARABOLA or kind == HYPERBOLA):
-        active = _curve_rows(
-            vos, k, sec, cfg, w0, planes.to_plane[p], G, h, work.scratch, work.valid
-        )
+        active = _curve_rows(vos, k, sec, cfg, w0, planes.to_plane[p], G, h, work.scratch)
     for r in range(G.shape[0]):
         h[r] -= cfg.margin  # strictly outside: pushed out by the margin (m/s)
     return active
