@@ -176,7 +176,7 @@ def vo_base(vos: VOs, k: int, frame: np.ndarray, cfg: Config, out: np.ndarray) -
         pyramid_base_points(vos.pyramids, k - n, frame, out)
 
 
-@kernel
+@inline
 def plane_rows(
     vos: VOs,
     k: int,
