@@ -226,7 +226,7 @@ def gather(qps: PlaneQPs, r: int, p: int) -> int:
     return m
 
 
-@kernel
+@inline
 def solve_qp(qps: PlaneQPs, r: int, p: int, bounds: Bounds) -> None:
     """QP (r, p) solved exactly: its optimum into sol[r, p], its deviation into key[r, p]."""
     m = gather(qps, r, p)
