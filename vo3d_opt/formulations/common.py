@@ -18,7 +18,7 @@ from typing import Annotated, Literal, NamedTuple
 import numpy as np
 from pydantic import Field, StrictBool
 
-from .._jit import entry, inline, jit, kernel
+from .._jit import entry, inline, jit
 from ..geometry import (
     CORRECTIONS,
     AvoidancePlanes,
@@ -304,7 +304,7 @@ def within_limits(v: np.ndarray, G: np.ndarray, h: np.ndarray, bounds: Bounds) -
     return True
 
 
-@kernel
+@inline
 def containing(vos: VOs, v: np.ndarray, horizon: float, out: np.ndarray) -> bool:
     """Which VOs (cones first) contain v, by the exact 3D membership, into ``out``; whether any."""
     n, any_in = vos.cones.d_oi.shape[0], False

@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import inline, jit, kernel
+from .._jit import inline, jit
 from ..geometry import AvoidancePlanes
 from ..geometry.cone import outward_normal
 from ..geometry.sections import (
@@ -165,7 +165,7 @@ def row_work(K: int) -> RowWork:
     )
 
 
-@kernel
+@inline
 def vo_base(vos: VOs, k: int, frame: np.ndarray, cfg: Config, out: np.ndarray) -> None:
     """VO k's points in the planes' frame (``cone_base_points`` / ``pyramid_base_points``),
     computed once per VO: each plane then only turns them (eq. 8). ``out`` (3, K + 3)."""

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import entry, inline, jit, kernel
+from .._jit import entry, inline, jit
 
 #: The paper's smallest virtual-sphere factor (section 3.1.6: tau >= 1.5).
 TAU_MIN = 1.5
@@ -190,7 +190,7 @@ def py_build_cones(
     return build_cones(p_A, p_B, apex, r_pz, reach, tau_min)
 
 
-@kernel
+@inline
 def min_speed(cones: VOCones, i: int) -> float:
     """The smallest |v| inside VO cone i: the distance from the velocity origin to the
     (infinite) cone; 0 when A is inside the zone or the origin is in the cone."""
