@@ -16,11 +16,11 @@ Five flavours, by what a function does:
 - ``inline``: a ``kernel`` that LLVM always inlines where it is called (``forceinline``: the
   ``alwaysinline`` attribute): the helpers of hot loops, whose arithmetic costs less than a
   call, and the functions whose call would pass every array of the VOs or of the plane QPs by
-  value (tens of arrays, each several machine words): the fallbacks' per-point checks (a
-  fallback of the sphere swap costs about a quarter), ``plane_rows``, ``solve_qp``,
-  ``containing``. Typed and lowered once, not once per call site as numba's own IR
-  inlining (``inline="always"``) does (its inlining pass alone took
-  4.8 s of a 37 s first call); the answers are bitwise the same;
+  value (tens of arrays, each several machine words): the fallbacks' per-point checks (inlined,
+  a fallback decision of the sphere swap took about a quarter of its time before),
+  ``plane_rows``, ``solve_qp``, ``containing``, ``vo_base``, ``min_speed``. Typed and lowered
+  once, not once per call site as numba's own IR inlining (``inline="always"``) does (its
+  inlining pass alone took 4.8 s of a 37 s first call); the answers are bitwise the same;
 - ``inline_alloc``: inlined by numba at the IR level (so it may allocate, with its caller's
   flags): ``decide_one`` into ``decide`` and ``decide_range`` and the per-vehicle code into
   ``decide_range``. A function numba compiles on its own gets an LLVM module of its own, and

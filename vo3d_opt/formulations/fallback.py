@@ -65,7 +65,8 @@ def _by_value(x: np.ndarray) -> np.ndarray:
 def _in_any(vos: VOs, v: np.ndarray, horizon: float, hint: np.ndarray) -> bool:
     """Whether some VO holds v (the exact 3D check), starting with hint[0], the VO that held
     the last velocity checked: in a crowd most grid points fail on the same VO, so this
-    skips most of the checks without changing any answer."""
+    skips most of the checks without changing any answer. 0 <= hint[0] < the VO count (a
+    fresh hint per decision: it indexes these VOs)."""
     n = vos.cones.d_oi.shape[0]
     count = n + vos.pyramids.L_pz.shape[0]
     k = hint[0]

@@ -51,7 +51,7 @@ def _pick(sec: Section, K: int, w0: np.ndarray, scratch: np.ndarray) -> tuple[in
     (0..K-1) and the chord points of eq. (17) (K, K + 1): "near" the nearest, "left" / "right"
     the nearest in the upper / lower half of the section (by in-plane y about the candidates'
     mean), or the nearest when that half is empty. A candidate exists if its x is not NaN.
-    Two passes (the mean, then the halves); ``scratch`` (2, K + 2)."""
+    Two passes (the mean and "near", then the halves); ``scratch`` (2, K + 2)."""
     dist, side_y = scratch[0], scratch[1]
     count, total, near, d_near = 0, 0.0, 0, np.inf
     for k in range(K + 2):
