@@ -135,6 +135,8 @@ def grid_search(
 def _consider(
     vos: VOs,
     v: np.ndarray,
+    clip: bool,
+    v_now: np.ndarray,
     G3: np.ndarray,
     h3: np.ndarray,
     bounds: Bounds,
@@ -142,8 +144,13 @@ def _consider(
     key: np.ndarray,
     hint: np.ndarray,
 ) -> None:
-    """Keep v in ``best`` if it is within the limits and its (latest intrusion, least
-    deviation) beats ``key`` = (-time, deviation)."""
+    """Keep v (first clipped into the reachable box |v - v_now| <= a·dt if ``clip``) in
+    ``best`` if it is within the limits and its (latest intrusion, least deviation) beats
+    ``key`` = (-time, deviation)."""
+    if clip:
+        dv = bounds.acceleration * bounds.dt
+        for c in range(3):
+            v[c] = min(max(v[c], v_now[c] - dv), v_now[c] + dv)
     if not within_limits(v, G3, h3, bounds):
         return
     # A velocity whose intrusion comes before the best one's cannot win: its time is only
@@ -157,27 +164,6 @@ def _consider(
     if t < key[0] or (t == key[0] and dev < key[1]):
         best[0], best[1], best[2] = v[0], v[1], v[2]
         key[0], key[1] = t, dev
-
-
-@inline
-def _clip_consider(
-    vos: VOs,
-    v: np.ndarray,
-    clip: bool,
-    v_now: np.ndarray,
-    G3: np.ndarray,
-    h3: np.ndarray,
-    bounds: Bounds,
-    best: np.ndarray,
-    key: np.ndarray,
-    hint: np.ndarray,
-) -> None:
-    """``_consider`` v, first clipped into the reachable box |v - v_now| <= a·dt if ``clip``."""
-    if clip:
-        dv = bounds.acceleration * bounds.dt
-        for c in range(3):
-            v[c] = min(max(v[c], v_now[c] - dv), v_now[c] + dv)
-    _consider(vos, v, G3, h3, bounds, best, key, hint)
 
 
 @jit
@@ -208,18 +194,18 @@ def least_bad(
         for q in range(tried.shape[0]):
             for c in range(3):
                 v[c] = tried[q, c]
-            _clip_consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
+            _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
         for pl in range(planes.phi.shape[0]):
             for g in range(grid.shape[0]):
                 for c in range(3):
                     v[c] = grid[g, 0] * T[pl, 0, c] + grid[g, 1] * T[pl, 1, c]
-                _clip_consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
+                _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
         for c in range(3):
             v[c] = 0.0
-        _clip_consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
+        _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
         for c in range(3):
             v[c] = v_now[c]
-        _clip_consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
+        _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
     if np.isnan(best[0]):
         lo, hi = vz_range(p[2], bounds)
         best[0], best[1], best[2] = 0.0, 0.0, min(max(0.0, lo), hi)
