@@ -13,7 +13,7 @@ $(PY):
 
 $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev,baselines]'
+	$(PY) -m pip install --quiet -e '.[dev,baselines,batched]'
 	@touch $(STAMP)
 
 install: $(STAMP)

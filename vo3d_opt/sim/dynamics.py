@@ -26,6 +26,9 @@ Models (the vehicle, its velocity controller and the wind are kept apart as in R
   stiff velocity loop (``k_v`` 10) turns a set-point step into an attitude step, and a step of
   0.25 m/s per axis on top of the usual lag saturated the hummingbird's rotors in paper case 1
   (45 degrees of tilt, 28 degrees of yaw, 4.7 m/s for a 3.7 m/s command).
+* ``rotorpy`` with ``batched: true``: the same vehicles, controller, wind and ramp, all vehicles
+  in one RotorPy ``BatchedMultirotor`` (torch; the ``batched`` extra), one fixed RK4 step per
+  sub-step at 200 Hz by default: for swarms, where integrating vehicles one by one takes hours.
 
 Within one period ``kinematic`` and ``first_order`` move in a straight line at constant velocity
 (their single sample is the period's end); ``rotorpy`` samples every sub-step, between which the
@@ -51,6 +54,12 @@ from vo3d_opt.types import Positive, Vec3, raise_problems
 #: lowest measured rate at which both vehicles are stable and their step responses stay close
 #: to a 1 kHz integration; this is a factor 2 above it (formulations/dynamics.md).
 DEFAULT_SUBSTEP_RATE = 100.0
+
+#: The same for ``batched: true``: RotorPy's batched vehicles take one fixed RK4 step per
+#: sub-step, which at 100 Hz strays 0.86 m in 2 s from the adaptive RK45 of a single
+#: ``Multirotor``; at 200 Hz it keeps within 2.3 mm of RK45 at the same rate
+#: (formulations/dynamics.md).
+BATCHED_SUBSTEP_RATE = 200.0
 
 MODELS = ("kinematic", "first_order", "rotorpy")
 VEHICLES = ("hummingbird", "crazyflie")
@@ -80,14 +89,16 @@ class WindConfig(_Config):
 
 
 class DynamicsConfig(_Config):
-    """The ``dynamics`` mapping of contract §5; ``substep_rate`` (Hz) and ``command_ramp``
-    (default true), both ``rotorpy`` only, extend it."""
+    """The ``dynamics`` mapping of contract §5; ``substep_rate`` (Hz), ``command_ramp``
+    (default true) and ``batched`` (default false: all vehicles in one RotorPy
+    ``BatchedMultirotor``, needs the ``batched`` extra), all ``rotorpy`` only, extend it."""
 
     model: Literal["kinematic", "first_order", "rotorpy"] = "kinematic"
     vehicle: Literal["hummingbird", "crazyflie"] | None = None
     tau: Positive | None = None
     substep_rate: Positive | None = None
     command_ramp: StrictBool | None = None
+    batched: StrictBool | None = None
 
     @property
     def ramped(self) -> bool:
@@ -104,6 +115,7 @@ class DynamicsConfig(_Config):
             ("vehicle", "rotorpy"),
             ("substep_rate", "rotorpy"),
             ("command_ramp", "rotorpy"),
+            ("batched", "rotorpy"),
         ):
             if self.model != owner and getattr(self, key) is not None:
                 problems.append(((key,), f"only for model {owner}", getattr(self, key)))
@@ -323,36 +335,22 @@ def make_wind(config: WindConfig | None, dt: float) -> Any:
     )
 
 
-class RotorPyDynamics(Dynamics):
-    """Each vehicle a RotorPy ``Multirotor`` flying RotorPy's ``cmd_vel`` velocity controller.
-
-    ``substep_rate`` (Hz): sub-steps per second (the period is cut into ``ceil(dt * rate)``
-    equal ones). ``command_ramp``: the velocity set-point goes from the last command to the new
-    one in equal steps, one per sub-step (the module docstring says why); False: the new command
-    at once. ``wind``: a :class:`WindConfig` (or its mapping) or None; each vehicle gets its
-    own wind object (independent Dryden gusts: the relative motion between vehicles, which
-    matters for separation, is the largest). ``seed`` fixes the gusts. ``integrator_kwargs``
-    go to RotorPy (``scipy.integrate.solve_ivp``; RotorPy's default RK45 when None).
-
-    Vehicles start level with their rotors at hover speed. ``Multirotor`` keeps no state of its
-    own (``step(state, control, dt)`` returns the next state), so one instance serves all.
-    """
+class _RotorPyModel(Dynamics):
+    """What both RotorPy models share: the vehicle's parameters, the wind objects, the seeded
+    streams, the sub-steps and the ramped set-point. Subclasses integrate the vehicles."""
 
     model = "rotorpy"
 
     def __init__(
         self,
-        vehicle: str = "hummingbird",
+        vehicle: str,
         *,
-        wind: WindConfig | Mapping | None = None,
-        substep_rate: float = DEFAULT_SUBSTEP_RATE,
-        command_ramp: bool = True,
-        seed: int = 0,
-        integrator_kwargs: Mapping[str, Any] | None = None,
+        wind: WindConfig | Mapping | None,
+        substep_rate: float,
+        command_ramp: bool,
+        seed: int,
     ) -> None:
         super().__init__()
-        from rotorpy.vehicles.multirotor import Multirotor
-
         if not (
             isinstance(substep_rate, (int, float))
             and math.isfinite(substep_rate)
@@ -373,14 +371,8 @@ class RotorPyDynamics(Dynamics):
         self.substep_rate = float(substep_rate)
         self.command_ramp = bool(command_ramp)
         self.seed = int(seed)
-        self.multirotor = Multirotor(
-            self.params,
-            control_abstraction="cmd_vel",
-            integrator_kwargs=dict(integrator_kwargs or {"method": "RK45"}),
-        )
         self.hover_speed = hover_rotor_speed(self.params)
         self.t = 0.0
-        self.states: list[dict[str, np.ndarray]] = []
         self.setpoints = np.zeros((0, 3))  # (N, 3) the velocity set-point each vehicle flies now
         self.winds: list[Any] = []
         self._rng = _GlobalRNG(self.seed)
@@ -390,27 +382,24 @@ class RotorPyDynamics(Dynamics):
         return max(1, math.ceil(dt * self.substep_rate - 1e-9))
 
     def _hover_state(self, p: np.ndarray, v: np.ndarray) -> dict[str, np.ndarray]:
+        """RotorPy's state of vehicles level at ``p`` with velocity ``v``, rotors at hover
+        speed: one vehicle for ``p`` of shape (3,), a batch for (n, 3)."""
+        lead = p.shape[:-1]
         return {
             "x": p.copy(),
             "v": v.copy(),
-            "q": np.array([0.0, 0.0, 0.0, 1.0]),
-            "w": np.zeros(3),
-            "wind": np.zeros(3),
-            "rotor_speeds": np.full(self.params["num_rotors"], self.hover_speed),
+            "q": np.broadcast_to([0.0, 0.0, 0.0, 1.0], (*lead, 4)).copy(),
+            "w": np.zeros((*lead, 3)),
+            "wind": np.zeros((*lead, 3)),
+            "rotor_speeds": np.full((*lead, self.params["num_rotors"]), self.hover_speed),
         }
 
     def _reset_model(self) -> None:
         self.t = 0.0
         self._rng = _GlobalRNG(self.seed)
-        self.states = [self._hover_state(self._p[i], self._v[i]) for i in range(self.n)]
         self.setpoints = self._v.copy()
         with self._rng:  # Dryden draws its first gust at construction
             self.winds = [make_wind(self.wind, 1.0 / self.substep_rate) for _ in range(self.n)]
-
-    def _hold_model(self, mask: np.ndarray) -> None:
-        for i in np.flatnonzero(mask):
-            self.states[i] = self._hover_state(self._p[i], np.zeros(3))
-        self.setpoints[mask] = 0.0
 
     def _step(self, u: np.ndarray, dt: float) -> StepResult:
         s = self.substeps(dt)
@@ -424,14 +413,8 @@ class RotorPyDynamics(Dynamics):
                 if hasattr(w, "dt"):
                     w.dt = h  # Dryden's discretisation follows the sub-step
             for k in range(s):
-                t = self.t + k * h
                 cmd_v = start + (u - start) * ((k + 1) / s)  # the set-point of this sub-step
-                for i in active:
-                    state = self.states[i]
-                    state["wind"] = np.asarray(self.winds[i].update(t, state["x"]), dtype=float)
-                    self.states[i] = self.multirotor.step(state, {"cmd_v": cmd_v[i]}, h)
-                p_out[k] = [st["x"] for st in self.states]
-                v_out[k] = [st["v"] for st in self.states]
+                p_out[k], v_out[k] = self._substep(self.t + k * h, h, cmd_v, active)
         self.t += dt
         self.setpoints = np.where(self._held[:, None], 0.0, u)
         p_out[:, self._held] = self._p[self._held]
@@ -444,6 +427,161 @@ class RotorPyDynamics(Dynamics):
             sample_positions=p_out,
             sample_velocities=v_out,
         )
+
+    @abstractmethod
+    def _substep(
+        self, t: float, h: float, cmd_v: np.ndarray, active: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Fly the ``active`` vehicles for ``h`` s from time ``t`` (wind first, as RotorPy's
+        ``simulate`` does) towards the set-points ``cmd_v`` (N, 3); return every vehicle's
+        (N, 3) positions and velocities (rows of held vehicles are overwritten by the caller)."""
+
+
+class RotorPyDynamics(_RotorPyModel):
+    """Each vehicle a RotorPy ``Multirotor`` flying RotorPy's ``cmd_vel`` velocity controller.
+
+    ``substep_rate`` (Hz): sub-steps per second (the period is cut into ``ceil(dt * rate)``
+    equal ones). ``command_ramp``: the velocity set-point goes from the last command to the new
+    one in equal steps, one per sub-step (the module docstring says why); False: the new command
+    at once. ``wind``: a :class:`WindConfig` (or its mapping) or None; each vehicle gets its
+    own wind object (independent Dryden gusts: the relative motion between vehicles, which
+    matters for separation, is the largest). ``seed`` fixes the gusts. ``integrator_kwargs``
+    go to RotorPy (``scipy.integrate.solve_ivp``; RotorPy's default RK45 when None).
+
+    Vehicles start level with their rotors at hover speed. ``Multirotor`` keeps no state of its
+    own (``step(state, control, dt)`` returns the next state), so one instance serves all.
+    """
+
+    def __init__(
+        self,
+        vehicle: str = "hummingbird",
+        *,
+        wind: WindConfig | Mapping | None = None,
+        substep_rate: float = DEFAULT_SUBSTEP_RATE,
+        command_ramp: bool = True,
+        seed: int = 0,
+        integrator_kwargs: Mapping[str, Any] | None = None,
+    ) -> None:
+        super().__init__(
+            vehicle, wind=wind, substep_rate=substep_rate, command_ramp=command_ramp, seed=seed
+        )
+        from rotorpy.vehicles.multirotor import Multirotor
+
+        self.multirotor = Multirotor(
+            self.params,
+            control_abstraction="cmd_vel",
+            integrator_kwargs=dict(integrator_kwargs or {"method": "RK45"}),
+        )
+        self.states: list[dict[str, np.ndarray]] = []
+
+    def _reset_model(self) -> None:
+        super()._reset_model()
+        self.states = [self._hover_state(self._p[i], self._v[i]) for i in range(self.n)]
+
+    def _hold_model(self, mask: np.ndarray) -> None:
+        for i in np.flatnonzero(mask):
+            self.states[i] = self._hover_state(self._p[i], np.zeros(3))
+        self.setpoints[mask] = 0.0
+
+    def _substep(
+        self, t: float, h: float, cmd_v: np.ndarray, active: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        for i in active:
+            state = self.states[i]
+            state["wind"] = np.asarray(self.winds[i].update(t, state["x"]), dtype=float)
+            self.states[i] = self.multirotor.step(state, {"cmd_v": cmd_v[i]}, h)
+        return (
+            np.array([st["x"] for st in self.states]),
+            np.array([st["v"] for st in self.states]),
+        )
+
+
+def _import_torch() -> Any:
+    """torch, after checking that the rest of the ``batched`` extra (torchdiffeq, roma, which
+    RotorPy's batched vehicles import) is there too; a ``ValueError`` naming the key if not."""
+    try:
+        import roma  # noqa: F401 - imported by RotorPy's batched vehicles
+        import torch
+        import torchdiffeq  # noqa: F401 - the same
+    except ImportError as exc:
+        raise ValueError(
+            "dynamics.batched: needs the optional dependencies torch, torchdiffeq and roma "
+            f"(pip install 'vo3d-opt[batched]'): {exc}"
+        ) from exc
+    return torch
+
+
+class BatchedRotorPyDynamics(_RotorPyModel):
+    """All vehicles in one RotorPy ``BatchedMultirotor`` (torch, on the CPU) under the same
+    ``cmd_vel`` controller, the same parameters, wind objects, ramp and seed as
+    :class:`RotorPyDynamics`, integrated by RotorPy's fixed-step ``rk4`` (one step per sub-step,
+    hence the higher default ``substep_rate``). One period of 1,000 hummingbirds costs about
+    as much as 40 single ones (formulations/dynamics.md). Needs the ``batched`` extra; torch's
+    random stream (RotorPy's motor noise) is private and seeded by ``seed``, as numpy's is."""
+
+    def __init__(
+        self,
+        vehicle: str = "hummingbird",
+        *,
+        wind: WindConfig | Mapping | None = None,
+        substep_rate: float = BATCHED_SUBSTEP_RATE,
+        command_ramp: bool = True,
+        seed: int = 0,
+    ) -> None:
+        self.torch = _import_torch()
+        super().__init__(
+            vehicle, wind=wind, substep_rate=substep_rate, command_ramp=command_ramp, seed=seed
+        )
+        self.vehicles: Any = None  # a BatchedMultirotor for the N vehicles of the last reset
+        self.state: dict[str, Any] = {}  # RotorPy's batched state: (N, k) float64 tensors
+        self._torch_rng = self._seeded_torch_rng()
+
+    def _seeded_torch_rng(self) -> Any:
+        with self.torch.random.fork_rng(devices=[]):
+            self.torch.manual_seed(self.seed)
+            return self.torch.random.get_rng_state()
+
+    def _tensors(self, arrays: Mapping[str, np.ndarray]) -> dict[str, Any]:
+        return {key: self.torch.from_numpy(np.ascontiguousarray(a)) for key, a in arrays.items()}
+
+    def _reset_model(self) -> None:
+        from rotorpy.vehicles.multirotor import BatchedMultirotor, BatchedMultirotorParams
+
+        super()._reset_model()
+        self._torch_rng = self._seeded_torch_rng()
+        cpu = self.torch.device("cpu")
+        self.state = self._tensors(self._hover_state(self._p, self._v))
+        self.vehicles = BatchedMultirotor(
+            BatchedMultirotorParams([self.params] * self.n, self.n, cpu),
+            self.n,
+            self.state,
+            cpu,
+            control_abstraction="cmd_vel",
+            integrator="rk4",
+        )
+
+    def _hold_model(self, mask: np.ndarray) -> None:
+        self.setpoints[mask] = 0.0
+
+    def _substep(
+        self, t: float, h: float, cmd_v: np.ndarray, active: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        torch = self.torch
+        if active.size:
+            x = self.state["x"].numpy()
+            if self.wind is not None:
+                wind = np.array([self.winds[i].update(t, x[i]) for i in active], dtype=float)
+                self.state["wind"][active] = torch.from_numpy(wind)
+            with torch.random.fork_rng(devices=[]), torch.no_grad():
+                torch.random.set_rng_state(self._torch_rng)
+                state = self.vehicles.step(
+                    self.state, {"cmd_v": torch.from_numpy(cmd_v)}, h, idxs=torch.from_numpy(active)
+                )
+                self._torch_rng = torch.random.get_rng_state()
+            # RotorPy returns NaN rows for the vehicles it did not step: keep theirs
+            for key, value in state.items():
+                self.state[key][active] = value[active]
+        return self.state["x"].numpy().copy(), self.state["v"].numpy().copy()
 
 
 def make_dynamics(
@@ -474,6 +612,15 @@ def make_dynamics(
     if cfg.model == "first_order":
         assert cfg.tau is not None  # DynamicsConfig requires tau for first_order
         return FirstOrderDynamics(cfg.tau)
+    if cfg.batched:
+        return BatchedRotorPyDynamics(
+            cfg.vehicle or "hummingbird",
+            wind=wcfg,
+            seed=seed,
+            substep_rate=cfg.substep_rate or BATCHED_SUBSTEP_RATE,
+            command_ramp=cfg.ramped,
+            **rotorpy_options,
+        )
     return RotorPyDynamics(
         cfg.vehicle or "hummingbird",
         wind=wcfg,
