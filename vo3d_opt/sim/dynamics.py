@@ -297,9 +297,9 @@ class _GlobalRNG:
 def dryden_gust_class() -> type:
     """RotorPy's ``DrydenGust``. RotorPy 3.0's Dryden modules import torch at their top for the
     batched (torch) variants only; the numpy ``DrydenGust`` never touches it. Without torch
-    installed (it is not a dependency: a CPU build alone is about 800 MB, and importing it would
-    add seconds to every RotorPy import), a placeholder module stands in for that import alone
-    and is taken out of ``sys.modules`` again at once, so nothing else ever sees it."""
+    installed (it is only in the ``batched`` extra: a CPU build alone is about 800 MB), a
+    placeholder module stands in for that import alone and is taken out of ``sys.modules``
+    again at once, so nothing else ever sees it."""
     try:
         from rotorpy.wind.dryden_winds import DrydenGust
 
@@ -514,10 +514,12 @@ def _import_torch() -> Any:
 class BatchedRotorPyDynamics(_RotorPyModel):
     """All vehicles in one RotorPy ``BatchedMultirotor`` (torch, on the CPU) under the same
     ``cmd_vel`` controller, the same parameters, wind objects, ramp and seed as
-    :class:`RotorPyDynamics`, integrated by RotorPy's fixed-step ``rk4`` (one step per sub-step,
-    hence the higher default ``substep_rate``). One period of 1,000 hummingbirds costs about
-    as much as 40 single ones (formulations/dynamics.md). Needs the ``batched`` extra; torch's
-    random stream (RotorPy's motor noise) is private and seeded by ``seed``, as numpy's is."""
+    :class:`RotorPyDynamics` (a seed gives both the same Dryden gusts), integrated by RotorPy's
+    fixed-step ``rk4`` (one step per sub-step, hence the higher default ``substep_rate``): for
+    swarms, where the one-by-one model takes hours (cost and accuracy:
+    ``benchmarks/results_dynamics.md``). Needs the ``batched`` extra. RotorPy's batched motor
+    noise draws from torch's random stream (its scale is 0 for both vehicles): the model keeps
+    that stream private and seeded by ``seed``, as it does numpy's."""
 
     def __init__(
         self,
@@ -527,7 +529,13 @@ class BatchedRotorPyDynamics(_RotorPyModel):
         substep_rate: float = BATCHED_SUBSTEP_RATE,
         command_ramp: bool = True,
         seed: int = 0,
+        integrator_kwargs: Mapping[str, Any] | None = None,
     ) -> None:
+        if integrator_kwargs is not None:
+            raise ValueError(
+                "integrator_kwargs: only for the one-by-one RotorPy model (the batched one "
+                "integrates with RotorPy's fixed-step rk4)"
+            )
         self.torch = _import_torch()
         super().__init__(
             vehicle, wind=wind, substep_rate=substep_rate, command_ramp=command_ramp, seed=seed
@@ -568,20 +576,29 @@ class BatchedRotorPyDynamics(_RotorPyModel):
     ) -> tuple[np.ndarray, np.ndarray]:
         torch = self.torch
         if active.size:
-            x = self.state["x"].numpy()
             if self.wind is not None:
-                wind = np.array([self.winds[i].update(t, x[i]) for i in active], dtype=float)
-                self.state["wind"][active] = torch.from_numpy(wind)
+                self.state["wind"][active] = torch.from_numpy(self._winds_at(t, active))
             with torch.random.fork_rng(devices=[]), torch.no_grad():
                 torch.random.set_rng_state(self._torch_rng)
-                state = self.vehicles.step(
+                # RotorPy returns NaN rows for the vehicles it does not step (the held ones):
+                # never stepped again, and _step overwrites their samples
+                self.state = self.vehicles.step(
                     self.state, {"cmd_v": torch.from_numpy(cmd_v)}, h, idxs=torch.from_numpy(active)
                 )
                 self._torch_rng = torch.random.get_rng_state()
-            # RotorPy returns NaN rows for the vehicles it did not step: keep theirs
-            for key, value in state.items():
-                self.state[key][active] = value[active]
         return self.state["x"].numpy().copy(), self.state["v"].numpy().copy()
+
+    def _winds_at(self, t: float, active: np.ndarray) -> np.ndarray:
+        """(len(active), 3) the wind of each active vehicle, drawn from numpy's stream in the
+        one-by-one model's order: there ``Multirotor.step`` draws its motor noise (4 normals,
+        scale 0 for both vehicles) after each vehicle's wind, so the same draws are made here
+        and a seed gives both models the same Dryden gusts."""
+        x = self.state["x"].numpy()
+        out = np.empty((active.size, 3))
+        for k, i in enumerate(active):
+            out[k] = self.winds[i].update(t, x[i])
+            np.random.normal(scale=0.0, size=self.params["num_rotors"])
+        return out
 
 
 def make_dynamics(
@@ -593,8 +610,8 @@ def make_dynamics(
 ) -> Dynamics:
     """The model of a scenario's ``dynamics`` and ``wind`` mappings (contract §5; None: the
     defaults, ``kinematic`` and no wind). ``seed`` fixes the Dryden gusts; ``rotorpy_options``
-    (``integrator_kwargs``) go to :class:`RotorPyDynamics`. Bad values raise ``ValueError``
-    naming the key."""
+    (``integrator_kwargs``) go to :class:`RotorPyDynamics` (refused by the batched model).
+    Bad values raise ``ValueError`` naming the key."""
     cfg = (
         dynamics
         if isinstance(dynamics, DynamicsConfig)

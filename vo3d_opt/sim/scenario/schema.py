@@ -42,8 +42,8 @@ Extensions beyond the contract (all optional):
   (clamped to a full step when ``dt >= tau``); off (ideal kinematics) when omitted.
 * ``dynamics``, ``wind``, ``sensing.position_noise`` / ``velocity_noise`` / ``latency`` /
   ``seed`` and the agents' ``avoids`` (contract §5; ``vo3d_opt.sim.dynamics``,
-  ``vo3d_opt.sim.sensing``); ``dynamics.substep_rate`` (Hz) and ``dynamics.command_ramp``
-  (rotorpy) and ``wind.sigma`` / ``wind.altitude`` (Dryden) extend it.
+  ``vo3d_opt.sim.sensing``); ``dynamics.substep_rate`` (Hz), ``dynamics.command_ramp`` and
+  ``dynamics.batched`` (rotorpy) and ``wind.sigma`` / ``wind.altitude`` (Dryden) extend it.
   ``velocity_response_tau`` is an alias of ``dynamics: {model: first_order, tau: ...}`` (not
   both).
 * ``safety``: overrides of the margins the simulator derives for those conditions
