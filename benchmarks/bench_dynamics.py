@@ -21,9 +21,8 @@ period (median over the periods; 5 vehicles at once for RotorPy) as CPU time of 
 (``time.process_time``; on a shared machine wall time counts the others' load too). Wind:
 hovering in a constant 3 m/s wind, crossing it at s, 20 s of hover in Dryden gusts around 3 m/s
 (sigma 1 and 25), and the standard deviation of the gusts themselves.
-Sensing: ``Sensor.sensed(i)`` for N = 1000. Batched RotorPy vehicles (``BatchedMultirotor``,
-torch) are timed only when torch, torchdiffeq and roma are importable (not project
-dependencies).
+Sensing: ``Sensor.sensed(i)`` for N = 1000. Batched RotorPy vehicles (``batched: true``, the
+``batched`` extra): their cost against one ``Multirotor`` per vehicle, and their accuracy.
 
     python benchmarks/bench_dynamics.py [--quick] > benchmarks/results_dynamics.md
 """
@@ -38,7 +37,14 @@ from typing import Any, Callable
 
 import numpy as np
 
-from vo3d_opt.sim.dynamics import DEFAULT_SUBSTEP_RATE, Dynamics, WindConfig, make_dynamics, make_wind
+from vo3d_opt.sim.dynamics import (
+    BATCHED_SUBSTEP_RATE,
+    DEFAULT_SUBSTEP_RATE,
+    Dynamics,
+    WindConfig,
+    make_dynamics,
+    make_wind,
+)
 from vo3d_opt.sim.sensing import Sensor
 
 DT = 0.2
@@ -131,9 +137,10 @@ def table(header: list[str], rows: list[list[Any]]) -> str:
     return "\n".join(lines)
 
 
-def rotorpy(vehicle: str, rate: float, wind: dict | None = None) -> Callable[[], Dynamics]:
-    return lambda: make_dynamics({"model": "rotorpy", "vehicle": vehicle, "substep_rate": rate},
-                                 wind, seed=1)
+def rotorpy(vehicle: str, rate: float, wind: dict | None = None,
+            batched: bool = False) -> Callable[[], Dynamics]:
+    spec = {"model": "rotorpy", "vehicle": vehicle, "substep_rate": rate, "batched": batched}
+    return lambda: make_dynamics(spec, wind, seed=1)
 
 
 def step_responses(rates: list[float]) -> None:
@@ -238,37 +245,40 @@ def sensing_cost(n: int = 1000) -> None:
                                           ["sensed(i)", statistics.median(times) * 1e6]]))
 
 
-def batched_cost(sizes: list[int], rate: float = DEFAULT_SUBSTEP_RATE) -> None:
+def batched_cost(sizes: list[int], one_by_one_up_to: int = 50) -> None:
+    """``batched: true`` against one ``Multirotor`` per vehicle: CPU time per vehicle and period
+    (hummingbirds cruising at 4 m/s, torch on one thread), and how far the batched RK4 strays
+    from RotorPy's RK45 at the same sub-step rate (100 Hz, 200 Hz) in the step manoeuvres."""
     try:
         import torch
-        from rotorpy.vehicles.hummingbird_params import quad_params
-        from rotorpy.vehicles.multirotor import BatchedMultirotor, BatchedMultirotorParams
     except ImportError as exc:
-        print(f"\n## Batched RotorPy vehicles: not measured ({exc.name} is not installed)")
+        print(f"\n## Batched RotorPy vehicles: not measured ({exc.name} is not installed; "
+              "pip install 'vo3d-opt[batched]')")
         return
     torch.set_num_threads(1)
+    rate = BATCHED_SUBSTEP_RATE
+    cruise = [(np.array([4.0, 0.0, 0.0]), 1.0)]
     rows = []
-    hover = float(np.sqrt(quad_params["mass"] * 9.81 / (4 * quad_params["k_eta"])))
-    for integrator in ("rk4", "dopri5"):
-        for n in sizes:
-            dev = torch.device("cpu")
-            params = BatchedMultirotorParams([quad_params] * n, n, dev)
-            state = {"x": torch.zeros(n, 3).double(), "v": torch.zeros(n, 3).double(),
-                     "q": torch.tensor([[0, 0, 0, 1.0]] * n).double(),
-                     "w": torch.zeros(n, 3).double(), "wind": torch.zeros(n, 3).double(),
-                     "rotor_speeds": torch.full((n, 4), hover).double()}
-            model = BatchedMultirotor(params, n, state, dev, control_abstraction="cmd_vel",
-                                      integrator=integrator)
-            cmd = {"cmd_v": torch.tensor([[4.0, 0.0, 0.0]] * n).double()}
-            periods = 3
-            t0 = time.process_time()
-            for _ in range(round(periods * DT * rate)):
-                state = model.step(state, cmd, 1.0 / rate)
-            per_period = (time.process_time() - t0) / periods
-            rows.append([integrator, n, per_period * 1e3, per_period / n * 1e3])
-    print(f"\n## Batched RotorPy hummingbirds (BatchedMultirotor, torch {torch.__version__}, "
-          f"one thread, {rate:g} Hz)\n")
-    print(table(["integrator", "N", "ms per period", "ms per vehicle per period"], rows))
+    for n in sizes:
+        batched = statistics.median(
+            fly(rotorpy("hummingbird", rate, batched=True), cruise, n=n).step_cost) * 1e3
+        single = (statistics.median(fly(rotorpy("hummingbird", rate), cruise, n=n).step_cost)
+                  * 1e3 if n <= one_by_one_up_to else float("nan"))
+        rows.append([n, batched, single, single / batched])
+    print(f"\n## Batched RotorPy hummingbirds (torch {torch.__version__}, one thread, "
+          f"{rate:g} Hz): CPU ms per vehicle per 0.2 s period (median)\n")
+    print(table(["N", "batched (RK4)", "one by one (RK45)", "one by one / batched"], rows))
+    phases = {**manoeuvres(4.0), "diagonal (4, 4, 0) from hover": [(np.array([4.0, 4.0, 0.0]), AFTER)]}
+    acc = []
+    for rate_hz in (100.0, BATCHED_SUBSTEP_RATE):
+        for name, phase in phases.items():
+            pair = [fly(rotorpy("hummingbird", rate_hz, batched=b), phase) for b in (True, False)]
+            acc.append([f"{rate_hz:g}", name, float(np.abs(pair[0].p - pair[1].p).max()),
+                        float(np.abs(pair[0].v - pair[1].v).max())])
+    print("\n### Batched (RK4) against one by one (RK45) at the same sub-step rate, one "
+          "hummingbird, every sub-step sample\n")
+    print(table(["sub-steps per s", "manoeuvre", "largest position difference m",
+                 "largest velocity difference m/s"], acc))
 
 
 def main() -> None:
@@ -283,7 +293,7 @@ def main() -> None:
         "cost": lambda: rotorpy_cost([50.0, 100.0, 200.0]),
         "wind": wind_figures,
         "sensing": sensing_cost,
-        "batched": lambda: batched_cost([1, 2, 5, 10, 20, 50]),
+        "batched": lambda: batched_cost([1, 10, 50, 200, 1000]),
     }
     print(f"# {platform.processor() or platform.machine()}, {platform.python_implementation()} "
           f"{platform.python_version()}, {time.strftime('%Y-%m-%d')}\n")
