@@ -18,6 +18,7 @@ from vo3d_opt.sim.scenario import (
     load_scenario,
     resolve,
     scenario_from_dict,
+    scenario_variant,
 )
 from vo3d_opt.sim.simulator import run_scenario
 from vo3d_opt.types import Box, Cylinder
@@ -321,6 +322,17 @@ def test_step_longer_than_a_protected_zone_is_reported():
     warnings = sc.warnings()
     assert len(warnings) == 3 and all("12 m per step" in w for w in warnings), warnings
     assert scenario_from_dict(BASE).warnings() == []
+
+
+def test_a_swarm_under_rotorpy_one_by_one_is_pointed_to_the_batched_model():
+    crossing = load_scenario("random-crossing-50")
+    one_by_one = scenario_variant(crossing, dynamics={"model": "rotorpy"})
+    assert any("dynamics.batched: true" in w for w in one_by_one.warnings())
+    batched = scenario_variant(crossing, dynamics={"model": "rotorpy", "batched": True})
+    assert crossing.warnings() == batched.warnings() == []
+    few = scenario_variant(load_scenario("paper-case1-ten-uav-crossing"),
+                           dynamics={"model": "rotorpy"})
+    assert few.warnings() == []
 
 
 def test_load_scenario_warns_through_logging(tmp_path, caplog):

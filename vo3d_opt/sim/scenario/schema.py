@@ -88,6 +88,11 @@ from vo3d_opt.types import (
     raise_problems,
 )
 
+#: From this many vehicles a run under RotorPy one by one suggests ``batched: true``: at 50,
+#: the batched model costs 6.5 ms per vehicle and period against 109 ms one by one
+#: (benchmarks/results_dynamics.md).
+BATCHED_ADVISED = 50
+
 Text = Annotated[str, Field(min_length=1)]
 
 
@@ -501,8 +506,21 @@ class Scenario(Spec):
 
     def warnings(self) -> list[str]:
         """What is allowed but worth saying before a run, one line each: starts inside a
-        protected zone, steps longer than a protected-zone radius."""
-        return self.start_warnings() + self.step_warnings()
+        protected zone, steps longer than a protected-zone radius, a swarm under RotorPy one
+        vehicle at a time."""
+        return self.start_warnings() + self.step_warnings() + self.dynamics_warnings()
+
+    def dynamics_warnings(self) -> list[str]:
+        """A swarm under RotorPy integrated one vehicle at a time, where ``batched: true`` is
+        an order of magnitude cheaper (from about 50 vehicles, formulations/dynamics.md)."""
+        dyn = self.vehicle_dynamics
+        if dyn.model != "rotorpy" or dyn.batched or self.n_agents < BATCHED_ADVISED:
+            return []
+        return [
+            f"{self.n_agents} vehicles under RotorPy one at a time (tens of ms each per "
+            "period): dynamics.batched: true flies them in one batch, an order of magnitude "
+            "cheaper (needs the batched extra)"
+        ]
 
     def step_warnings(self) -> list[str]:
         """Agents that fly farther than their protected-zone radius in one step."""
