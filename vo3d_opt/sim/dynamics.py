@@ -110,6 +110,8 @@ class DynamicsConfig(_Config):
         problems = []
         if self.model == "first_order" and self.tau is None:
             problems.append((("tau",), "required for model first_order", None))
+        # an omitted model is kinematic: say so, the usual slip is forgetting `model: rotorpy`
+        model = self.model if "model" in self.model_fields_set else f"{self.model} (no model given)"
         for key, owner in (
             ("tau", "first_order"),
             ("vehicle", "rotorpy"),
@@ -118,7 +120,8 @@ class DynamicsConfig(_Config):
             ("batched", "rotorpy"),
         ):
             if self.model != owner and getattr(self, key) is not None:
-                problems.append(((key,), f"only for model {owner}", getattr(self, key)))
+                problem = f"only for model {owner}, not {model}"
+                problems.append(((key,), problem, getattr(self, key)))
         raise_problems("dynamics", problems)  # each at its own key: dynamics.tau: ...
         return self
 

@@ -518,8 +518,8 @@ class Scenario(Spec):
             return []
         return [
             f"{self.n_agents} vehicles under RotorPy one at a time (tens of ms each per "
-            "period): dynamics.batched: true flies them in one batch, an order of magnitude "
-            "cheaper (needs the batched extra)"
+            "period): dynamics.batched: true flies them in one batch, many times cheaper "
+            "(needs the batched extra)"
         ]
 
     def step_warnings(self) -> list[str]:
