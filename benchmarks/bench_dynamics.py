@@ -31,6 +31,8 @@ from __future__ import annotations
 import argparse
 import platform
 import statistics
+import subprocess
+import sys
 import time
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -247,8 +249,9 @@ def sensing_cost(n: int = 1000) -> None:
 
 def batched_cost(sizes: list[int], one_by_one_up_to: int = 50) -> None:
     """``batched: true`` against one ``Multirotor`` per vehicle: CPU time per vehicle and period
-    (hummingbirds cruising at 4 m/s, torch on one thread), and how far the batched RK4 strays
-    from RotorPy's RK45 at the same sub-step rate (100 Hz, 200 Hz) in the step manoeuvres."""
+    (hummingbirds commanded 4 m/s from hover, torch on one thread), how far the batched RK4
+    strays from RotorPy's RK45 at the same sub-step rate (100 Hz, 200 Hz) in the step
+    manoeuvres, and what importing RotorPy costs with torch installed."""
     try:
         import torch
     except ImportError as exc:
@@ -279,6 +282,23 @@ def batched_cost(sizes: list[int], one_by_one_up_to: int = 50) -> None:
           "hummingbird, every sub-step sample\n")
     print(table(["sub-steps per s", "manoeuvre", "largest position difference m",
                  "largest velocity difference m/s"], acc))
+    rotorpy_import_cost()
+
+
+def rotorpy_import_cost(runs: int = 3) -> None:
+    """Wall time of ``import rotorpy.vehicles.multirotor`` in a fresh process: RotorPy imports
+    torch at its top when it is installed, whichever model is used; 'without' blocks it."""
+    code = ("import sys, time\nif sys.argv[1] == 'without': sys.modules['torch'] = None\n"
+            "t = time.perf_counter()\nimport rotorpy.vehicles.multirotor\n"
+            "print(time.perf_counter() - t)")
+    rows = []
+    for torch_state in ("with", "without"):
+        times = [float(subprocess.run([sys.executable, "-c", code, torch_state], check=True,
+                                      capture_output=True, text=True).stdout)
+                 for _ in range(runs)]
+        rows.append([f"{torch_state} torch", " / ".join(f"{t:.2f}" for t in times)])
+    print(f"\n### Importing RotorPy's vehicles ({runs} fresh processes each, s)\n")
+    print(table(["", "import rotorpy.vehicles.multirotor"], rows))
 
 
 def main() -> None:

@@ -12,6 +12,8 @@ from vo3d_opt.sim.dynamics import (
     BATCHED_SUBSTEP_RATE,
     DEFAULT_SUBSTEP_RATE,
     BatchedRotorPyDynamics,
+    Dynamics,
+    StepResult,
     FirstOrderDynamics,
     KinematicDynamics,
     RotorPyDynamics,
@@ -113,6 +115,8 @@ def test_bad_arrays_are_rejected_naming_the_argument():
     dyn = KinematicDynamics()
     with pytest.raises(ValueError, match="^positions:"):
         dyn.reset(np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="^positions:"):
+        dyn.reset(np.zeros((0, 3)))
     dyn.reset(np.zeros((3, 3)))
     with pytest.raises(ValueError, match="^commands:"):
         dyn.step(np.zeros((2, 3)), DT)
@@ -255,7 +259,9 @@ def test_rotorpy_ramp_reaches_the_command_by_the_period_end_and_holds_it():
 # ------------------------------------------------------------------------- RotorPy, batched
 
 
-def paired_runs(wind, seed=0, periods=8):
+def paired_runs(
+    wind: dict | None, seed: int = 0, periods: int = 8
+) -> tuple[list[Dynamics], list[list[StepResult]]]:
     """The same three vehicles, commands and wind flown one by one (RK45) and batched (RK4),
     both at the batched model's sub-step rate; vehicle 1 is held after half the periods."""
     rng = np.random.default_rng(11)
@@ -284,7 +290,7 @@ def paired_runs(wind, seed=0, periods=8):
 def test_batched_vehicles_fly_as_the_one_by_one_ones(wind):
     models, (single, batched) = paired_runs(wind)
     assert isinstance(models[1], BatchedRotorPyDynamics)
-    for a, b in zip(single, batched):
+    for a, b in zip(single, batched, strict=True):
         assert np.array_equal(a.sample_times, b.sample_times)
         # RK4 at 200 Hz against RK45 (itself within rtol 1e-3), the same gusts: measured
         # 0.08 mm and 0.6 mm/s at most; gusts out of step gave 3.1 mm and 3.3 mm/s
@@ -294,11 +300,12 @@ def test_batched_vehicles_fly_as_the_one_by_one_ones(wind):
     assert np.linalg.norm(moved[[0, 2]], axis=1).min() > 0.5  # they did fly
     held = batched[len(batched) // 2].sample_positions[0, 1]
     for out in batched[len(batched) // 2:]:  # the held vehicle stays where it was stopped
-        assert np.array_equal(out.sample_positions[:, 1], np.repeat(held[None], len(out.sample_times), 0))
+        still = np.repeat(held[None], len(out.sample_times), 0)
+        assert np.array_equal(out.sample_positions[:, 1], still)
         assert np.all(out.sample_velocities[:, 1] == 0)
 
 
-def batched_run(seed: int) -> list:
+def batched_run(seed: int) -> list[StepResult]:
     dyn = make_dynamics({"model": "rotorpy", "batched": True},
                         {"type": "dryden", "velocity": [1.0, 0.0, 0.0]}, seed=seed)
     dyn.reset(np.array([[0.0, 0.0, 5.0], [4.0, 0.0, 5.0]]))
@@ -317,7 +324,7 @@ def test_batched_vehicles_repeat_for_a_seed_and_leave_the_random_streams_alone()
     assert np.array_equal(after[0], torch.rand(3))  # the callers' streams were not drawn from
     assert np.array_equal(after[1], np.random.random(3))
     again = batched_run(3)
-    for a, b in zip(first, again):
+    for a, b in zip(first, again, strict=True):
         assert np.array_equal(a.sample_positions, b.sample_positions)
     other = batched_run(4)  # other gusts
     assert not np.array_equal(other[-1].positions, first[-1].positions)
@@ -329,7 +336,11 @@ def test_batched_refuses_the_one_by_one_integrator_options():
                       integrator_kwargs={"method": "RK45", "rtol": 1e-6})
 
 
-def test_batched_without_its_extra_names_the_key(monkeypatch):
+def test_batched_without_its_extra_names_the_key_and_how_to_get_it(monkeypatch):
     monkeypatch.setitem(sys.modules, "torchdiffeq", None)  # as if not installed
-    with pytest.raises(ValueError, match=r"^dynamics\.batched: .*vo3d-opt\[batched\]"):
+    with pytest.raises(ValueError) as info:  # the configuration, before any import of torch
         make_dynamics({"model": "rotorpy", "batched": True})
+    assert named_keys(info.value) >= {"batched"}
+    assert "needs torchdiffeq" in str(info.value) and "vo3d-opt[batched]" in str(info.value)
+    with pytest.raises(ValueError, match=r"^dynamics\.batched: needs torchdiffeq: .*\[batched\]"):
+        BatchedRotorPyDynamics()  # the model built directly

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import math
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -364,7 +365,17 @@ def test_rotorpy_batched_in_the_loop_flies_as_one_by_one_at_its_rate():
     assert batched.samples.shape == single.samples.shape == (batched.steps * 40 + 1, 2, 3)
     travelled = np.linalg.norm(batched.positions[-1] - batched.positions[0], axis=1)
     assert travelled.min() > 5.0
-    assert np.abs(batched.samples - single.samples).max() < 0.02
+    assert np.abs(batched.samples - single.samples).max() < 0.001  # measured 0.007 mm
+
+
+def test_batched_without_its_extra_is_refused_at_load_naming_the_key(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "torchdiffeq", None)  # as if not installed
+    f = tmp_path / "batched.yaml"
+    f.write_text(yaml.safe_dump({**SMALL, "dynamics": {"model": "rotorpy", "batched": True}}))
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(f)
+    msg = str(err.value)
+    assert msg.startswith(f"{f}: dynamics.batched: needs torchdiffeq: ") and "\n" not in msg
 
 
 def test_rotorpy_commands_stay_within_what_its_velocity_loop_follows_without_flipping():

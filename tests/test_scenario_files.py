@@ -20,6 +20,7 @@ from vo3d_opt.sim.scenario import (
     scenario_from_dict,
     scenario_variant,
 )
+from vo3d_opt.sim.scenario.swarms import random_crossing_scenario
 from vo3d_opt.sim.simulator import run_scenario
 from vo3d_opt.types import Box, Cylinder
 
@@ -333,6 +334,10 @@ def test_a_swarm_under_rotorpy_one_by_one_is_pointed_to_the_batched_model():
     few = scenario_variant(load_scenario("paper-case1-ten-uav-crossing"),
                            dynamics={"model": "rotorpy"})
     assert few.warnings() == []
+    # from BATCHED_ADVISED = 50 vehicles on
+    for n, warned in ((49, False), (50, True)):
+        swarm = scenario_variant(random_crossing_scenario(n, seed=1), dynamics={"model": "rotorpy"})
+        assert any("batched" in w for w in swarm.warnings()) == warned
 
 
 def test_load_scenario_warns_through_logging(tmp_path, caplog):

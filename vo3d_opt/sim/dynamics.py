@@ -37,6 +37,7 @@ path is close to straight at the default rate.
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import sys
 import types
@@ -56,9 +57,9 @@ from vo3d_opt.types import Positive, Vec3, raise_problems
 DEFAULT_SUBSTEP_RATE = 100.0
 
 #: The same for ``batched: true``: RotorPy's batched vehicles take one fixed RK4 step per
-#: sub-step, which at 100 Hz strays 0.86 m in 2 s from the adaptive RK45 of a single
-#: ``Multirotor``; at 200 Hz it keeps within 2.3 mm of RK45 at the same rate
-#: (formulations/dynamics.md).
+#: sub-step. At 100 Hz a set-point jump of 4 m/s (a right angle, a diagonal from hover) puts
+#: that 2.4-3.4 m from the adaptive RK45 of a single ``Multirotor``; at 200 Hz 1.8-4.6 mm
+#: (benchmarks/results_dynamics.md, formulations/dynamics.md).
 BATCHED_SUBSTEP_RATE = 200.0
 
 MODELS = ("kinematic", "first_order", "rotorpy")
@@ -88,6 +89,27 @@ class WindConfig(_Config):
         return self
 
 
+#: How to get the ``batched`` extra (torch's CPU build first: PyPI's torch is a CUDA build).
+BATCHED_INSTALL = (
+    "pip install torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu, then "
+    "pip install 'vo3d-opt[batched]'"
+)
+
+
+def _missing_batched_extra() -> str:
+    """The modules of the ``batched`` extra that cannot be imported ('' if none), found
+    without importing them (torch takes seconds)."""
+    missing = []
+    for name in ("torch", "torchdiffeq", "roma"):
+        try:
+            found = importlib.util.find_spec(name) is not None
+        except ValueError:  # in sys.modules as None: blocked
+            found = False
+        if not found:
+            missing.append(name)
+    return ", ".join(missing)
+
+
 class DynamicsConfig(_Config):
     """The ``dynamics`` mapping of contract §5; ``substep_rate`` (Hz), ``command_ramp``
     (default true) and ``batched`` (default false: all vehicles in one RotorPy
@@ -107,9 +129,11 @@ class DynamicsConfig(_Config):
 
     @model_validator(mode="after")
     def _keys_of_the_model(self) -> DynamicsConfig:
-        problems = []
+        problems: list[tuple[tuple[Any, ...], str, Any]] = []
         if self.model == "first_order" and self.tau is None:
             problems.append((("tau",), "required for model first_order", None))
+        if self.batched and (missing := _missing_batched_extra()):
+            problems.append((("batched",), f"needs {missing}: {BATCHED_INSTALL}", True))
         # an omitted model is kinematic: say so, the usual slip is forgetting `model: rotorpy`
         model = self.model if "model" in self.model_fields_set else f"{self.model} (no model given)"
         for key, owner in (
@@ -184,8 +208,8 @@ class Dynamics(ABC):
     def reset(self, positions: Any, velocities: Any = None) -> None:
         """Start N = len(positions) vehicles there, with ``velocities`` (default 0: hovering)."""
         p = np.asarray(positions, dtype=float)
-        if p.ndim != 2 or p.shape[1] != 3:
-            raise ValueError(f"positions: must have shape (N, 3), got {p.shape}")
+        if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] == 0:
+            raise ValueError(f"positions: must have shape (N, 3) with N >= 1, got {p.shape}")
         self.n = p.shape[0]
         self._p = _check_array(p, "positions", self.n).copy()
         self._v = (
@@ -507,10 +531,7 @@ def _import_torch() -> Any:
         import torch
         import torchdiffeq  # noqa: F401 - the same
     except ImportError as exc:
-        raise ValueError(
-            "dynamics.batched: needs the optional dependencies torch, torchdiffeq and roma "
-            f"(pip install 'vo3d-opt[batched]'): {exc}"
-        ) from exc
+        raise ValueError(f"dynamics.batched: needs {exc.name}: {BATCHED_INSTALL}") from exc
     return torch
 
 
@@ -632,20 +653,16 @@ def make_dynamics(
     if cfg.model == "first_order":
         assert cfg.tau is not None  # DynamicsConfig requires tau for first_order
         return FirstOrderDynamics(cfg.tau)
-    if cfg.batched:
-        return BatchedRotorPyDynamics(
-            cfg.vehicle or "hummingbird",
-            wind=wcfg,
-            seed=seed,
-            substep_rate=cfg.substep_rate or BATCHED_SUBSTEP_RATE,
-            command_ramp=cfg.ramped,
-            **rotorpy_options,
-        )
-    return RotorPyDynamics(
+    model, rate = (
+        (BatchedRotorPyDynamics, BATCHED_SUBSTEP_RATE)
+        if cfg.batched
+        else (RotorPyDynamics, DEFAULT_SUBSTEP_RATE)
+    )
+    return model(
         cfg.vehicle or "hummingbird",
         wind=wcfg,
         seed=seed,
-        substep_rate=cfg.substep_rate or DEFAULT_SUBSTEP_RATE,
+        substep_rate=cfg.substep_rate or rate,
         command_ramp=cfg.ramped,
         **rotorpy_options,
     )

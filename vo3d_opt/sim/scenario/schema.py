@@ -89,8 +89,8 @@ from vo3d_opt.types import (
 )
 
 #: From this many vehicles a run under RotorPy one by one suggests ``batched: true``: at 50,
-#: the batched model costs 6.5 ms per vehicle and period against 109 ms one by one
-#: (benchmarks/results_dynamics.md).
+#: random-crossing-50 took 237 s batched against 1313 s one by one (at its default 100 Hz) in
+#: benchmarks/results_real_world.md.
 BATCHED_ADVISED = 50
 
 Text = Annotated[str, Field(min_length=1)]
@@ -512,7 +512,7 @@ class Scenario(Spec):
 
     def dynamics_warnings(self) -> list[str]:
         """A swarm under RotorPy integrated one vehicle at a time, where ``batched: true`` is
-        an order of magnitude cheaper (from about 50 vehicles, formulations/dynamics.md)."""
+        several times cheaper (``BATCHED_ADVISED``, formulations/dynamics.md)."""
         dyn = self.vehicle_dynamics
         if dyn.model != "rotorpy" or dyn.batched or self.n_agents < BATCHED_ADVISED:
             return []
