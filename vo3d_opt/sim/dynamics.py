@@ -610,7 +610,8 @@ class BatchedRotorPyDynamics(_RotorPyModel):
                     self.state, {"cmd_v": torch.from_numpy(cmd_v)}, h, idxs=torch.from_numpy(active)
                 )
                 self._torch_rng = torch.random.get_rng_state()
-        return self.state["x"].numpy().copy(), self.state["v"].numpy().copy()
+        # views: the caller copies them into its samples, and step() returns new tensors
+        return self.state["x"].numpy(), self.state["v"].numpy()
 
     def _winds_at(self, t: float, active: np.ndarray) -> np.ndarray:
         """(len(active), 3) the wind of each active vehicle, drawn from numpy's stream in the
