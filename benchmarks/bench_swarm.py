@@ -1,5 +1,8 @@
 """Swarm scale: vo3d_opt's select_many (1 thread and every thread) against RVO2-3D's doStep.
 
+``ours-guard`` is ours on every thread with the ``closing_guard`` option added to the
+simulator's (reciprocal, pz_buffer): README, "Safety in simulation".
+
 Both methods fly the same scenarios in the same loop (``vo3d_opt.sim.simulator.fly``: the same
 preferred velocities, dynamics and metrics), with the same dt (0.2 s), speeds (0-4 m/s),
 sensing range (55 m) and neighbour count (``--max-neighbors``, default 10 for both):
@@ -18,7 +21,7 @@ process, so "peak MB" is that run's peak resident memory (the run, its record an
 ``--profile`` adds where ours spends its time on the first steps of each N = 1000 case.
 
     python benchmarks/bench_swarm.py [--sizes 100 1000 10000] [--cases swap crossing]
-        [--methods ours-1 ours-all rvo2] [--max-neighbors 10] [--max-steps N=K ...] [--profile]
+        [--methods ours-1 ours-all ours-guard rvo2] [--max-neighbors 10] [--max-steps N=K ...] [--profile]
         [--out benchmarks/results_swarm.md]
 
 Writes the markdown table to ``--out`` as rows finish (one line of JSON per run also goes to
@@ -39,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-METHODS = ("ours-1", "ours-all", "rvo2")
+METHODS = ("ours-1", "ours-all", "ours-guard", "rvo2")
 
 
 def scenario(case: str, n: int):
@@ -59,7 +62,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
     from vo3d_opt.baselines.rvo2 import RVO2Step, summarize_rvo2
     from vo3d_opt.sim.deciders import SwarmSelect
     from vo3d_opt.sim.metrics import summarize
-    from vo3d_opt.sim.simulator import fly, scenario_selector
+    from vo3d_opt.sim.simulator import default_selector_options, fly, make_selector, scenario_selector
 
     sc = scenario(case, n)
     if method == "rvo2":
@@ -68,6 +71,9 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
     else:
         threads = 1 if method == "ours-1" else numba.config.NUMBA_NUM_THREADS
         sel, formulation, solver = scenario_selector(sc)
+        if method == "ours-guard":  # the simulator's options plus the closing guard
+            sel, formulation, solver = make_selector(
+                formulation, solver, {**default_selector_options(sc), **sc.selector_options, "closing_guard": True})
         step = SwarmSelect(sc, sel, formulation=formulation, solver=solver, max_neighbors=max_neighbors,
                            threads=threads)
         from vo3d_opt.selector import warm_up_many
@@ -108,7 +114,7 @@ def profile_run(case: str, n: int, max_neighbors: int, steps: int) -> dict[str, 
     from vo3d_opt.selector import warm_up_many
     from vo3d_opt.sim.deciders import SwarmSelect
     from vo3d_opt.sim.metrics import summarize
-    from vo3d_opt.sim.simulator import fly, scenario_selector
+    from vo3d_opt.sim.simulator import default_selector_options, fly, make_selector, scenario_selector
 
     @numba.njit(nogil=True)
     def rows_only(sw):  # the row building of decide_range, without the decisions
@@ -171,6 +177,7 @@ def _fmt(x: Any, spec: str = ".1f") -> str:
 
 def table_row(r: dict[str, Any]) -> str:
     name = {"ours-1": "vo3d_opt select_many, 1 thread", "ours-all": f"vo3d_opt select_many, {r['threads']} threads",
+            "ours-guard": f"vo3d_opt select_many + closing_guard, {r['threads']} threads",
             "rvo2": "RVO2-3D doStep, 1 thread"}[r["method"]]
     flown = "whole run" if r["steps"] < r["n_steps"] or r["all_reached"] else f"{r['steps']} steps (max_time)"
     if r.get("capped"):

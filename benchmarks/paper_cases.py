@@ -3,7 +3,8 @@
 Runs every scenarios/paper-*.yaml under the given formulations and prints a markdown table:
 closest vehicle-vehicle and vehicle-obstacle distances, safety counts, and time per decision;
 then case 3's VO pyramid against the three-sphere workaround, beside the paper's MATLAB
-0.3035 s vs 1.4530 s per iteration.
+0.3035 s vs 1.4530 s per iteration; then the simulator's safety options (reciprocal, pz_buffer,
+closing_guard) against the paper's selection as published.
 
     python benchmarks/paper_cases.py [--formulations plane_qp sampled]
 """
@@ -62,16 +63,18 @@ def main() -> None:
             s = rows[(stem, form)]
             print(f"| {stem} | {form} | {s['decision_time_median_us']:.0f} | {s['decision_time_p99_us']:.0f} | {paper} |")
     print()
-    print("| scenario (plane_qp) | reciprocal | pz_buffer m | min vehicle dist. m | pz intrusions | fallbacks |")
-    print("|---|---|---:|---:|---:|---:|")
+    print("| scenario (plane_qp) | reciprocal | pz_buffer m | closing_guard | min vehicle dist. m | pz intrusions "
+          "| fallbacks |")
+    print("|---|---|---:|---|---:|---:|---:|")
     for stem in ("paper-case1-ten-uav-crossing", "sphere-swap-16"):
         sc = load_scenario(next(p for p in bundled_files() if p.stem == stem))
         buf = default_selector_options(sc)["pz_buffer"]
-        for rec, b in ((False, 0.0), (True, 0.0), (False, buf), (True, buf)):
-            sel, _, _ = make_selector("plane_qp", None, {"reciprocal": rec, "pz_buffer": b})
+        for rec, b, guard in ((False, 0.0, False), (True, 0.0, False), (False, buf, False), (True, buf, False),
+                              (False, 0.0, True), (True, buf, True)):
+            sel, _, _ = make_selector("plane_qp", None, {"reciprocal": rec, "pz_buffer": b, "closing_guard": guard})
             s = summarize(run_scenario(sc, sel, progress=False))
-            print(f"| {stem} | {rec} | {b:g} | {fmt(s['min_vehicle_distance'])} | {s['pz_intrusions']} | {s['fallbacks']} |",
-                  flush=True)
+            print(f"| {stem} | {rec} | {b:g} | {guard} | {fmt(s['min_vehicle_distance'])} | {s['pz_intrusions']} "
+                  f"| {s['fallbacks']} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -83,7 +83,8 @@ CASES = {
     "obstacle_range": ({}, dict(obstacles=OBSTACLES, spheres=SPHERES, obstacle_range=12.0)),
     "spheres": (dict(reciprocal=True), dict(spheres=SPHERES)),
     "max_speed": ({}, dict(max_speed=np.linspace(2.0, 5.0, 24))),
-    "everything": (dict(reciprocal=True, pz_buffer=1.0, horizon=8.0),
+    "closing_guard": (dict(reciprocal=True, closing_guard=True), {}),
+    "everything": (dict(reciprocal=True, pz_buffer=1.0, horizon=8.0, closing_guard=True),
                    dict(obstacles=OBSTACLES, spheres=SPHERES, obstacle_range=20.0, max_neighbors=4,
                         limits=Limits(speed=(0.5, 4.0), altitude=(0.0, 50.0), acceleration=5.0), dt=0.1)),
 }
@@ -99,6 +100,20 @@ def test_select_many_equals_a_loop_of_select(case):
         statuses |= set(many.statuses)
         assert many.compiled and many.solve_time > 0
     assert "optimal" in statuses
+
+
+def test_closing_guard_in_a_tight_swarm_changes_answers_and_matches_select():
+    """24 vehicles in a 30 m cube: many pairs within a step of each other's zones, so the
+    guard's rows bind (some answers change) and select_many still equals select."""
+    guarded = VelocitySelector(reciprocal=True, closing_guard=True)
+    P, V, W, R = random_swarm(2, side=30.0)
+    kw = dict(sensing_range=30.0, limits=LIMITS)
+    many = guarded.select_many(P, V, W, R, **kw)
+    vel, statuses = loop_of_select(guarded, P, V, W, R, **kw)
+    np.testing.assert_allclose(many.velocities, vel, rtol=0, atol=TOL)
+    assert list(many.statuses) == list(statuses)
+    plain = VelocitySelector(reciprocal=True).select_many(P, V, W, R, **kw)
+    assert np.abs(plain.velocities - many.velocities).max(axis=1).max() > 0.1
 
 
 def test_decide_mask_keeps_the_others_and_makes_them_non_cooperative():

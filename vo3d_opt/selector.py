@@ -359,6 +359,7 @@ class VelocitySelector:
             limits=limits,
             dt=float(dt),
             options=self.options,
+            nbrs=nbrs,
         )
         out = self._run(enc, nbrs, prisms, bounds)
         status = out.status

@@ -73,6 +73,7 @@ class Config(NamedTuple):
     sin_t: np.ndarray  # (K,) and sines
     speed_levels: int  # the sampled grid: speeds v_min..v_max ...
     heading_step: float  # ... every this many rad on each plane
+    closing_guard: bool  # see Options and limit_rows
 
 
 class Bounds(NamedTuple):
@@ -128,6 +129,9 @@ class Options(Model):
     margin: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1e-3  # m/s; linearised VO
     # half-spaces are pushed out by this much, so that an answer on the boundary (within a
     # solver's tolerance) is still strictly outside the VO; sampled candidates keep it too
+    # no neighbour's zone reachable within dt: the speed towards it at most gap / dt (half of
+    # it each for a cooperative neighbour under ``reciprocal``); a limit row (limit_rows)
+    closing_guard: StrictBool = False
 
     @cached_property
     def packed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -144,6 +148,7 @@ class Options(Model):
                 self.speed_levels,
                 math.radians(self.heading_step_deg),
                 *corr,
+                self.closing_guard,
             ],
             dtype=float,
         )
@@ -178,6 +183,7 @@ def config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray) ->
         gen_tab[2],
         int(values[4]),
         values[5],
+        values[12] > 0,
     )
 
 
@@ -278,10 +284,19 @@ def vz_range(z: float, bounds: Bounds) -> tuple[float, float]:
 
 
 @entry
-def limit_rows(p: np.ndarray, v_now: np.ndarray, bounds: Bounds) -> tuple[np.ndarray, np.ndarray]:
-    """The altitude bound (and the acceleration box |v - v_now| <= a·dt per axis) as G v <= h."""
+def limit_rows(
+    p: np.ndarray, v_now: np.ndarray, nbrs: np.ndarray, bounds: Bounds, cfg: Config
+) -> tuple[np.ndarray, np.ndarray]:
+    """The altitude bound, the acceleration box |v - v_now| <= a·dt per axis (with an
+    acceleration limit) and, with ``closing_guard``, one row per cooperative neighbour whose
+    zone could be reached within dt (``_closing_row``), as G v <= h."""
     rows = 2 if np.isnan(bounds.acceleration) else 8
-    G, h = np.zeros((rows, 3)), np.empty(rows)
+    guards = 0
+    if cfg.closing_guard:
+        for i in range(nbrs.shape[0]):
+            if _closing_row(p, v_now, nbrs, i, bounds)[3] < np.inf:
+                guards += 1
+    G, h = np.zeros((rows + guards, 3)), np.empty(rows + guards)
     lo, hi = vz_range(p[2], bounds)
     G[0, 2], h[0], G[1, 2], h[1] = 1.0, hi, -1.0, -lo
     if rows == 8:
@@ -289,7 +304,44 @@ def limit_rows(p: np.ndarray, v_now: np.ndarray, bounds: Bounds) -> tuple[np.nda
         for k in range(3):
             G[2 + 2 * k, k], h[2 + 2 * k] = 1.0, v_now[k] + dv
             G[3 + 2 * k, k], h[3 + 2 * k] = -1.0, dv - v_now[k]
+    for i in range(nbrs.shape[0] if guards else 0):
+        ux, uy, uz, c = _closing_row(p, v_now, nbrs, i, bounds)
+        if c < np.inf:
+            G[rows, 0], G[rows, 1], G[rows, 2], h[rows] = ux, uy, uz, c
+            rows += 1
     return G, h
+
+
+@inline
+def _closing_row(
+    p: np.ndarray, v_now: np.ndarray, nbrs: np.ndarray, i: int, bounds: Bounds
+) -> tuple[float, float, float, float]:
+    """The closing guard's row u·v <= c for neighbour i (u: the unit vector towards it), or
+    c = inf when it constrains nothing (c >= v_max, or B does not avoid: its VO is exact for a
+    vehicle that keeps its velocity). A cooperative B runs the same rule, so each closes at
+    most half the gap (d - r_pz, 0 inside) within dt and the pair at most all of it: straight
+    flight over the step cannot take either into the other's zone, whatever each chooses
+    (the non-reciprocal VO's sliding into zones, README: safety in simulation). With an
+    acceleration limit, c is never below u·v_brake, v_brake the velocity of the box
+    |v - v_now| <= a·dt nearest hovering: v_brake meets every guard row and the box, so the
+    limits stay feasible together (the guarantee then needs room to brake)."""
+    dx, dy, dz = nbrs[i, 0] - p[0], nbrs[i, 1] - p[1], nbrs[i, 2] - p[2]
+    d = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if not (nbrs[i, 7] > 0.0 and d > 0.0):
+        return 0.0, 0.0, 0.0, np.inf
+    ux, uy, uz = dx / d, dy / d, dz / d
+    c = 0.5 * max(d - nbrs[i, 6], 0.0) / bounds.dt
+    if not np.isnan(bounds.acceleration):
+        dv = bounds.acceleration * bounds.dt
+        brake = ux * _brake(v_now[0], dv) + uy * _brake(v_now[1], dv) + uz * _brake(v_now[2], dv)
+        c = max(c, brake)
+    return ux, uy, uz, (c if c < bounds.v_max else np.inf)
+
+
+@inline
+def _brake(v: float, dv: float) -> float:
+    """The component in [v - dv, v + dv] nearest 0."""
+    return min(max(0.0, v - dv), v + dv)
 
 
 @inline
@@ -428,6 +480,7 @@ class Encounter:
     limits: Limits
     dt: float
     options: Options
+    nbrs: np.ndarray  # (n, 8) ``neighbor_rows``: the closing guard's rows need them
 
     @property
     def v_pref(self) -> np.ndarray:
@@ -461,7 +514,7 @@ class Encounter:
 
     @cached_property
     def _linear_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        G, h = limit_rows(self.position, self.v_now, self.bounds)
+        G, h = limit_rows(self.position, self.v_now, self.nbrs, self.bounds, self.options.config)
         G.setflags(write=False)
         h.setflags(write=False)
         return G, h
@@ -512,12 +565,12 @@ def prepare(
     options: Options,
 ) -> Encounter:
     """Build the VO cones and pyramids of one decision (``build_vos``)."""
-    bounds = Bounds.of(limits, dt)
+    bounds, nbrs = Bounds.of(limits, dt), neighbor_rows(neighbors)
     vos = py_build_vos(
         np.asarray(own.position, dtype=float),
         np.asarray(own.velocity, dtype=float),
         np.asarray(v_pref, dtype=float),
-        neighbor_rows(neighbors),
+        nbrs,
         prism_rows(obstacles),
         bounds,
         options.config,
@@ -529,6 +582,7 @@ def prepare(
         limits=limits,
         dt=float(dt),
         options=options,
+        nbrs=nbrs,
     )
 
 

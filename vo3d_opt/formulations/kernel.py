@@ -471,7 +471,7 @@ def decide_one(
 ) -> KernelOut:
     """``decide`` on the compiled side (``select_many`` calls it for every vehicle)."""
     vos = build_vos(p, v_now, v_pref, nbrs, prisms, bounds, cfg)  # 1
-    G3, h3 = limit_rows(p, v_now, bounds)
+    G3, h3 = limit_rows(p, v_now, nbrs, bounds, cfg)
     n, V = vos.cones.d_oi.shape[0], vos.cones.d_oi.shape[0] + vos.pyramids.L_pz.shape[0]
     initial = np.empty(V, dtype=np.bool_)
     pref_in = containing(vos, vos.v_pref, cfg.horizon, initial)
