@@ -114,7 +114,7 @@ def profile_run(case: str, n: int, max_neighbors: int, steps: int) -> dict[str, 
     from vo3d_opt.selector import warm_up_many
     from vo3d_opt.sim.deciders import SwarmSelect
     from vo3d_opt.sim.metrics import summarize
-    from vo3d_opt.sim.simulator import default_selector_options, fly, make_selector, scenario_selector
+    from vo3d_opt.sim.simulator import fly, scenario_selector
 
     @numba.njit(nogil=True)
     def rows_only(sw):  # the row building of decide_range, without the decisions

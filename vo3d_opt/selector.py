@@ -263,7 +263,8 @@ class VelocitySelector:
     per-plane solver); "nlp" is started from plane_qp on ``start_solver`` (default exact2d).
     Keyword options (see ``Options``): plane_step_deg, heading_step_deg, speed_levels,
     polygon_sides, reciprocal, horizon, corrections, n_samples, qp_samples, pz_buffer (m: plan
-    with every neighbour's sphere this much larger), margin.
+    with every neighbour's sphere this much larger), margin, closing_guard (the speed towards
+    each cooperative neighbour at most half the gap to its zone per dt).
     """
 
     def __init__(

@@ -129,8 +129,9 @@ class Options(Model):
     margin: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1e-3  # m/s; linearised VO
     # half-spaces are pushed out by this much, so that an answer on the boundary (within a
     # solver's tolerance) is still strictly outside the VO; sampled candidates keep it too
-    # no neighbour's zone reachable within dt: the speed towards it at most gap / dt (half of
-    # it each for a cooperative neighbour under ``reciprocal``); a limit row (limit_rows)
+    # a limit row per cooperative neighbour near its zone: the speed towards it at most half
+    # the gap per dt, so that no two vehicles running it enter each other's zones within a step
+    # (limit_rows; its conditions: formulations/plane_qp.md)
     closing_guard: StrictBool = False
 
     @cached_property
@@ -147,8 +148,8 @@ class Options(Model):
                 self.margin,
                 self.speed_levels,
                 math.radians(self.heading_step_deg),
-                *corr,
                 self.closing_guard,
+                *corr,  # last: a seventh correction would not shift the others
             ],
             dtype=float,
         )
@@ -167,7 +168,7 @@ class Options(Model):
 def config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray) -> Config:
     """``Config`` from ``Options.packed``."""
     corr = Corrections(
-        values[6] > 0, values[7] > 0, values[8] > 0, values[9] > 0, values[10] > 0, values[11] > 0
+        values[7] > 0, values[8] > 0, values[9] > 0, values[10] > 0, values[11] > 0, values[12] > 0
     )
     return Config(
         values[0] > 0,
@@ -183,7 +184,7 @@ def config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray) ->
         gen_tab[2],
         int(values[4]),
         values[5],
-        values[12] > 0,
+        values[6] > 0,
     )
 
 
@@ -316,15 +317,16 @@ def limit_rows(
 def _closing_row(
     p: np.ndarray, v_now: np.ndarray, nbrs: np.ndarray, i: int, bounds: Bounds
 ) -> tuple[float, float, float, float]:
-    """The closing guard's row u·v <= c for neighbour i (u: the unit vector towards it), or
-    c = inf when it constrains nothing (c >= v_max, or B does not avoid: its VO is exact for a
-    vehicle that keeps its velocity). A cooperative B runs the same rule, so each closes at
-    most half the gap (d - r_pz, 0 inside) within dt and the pair at most all of it: straight
-    flight over the step cannot take either into the other's zone, whatever each chooses
-    (the non-reciprocal VO's sliding into zones, README: safety in simulation). With an
-    acceleration limit, c is never below u·v_brake, v_brake the velocity of the box
-    |v - v_now| <= a·dt nearest hovering: v_brake meets every guard row and the box, so the
-    limits stay feasible together (the guarantee then needs room to brake)."""
+    """The closing guard's row u·v <= c for neighbour i, u the unit vector towards it; c = inf
+    when the row constrains nothing.
+
+    c is half the gap (d - r_pz, 0 inside) per dt: B runs the same rule, so the pair closes by
+    at most the gap within the step, whatever each chooses. That is what the VO cannot promise
+    when both change velocity at once (README: safety in simulation). No row for a vehicle
+    that does not avoid (its VO is exact: it keeps its velocity) or when c >= v_max. With an
+    acceleration limit c is raised to u·v_brake, v_brake the point of the box |v - v_now| <= a·dt
+    nearest hovering, so that the box and every guard row share it (the promise then holds for
+    the pairs whose rows were not raised; formulations/plane_qp.md)."""
     dx, dy, dz = nbrs[i, 0] - p[0], nbrs[i, 1] - p[1], nbrs[i, 2] - p[2]
     d = np.sqrt(dx * dx + dy * dy + dz * dz)
     if not (nbrs[i, 7] > 0.0 and d > 0.0):
