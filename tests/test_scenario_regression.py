@@ -1,5 +1,6 @@
 """Regression over the bundled scenarios: every one under the default formulation (plane_qp),
-and the paper's cases also under the paper's sampled selection, must end with every agent
+with and without the closing guard, and the paper's cases also under the paper's sampled
+selection, must end with every agent
 arrived, no collision, no protected-zone intrusion and no speed or altitude violation. The
 swarm-sized scenarios are flown by benchmarks/bench_swarm.py instead (a test flies the first
 steps of each: tests/test_sim_loop.py)."""
@@ -8,9 +9,10 @@ from __future__ import annotations
 import json
 
 import pytest
+import yaml
 
 from vo3d_opt.sim.metrics import summarize
-from vo3d_opt.sim.scenario import bundled_files
+from vo3d_opt.sim.scenario import bundled_files, scenario_from_dict
 from vo3d_opt.sim.simulator import run_scenario
 
 
@@ -20,7 +22,16 @@ FILES = [p for p in bundled_files() if p.stem not in SWARMS]
 PAPER = [p for p in FILES if p.stem.startswith("paper-")]
 CASES = [pytest.param(p, "plane_qp", id=f"{p.stem}-plane_qp") for p in FILES] + [
     pytest.param(p, "sampled", id=f"{p.stem}-sampled") for p in PAPER
-]
+] + [pytest.param(p, "plane_qp+closing_guard", id=f"{p.stem}-closing_guard") for p in FILES]
+
+
+def _scenario(path, formulation):
+    """The file, or with ``+closing_guard`` its data with the guard added to its options."""
+    if not formulation.endswith("+closing_guard"):
+        return path
+    data = yaml.safe_load(path.read_text())
+    data["selector_options"] = {**data.get("selector_options", {}), "closing_guard": True}
+    return scenario_from_dict(data, str(path))
 
 
 def test_there_is_something_to_check():
@@ -29,7 +40,8 @@ def test_there_is_something_to_check():
 
 @pytest.mark.parametrize("path, formulation", CASES)
 def test_bundled_scenario_is_safe(path, formulation):
-    record = run_scenario(path, formulation=formulation, progress=False)
+    record = run_scenario(_scenario(path, formulation), formulation=formulation.split("+")[0],
+                          progress=False)
     s = summarize(record)
     problems = []
     if not s["all_reached"]:
