@@ -19,6 +19,11 @@ LIMITS = Limits(speed=(0.0, V_MAX), altitude=(0.0, 80.0))
 SLACK = 2 * LIMIT_TOL * DT
 
 
+def pair_distances(X: np.ndarray) -> np.ndarray:
+    """(n, n) distances between the rows of X, a huge number on the diagonal (no self-pairs)."""
+    return np.linalg.norm(X[:, None] - X[None], axis=-1) + np.eye(len(X)) * 1e9
+
+
 def near_contact_swarm(seed: int, n: int = 5, side: float = 18.0, inside: bool = False
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """n vehicles in a box so small that some pairs are within a step of each other's zones
@@ -28,11 +33,11 @@ def near_contact_swarm(seed: int, n: int = 5, side: float = 18.0, inside: bool =
     while True:
         P = rng.uniform(0.0, side, (n, 3))
         P[:, 2] += 20.0
-        D = np.linalg.norm(P[:, None] - P[None], axis=-1) + np.eye(n) * 1e9
+        D = pair_distances(P)
         if inside:
             unit = rng.normal(size=3)
             P[1] = P[0] + unit / np.linalg.norm(unit) * rng.uniform(4.0, 7.5)
-            D = np.linalg.norm(P[:, None] - P[None], axis=-1) + np.eye(n) * 1e9
+            D = pair_distances(P)
             D[0, 1] = D[1, 0] = np.inf
         if D.min() >= R_PZ:
             break
@@ -49,8 +54,8 @@ def one_step(sel: VelocitySelector, seed: int, limits: Limits = LIMITS, inside: 
     P, V, W = near_contact_swarm(seed, inside=inside)
     many = sel.select_many(P, V, W, R_PZ, limits=limits, dt=DT, sensing_range=100.0)
     Q = P + many.velocities * DT
-    before = np.linalg.norm(P[:, None] - P[None], axis=-1) + np.eye(len(P)) * 1e9
-    after = np.linalg.norm(Q[:, None] - Q[None], axis=-1) + np.eye(len(P)) * 1e9
+    before = pair_distances(P)
+    after = pair_distances(Q)
     return (P, V, W), many, before, after
 
 
@@ -81,7 +86,7 @@ def test_the_least_bad_fallback_keeps_the_guard_too(gap):
     many = sel.select_many(P, V, W, R_PZ, limits=LIMITS, dt=DT, sensing_range=100.0)
     assert many.statuses[0] == "infeasible_min_violation"
     Q = P + many.velocities * DT
-    after = np.linalg.norm(Q[:, None] - Q[None], axis=-1) + np.eye(len(P)) * 1e9
+    after = pair_distances(Q)
     assert after.min() >= R_PZ - SLACK
 
 
