@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 from vo3d_opt.sim.metrics import CONTRACT_KEYS
+from vo3d_opt.sim.safety import derive_margins
 from vo3d_opt.sim.scenario import bundled_files, load_scenario
 
 SMALL = {
@@ -152,6 +153,49 @@ def test_compare_one_row_per_combination(small):
     lines = table.stdout.strip().splitlines()
     assert lines[1].split()[:2] == ["formulation", "solver"] and len(lines) == 4
     assert "min_vehicle_distance" in lines[1]
+
+
+TIMING_KEYS = {"decision_time_median_us", "decision_time_p99_us", "decision_time_max_us",
+               "wall_time"}
+
+
+def _behaviour(res: subprocess.CompletedProcess) -> dict:
+    assert res.returncode == 0, res.stderr
+    return {k: v for k, v in json.loads(res.stdout).items() if k not in TIMING_KEYS}
+
+
+def test_selector_options_fly_as_the_scenario_key_and_override_it(small, tmp_path, run_json):
+    published = {"reciprocal": False, "pz_buffer": 0.0}
+    path = tmp_path / "published.yaml"
+    path.write_text(yaml.safe_dump({**SMALL, "selector_options": published}))
+    in_file = _behaviour(vo3d("run", path, "--json"))
+    flags = _behaviour(vo3d("run", small, "--json", "-o", "reciprocal=false",
+                            "--selector-option", "pz_buffer=0"))
+    assert flags == in_file
+    assert in_file != _behaviour(run_json)  # the options change the flight
+    # the command line's value wins over the file's: back to the defaults
+    back = vo3d("run", path, "--json", "-o", "reciprocal=true", "-o",
+                f"pz_buffer={derive_margins(load_scenario(small)).pz_buffer!r}")
+    assert _behaviour(back) == _behaviour(run_json)
+    rows = json.loads(vo3d("compare", small, "--json", "-o", "reciprocal=false",
+                           "-o", "pz_buffer=0").stdout)
+    assert {k: v for k, v in rows[0].items() if k not in TIMING_KEYS} == in_file
+
+
+@pytest.mark.parametrize(
+    "command, option, fragment",
+    [
+        pytest.param("run", "closing_guard=3", "selector_options.closing_guard", id="bad-value"),
+        pytest.param("run", "pz_bufer=1", "'pz_buffer'", id="unknown-key"),
+        pytest.param("run", "margin", "KEY=VALUE", id="no-value"),
+        pytest.param("compare", "margin=-1", "selector_options.margin", id="compare"),
+    ],
+)
+def test_bad_selector_options_exit_2_naming_the_key(small, command, option, fragment):
+    res = vo3d(command, small, "--json", "-o", option)
+    assert res.returncode == 2 and res.stdout == ""
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and fragment in lines[0], res.stderr
 
 
 def test_compare_unknown_name_exits_2(small):

@@ -17,7 +17,7 @@ import pytest
 from scipy.stats import binomtest
 
 from vo3d_opt.sim.metrics import CONTRACT_KEYS
-from vo3d_opt.sim.scenario import load_scenario, scenario_from_dict
+from vo3d_opt.sim.scenario import load_scenario, scenario_from_dict, scenario_variant
 from vo3d_opt.sweep import (
     FAMILIES,
     TIMING_COLUMNS,
@@ -34,6 +34,7 @@ from vo3d_opt.sweep import (
     upper_bound,
 )
 from vo3d_opt.sweep.families import TIME_FACTOR, TIME_SLACK, encounter_rng
+from vo3d_opt.sweep.flight import DEFAULT_METHOD, fly
 from vo3d_opt.sweep.output import failed_rows, failure_scenario, write_results
 from vo3d_opt.sweep.runner import rows_equal
 
@@ -268,6 +269,12 @@ def test_bad_options_are_refused_before_any_cluster_starts():
         run_sweep("pair", 0)
     with pytest.raises(SweepError, match="solver 'bogus'"):
         run_sweep("pair", 2, method=Method(solver="bogus"))
+    with pytest.raises(SweepError, match="selector_options.closing_guard: .*boolean"):
+        run_sweep("pair", 2, method=Method(selector_options=(("closing_guard", 3),)))
+    with pytest.raises(SweepError, match="selector_options.pz_bufer: .*'pz_buffer'"):
+        run_sweep("pair", 2, method=Method(selector_options=(("pz_bufer", 1.0),)))
+    with pytest.raises(SweepError, match="--selector-option: not used by --method rvo2"):
+        run_sweep("pair", 2, method=Method(name="rvo2", selector_options=(("margin", 0.1),)))
 
 
 # ------------------------------------------------------------- outputs and the CLI
@@ -301,7 +308,7 @@ def test_collisions_are_written_as_scenarios_that_vo3d_run_replays(cluster, tmp_
 
 def test_sweep_json_prints_one_object_with_the_contract_keys(cluster, tmp_path):
     proc = vo3d("sweep", "pair", "--n", "2", "--seed", "5", "--scheduler", cluster, "--json",
-                "--out", tmp_path)
+                "--out", tmp_path, "-o", "closing_guard=true")
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout.strip()
     assert out.startswith("{") and "\n" not in out
@@ -309,6 +316,7 @@ def test_sweep_json_prints_one_object_with_the_contract_keys(cluster, tmp_path):
     assert set(SECTION6_KEYS) <= set(summary)
     assert (summary["family"], summary["encounters"], summary["seed"]) == ("pair", 2, 5)
     assert summary["method"] == "vo3d" and summary["formulation"] == "plane_qp"
+    assert summary["selector_options"] == {"closing_guard": True}
     k = summary["encounters_with_collision"]
     assert summary["collision_rate_upper95"] == pytest.approx(upper_bound(k, 2))
     assert json.loads((tmp_path / "summary.json").read_text()) == summary
@@ -316,6 +324,7 @@ def test_sweep_json_prints_one_object_with_the_contract_keys(cluster, tmp_path):
     assert list(rows["index"]) == [0, 1] and (rows["family"] == "pair").all()
     assert {"param_miss_distance", "param_speed_0"} <= set(rows.columns)
     assert set(CONTRACT_KEYS) <= set(rows.columns)
+    assert (rows["selector_options"] == '{"closing_guard": true}').all()
     assert (tmp_path / "min_distance.png").stat().st_size > 0
 
 
@@ -355,6 +364,31 @@ def test_formulation_and_solver_pass_through_to_the_runs_and_the_replays():
     data = failure_scenario(result, 1)
     assert (data["formulation"], data["solver"]) == ("cone_qp", "osqp")
     assert data["agents"] == make_encounter("pair", 0, 1).scenario["agents"]
+
+
+def test_selector_options_pass_through_to_the_runs_and_the_replays():
+    """Each encounter flies as its scenario with the options in selector_options; the paper's
+    selection as published (no reciprocity, no buffer) flies differently from the defaults."""
+    options = (("reciprocal", False), ("pz_buffer", 0.0))
+    method = Method(selector_options=options)
+    changed = 0
+    for index in range(3):
+        row = run_encounter("pair", 0, index, method)
+        assert row["error"] is None and json.loads(row["selector_options"]) == dict(options)
+        variant = scenario_variant(make_encounter("pair", 0, index).load(),
+                                   selector_options=dict(options))
+        _, summary = fly(variant, DEFAULT_METHOD)
+        for key, value in summary.items():
+            if key not in TIMING_SUMMARY_KEYS:
+                expected = json.loads(row[key]) if key == "status_counts" else row[key]
+                assert value == expected, (index, key)
+        changed += row["min_vehicle_distance"] != run_encounter("pair", 0, index)[
+            "min_vehicle_distance"]
+    assert changed
+    result = SweepResult(family=FAMILIES["pair"], seed=0, method=method, rows=pd.DataFrame())
+    data = failure_scenario(result, 1)
+    assert data["selector_options"] == dict(options)
+    assert scenario_from_dict(data).selector_options == dict(options)
 
 
 # ------------------------------------------------- group variants (contracts §5 keys)

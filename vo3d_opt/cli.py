@@ -12,6 +12,8 @@
 * ``vo3d list`` lists the bundled scenarios: name, agents, obstacles, first sentence.
 * ``vo3d sweep FAMILY --n N ...`` runs N random encounters on Dask (contract §6;
   ``vo3d_opt.sweep``).
+* ``--selector-option KEY=VALUE`` (``-o``, repeatable; run, compare, sweep): merged over the
+  scenario's ``selector_options`` and checked as they are.
 
 SCENARIO is a path or the name of a bundled scenario. Progress and logs go to stderr through
 ``logging`` (``-q``: warnings and errors only, ``-v``: debugging detail too). Exit status: 0 when
@@ -40,7 +42,15 @@ from vo3d_opt import __version__
 from vo3d_opt.report import CSV_MAX_ROWS, rounded, write_outputs
 from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FORMULATIONS
 from vo3d_opt.sim.metrics import CONTRACT_KEYS, summarize
-from vo3d_opt.sim.scenario import Scenario, ScenarioError, bundled_files, load_scenario
+from vo3d_opt.sim.scenario import (
+    Scenario,
+    ScenarioError,
+    bundled_files,
+    check_selector_options,
+    load_scenario,
+    parse_option,
+    scenario_variant,
+)
 from vo3d_opt.sim.simulator import DEFAULT_FORMULATION, Simulator, scenario_selector
 from vo3d_opt.types import one_line
 
@@ -106,6 +116,39 @@ def _out_dir(arg: str) -> Path:
     except OSError as exc:
         raise _UsageError(f"--out {arg}: cannot write there: {exc.strerror or exc}") from None
     return path
+
+
+def _selector_option(text: str) -> tuple[str, Any]:
+    try:
+        return parse_option(text)
+    except ScenarioError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _add_selector_option(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument(
+        "--selector-option",
+        "-o",
+        dest="selector_options",
+        type=_selector_option,
+        action="append",
+        metavar="KEY=VALUE",
+        help=f"a selector option for {what}, as the scenario key selector_options takes it "
+        "(README, Selector options), e.g. closing_guard=true or margin=0.05; repeatable; "
+        "overrides the scenario's",
+    )
+
+
+def _with_options(sc: Scenario, pairs: list[tuple[str, Any]] | None) -> Scenario:
+    """The scenario with ``--selector-option`` merged into its ``selector_options``."""
+    if not pairs:
+        return sc
+    try:
+        options = check_selector_options(dict(pairs), "--selector-option")
+        log.info("selector options from the command line: %s", options)
+        return scenario_variant(sc, selector_options=options)
+    except ScenarioError as exc:
+        raise _UsageError(str(exc)) from None
 
 
 def _selector(sc: Scenario, formulation: str | None, solver: str | None) -> tuple[Any, str, str]:
@@ -236,7 +279,7 @@ def _zones(text: str) -> Any:
 
 def cmd_run(args: argparse.Namespace) -> int:
     plot_options = _figure_options(args)
-    sc = _load(args.scenario)
+    sc = _with_options(_load(args.scenario), args.selector_options)
     out = _out_dir(args.out) if args.out else None
     sel, formulation, solver = _selector(sc, args.formulation, args.solver)
     record, summary = _run(sc, sel, formulation, solver)
@@ -259,7 +302,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    sc = _load(args.scenario)
+    sc = _with_options(_load(args.scenario), args.selector_options)
     formulations = args.formulations or [sc.formulation or "plane_qp"]
     solvers = args.solvers or [sc.solver]
     built: dict[tuple[str, str], Any] = {}
@@ -409,6 +452,7 @@ def _add_sweep(sub: Any, common: list[_Parser]) -> None:
         help="solver names as for `vo3d run --solver`; default: "
         f"{DEFAULT_QP_SOLVER} (QP) / {DEFAULT_NLP_SOLVER} (nlp)",
     )
+    _add_selector_option(sw, "every encounter (--method vo3d)")
     sw.add_argument(
         "--out",
         metavar="DIR",
@@ -493,6 +537,7 @@ def build_parser() -> argparse.ArgumentParser:
         f"else {DEFAULT_FORMULATION}",
     )
     run.add_argument("--solver", "-s", metavar="S", help=_SOLVER_HELP)
+    _add_selector_option(run, "every agent")
     run.add_argument(
         "--json",
         action="store_true",
@@ -548,6 +593,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="solver names as for `vo3d run --solver`; default: the scenario's "
         f"`solver`, else {DEFAULT_QP_SOLVER} (QP) / {DEFAULT_NLP_SOLVER} (nlp)",
     )
+    _add_selector_option(cmp_, "every run")
     cmp_.add_argument(
         "--json",
         action="store_true",

@@ -3,10 +3,10 @@ declared in ``vo3d_opt.cli``).
 
 Exit status: 0 when every encounter ran (whatever its safety figures), 1 when some raised or
 lost their worker (they are listed in the summary; the rest of the output is complete) or when
-writing ``--out`` failed after the sweep (the summary is still printed), 2 with
-a one-line message (:class:`~vo3d_opt.sweep.runner.SweepError`) for a bad option, an unknown
-family, formulation or solver, ``--method rvo2`` on a family with obstacles, or an unreachable
-scheduler.
+writing ``--out`` failed after the sweep (the summary is still printed), 2 with a one-line
+message (:class:`~vo3d_opt.sweep.runner.SweepError`) for a bad option (a selector option names
+its key), an unknown family, formulation or solver, ``--method rvo2`` on a family with
+obstacles, or an unreachable scheduler.
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ def _list(as_json: bool) -> int:
 
 
 def _fmt(x: Any) -> str:
-    if x is None:
+    if x is None or x == {}:
         return "-"
     return f"{x:.4g}" if isinstance(x, float) else str(x)
 
@@ -70,6 +70,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         "method",
         "formulation",
         "solver",
+        "selector_options",
         "seed",
         "encounters",
         "completed",
@@ -118,7 +119,12 @@ def main(
         raise SweepError("family: required (vo3d sweep --list names them)")
     if args.n is None:
         raise SweepError("--n: required (the number of encounters)")
-    method = Method(name=args.method, formulation=args.formulation, solver=args.solver)
+    method = Method(
+        name=args.method,
+        formulation=args.formulation,
+        solver=args.solver,
+        selector_options=tuple(args.selector_options or ()),
+    )
     workers = 1 if args.workers is None and args.scheduler else args.workers
     validate(
         args.family,

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from vo3d_opt.sim.metrics import pair_min_distances, summarize
-from vo3d_opt.sim.scenario import Scenario, scenario_from_dict
+from vo3d_opt.sim.scenario import Scenario, scenario_from_dict, scenario_variant
 from vo3d_opt.sim.simulator import RunRecord, Simulator, scenario_selector
 from vo3d_opt.sweep.families import Family, get_family, make_encounter
 
@@ -39,11 +39,14 @@ TIMING_COLUMNS = (
 class Method:
     """How the encounters are flown: ``vo3d`` (the selector, with ``formulation`` / ``solver``
     as ``vo3d run`` takes them; None = the defaults) or ``rvo2`` (RVO2-3D,
-    ``vo3d_opt.baselines.run_rvo2``)."""
+    ``vo3d_opt.baselines.run_rvo2``). ``selector_options``: (key, value) pairs merged into
+    every encounter's ``selector_options`` (``vo3d`` only), e.g.
+    ``(("closing_guard", True),)``."""
 
     name: str = "vo3d"
     formulation: str | None = None
     solver: str | None = None
+    selector_options: tuple[tuple[str, Any], ...] = ()
 
 
 #: The selector with its default formulation and solver.
@@ -66,6 +69,8 @@ def fly(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, Any]]:
         )
         record = dataclasses.replace(run_rvo2(equal, progress=False), scenario=sc)
         return record, summarize_rvo2(record)
+    if method.selector_options:
+        sc = scenario_variant(sc, selector_options=dict(method.selector_options))
     sel, formulation, solver = scenario_selector(sc, method.formulation, method.solver)
     record = Simulator(sc, sel, formulation=formulation, solver=solver).run(progress=False)
     return record, summarize(record)
@@ -99,7 +104,8 @@ def run_encounter(
     """Regenerate and fly encounter ``index``; one row: family, seed, index, method, attempts,
     ``param_*``, the summary's keys (``status_counts`` as JSON text),
     ``min_normalised_distance``, ``error`` (None, or the exception in one line), ``run_time``
-    and ``worker``. Never raises for a failing encounter: the error is the row's."""
+    and ``worker``; ``selector_options`` (JSON text) when the method sets some. Never raises
+    for a failing encounter: the error is the row's."""
     t0 = time.perf_counter()
     fam = get_family(family)
     row: dict[str, Any] = {
@@ -109,6 +115,8 @@ def run_encounter(
         "method": method.name,
         "error": None,
     }
+    if method.selector_options:
+        row["selector_options"] = json.dumps(dict(method.selector_options), sort_keys=True)
     try:
         enc = make_encounter(fam, seed, index)
         row["attempts"] = enc.attempts

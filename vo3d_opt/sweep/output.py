@@ -49,14 +49,20 @@ def failed_rows(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def failure_scenario(result: SweepResult, index: int) -> dict[str, Any]:
-    """The scenario dict of encounter ``index``, regenerated, with the sweep's formulation and
-    solver (when it named them) so that ``vo3d run`` flies it the same way."""
+    """The scenario dict of encounter ``index``, regenerated, with the sweep's formulation,
+    solver and selector options (when it named them) so that ``vo3d run`` flies it the same
+    way."""
     data = dict(make_encounter(result.family, result.seed, index).scenario)
     if result.method.name == "vo3d":
         for key in ("formulation", "solver"):
             value = getattr(result.method, key)
             if value is not None:
                 data[key] = value
+        if result.method.selector_options:
+            data["selector_options"] = {
+                **data.get("selector_options", {}),
+                **dict(result.method.selector_options),
+            }
     return data
 
 

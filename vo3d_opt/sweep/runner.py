@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from tqdm import tqdm
 
+from vo3d_opt.sim.scenario import ScenarioError, check_selector_options
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.families import FAMILIES, Family, get_family
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, one_line
@@ -56,8 +57,8 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
     if method.name == "rvo2":
         from vo3d_opt.baselines import rvo2
 
-        if method.formulation or method.solver:
-            raise SweepError("--formulation/--solver: not used by --method rvo2")
+        if method.formulation or method.solver or method.selector_options:
+            raise SweepError("--formulation/--solver/--selector-option: not used by --method rvo2")
         if not family.obstacle_free:
             ok = ", ".join(f.name for f in FAMILIES.values() if f.obstacle_free)
             raise SweepError(
@@ -70,7 +71,11 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
             )
         return rvo2.FORMULATION, f"rvo23d {rvo2.version()}"
     try:
-        _, formulation, solver = make_selector(method.formulation, method.solver)
+        options = dict(method.selector_options)
+        check_selector_options(options, "--selector-option")
+        _, formulation, solver = make_selector(method.formulation, method.solver, options)
+    except ScenarioError as exc:
+        raise SweepError(str(exc)) from None
     except (ValueError, TypeError) as exc:
         form, solver = method.formulation or "default", method.solver or "default"
         what = f"formulation {form!r}, solver {solver!r}"
@@ -175,6 +180,7 @@ def run_sweep(
     )
     summary.update(
         {
+            "selector_options": dict(method.selector_options),
             "wall_time": round(wall, 3),
             "setup_time": round(setup_time, 3),
             "encounters_per_second": round(n / wall, 4) if wall > 0 else None,

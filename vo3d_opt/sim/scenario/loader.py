@@ -238,6 +238,31 @@ def _suggestion(name: str) -> str:
     return f"{found} (`vo3d list` lists the bundled scenarios)"
 
 
+def parse_option(text: str) -> tuple[str, Any]:
+    """``KEY=VALUE`` from a command line: the key, and the value read as a scenario file's
+    value would be (YAML: ``true``, ``0.5``, ``[1, 2]``, ``1e-3``); ``ScenarioError`` for text
+    without a key or with a value that is no YAML."""
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip():
+        raise ScenarioError(f"expected KEY=VALUE, got {text!r}")
+    return key.strip(), _parse(value, key.strip())
+
+
+def check_selector_options(options: dict[str, Any], source: str) -> dict[str, Any]:
+    """``options`` checked as a scenario's ``selector_options`` would be (``ScenarioError``
+    naming ``selector_options.KEY``, ``source`` first); returned as they are."""
+    from vo3d_opt.formulations.common import Options  # late: loading a file needs no solver
+
+    try:
+        Options.model_validate(options)
+    except ValidationError as exc:
+        raise _fail(
+            source,
+            [_describe({**e, "loc": ("selector_options", *e["loc"])}) for e in exc.errors()],
+        ) from None
+    return options
+
+
 def scenario_variant(sc: Scenario, **keys: Any) -> Scenario:
     """``sc`` with some top-level keys replaced and validated again (errors name ``sc``'s
     file): a mapping given for a mapping key (``sensing``, ``safety``, ``limits``, ...) is
