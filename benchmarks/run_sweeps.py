@@ -17,8 +17,12 @@ Three stages (all by default, or those named with ``--stages``):
     python benchmarks/run_sweeps.py --n 10000 [--families pair group dense lagged]
         [--rvo2 pair dense] [--seeds 0] [--workers 2] [--out-root /work/sweep-out]
         [--stages throughput sweeps table] [--results benchmarks/results_sweeps.md]
+        [--selector-option KEY=VALUE ...]
 
 ``--n`` is one N for every family, or ``FAMILY=N`` items for per-family counts.
+``--selector-option`` passes ``-o KEY=VALUE`` to every ``vo3d`` sweep (not RVO2-3D's); the
+table names the options beside the method, so give such runs their own ``--out-root`` and
+``--results``.
 """
 from __future__ import annotations
 
@@ -81,16 +85,20 @@ def pooled(dirs: list[Path]) -> dict[str, Any]:
                       formulation=first["formulation"], solver=first["solver"])
         wall = sum(x["wall_time"] for x in summaries)
         s.update({"seed": [x["seed"] for x in summaries], "wall_time": wall,
+                  "selector_options": first.get("selector_options", {}),
                   "encounters_per_second": s["encounters"] / wall, "workers": first["workers"]})
     s["deep_intrusions"] = int((rows["min_normalised_distance"] < DEEP).sum())
     return s
 
 
-def run_one(family: str, n: int, *, seed: int, workers: int, method: str, out: Path) -> None:
+def run_one(family: str, n: int, *, seed: int, workers: int, method: str, out: Path,
+            options: list[str]) -> None:
     """One ``vo3d sweep`` process; its stderr (progress) goes to ``out/sweep.log``."""
     out.mkdir(parents=True, exist_ok=True)
     cmd = vo3d_cmd() + ["sweep", family, "--n", str(n), "--seed", str(seed), "--workers",
                         str(workers), "--method", method, "--out", str(out), "--json"]
+    if method == "vo3d":
+        cmd += [arg for option in options for arg in ("-o", option)]
     print(" ".join(cmd), file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     with open(out / "sweep.log", "w") as log:
@@ -129,7 +137,9 @@ def _pct(x: float) -> str:
 
 def summary_row(s: dict[str, Any]) -> str:
     r = s["rates"]
-    name = "ours (plane_qp)" if s["method"] == "vo3d" else "RVO2-3D"
+    options = ", ".join(f"{k}: {json.dumps(v)}" for k, v in s.get("selector_options", {}).items())
+    name = "RVO2-3D" if s["method"] != "vo3d" else "ours (plane_qp" + (
+        f"; {options})" if options else ")")
     return (f"| {s['family']} | {name} | {s['encounters']} | {len(s['errors'])} | "
             f"{s['encounters_with_collision']} ({s['collisions']}) | "
             f"{s['encounters_with_intrusion']} ({s['pz_intrusions']}) | {s['deep_intrusions']} | "
@@ -216,6 +226,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--bench-family", default="pair")
     p.add_argument("--bench-n", type=int, default=300)
     p.add_argument("--results", type=Path, default=HERE / "results_sweeps.md")
+    p.add_argument("--selector-option", "-o", action="append", default=[], metavar="KEY=VALUE",
+                   help="passed to every vo3d sweep")
     args = p.parse_args(argv)
 
     if "throughput" in args.stages:
@@ -226,7 +238,8 @@ def main(argv: list[str] | None = None) -> int:
         for seed in args.seeds:
             for family, method in jobs:
                 run_one(family, n[family], seed=seed, workers=args.workers, method=method,
-                        out=run_dir(args.out_root, family, method, seed))
+                        out=run_dir(args.out_root, family, method, seed),
+                        options=args.selector_option)
     if "table" in args.stages:
         text = table(args.out_root, args.families, args.rvo2)
         args.results.write_text(text)
