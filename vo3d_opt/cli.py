@@ -134,8 +134,8 @@ def _add_selector_option(p: argparse.ArgumentParser, what: str) -> None:
         action="append",
         metavar="KEY=VALUE",
         help=f"a selector option for {what}, as the scenario key selector_options takes it "
-        "(README, Selector options), e.g. closing_guard=true or margin=0.05; repeatable; "
-        "overrides the scenario's",
+        "(the keyword arguments of VelocitySelector, README), e.g. closing_guard=true or "
+        "margin=0.05; repeatable; overrides the scenario's",
     )
 
 
