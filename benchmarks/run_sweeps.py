@@ -20,9 +20,9 @@ Three stages (all by default, or those named with ``--stages``):
         [--selector-option KEY=VALUE ...]
 
 ``--n`` is one N for every family, or ``FAMILY=N`` items for per-family counts.
-``--selector-option`` passes ``-o KEY=VALUE`` to every ``vo3d`` sweep (not RVO2-3D's); the
-table names the options beside the method, so give such runs their own ``--out-root`` and
-``--results``.
+``--selector-option`` passes ``-o KEY=VALUE`` to every ``vo3d`` sweep (not RVO2-3D's nor the
+throughput stage's); the table names the options beside the method. Such runs need their own
+``--out-root`` and ``--results`` (refused without them: they would overwrite the defaults').
 """
 from __future__ import annotations
 
@@ -84,6 +84,8 @@ def pooled(dirs: list[Path]) -> dict[str, Any]:
         s = aggregate(rows, family=first["family"], seed=first["seed"], method=first["method"],
                       formulation=first["formulation"], solver=first["solver"])
         wall = sum(x["wall_time"] for x in summaries)
+        if any(x.get("selector_options") != first.get("selector_options") for x in summaries):
+            raise SystemExit(f"{dirs}: the seeds ran with different selector options")
         s.update({"seed": [x["seed"] for x in summaries], "wall_time": wall,
                   "selector_options": first.get("selector_options", {}),
                   "encounters_per_second": s["encounters"] / wall, "workers": first["workers"]})
@@ -138,8 +140,8 @@ def _pct(x: float) -> str:
 def summary_row(s: dict[str, Any]) -> str:
     r = s["rates"]
     options = ", ".join(f"{k}: {json.dumps(v)}" for k, v in s.get("selector_options", {}).items())
-    name = "RVO2-3D" if s["method"] != "vo3d" else "ours (plane_qp" + (
-        f"; {options})" if options else ")")
+    label = "plane_qp" + (f"; {options}" if options else "")
+    name = f"ours ({label})" if s["method"] == "vo3d" else "RVO2-3D"
     return (f"| {s['family']} | {name} | {s['encounters']} | {len(s['errors'])} | "
             f"{s['encounters_with_collision']} ({s['collisions']}) | "
             f"{s['encounters_with_intrusion']} ({s['pz_intrusions']}) | {s['deep_intrusions']} | "
@@ -213,6 +215,20 @@ def table(out_root: Path, families: list[str], rvo2: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def check_options(args: argparse.Namespace, p: argparse.ArgumentParser) -> None:
+    """Refuse ``-o`` without its own ``--out-root`` / ``--results`` or with a bad option,
+    before anything runs."""
+    from vo3d_opt.sim.scenario import ScenarioError, check_selector_options, parse_option
+
+    defaults = p.parse_args([])
+    if args.out_root == defaults.out_root or args.results == defaults.results:
+        p.error("--selector-option: give the runs their own --out-root and --results")
+    try:
+        check_selector_options(dict(parse_option(o) for o in args.selector_option), "-o")
+    except ScenarioError as exc:
+        p.error(str(exc))
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--n", nargs="+", default=["10000"], help="N, or FAMILY=N items")
@@ -229,6 +245,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--selector-option", "-o", action="append", default=[], metavar="KEY=VALUE",
                    help="passed to every vo3d sweep")
     args = p.parse_args(argv)
+    if args.selector_option:
+        check_options(args, p)
 
     if "throughput" in args.stages:
         throughput(args.bench_family, args.bench_n, args.seeds[0], args.out_root)

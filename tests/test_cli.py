@@ -159,35 +159,49 @@ TIMING_KEYS = {"decision_time_median_us", "decision_time_p99_us", "decision_time
                "wall_time"}
 
 
-def _behaviour(res: subprocess.CompletedProcess) -> dict:
+def _behaviour(res: subprocess.CompletedProcess, options: dict | None = None) -> dict:
+    """The summary but its timing and the options it reports (checked: ``options``)."""
     assert res.returncode == 0, res.stderr
-    return {k: v for k, v in json.loads(res.stdout).items() if k not in TIMING_KEYS}
+    summary = json.loads(res.stdout)
+    if options is not None:
+        assert summary["selector_options"] == options
+    return {k: v for k, v in summary.items() if k not in TIMING_KEYS | {"selector_options"}}
 
 
 def test_selector_options_fly_as_the_scenario_key_and_override_it(small, tmp_path, run_json):
     published = {"reciprocal": False, "pz_buffer": 0.0}
     path = tmp_path / "published.yaml"
     path.write_text(yaml.safe_dump({**SMALL, "selector_options": published}))
-    in_file = _behaviour(vo3d("run", path, "--json"))
+    in_file = _behaviour(vo3d("run", path, "--json"), published)
     flags = _behaviour(vo3d("run", small, "--json", "-o", "reciprocal=false",
-                            "--selector-option", "pz_buffer=0"))
+                            "--selector-option", "pz_buffer=0"), published)
     assert flags == in_file
-    assert in_file != _behaviour(run_json)  # the options change the flight
+    assert in_file != _behaviour(run_json, {})  # the options change the flight
+    # -o merges into the file's options (not replacing them): one from each
+    half = tmp_path / "half.yaml"
+    half.write_text(yaml.safe_dump({**SMALL, "selector_options": {"reciprocal": False}}))
+    assert _behaviour(vo3d("run", half, "--json", "-o", "pz_buffer=0"), published) == in_file
     # the command line's value wins over the file's: back to the defaults
-    back = vo3d("run", path, "--json", "-o", "reciprocal=true", "-o",
-                f"pz_buffer={derive_margins(load_scenario(small)).pz_buffer!r}")
-    assert _behaviour(back) == _behaviour(run_json)
-    rows = json.loads(vo3d("compare", small, "--json", "-o", "reciprocal=false",
-                           "-o", "pz_buffer=0").stdout)
-    assert {k: v for k, v in rows[0].items() if k not in TIMING_KEYS} == in_file
+    buffer = derive_margins(load_scenario(small)).pz_buffer
+    back = vo3d("run", path, "--json", "-o", "reciprocal=true", "-o", f"pz_buffer={buffer!r}")
+    back_options = {"reciprocal": True, "pz_buffer": buffer}
+    assert _behaviour(back, back_options) == _behaviour(run_json)
+    res = vo3d("compare", small, "--json", "-o", "reciprocal=false", "-o", "pz_buffer=0")
+    assert res.returncode == 0, res.stderr
+    (row,) = json.loads(res.stdout)
+    assert row["selector_options"] == published
+    assert {k: v for k, v in row.items() if k not in TIMING_KEYS | {"selector_options"}} == in_file
 
 
 @pytest.mark.parametrize(
     "command, option, fragment",
     [
         pytest.param("run", "closing_guard=3", "selector_options.closing_guard", id="bad-value"),
-        pytest.param("run", "pz_bufer=1", "'pz_buffer'", id="unknown-key"),
+        pytest.param("run", "pz_bufer=1", "selector_options.pz_bufer: unknown key (did you mean "
+                     "'pz_buffer'?)", id="unknown-key"),
         pytest.param("run", "margin", "KEY=VALUE", id="no-value"),
+        pytest.param("run", "corrections=[tg_range", "selector_options.corrections: line 1",
+                     id="bad-yaml"),
         pytest.param("compare", "margin=-1", "selector_options.margin", id="compare"),
     ],
 )

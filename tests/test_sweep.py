@@ -7,17 +7,19 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import yaml
 import pytest
 from scipy.stats import binomtest
 
 from vo3d_opt.sim.metrics import CONTRACT_KEYS
-from vo3d_opt.sim.scenario import load_scenario, scenario_from_dict, scenario_variant
+from vo3d_opt.sim.scenario import load_scenario, scenario_from_dict
 from vo3d_opt.sweep import (
     FAMILIES,
     TIMING_COLUMNS,
@@ -269,10 +271,10 @@ def test_bad_options_are_refused_before_any_cluster_starts():
         run_sweep("pair", 0)
     with pytest.raises(SweepError, match="solver 'bogus'"):
         run_sweep("pair", 2, method=Method(solver="bogus"))
-    with pytest.raises(SweepError, match="selector_options.closing_guard: .*boolean"):
-        run_sweep("pair", 2, method=Method(selector_options=(("closing_guard", 3),)))
-    with pytest.raises(SweepError, match="selector_options.pz_bufer: .*'pz_buffer'"):
-        run_sweep("pair", 2, method=Method(selector_options=(("pz_bufer", 1.0),)))
+    with pytest.raises(ValueError, match="selector_options.closing_guard: .*boolean"):
+        Method(selector_options=(("closing_guard", 3),))
+    with pytest.raises(ValueError, match="selector_options.pz_bufer: .*'pz_buffer'"):
+        Method(selector_options=(("pz_bufer", 1.0),))
     with pytest.raises(SweepError, match="--selector-option: not used by --method rvo2"):
         run_sweep("pair", 2, method=Method(name="rvo2", selector_options=(("margin", 0.1),)))
 
@@ -299,7 +301,8 @@ def test_collisions_are_written_as_scenarios_that_vo3d_run_replays(cluster, tmp_
         for key, value in summary.items():
             if key in TIMING_SUMMARY_KEYS:
                 continue
-            expected = json.loads(row[key]) if key == "status_counts" else row[key]
+            as_text = key in ("status_counts", "selector_options")
+            expected = json.loads(row[key]) if as_text else row[key]
             if isinstance(value, float):  # vo3d run's JSON keeps 12 significant digits
                 assert value == pytest.approx(expected, rel=1e-11, abs=0), key
             else:
@@ -325,6 +328,8 @@ def test_sweep_json_prints_one_object_with_the_contract_keys(cluster, tmp_path):
     assert {"param_miss_distance", "param_speed_0"} <= set(rows.columns)
     assert set(CONTRACT_KEYS) <= set(rows.columns)
     assert (rows["selector_options"] == '{"closing_guard": true}').all()
+    table = vo3d("sweep", "pair", "--n", "1", "--scheduler", cluster, "-o", "closing_guard=true")
+    assert re.search(r"^selector_options +closing_guard=true$", table.stdout, re.M), table.stdout
     assert (tmp_path / "min_distance.png").stat().st_size > 0
 
 
@@ -337,6 +342,14 @@ def test_sweep_cli_lists_families_and_refuses_rvo2_with_obstacles():
     refused = vo3d("sweep", "group", "--n", "2", "--method", "rvo2")
     assert refused.returncode == 2 and refused.stdout == ""
     assert refused.stderr.strip().splitlines()[-1].startswith("vo3d: --method rvo2:")
+    bad = vo3d("sweep", "pair", "--n", "2", "-o", "margin=0", "-o", "closing_guard=[")
+    assert bad.returncode == 2 and bad.stdout == ""
+    (line,) = bad.stderr.strip().splitlines()
+    assert "selector_options.closing_guard" in line and "invalid YAML" in line
+    bad = vo3d("sweep", "pair", "--n", "2", "-o", "margin=0")
+    assert bad.returncode == 2 and bad.stdout == ""
+    assert bad.stderr.strip() == ("vo3d: --selector-option: selector_options.margin: input "
+                                  "should be greater than 0")
 
 
 def test_rvo2_flies_the_same_encounters_keeping_the_larger_r_pz_apart():
@@ -366,29 +379,47 @@ def test_formulation_and_solver_pass_through_to_the_runs_and_the_replays():
     assert data["agents"] == make_encounter("pair", 0, 1).scenario["agents"]
 
 
-def test_selector_options_pass_through_to_the_runs_and_the_replays():
-    """Each encounter flies as its scenario with the options in selector_options; the paper's
-    selection as published (no reciprocity, no buffer) flies differently from the defaults."""
-    options = (("reciprocal", False), ("pz_buffer", 0.0))
-    method = Method(selector_options=options)
+def test_selector_options_pass_through_to_the_runs_and_the_replays(tmp_path):
+    """Each encounter flies as its scenario with the options in selector_options (as a file
+    written with them flies); the paper's selection as published (no reciprocity, no buffer)
+    flies differently from the defaults."""
+    options = {"pz_buffer": 0.0, "reciprocal": False}
+    method = Method(selector_options=(("reciprocal", False), ("pz_buffer", 0)))
+    assert method == Method(selector_options=tuple(options.items()))  # one form: sorted, valid
     changed = 0
     for index in range(3):
         row = run_encounter("pair", 0, index, method)
-        assert row["error"] is None and json.loads(row["selector_options"]) == dict(options)
-        variant = scenario_variant(make_encounter("pair", 0, index).load(),
-                                   selector_options=dict(options))
-        _, summary = fly(variant, DEFAULT_METHOD)
+        assert row["error"] is None and json.loads(row["selector_options"]) == options
+        data = {**make_encounter("pair", 0, index).scenario, "selector_options": options}
+        _, summary = fly(scenario_from_dict(data), DEFAULT_METHOD)
         for key, value in summary.items():
             if key not in TIMING_SUMMARY_KEYS:
-                expected = json.loads(row[key]) if key == "status_counts" else row[key]
-                assert value == expected, (index, key)
-        changed += row["min_vehicle_distance"] != run_encounter("pair", 0, index)[
-            "min_vehicle_distance"]
+                as_text = key in ("status_counts", "selector_options")
+                assert value == (json.loads(row[key]) if as_text else row[key]), (index, key)
+        plain = run_encounter("pair", 0, index)
+        assert json.loads(plain["selector_options"]) == {}
+        changed += row["min_vehicle_distance"] != plain["min_vehicle_distance"]
     assert changed
     result = SweepResult(family=FAMILIES["pair"], seed=0, method=method, rows=pd.DataFrame())
     data = failure_scenario(result, 1)
-    assert data["selector_options"] == dict(options)
-    assert scenario_from_dict(data).selector_options == dict(options)
+    assert data["selector_options"] == options
+    path = tmp_path / "replay.yaml"
+    path.write_text(yaml.safe_dump(data))
+    replay = vo3d("run", path, "--json")
+    assert replay.returncode == 0, replay.stderr
+    assert json.loads(replay.stdout)["selector_options"] == options
+
+
+def test_a_family_s_own_selector_options_stay_under_the_method_s():
+    enc = make_encounter("pair", 0, 0)
+    sc = scenario_from_dict({**enc.scenario, "selector_options": {"margin": 0.01,
+                                                                  "reciprocal": True}})
+    _, summary = fly(sc, Method(selector_options=(("reciprocal", False),)))
+    assert summary["selector_options"] == {"margin": 0.01, "reciprocal": False}
+    with pytest.raises(ValueError, match="selector_options.corrections"):
+        Method(selector_options=(("corrections", ["bogus"]),))
+    kept = Method(selector_options=(("corrections", frozenset({"tg_range"})),))
+    assert kept.selector_options == (("corrections", ["tg_range"]),)  # JSON: rows, files
 
 
 # ------------------------------------------------- group variants (contracts §5 keys)

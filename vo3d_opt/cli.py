@@ -1,26 +1,27 @@
 """The ``vo3d`` command line (contract §3).
 
-* ``vo3d run SCENARIO [--formulation F] [--solver S] [--json] [--out DIR]`` runs one scenario,
-  every agent deciding for itself (the whole swarm in one ``select_many`` call per step); a
-  table by default, exactly one JSON object on stdout with ``--json``; ``--out DIR`` writes
-  ``trajectories.parquet`` (and ``trajectories.csv`` up to ``report.CSV_MAX_ROWS`` rows),
-  ``summary.json`` and the figures (``--format png|pdf|svg``, ``--dpi``, ``--zones``), and with
-  ``--animate`` ``animation.gif`` (``vo3d_opt.report``). The decisions use every core; set the
-  ``NUMBA_NUM_THREADS`` environment variable to use fewer.
+* ``vo3d run SCENARIO [--formulation F] [--solver S] [-o KEY=VALUE ...] [--json] [--out DIR]``
+  runs one scenario, every agent deciding for itself (the whole swarm in one ``select_many``
+  call per step); a table by default, exactly one JSON object on stdout with ``--json``;
+  ``--out DIR`` writes ``trajectories.parquet`` (and ``trajectories.csv`` up to
+  ``report.CSV_MAX_ROWS`` rows), ``summary.json`` and the figures (``--format png|pdf|svg``,
+  ``--dpi``, ``--zones``), and with ``--animate`` ``animation.gif`` (``vo3d_opt.report``). The
+  decisions use every core; set the ``NUMBA_NUM_THREADS`` environment variable to use fewer.
 * ``vo3d compare SCENARIO --formulations A B --solvers X Y [--json]`` runs every combination and
   prints one row per combination with the summary's columns (a JSON list with ``--json``).
 * ``vo3d list`` lists the bundled scenarios: name, agents, obstacles, first sentence.
 * ``vo3d sweep FAMILY --n N ...`` runs N random encounters on Dask (contract §6;
   ``vo3d_opt.sweep``).
-* ``--selector-option KEY=VALUE`` (``-o``, repeatable; run, compare, sweep): merged over the
-  scenario's ``selector_options`` and checked as they are.
+* ``--selector-option KEY=VALUE`` (``-o``, repeatable, the last of a repeated key wins; run,
+  compare, sweep): merged over the scenario's ``selector_options`` and checked as they are;
+  the summaries carry the scenario's ``selector_options`` so merged.
 
 SCENARIO is a path or the name of a bundled scenario. Progress and logs go to stderr through
 ``logging`` (``-q``: warnings and errors only, ``-v``: debugging detail too). Exit status: 0 when
 the runs completed (whatever their safety figures), 2 with a one-line message on stderr for an
-unreadable or invalid scenario, an unknown formulation or solver, or an ``--out`` directory that
-cannot be written (checked before the run), 1 when writing the outputs fails after the run (the
-summary is still printed).
+unreadable or invalid scenario, a bad ``--selector-option``, an unknown formulation or solver, or
+an ``--out`` directory that cannot be written (checked before the run), 1 when writing the
+outputs fails after the run (the summary is still printed).
 """
 
 from __future__ import annotations
@@ -199,7 +200,8 @@ def _run(sc: Scenario, sel: Any, formulation: str, solver: str) -> tuple[Any, di
     progress = None if log.isEnabledFor(logging.INFO) else False  # -q: no progress bar either
     with _stdout_to_stderr():
         record = Simulator(sc, sel, formulation=formulation, solver=solver).run(progress=progress)
-    summary = summarize(record)
+    # what the run added to the simulator's default options: the file's and -o's
+    summary = {**summarize(record), "selector_options": dict(sc.selector_options)}
     log.info(
         "done: %d steps, %d/%d arrived, %.2f s wall time",
         summary["steps"],
@@ -225,6 +227,7 @@ def _fmt(value: Any) -> str:
 def _print_summary(summary: dict[str, Any]) -> None:
     keys = list(CONTRACT_KEYS) + [
         "status_counts",
+        "selector_options",
         "obstacle_pz_intrusions",
         "starts_inside_pz",
         "arrival_time_max",

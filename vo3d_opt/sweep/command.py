@@ -19,6 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from vo3d_opt.sim.scenario import ScenarioError, check_selector_options
 from vo3d_opt.sweep.families import FAMILIES
 from vo3d_opt.sweep.runner import Method, SweepError, run_sweep, validate
 
@@ -58,7 +59,9 @@ def _list(as_json: bool) -> int:
 
 
 def _fmt(x: Any) -> str:
-    if x is None or x == {}:
+    if isinstance(x, dict):  # selector options, as -o takes them
+        return " ".join(f"{k}={json.dumps(v)}" for k, v in x.items()) or "-"
+    if x is None:
         return "-"
     return f"{x:.4g}" if isinstance(x, float) else str(x)
 
@@ -119,11 +122,15 @@ def main(
         raise SweepError("family: required (vo3d sweep --list names them)")
     if args.n is None:
         raise SweepError("--n: required (the number of encounters)")
+    try:
+        options = check_selector_options(dict(args.selector_options or ()), "--selector-option")
+    except ScenarioError as exc:
+        raise SweepError(str(exc)) from None
     method = Method(
         name=args.method,
         formulation=args.formulation,
         solver=args.solver,
-        selector_options=tuple(args.selector_options or ()),
+        selector_options=tuple(options.items()),
     )
     workers = 1 if args.workers is None and args.scheduler else args.workers
     validate(

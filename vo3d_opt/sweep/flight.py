@@ -18,7 +18,12 @@ from typing import Any
 import numpy as np
 
 from vo3d_opt.sim.metrics import pair_min_distances, summarize
-from vo3d_opt.sim.scenario import Scenario, scenario_from_dict, scenario_variant
+from vo3d_opt.sim.scenario import (
+    Scenario,
+    check_selector_options,
+    scenario_from_dict,
+    scenario_variant,
+)
 from vo3d_opt.sim.simulator import RunRecord, Simulator, scenario_selector
 from vo3d_opt.sweep.families import Family, get_family, make_encounter
 
@@ -41,12 +46,19 @@ class Method:
     as ``vo3d run`` takes them; None = the defaults) or ``rvo2`` (RVO2-3D,
     ``vo3d_opt.baselines.run_rvo2``). ``selector_options``: (key, value) pairs merged into
     every encounter's ``selector_options`` (``vo3d`` only), e.g.
-    ``(("closing_guard", True),)``."""
+    ``(("closing_guard", True),)``; kept validated, as a scenario file holds them, sorted by
+    key, the last of a repeated key (``ValueError`` naming a bad one)."""
 
     name: str = "vo3d"
     formulation: str | None = None
     solver: str | None = None
     selector_options: tuple[tuple[str, Any], ...] = ()
+
+    def __post_init__(self) -> None:
+        # One form per set of options: equal methods compare equal and every value is JSON
+        # (the rows, summary.json and the failure scenarios write them).
+        options = check_selector_options(dict(self.selector_options), "Method")
+        object.__setattr__(self, "selector_options", tuple(options.items()))
 
 
 #: The selector with its default formulation and solver.
@@ -54,7 +66,8 @@ DEFAULT_METHOD = Method()
 
 
 def fly(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, Any]]:
-    """Fly one scenario with the method; its record and its §3 summary.
+    """Fly one scenario with the method; its record and its §3 summary, with
+    ``selector_options``: the scenario's, the method's merged in (None for RVO2-3D).
 
     RVO2-3D keeps two agents ``radius_i + radius_j`` apart, so it flies every agent with the
     radius max(r_pz) / 2: each pair keeps at least its larger r_pz apart, which is what the
@@ -68,12 +81,12 @@ def fly(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, Any]]:
             update={"agents": [a.model_copy(update={"r_pz": r_pz}) for a in sc.agents]}
         )
         record = dataclasses.replace(run_rvo2(equal, progress=False), scenario=sc)
-        return record, summarize_rvo2(record)
+        return record, {**summarize_rvo2(record), "selector_options": None}
     if method.selector_options:
         sc = scenario_variant(sc, selector_options=dict(method.selector_options))
     sel, formulation, solver = scenario_selector(sc, method.formulation, method.solver)
     record = Simulator(sc, sel, formulation=formulation, solver=solver).run(progress=False)
-    return record, summarize(record)
+    return record, {**summarize(record), "selector_options": dict(sc.selector_options)}
 
 
 def normalised_min_distance(record: RunRecord) -> float | None:
@@ -102,10 +115,9 @@ def run_encounter(
     family: str | Family, seed: int, index: int, method: Method = Method()
 ) -> dict[str, Any]:
     """Regenerate and fly encounter ``index``; one row: family, seed, index, method, attempts,
-    ``param_*``, the summary's keys (``status_counts`` as JSON text),
+    ``param_*``, the summary's keys (``status_counts`` and ``selector_options`` as JSON text),
     ``min_normalised_distance``, ``error`` (None, or the exception in one line), ``run_time``
-    and ``worker``; ``selector_options`` (JSON text) when the method sets some. Never raises
-    for a failing encounter: the error is the row's."""
+    and ``worker``. Never raises for a failing encounter: the error is the row's."""
     t0 = time.perf_counter()
     fam = get_family(family)
     row: dict[str, Any] = {
@@ -115,14 +127,13 @@ def run_encounter(
         "method": method.name,
         "error": None,
     }
-    if method.selector_options:
-        row["selector_options"] = json.dumps(dict(method.selector_options), sort_keys=True)
     try:
         enc = make_encounter(fam, seed, index)
         row["attempts"] = enc.attempts
         row.update({f"param_{k}": v for k, v in enc.params.items()})
         record, summary = fly(enc.load(), method)
-        summary["status_counts"] = json.dumps(summary["status_counts"], sort_keys=True)
+        for key in ("status_counts", "selector_options"):
+            summary[key] = json.dumps(summary[key], sort_keys=True)
         row.update(summary)
         row["min_normalised_distance"] = normalised_min_distance(record)
     except Exception as exc:  # noqa: BLE001 - one bad encounter must not stop the sweep

@@ -1,7 +1,8 @@
 """What a sweep writes with ``--out DIR``:
 
 * ``encounters.parquet``: one row per encounter (family, seed, index, ``param_*``, the §3
-  summary, ``min_normalised_distance``, ``error``, ``run_time``, ``worker``);
+  summary with ``selector_options`` as JSON text, ``min_normalised_distance``, ``error``,
+  ``run_time``, ``worker``);
 * ``summary.json``: the sweep's summary (contract §6 keys and more);
 * ``min_distance.png``: the distribution of each encounter's smallest vehicle-vehicle distance
   over the larger protected-zone radius of the pair (d / r_pz; below 1 is an intrusion), as an

@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from tqdm import tqdm
 
-from vo3d_opt.sim.scenario import ScenarioError, check_selector_options
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.families import FAMILIES, Family, get_family
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, one_line
@@ -70,12 +69,9 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
                 "--method rvo2: the rvo23d module is missing (pip install 'vo3d-opt[baselines]')"
             )
         return rvo2.FORMULATION, f"rvo23d {rvo2.version()}"
-    try:
+    try:  # the options are valid (Method checks them): whether the selector takes them
         options = dict(method.selector_options)
-        check_selector_options(options, "--selector-option")
         _, formulation, solver = make_selector(method.formulation, method.solver, options)
-    except ScenarioError as exc:
-        raise SweepError(str(exc)) from None
     except (ValueError, TypeError) as exc:
         form, solver = method.formulation or "default", method.solver or "default"
         what = f"formulation {form!r}, solver {solver!r}"

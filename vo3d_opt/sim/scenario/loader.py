@@ -240,27 +240,29 @@ def _suggestion(name: str) -> str:
 
 def parse_option(text: str) -> tuple[str, Any]:
     """``KEY=VALUE`` from a command line: the key, and the value read as a scenario file's
-    value would be (YAML: ``true``, ``0.5``, ``[1, 2]``, ``1e-3``); ``ScenarioError`` for text
-    without a key or with a value that is no YAML."""
+    value would be (YAML: ``true``, ``0.5``, ``[1, 2]``, ``1e-3``; an empty value is null);
+    ``ScenarioError`` for text without a key or with a value that is no YAML."""
     key, sep, value = text.partition("=")
     if not sep or not key.strip():
         raise ScenarioError(f"expected KEY=VALUE, got {text!r}")
-    return key.strip(), _parse(value, key.strip())
+    return key.strip(), _parse(value, f"selector_options.{key.strip()}")
 
 
 def check_selector_options(options: dict[str, Any], source: str) -> dict[str, Any]:
     """``options`` checked as a scenario's ``selector_options`` would be (``ScenarioError``
-    naming ``selector_options.KEY``, ``source`` first); returned as they are."""
+    naming ``selector_options.KEY``, ``source`` first); returned validated, as a file would
+    hold them (JSON types: a set of corrections becomes a list, ``'5'`` for a number 5.0), in
+    key order."""
     from vo3d_opt.formulations.common import Options  # late: loading a file needs no solver
 
     try:
-        Options.model_validate(options)
+        valid = Options.model_validate(options)
     except ValidationError as exc:
         raise _fail(
             source,
             [_describe({**e, "loc": ("selector_options", *e["loc"])}) for e in exc.errors()],
         ) from None
-    return options
+    return dict(sorted(valid.model_dump(mode="json", include=set(options)).items()))
 
 
 def scenario_variant(sc: Scenario, **keys: Any) -> Scenario:
