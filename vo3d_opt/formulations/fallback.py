@@ -47,20 +47,6 @@ def polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
     return out[:m]
 
 
-@jit
-def _by_value(x: np.ndarray) -> np.ndarray:
-    """Indices that sort x, equal values in their original order (insertion sort: the grid
-    has a few hundred points)."""
-    order = np.empty(x.shape[0], dtype=np.int64)
-    for a in range(x.shape[0]):
-        b = a
-        while b > 0 and x[order[b - 1]] > x[a]:
-            order[b] = order[b - 1]
-            b -= 1
-        order[b] = a
-    return order
-
-
 @inline
 def _in_any(vos: VOs, v: np.ndarray, horizon: float, hint: np.ndarray) -> bool:
     """Whether some VO holds v (the exact 3D check), starting with hint[0], the VO that held
@@ -103,16 +89,23 @@ def safe_by_margin(
 
 @jit
 def grid_search(
-    vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config
+    vos: VOs,
+    planes: AvoidancePlanes,
+    grid: np.ndarray,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
 ) -> tuple[bool, np.ndarray, int]:
-    """The grid velocity nearest the preferred one that ``safe_by_margin`` accepts: (found,
-    velocity, plane index). Grid points equally far from it are tried plane by plane."""
-    grid, T = polar_grid(bounds, cfg), planes.to_plane
+    """The velocity of ``grid`` (``polar_grid``) on the planes nearest the preferred one that
+    ``safe_by_margin`` accepts: (found, velocity, plane index). Grid points equally far from it
+    are tried plane by plane."""
+    T = planes.to_plane
     w0 = T[0, 0, 0] * vos.v_pref[0] + T[0, 0, 1] * vos.v_pref[1] + T[0, 0, 2] * vos.v_pref[2]
     dev = np.empty(grid.shape[0])
     for g in range(grid.shape[0]):  # |v - v_pref|: the planes are isometric
         dev[g] = np.sqrt((grid[g, 0] - w0) ** 2 + grid[g, 1] ** 2)
-    order = _by_value(dev)
+    order = np.argsort(dev, kind="mergesort")  # stable: equal deviations in grid order
     hint = np.zeros(1, dtype=np.int64)
     v = np.empty(3)
     a = 0
@@ -123,6 +116,8 @@ def grid_search(
         for p in range(planes.phi.shape[0]):
             for q in range(a, b):
                 x, y = grid[order[q], 0], grid[order[q], 1]
+                if y == 0.0 and p > 0:  # on e1, the same velocity on every plane: tried on 0
+                    continue
                 for c in range(3):  # e1 is the same on every plane
                     v[c] = x * T[0, 0, c] + y * T[p, 1, c]
                 if safe_by_margin(vos, v, G3, h3, bounds, cfg, hint):
@@ -170,6 +165,7 @@ def _consider(
 def least_bad(
     vos: VOs,
     planes: AvoidancePlanes,
+    grid: np.ndarray,
     tried: np.ndarray,
     p: np.ndarray,
     v_now: np.ndarray,
@@ -178,12 +174,12 @@ def least_bad(
     bounds: Bounds,
     cfg: Config,
 ) -> np.ndarray:
-    """Among the tried answers (k, 3), the grid on every plane, zero and v_now, within the
+    """Among the tried answers (k, 3), ``grid`` on every plane, zero and v_now, within the
     limits, the velocity whose first protected-zone intrusion comes latest (ties: nearest the
     preferred velocity). With an acceleration limit each is also tried clipped into the
     reachable box (few grid points lie in it). None within the limits (e.g. v_min > 0 and
     zero): the limits' own closest point to hovering."""
-    grid, T = polar_grid(bounds, cfg), planes.to_plane
+    T = planes.to_plane
     best, key, hint = np.empty(3), np.empty(2), np.zeros(1, dtype=np.int64)
     best[0], key[0], key[1] = np.nan, np.inf, np.inf
     v = np.empty(3)
@@ -197,6 +193,8 @@ def least_bad(
             _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
         for pl in range(planes.phi.shape[0]):
             for g in range(grid.shape[0]):
+                if grid[g, 1] == 0.0 and pl > 0:  # on e1: plane 0's velocity, its key no better
+                    continue
                 for c in range(3):
                     v[c] = grid[g, 0] * T[pl, 0, c] + grid[g, 1] * T[pl, 1, c]
                 _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
@@ -222,9 +220,9 @@ def py_polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
 def py_grid_search(
     vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config
 ) -> tuple[bool, np.ndarray, int]:
-    """``grid_search`` for Python callers (compiled code calls ``grid_search``: no Python
-    wrapper)."""
-    return grid_search(vos, planes, G3, h3, bounds, cfg)
+    """``grid_search`` on ``polar_grid`` for Python callers (compiled code calls
+    ``grid_search``: no Python wrapper)."""
+    return grid_search(vos, planes, polar_grid(bounds, cfg), G3, h3, bounds, cfg)
 
 
 @entry
@@ -239,8 +237,9 @@ def py_least_bad(
     bounds: Bounds,
     cfg: Config,
 ) -> np.ndarray:
-    """``least_bad`` for Python callers (compiled code calls ``least_bad``: no Python wrapper)."""
-    return least_bad(vos, planes, tried, p, v_now, G3, h3, bounds, cfg)
+    """``least_bad`` on ``polar_grid`` for Python callers (compiled code calls ``least_bad``: no
+    Python wrapper)."""
+    return least_bad(vos, planes, polar_grid(bounds, cfg), tried, p, v_now, G3, h3, bounds, cfg)
 
 
 @entry

@@ -50,7 +50,7 @@ from .common import (
     vz_range,
     within_limits,
 )
-from .fallback import grid_search, least_bad
+from .fallback import grid_search, least_bad, polar_grid
 from .rows import ROUNDS, RowWork, plane_rows, row_work, vo_base
 
 #: How a decision's velocity was found (``KernelOut.round``): the preferred velocity, a QP round,
@@ -490,10 +490,11 @@ def decide_one(
         v = np.empty(3)
         lift(planes, qps.sol[r, plane], plane, v)
         return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], 1 + r, solved)
-    found, v, plane = grid_search(vos, planes, G3, h3, bounds, cfg)  # 5
+    grid = polar_grid(bounds, cfg)  # 5
+    found, v, plane = grid_search(vos, planes, grid, G3, h3, bounds, cfg)
     if found:
         return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], SAMPLED, solved)
-    v = least_bad(vos, planes, tried[:n_tried], p, v_now, G3, h3, bounds, cfg)
+    v = least_bad(vos, planes, grid, tried[:n_tried], p, v_now, G3, h3, bounds, cfg)
     return KernelOut(  # 6
         enforce_limits(v, p, bounds), INFEASIBLE_MIN_VIOLATION, np.nan, LEAST_BAD, solved
     )
