@@ -210,6 +210,57 @@ def test_neighbour_lists_are_brute_force_with_ties_and_crowds(k, spacing):
     assert longest > 48 if spacing == 4.0 else longest < 48
 
 
+def _brute_lists(P, who, sensing_range, k):
+    dist = np.linalg.norm(P[:, None, :] - P[None, :, :], axis=-1)
+    out = []
+    for i in who:
+        js = [j for j in range(P.shape[0]) if j != i and dist[i, j] <= sensing_range]
+        out.append(sorted(sorted(js, key=lambda j: dist[i, j])[:k]))
+    return out
+
+
+@pytest.mark.parametrize("crowded", [True, False])
+@pytest.mark.parametrize("kind", ["uniform", "crowd", "sphere", "grid", "coincident"])
+def test_nearest_lists_are_brute_force_where_the_tree_cannot_settle_them(kind, crowded, monkeypatch):
+    """With max_neighbors, in a crowd (``_crowded``, forced here both ways) the lists come from
+    one k-nearest query of the k-d tree, and a vehicle whose proposals leave a tie possible at
+    the edge takes all within range instead; elsewhere from every pair within range. Every way
+    the lists are the brute-force ones; on a grid and on shared spots (distances tied) some
+    vehicles do take the all-within-range way, at random positions none does."""
+    from vo3d_opt import swarm
+
+    calls = []
+    monkeypatch.setattr(swarm, "_crowded", lambda *args: crowded)
+
+    class Tree(swarm.cKDTree):
+        def query_ball_point(self, *args, **kwargs):
+            calls.append(1)
+            return super().query_ball_point(*args, **kwargs)
+
+    monkeypatch.setattr(swarm, "cKDTree", Tree)
+    rng = np.random.default_rng(["uniform", "crowd", "sphere", "grid", "coincident"].index(kind))
+    for _ in range(20):
+        n = int(rng.integers(20, 200))
+        if kind == "uniform":
+            P = rng.uniform(-60.0, 60.0, (n, 3))
+        elif kind == "crowd":
+            P = rng.normal(0.0, 3.0, (n, 3))
+        elif kind == "sphere":
+            u = rng.normal(size=(n, 3))
+            P = 40.0 * u / np.linalg.norm(u, axis=1, keepdims=True)
+        elif kind == "grid":
+            g = np.arange(6) * float(rng.choice([1.0, 2.5, 4.0]))
+            P = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)[:n]
+        else:
+            P = np.round(rng.uniform(-3.0, 3.0, (n, 3)))
+        who = np.flatnonzero(rng.random(P.shape[0]) < 0.8)
+        k, reach = int(rng.integers(1, 12)), float(rng.choice([2.0, 10.0, 55.0]))
+        span, idx = swarm.vehicle_links(P, who, reach, k)
+        want = _brute_lists(P, who, reach, k)
+        assert [list(idx[a:b]) for a, b in span] == want
+    assert (len(calls) > 0) == (crowded and kind in ("grid", "coincident"))
+
+
 def test_crowded_swarm_equals_a_loop_of_select():
     sel = VelocitySelector(reciprocal=True)
     P, V, W, R = random_swarm(2, n=60, side=30.0)
