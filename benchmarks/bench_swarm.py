@@ -18,10 +18,12 @@ and the compiled decisions) or ``doStep()`` (RVO2-3D: its k-d tree, its linear p
 position update) divided by the agent-steps; "loop µs" the whole loop's wall time (preferred
 velocities, dynamics, recording, RVO2's Python setters) per agent-step. Each run is its own
 process, so "peak MB" is that run's peak resident memory (the run, its record and its metrics).
-``--profile`` adds where ours spends its time on the first steps of each N = 1000 case.
+``--profile`` adds where ours spends its time on the first steps of each N = 1000 case
+(``--profile-steps K``: the first K, default 100; 0: the whole run).
 
     python benchmarks/bench_swarm.py [--sizes 100 1000 10000] [--cases swap crossing]
-        [--methods ours-1 ours-all ours-guard rvo2] [--max-neighbors 10] [--max-steps N=K ...] [--profile]
+        [--methods ours-1 ours-all ours-guard rvo2] [--max-neighbors 10] [--max-steps N=K ...]
+        [--profile [--profile-steps K]]
         [--out benchmarks/results_swarm.md]
 
 Writes the markdown table to ``--out`` as rows finish (one line of JSON per run also goes to
@@ -103,8 +105,8 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
     }
 
 
-def profile_run(case: str, n: int, max_neighbors: int, steps: int) -> dict[str, Any]:
-    """Where ours (1 thread) spends the first ``steps`` steps: the input checks, the k-d tree
+def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dict[str, Any]:
+    """Where ours (1 thread) spends the first ``steps`` steps (None: the whole run): the input checks, the k-d tree
     and neighbour lists, the compiled decisions (of which building each vehicle's rows, timed
     apart by a compiled loop that only builds them), the rest of the loop, the metrics."""
     import numba
@@ -215,7 +217,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
     ap.add_argument("--max-neighbors", type=int, default=10)
     ap.add_argument("--max-steps", nargs="*", default=[], metavar="N=K", help="cap the runs of size N at K steps")
-    ap.add_argument("--profile", action="store_true", help="also profile ours on the first 100 steps at N = 1000")
+    ap.add_argument("--profile", action="store_true", help="also profile ours on the first steps at N = 1000")
+    ap.add_argument("--profile-steps", type=int, default=100, metavar="K",
+                    help="profile the first K steps (0: the whole run)")
     ap.add_argument("--out", type=Path, default=Path(__file__).with_name("results_swarm.md"))
     ap.add_argument("--one", nargs=3, metavar=("CASE", "N", "METHOD"), help=argparse.SUPPRESS)
     ap.add_argument("--profile-one", nargs=2, metavar=("CASE", "N"), help=argparse.SUPPRESS)
@@ -228,7 +232,8 @@ def main(argv: list[str] | None = None) -> None:
         print(json.dumps(row))
         return
     if args.profile_one:
-        print(json.dumps(profile_run(args.profile_one[0], int(args.profile_one[1]), args.max_neighbors, 100)))
+        steps = args.profile_steps or None
+        print(json.dumps(profile_run(args.profile_one[0], int(args.profile_one[1]), args.max_neighbors, steps)))
         return
     caps = {int(k): int(v) for k, v in (item.split("=") for item in args.max_steps)}
     lines = [f"# Swarm benchmark ({Path(__file__).name})", "", _machine(), "",
@@ -258,12 +263,14 @@ def main(argv: list[str] | None = None) -> None:
                 print(lines[-1], flush=True)
                 flush()
     if args.profile:
-        lines += ["", "Where ours spends its time (1 thread, first 100 steps at N = 1000, µs per agent-step):", "",
+        flown = f"first {args.profile_steps} steps" if args.profile_steps else "the whole run"
+        lines += ["", f"Where ours spends its time (1 thread, {flown} at N = 1000, µs per agent-step):", "",
                   "| case | checks | k-d tree + neighbour lists | compiled decisions | of which row building "
                   "| select_many total | rest of the loop | metrics | load |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for case in args.cases:
             res = subprocess.run([sys.executable, __file__, "--profile-one", case, "1000", "--max-neighbors",
-                                  str(args.max_neighbors)], capture_output=True, text=True)
+                                  str(args.max_neighbors), "--profile-steps", str(args.profile_steps)],
+                                 capture_output=True, text=True)
             if res.returncode != 0:
                 lines.append(f"| {case} | failed: {res.stderr.strip().splitlines()[-1:]} |")
                 continue
