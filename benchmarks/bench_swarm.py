@@ -106,9 +106,10 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
 
 
 def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dict[str, Any]:
-    """Where ours (1 thread) spends the first ``steps`` steps (None: the whole run): the input checks, the k-d tree
-    and neighbour lists, the compiled decisions (of which building each vehicle's rows, timed
-    apart by a compiled loop that only builds them), the rest of the loop, the metrics."""
+    """Where ours (1 thread) spends the first ``steps`` steps (None: the whole run): the input
+    checks, the k-d tree and neighbour lists, the compiled decisions (of which building each
+    vehicle's rows, timed apart by a compiled loop that only builds them), the rest of the loop,
+    the metrics."""
     import numba
 
     from vo3d_opt import swarm
@@ -225,6 +226,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--profile-one", nargs=2, metavar=("CASE", "N"), help=argparse.SUPPRESS)
     ap.add_argument("--cap", type=int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.profile_steps < 0:
+        ap.error("--profile-steps must be 0 (the whole run) or more")
     if args.one:
         case, n, method = args.one
         row = one_run(case, int(n), method, args.max_neighbors, args.cap)

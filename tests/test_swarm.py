@@ -219,46 +219,56 @@ def _brute_lists(P, who, sensing_range, k):
     return out
 
 
-@pytest.mark.parametrize("crowded", [True, False])
-@pytest.mark.parametrize("kind", ["uniform", "crowd", "sphere", "grid", "coincident"])
-def test_nearest_lists_are_brute_force_where_the_tree_cannot_settle_them(kind, crowded, monkeypatch):
+SWARM_KINDS = ("uniform", "crowd", "sphere", "grid", "coincident", "pile")
+TIED = ("grid", "coincident", "pile")  # distances tie: some lists cannot be settled by the query
+
+
+def _kind_of_swarm(kind, rng):
+    n = int(rng.integers(20, 200))
+    if kind == "uniform":
+        return rng.uniform(-60.0, 60.0, (n, 3))
+    if kind == "crowd":
+        return rng.normal(0.0, 3.0, (n, 3))
+    if kind == "sphere":
+        u = rng.normal(size=(n, 3))
+        return 40.0 * u / np.linalg.norm(u, axis=1, keepdims=True)
+    if kind == "grid":
+        g = np.arange(6) * float(rng.choice([1.0, 2.5, 4.0]))
+        return np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)[:n]
+    if kind == "coincident":  # a few vehicles share each spot
+        return np.round(rng.uniform(-3.0, 3.0, (n, 3)))
+    return np.round(rng.uniform(-1.0, 1.0, (n, 3)))  # pile: more than k + 5 on a spot
+
+
+@pytest.mark.parametrize(("crowded", "share"), [(False, 0.05), (True, 0.0), (True, 1.0)])
+@pytest.mark.parametrize("kind", SWARM_KINDS)
+def test_nearest_lists_are_brute_force_where_the_tree_cannot_settle_them(
+    kind, crowded, share, monkeypatch
+):
     """With max_neighbors, in a crowd (``_crowded``, forced here both ways) the lists come from
-    one k-nearest query of the k-d tree, and a vehicle whose proposals leave a tie possible at
-    the edge takes all within range instead; elsewhere from every pair within range. Every way
-    the lists are the brute-force ones; on a grid and on shared spots (distances tied) some
-    vehicles do take the all-within-range way, at random positions none does."""
+    one k-nearest query of the k-d tree; a vehicle whose proposals leave a tie possible at the
+    edge ranks all within range instead, or, when more than ``_UNSETTLED`` of them would (0: at
+    the first, 1: never), the whole call lists every pair within range. Every way the lists
+    are the brute-force ones, ranges of 0 and inf included; ties (a grid, shared spots) take
+    the slow ways, random positions never do."""
     from vo3d_opt import swarm
 
-    calls = []
+    ranked, dropped = [], []
+    real_ranked, real_nearest = swarm._ranked_within, swarm._nearest_links
     monkeypatch.setattr(swarm, "_crowded", lambda *args: crowded)
-
-    class Tree(swarm.cKDTree):
-        def query_ball_point(self, *args, **kwargs):
-            calls.append(1)
-            return super().query_ball_point(*args, **kwargs)
-
-    monkeypatch.setattr(swarm, "cKDTree", Tree)
-    rng = np.random.default_rng(["uniform", "crowd", "sphere", "grid", "coincident"].index(kind))
+    monkeypatch.setattr(swarm, "_UNSETTLED", share)
+    monkeypatch.setattr(swarm, "_ranked_within", lambda *a: ranked.append(1) or real_ranked(*a))
+    monkeypatch.setattr(swarm, "_nearest_links", lambda *a: real_nearest(*a) or dropped.append(1))
+    rng = np.random.default_rng(SWARM_KINDS.index(kind))
     for _ in range(20):
-        n = int(rng.integers(20, 200))
-        if kind == "uniform":
-            P = rng.uniform(-60.0, 60.0, (n, 3))
-        elif kind == "crowd":
-            P = rng.normal(0.0, 3.0, (n, 3))
-        elif kind == "sphere":
-            u = rng.normal(size=(n, 3))
-            P = 40.0 * u / np.linalg.norm(u, axis=1, keepdims=True)
-        elif kind == "grid":
-            g = np.arange(6) * float(rng.choice([1.0, 2.5, 4.0]))
-            P = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)[:n]
-        else:
-            P = np.round(rng.uniform(-3.0, 3.0, (n, 3)))
+        P = _kind_of_swarm(kind, rng)
         who = np.flatnonzero(rng.random(P.shape[0]) < 0.8)
-        k, reach = int(rng.integers(1, 12)), float(rng.choice([2.0, 10.0, 55.0]))
+        k, reach = int(rng.integers(1, 12)), float(rng.choice([0.0, 2.0, 10.0, 55.0, np.inf]))
         span, idx = swarm.vehicle_links(P, who, reach, k)
-        want = _brute_lists(P, who, reach, k)
-        assert [list(idx[a:b]) for a, b in span] == want
-    assert (len(calls) > 0) == (crowded and kind in ("grid", "coincident"))
+        assert [list(idx[a:b]) for a, b in span] == _brute_lists(P, who, reach, k)
+    tied = crowded and kind in TIED
+    assert (len(ranked) > 0) == (tied and share == 1.0)
+    assert (len(dropped) > 0) == (tied and share == 0.0)
 
 
 def test_crowded_swarm_equals_a_loop_of_select():

@@ -215,7 +215,9 @@ def vehicle_links(
         return np.zeros((D, 2), dtype=np.int64), _EMPTY
     tree = cKDTree(P)
     if max_neighbors is not None and _crowded(tree, P, who, sensing_range, max_neighbors):
-        return _nearest_links(tree, P, who, sensing_range, int(max_neighbors))
+        links = _nearest_links(tree, P, who, sensing_range, int(max_neighbors))
+        if links is not None:
+            return links
     pairs = tree.query_pairs(_reach(sensing_range), output_type="ndarray")
     a, b = np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1])
     dist = np.linalg.norm(P[a] - P[b], axis=-1)
@@ -234,12 +236,16 @@ _SPARE = 4
 #: vehicles has on average more than _CROWD times k + 1 + _SPARE vehicles within range: a pair
 #: costs about 0.1 µs, the query about 3 µs per vehicle (2-core VM, 2026-11-24).
 _CROWD = 3
+#: The query is dropped for every pair again when more than this share of the deciding vehicles
+#: cannot settle their lists from its proposals (ties at the edge: a lattice), as each of those
+#: then costs a query of its own.
+_UNSETTLED = 0.05
 
 
 def _crowded(tree: cKDTree, P: np.ndarray, who: np.ndarray, sensing_range: float, k: int) -> bool:
     """Whether every pair within range costs more than one k-nearest query per vehicle, judged on
-    32 deciding vehicles spread over the index (a question of speed only: both ways give the
-    same lists)."""
+    32 to 63 deciding vehicles spread over the index (every (D // 32)-th: a question of speed
+    only, both ways give the same lists)."""
     K = k + 1 + _SPARE
     if K >= P.shape[0]:
         return False
@@ -249,21 +255,32 @@ def _crowded(tree: cKDTree, P: np.ndarray, who: np.ndarray, sensing_range: float
 
 
 def _pair_distance(P: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-    """numpy's distance between vehicles i and j (broadcast), the lower index first: the same
-    floating-point number query_pairs' (lower, higher) pairs get in ``vehicle_links``."""
-    lo, hi = np.minimum(i, j), np.maximum(i, j)
-    return np.asarray(np.linalg.norm(P[lo] - P[hi], axis=-1))
+    """numpy's distance between vehicles i and j (broadcast): bit for bit the number the
+    all-pairs path gets for the pair (a subtraction's sign flips exactly)."""
+    return np.asarray(np.linalg.norm(P[i] - P[j], axis=-1))
+
+
+def _ranked_within(
+    tree: cKDTree, P: np.ndarray, i: int, sensing_range: float, k: int
+) -> np.ndarray:
+    """Vehicle i's k nearest within range among all of them (ties: the lower index)."""
+    cand = np.asarray(tree.query_ball_point(P[i], _reach(sensing_range)), dtype=np.int64)
+    cand = cand[cand != i]
+    d = _pair_distance(P, np.array([i]), cand)
+    cand, d = cand[d <= sensing_range], d[d <= sensing_range]
+    return cand[np.lexsort((cand, d))[:k]]
 
 
 def _nearest_links(
     tree: cKDTree, P: np.ndarray, who: np.ndarray, sensing_range: float, k: int
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray] | None:
     """``vehicle_links`` with max_neighbors = k from one k-nearest query of the tree: O(D k log n)
     where every pair within range costs O(pairs), the whole swarm's square in a crowd (the
     sphere swap's centre). The same lists, tie for tie: numpy's distance ranks the proposed
     vehicles (ties: the lower index). A vehicle whose proposals cannot settle its list (the
     farthest proposed is not clearly farther than its k-th nearest or the range: a tie may hide
-    beyond) takes all within range, as ``vehicle_links`` does for every vehicle."""
+    beyond) ranks all within range instead; None when more than _UNSETTLED of the vehicles
+    would (a lattice, where distances tie everywhere: every pair is then cheaper)."""
     n, D, K = P.shape[0], who.shape[0], k + 1 + _SPARE
     far, near = tree.query(P[who], k=K, distance_upper_bound=_reach(sensing_range))
     ok = (near < n) & (near != who[:, None])
@@ -280,12 +297,11 @@ def _nearest_links(
     # Every vehicle the tree did not propose is at least far[:, -1] away by its distance, which
     # is numpy's within a few ulps: settled when that is clearly beyond the edge.
     settled = np.isinf(far[:, -1]) | (far[:, -1] > edge * (1.0 + 1e-9) + 1e-12)
-    for r in np.flatnonzero(~settled):
-        cand = np.asarray(tree.query_ball_point(P[who[r]], _reach(sensing_range)), dtype=np.int64)
-        cand = cand[cand != who[r]]
-        d = _pair_distance(P, who[r : r + 1], cand)
-        cand, d = cand[d <= sensing_range], d[d <= sensing_range]
-        pick = cand[np.lexsort((cand, d))[:k]]
+    unsettled = np.flatnonzero(~settled)
+    if unsettled.shape[0] > _UNSETTLED * D:
+        return None
+    for r in unsettled:
+        pick = _ranked_within(tree, P, int(who[r]), sensing_range, k)
         chosen[r] = n
         chosen[r, : pick.shape[0]] = pick
     chosen.sort(axis=1)  # each list in index order
