@@ -4,16 +4,44 @@ clipped into the reachable box) within the limits, the latest first intrusion, t
 the preferred velocity, the first such candidate in that order."""
 from __future__ import annotations
 
+import numba
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from encounters import encounters
-from vo3d_opt import AgentState, Limits
-from vo3d_opt.formulations.common import NEVER, Options, prepare, py_decision_planes
-from vo3d_opt.formulations.fallback import py_least_bad, py_polar_grid
+from vo3d_opt import AgentState, Limits, Neighbor
+from vo3d_opt.formulations.common import (
+    NEVER,
+    Options,
+    _zone_time,
+    prepare,
+    py_decision_planes,
+    zone_time_bound,
+)
+from vo3d_opt.formulations.fallback import (
+    first_safe,
+    grid_of,
+    py_grid_search,
+    py_least_bad,
+    py_polar_grid,
+)
+from vo3d_opt.geometry.membership import ball_in_cone, in_vo_cones
 
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
+
+# the compiled helpers have no Python wrapper: called through these
+_grid_of = numba.njit(lambda bounds, cfg: grid_of(bounds, cfg))
+
+
+@numba.njit
+def _block_covered(cones, to_plane, discs, b, p):
+    c = discs[b, 0] * to_plane[0, 0] + discs[b, 1] * to_plane[p, 1]
+    for k in range(cones.d_oi.shape[0]):
+        if ball_in_cone(cones, k, c, discs[b, 2]):
+            return True
+    return False
 
 
 def _candidates(enc, planes, tried, grid):
@@ -60,3 +88,149 @@ def test_least_bad_is_the_latest_intrusion(kw, accel, n_tried, seed):
     assert min(enc.time_to_intrusion(got)[0], NEVER) == t
     assert abs(np.linalg.norm(got - enc.v_pref) - dev) <= 1e-12
     np.testing.assert_allclose(got, v, atol=1e-9)
+
+
+# ------------------------------------------------------------- the grid's blocks, in a crowd
+
+def _crowd(seed: int, n: int = 30, inside: bool = False):
+    """A vehicle amid n neighbours 6–30 m away (r_pz 5) closing in from all sides: most of the
+    grid lies in some VO, so the fallbacks' blocks decide most points. ``inside``: one
+    neighbour's zone already holds the vehicle (its VO is then a half-space, no block's)."""
+    rng = np.random.default_rng(seed)
+    p = np.array([0.0, 0.0, 30.0])
+    nbs = []
+    for k in range(n):
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        dist = 3.0 if (inside and k == 0) else rng.uniform(6.0, 30.0)
+        vel = -d * rng.uniform(0.0, 4.0) + rng.normal(size=3) * 0.5
+        nbs.append(Neighbor(position=p + dist * d, velocity=vel, r_pz=5.0))
+    v_pref = rng.normal(size=3)
+    v_pref *= rng.uniform(1.0, 4.0) / np.linalg.norm(v_pref)
+    return dict(own=AgentState(position=p, velocity=v_pref), preferred_velocity=v_pref,
+                neighbors=nbs, obstacles=[], limits=Limits(speed=(0.0, 4.0), altitude=(0.0, 60.0)),
+                dt=0.2)
+
+
+def _grid_reference(enc, planes, grid):
+    """grid_search in plain numpy: points in order of deviation (ties within 1e-12 plane by
+    plane, then in grid order), on e1 on plane 0 only; the first that ``first_safe`` (point
+    by point, no blocks) accepts."""
+    w0 = planes.to_plane[0, 0] @ enc.v_pref
+    dev = np.sqrt((grid[:, 0] - w0) ** 2 + grid[:, 1] ** 2)
+    order = np.argsort(dev, kind="mergesort")
+    cands, where = [], []
+    a = 0
+    while a < len(order):
+        b = a
+        while b < len(order) and dev[order[b]] <= dev[order[a]] + 1e-12:
+            b += 1
+        for p in range(len(planes.phi)):
+            for g in order[a:b]:
+                if grid[g, 1] == 0.0 and p > 0:
+                    continue
+                cands.append(grid[g, 0] * planes.to_plane[0, 0] + grid[g, 1] * planes.to_plane[p, 1])
+                where.append(p)
+        a = b
+    k = first_safe(enc, np.array(cands))
+    return (False, -1) if k is None else (True, where[k], cands[k])
+
+
+@pytest.mark.parametrize("seed", range(24))
+def test_fallbacks_with_blocks_are_the_point_by_point_answers(seed):
+    """In crowds (most points decided by their block) grid_search returns the reference's point
+    and plane, least_bad the reference's key and velocity; with and without a horizon (which
+    turns the grid's blocks off), with A inside a zone (a VO no block lies in)."""
+    kw = _crowd(seed, n=20 + seed, inside=seed % 4 == 3)
+    horizon = 8.0 if seed % 3 == 2 else None
+    enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
+                  kw["limits"], kw["dt"], Options(horizon=horizon))
+    cfg = enc.options.config
+    planes = py_decision_planes(enc.vos, enc.v_now, cfg)
+    G3, h3 = enc.linear_bounds()
+    found, v, p = py_grid_search(enc.vos, planes, G3, h3, enc.bounds, cfg)
+    ref = _grid_reference(enc, planes, py_polar_grid(enc.bounds, cfg))
+    assert found == ref[0]
+    if found:
+        assert p == ref[1]
+        np.testing.assert_array_equal(v, ref[2])
+    rng = np.random.default_rng(seed)
+    tried = np.ascontiguousarray(rng.uniform(-4.0, 4.0, (8, 3)))
+    got = py_least_bad(enc.vos, planes, tried, np.asarray(enc.position, float), enc.v_now, G3, h3,
+                       enc.bounds, cfg)
+    v_ref, t_ref, dev_ref = _reference(enc, planes, tried)
+    assert min(enc.time_to_intrusion(got)[0], NEVER) == t_ref
+    assert abs(np.linalg.norm(got - enc.v_pref) - dev_ref) <= 1e-12
+    np.testing.assert_allclose(got, v_ref, atol=1e-9)
+
+
+def test_the_crowds_use_the_blocks():
+    """The crowds above are ones where blocks decide: most grid points on most planes lie in a
+    VO cone's block (else the test above would not test them)."""
+    covered = []
+    for seed in range(6):
+        kw = _crowd(seed, n=30)
+        enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
+                      kw["limits"], kw["dt"], Options())
+        planes = py_decision_planes(enc.vos, enc.v_now, enc.options.config)
+        grid = _grid_of(enc.bounds, enc.options.config)
+        covered.append(np.mean([_block_covered(enc.vos.cones, planes.to_plane, grid.discs, b, p)
+                                for p in range(len(planes.phi)) for b in range(len(grid.discs))]))
+    assert np.mean(covered) > 0.5
+
+
+# ------------------------------------------- the blocks' certificates against brute force
+
+@numba.njit
+def _zone_times(vos, k, v):
+    out = np.empty(v.shape[0])
+    for m in range(v.shape[0]):
+        out[m] = _zone_time(vos, k, v[m])
+    return out
+
+
+_time_bound = numba.njit(lambda vos, k, c, rho: zone_time_bound(vos, k, c, rho))
+_ball_in = numba.njit(lambda cones, k, c, rho: ball_in_cone(cones, k, c, rho))
+
+
+def _ball_points(rng, c, rho, m=400):
+    """m velocities in the ball of radius rho about c, half of them on its surface."""
+    d = rng.normal(size=(m, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    r = np.where(np.arange(m) % 2 == 0, rho, rho * rng.uniform(0, 1, m) ** (1 / 3))
+    return np.ascontiguousarray(c + d * r[:, None])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_block_certificates_hold_for_every_velocity_of_the_ball(seed):
+    """Whenever ``ball_in_cone`` certifies a ball, the exact membership (as computed) holds at
+    each of 400 of its velocities (half on its surface); whenever ``zone_time_bound`` gives a
+    time, the zone time (as computed) is at most that at each of them. Balls from deep inside
+    to far outside the cone, of every size: both certificates certify some and refuse some,
+    and the time bound is tight within a factor 3 on some (it bounds something)."""
+    rng = np.random.default_rng(seed)
+    kw = _crowd(seed, n=12, inside=seed == 5)
+    enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
+                  kw["limits"], kw["dt"], Options())
+    cones = enc.vos.cones
+    certified = refused = timed = tight = 0
+    for _ in range(300):
+        k = int(rng.integers(cones.d_oi.shape[0]))
+        axis = cones.rel[k] / np.linalg.norm(cones.rel[k])
+        # a centre about the axis (near it, or anywhere), at 0.2–8 m/s from the apex
+        off = rng.normal(size=3) * rng.choice([0.05, 0.3, 1.0])
+        c = cones.apex[k] + (axis + off) / np.linalg.norm(axis + off) * rng.uniform(0.2, 8.0)
+        rho = float(rng.choice([1e-6, 0.05, 0.5, 2.0]) * rng.uniform(0.5, 1.0))
+        pts = _ball_points(rng, c, rho)
+        if _ball_in(cones, k, c, rho):
+            certified += 1
+            assert in_vo_cones(cones, pts)[k].all()
+        else:
+            refused += 1
+        bound = _time_bound(enc.vos, k, c, rho)
+        if bound < np.inf:
+            timed += 1
+            times = _zone_times(enc.vos, k, pts)
+            assert (times <= bound).all()
+            tight += times.max() >= bound / 3
+    assert refused > 0 and (seed == 5 or (certified > 0 and timed > 0 and tight > 0))

@@ -394,6 +394,35 @@ def _zone_time(vos: VOs, k: int, v: np.ndarray) -> float:
 
 
 @inline
+def zone_time_bound(vos: VOs, k: int, c: np.ndarray, rho: float) -> float:
+    """A time by which zone k (a cone: k < the cone count) is entered, as ``_zone_time``
+    computes it, at every velocity within ``rho`` of ``c``; inf when none is known (A inside
+    the zone, the ball reaching the apex or not wholly closing in).
+
+    ``_zone_time``'s root is Q / (pu + sqrt(pu^2 - |u|^2 Q)), Q = d_oi^2 - r_pz^2, which falls
+    as pu = rel·u and the root's argument rise: over the ball pu >= pu_c - |rel| rho and
+    |u| <= |u_c| + rho bound both from below. Widened far beyond the rounding of the root as
+    ``_zone_time`` computes it, so that every velocity of the ball is computed to enter before
+    this time, not only in exact arithmetic."""
+    cones = vos.cones
+    if cones.inside[k]:
+        return np.inf
+    a, rel = cones.apex[k], cones.rel[k]
+    u0, u1, u2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    nu = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    nrel = np.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2)
+    pu_lo = rel[0] * u0 + rel[1] * u1 + rel[2] * u2 - nrel * rho
+    Q = cones.d_oi[k] ** 2 - cones.r_pz[k] ** 2
+    disc_lo = pu_lo * pu_lo - (nu + rho) ** 2 * Q
+    if not (nu > rho and pu_lo > 0.0 and Q > 0.0 and disc_lo > 0.0):  # NaN fails too
+        return np.inf
+    t, pu_hi, uu_lo = Q / (pu_lo + np.sqrt(disc_lo)), nrel * (nu + rho), (nu - rho) ** 2
+    # the root's rounding: pu^2 - |u|^2 Q is off by a few ulp of pu_hi^2, its square root by
+    # that over sqrt(disc_lo) (large near a tangent), the root by those over |u|^2
+    return t + 1e-9 * (t + pu_hi / uu_lo) + 1e-12 * pu_hi * pu_hi / np.sqrt(disc_lo) / uu_lo
+
+
+@inline
 def time_to_intrusion(vos: VOs, v: np.ndarray, floor: float, hint: np.ndarray) -> float:
     """The earliest time (s) any protected zone would be entered at velocity v (inf: never; 0:
     inside and closing). The least-bad velocity maximises it. Once the time is known to be

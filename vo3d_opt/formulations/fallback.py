@@ -9,11 +9,13 @@ The compiled kernel calls ``grid_search`` and ``least_bad`` directly; the Python
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .._jit import entry, inline, jit
 from ..geometry import AvoidancePlanes
-from ..geometry.membership import clearance, in_cone, in_pyramid
+from ..geometry.membership import ball_in_cone, clearance, in_cone, in_pyramid
 from ..status import Status
 from .common import (
     NEVER,
@@ -25,16 +27,16 @@ from .common import (
     time_to_intrusion,
     vz_range,
     within_limits,
+    zone_time_bound,
 )
 
 
 @jit
-def polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
-    """(M, 2) in-plane candidates: ``speed_levels`` speeds from v_min to v_max, headings every
-    ``heading_step``; speed 0 once, repeated speeds once."""
+def _polar(bounds: Bounds, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
+    """``polar_grid``'s points and, for each, its speed level and heading index (M, 2)."""
     L = cfg.speed_levels
     H = int(np.ceil(2.0 * np.pi / cfg.heading_step - 1e-9))
-    out = np.empty((L * H, 2))
+    out, where = np.empty((L * H, 2)), np.empty((L * H, 2), dtype=np.int64)
     m = 0
     for a in range(L):
         s = bounds.v_min + (bounds.v_max - bounds.v_min) * a / (L - 1)
@@ -43,8 +45,56 @@ def polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
         for k in range(1 if s == 0.0 else H):  # rounded as numpy's round(12) does
             out[m, 0] = np.rint(s * np.cos(k * cfg.heading_step) * 1e12) / 1e12
             out[m, 1] = np.rint(s * np.sin(k * cfg.heading_step) * 1e12) / 1e12
+            where[m, 0], where[m, 1] = a, k
             m += 1
-    return out[:m]
+    return out[:m], where[:m]
+
+
+@jit
+def polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
+    """(M, 2) in-plane candidates: ``speed_levels`` speeds from v_min to v_max, headings every
+    ``heading_step``; speed 0 once, repeated speeds once."""
+    return _polar(bounds, cfg)[0]
+
+
+class Grid(NamedTuple):
+    """``polar_grid`` in blocks of neighbouring points (BLOCK speeds by BLOCK headings), each
+    with a disc that holds them: a VO that holds a block's disc on a plane holds each of its
+    points there (``ball_in_cone``), so the fallbacks skip them without checking them one by
+    one. In a crowd almost every block lies in some VO."""
+
+    points: np.ndarray  # (M, 2) the in-plane candidates
+    block: np.ndarray  # (M,) int64: each point's block
+    discs: np.ndarray  # (B, 3) each block's disc in plane coordinates: centre x, y, radius
+
+
+#: Speed levels and headings per block side (3 x 3: most blocks of the sphere swap's least-bad
+#: decisions lie in a VO; blocks twice as wide, under half as many).
+BLOCK = 3
+
+
+@jit
+def grid_of(bounds: Bounds, cfg: Config) -> Grid:
+    """The polar grid of one decision and its blocks."""
+    points, where = _polar(bounds, cfg)
+    M, per_row = points.shape[0], (where[:, 1].max() // BLOCK + 1) if points.shape[0] else 1
+    block = np.empty(M, dtype=np.int64)
+    for m in range(M):
+        block[m] = (where[m, 0] // BLOCK) * per_row + where[m, 1] // BLOCK
+    B = block.max() + 1 if M else 0
+    discs, count = np.zeros((B, 3)), np.zeros(B)
+    for m in range(M):  # centres: the mean of the members
+        for j in range(2):
+            discs[block[m], j] += points[m, j]
+        count[block[m]] += 1.0
+    for b in range(B):
+        for j in range(2):
+            discs[b, j] /= max(count[b], 1.0)
+    for m in range(M):  # radii: the farthest member, widened beyond the rounding of a lift
+        b = block[m]
+        d = np.sqrt((points[m, 0] - discs[b, 0]) ** 2 + (points[m, 1] - discs[b, 1]) ** 2)
+        discs[b, 2] = max(discs[b, 2], d * (1.0 + 1e-9) + 1e-9)
+    return Grid(points, block, discs)
 
 
 @inline
@@ -87,27 +137,51 @@ def safe_by_margin(
     return clearance(vos.cones, vos.pyramids, v, cfg.horizon) >= cfg.margin * (1.0 - 1e-9)
 
 
+@inline
+def _covered(
+    vos: VOs, planes: AvoidancePlanes, grid: Grid, b: int, p: int, c: np.ndarray, hint: np.ndarray
+) -> bool:
+    """Whether some VO cone holds block b's disc on plane p (``ball_in_cone``), trying first
+    hint[0], the cone that held the last block (0 <= hint[0] < the cone count). ``c`` (3,):
+    scratch for the disc's centre."""
+    n, T = vos.cones.d_oi.shape[0], planes.to_plane
+    for j in range(3):  # lifted as a grid point is
+        c[j] = grid.discs[b, 0] * T[0, 0, j] + grid.discs[b, 1] * T[p, 1, j]
+    k = hint[0]
+    for _ in range(n):
+        if ball_in_cone(vos.cones, k, c, grid.discs[b, 2]):
+            hint[0] = k
+            return True
+        k = k + 1 if k + 1 < n else 0
+    return False
+
+
 @jit
 def grid_search(
     vos: VOs,
     planes: AvoidancePlanes,
-    grid: np.ndarray,
+    grid: Grid,
     G3: np.ndarray,
     h3: np.ndarray,
     bounds: Bounds,
     cfg: Config,
 ) -> tuple[bool, np.ndarray, int]:
-    """The velocity of ``grid`` (``polar_grid``) on the planes nearest the preferred one that
-    ``safe_by_margin`` accepts: (found, velocity, plane index). Grid points equally far from it
-    are tried plane by plane."""
-    T = planes.to_plane
+    """The velocity of ``grid`` on the planes nearest the preferred one that ``safe_by_margin``
+    accepts: (found, velocity, plane index). Grid points equally far from it are tried plane
+    by plane. A point whose block lies in a VO cone on that plane is not safe: it is skipped
+    (the block is looked at once, when the first of its points comes up; without a horizon
+    only, the cones' certificate's condition)."""
+    T, points = planes.to_plane, grid.points
     w0 = T[0, 0, 0] * vos.v_pref[0] + T[0, 0, 1] * vos.v_pref[1] + T[0, 0, 2] * vos.v_pref[2]
-    dev = np.empty(grid.shape[0])
-    for g in range(grid.shape[0]):  # |v - v_pref|: the planes are isometric
-        dev[g] = np.sqrt((grid[g, 0] - w0) ** 2 + grid[g, 1] ** 2)
+    dev = np.empty(points.shape[0])
+    for g in range(points.shape[0]):  # |v - v_pref|: the planes are isometric
+        dev[g] = np.sqrt((points[g, 0] - w0) ** 2 + points[g, 1] ** 2)
     order = np.argsort(dev, kind="mergesort")  # stable: equal deviations in grid order
-    hint = np.zeros(1, dtype=np.int64)
-    v = np.empty(3)
+    hint, block_hint = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)
+    # per plane and block: 0 not looked at yet, 1 in a VO cone, 2 to check point by point
+    state = np.zeros((planes.phi.shape[0], grid.discs.shape[0]), dtype=np.int8)
+    by_block = cfg.horizon < 0.0 and vos.cones.d_oi.shape[0] > 0
+    v, c = np.empty(3), np.empty(3)
     a = 0
     while a < order.shape[0]:
         b = a
@@ -115,11 +189,17 @@ def grid_search(
             b += 1
         for p in range(planes.phi.shape[0]):
             for q in range(a, b):
-                x, y = grid[order[q], 0], grid[order[q], 1]
+                x, y = points[order[q], 0], points[order[q], 1]
                 if y == 0.0 and p > 0:  # on e1, the same velocity on every plane: tried on 0
                     continue
-                for c in range(3):  # e1 is the same on every plane
-                    v[c] = x * T[0, 0, c] + y * T[p, 1, c]
+                if by_block:
+                    k = grid.block[order[q]]
+                    if state[p, k] == 0:
+                        state[p, k] = 1 if _covered(vos, planes, grid, k, p, c, block_hint) else 2
+                    if state[p, k] == 1:
+                        continue
+                for j in range(3):  # e1 is the same on every plane
+                    v[j] = x * T[0, 0, j] + y * T[p, 1, j]
                 if safe_by_margin(vos, v, G3, h3, bounds, cfg, hint):
                     return True, v, p
         a = b
@@ -161,11 +241,25 @@ def _consider(
         key[0], key[1] = t, dev
 
 
+@inline
+def _block_time(
+    vos: VOs, planes: AvoidancePlanes, grid: Grid, b: int, p: int, c: np.ndarray, k: int
+) -> float:
+    """``zone_time_bound`` of block b's disc on plane p for zone k, the zone that beat the last
+    grid point (inf when k is a pyramid). ``c`` (3,): scratch for the disc's centre."""
+    if k >= vos.cones.d_oi.shape[0]:
+        return np.inf
+    T = planes.to_plane
+    for j in range(3):  # lifted as a grid point is
+        c[j] = grid.discs[b, 0] * T[0, 0, j] + grid.discs[b, 1] * T[p, 1, j]
+    return zone_time_bound(vos, k, c, grid.discs[b, 2])
+
+
 @jit
 def least_bad(
     vos: VOs,
     planes: AvoidancePlanes,
-    grid: np.ndarray,
+    grid: Grid,
     tried: np.ndarray,
     p: np.ndarray,
     v_now: np.ndarray,
@@ -179,10 +273,16 @@ def least_bad(
     preferred velocity). With an acceleration limit each is also tried clipped into the
     reachable box (few grid points lie in it). None within the limits (e.g. v_min > 0 and
     zero): the limits' own closest point to hovering."""
-    T = planes.to_plane
+    T, points = planes.to_plane, grid.points
     best, key, hint = np.empty(3), np.empty(2), np.zeros(1, dtype=np.int64)
     best[0], key[0], key[1] = np.nan, np.inf, np.inf
-    v = np.empty(3)
+    v, centre, n = np.empty(3), np.empty(3), vos.cones.d_oi.shape[0]
+    # per plane and block: a time by which each of its points enters a zone, by the zones
+    # that beat a grid point just before one of its points came up (the last in by_zone): a
+    # point that enters before the best so far cannot win, and the best only gets later, so
+    # the block is skipped from then on (the answer is the same, in the same order)
+    by = np.full((planes.phi.shape[0], grid.discs.shape[0]), np.inf)
+    by_zone = np.full((planes.phi.shape[0], grid.discs.shape[0]), -1, dtype=np.int64)
     for pass_ in range(1 if np.isnan(bounds.acceleration) else 2):
         clip = pass_ == 1  # the second pass: each clipped into the reachable box
         # in this order: the tried answers, the grid plane by plane, zero, v_now (plain loops:
@@ -192,11 +292,18 @@ def least_bad(
                 v[c] = tried[q, c]
             _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
         for pl in range(planes.phi.shape[0]):
-            for g in range(grid.shape[0]):
-                if grid[g, 1] == 0.0 and pl > 0:  # on e1: plane 0's velocity, its key no better
+            for g in range(points.shape[0]):
+                if points[g, 1] == 0.0 and pl > 0:  # on e1: plane 0's velocity, its key no better
                     continue
+                if not clip and n > 0:  # its block enters a zone before the best so far: skip
+                    b = grid.block[g]
+                    if by_zone[pl, b] != hint[0]:  # a zone not tried on this block yet
+                        t = _block_time(vos, planes, grid, b, pl, centre, hint[0])
+                        by[pl, b], by_zone[pl, b] = min(by[pl, b], t), hint[0]
+                    if by[pl, b] < -key[0]:
+                        continue
                 for c in range(3):
-                    v[c] = grid[g, 0] * T[pl, 0, c] + grid[g, 1] * T[pl, 1, c]
+                    v[c] = points[g, 0] * T[pl, 0, c] + points[g, 1] * T[pl, 1, c]
                 _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
         for c in range(3):
             v[c] = 0.0
@@ -220,9 +327,9 @@ def py_polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
 def py_grid_search(
     vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config
 ) -> tuple[bool, np.ndarray, int]:
-    """``grid_search`` on ``polar_grid`` for Python callers (compiled code calls
+    """``grid_search`` on ``grid_of`` for Python callers (compiled code calls
     ``grid_search``: no Python wrapper)."""
-    return grid_search(vos, planes, polar_grid(bounds, cfg), G3, h3, bounds, cfg)
+    return grid_search(vos, planes, grid_of(bounds, cfg), G3, h3, bounds, cfg)
 
 
 @entry
@@ -237,9 +344,9 @@ def py_least_bad(
     bounds: Bounds,
     cfg: Config,
 ) -> np.ndarray:
-    """``least_bad`` on ``polar_grid`` for Python callers (compiled code calls ``least_bad``: no
+    """``least_bad`` on ``grid_of`` for Python callers (compiled code calls ``least_bad``: no
     Python wrapper)."""
-    return least_bad(vos, planes, polar_grid(bounds, cfg), tried, p, v_now, G3, h3, bounds, cfg)
+    return least_bad(vos, planes, grid_of(bounds, cfg), tried, p, v_now, G3, h3, bounds, cfg)
 
 
 @entry

@@ -50,7 +50,7 @@ from .common import (
     vz_range,
     within_limits,
 )
-from .fallback import grid_search, least_bad, polar_grid
+from .fallback import grid_of, grid_search, least_bad
 from .rows import ROUNDS, RowWork, plane_rows, row_work, vo_base
 
 #: How a decision's velocity was found (``KernelOut.round``): the preferred velocity, a QP round,
@@ -490,7 +490,7 @@ def decide_one(
         v = np.empty(3)
         lift(planes, qps.sol[r, plane], plane, v)
         return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], 1 + r, solved)
-    grid = polar_grid(bounds, cfg)  # 5
+    grid = grid_of(bounds, cfg)  # 5
     found, v, plane = grid_search(vos, planes, grid, G3, h3, bounds, cfg)
     if found:
         return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], SAMPLED, solved)

@@ -84,6 +84,39 @@ def in_pyramid(pyramids: VOPyramids, j: int, v: np.ndarray, horizon: float) -> b
     return t < np.inf if horizon < 0.0 else t <= horizon
 
 
+@inline
+def ball_in_cone(cones: VOCones, i: int, c: np.ndarray, rho: float) -> bool:
+    """Whether every velocity within ``rho`` of ``c`` lies in VO cone i without a horizon, with
+    a margin that outlasts rounding: ``in_cone`` (tol 0, no horizon) then holds for each of
+    them as computed, not only in exact arithmetic. Sufficient, not necessary: False when A is
+    inside the zone, when the ball reaches the apex, or near the cone's surface.
+
+    The ball is seen from the apex under the half-angle beta (sin beta = rho / |u|, u = c -
+    apex) and its centre at theta from rel, so no velocity in it is farther than theta + beta
+    from rel: below 90 degrees it closes in (t* > 0), and its closest approach to B's centre,
+    |rel| sin(theta + beta), is below r_pz by 1e-9 (r_pz + |rel|), a million times the
+    rounding of ``closest_approach``."""
+    if cones.inside[i]:
+        return False
+    a, rel = cones.apex[i], cones.rel[i]
+    u0, u1, u2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    nu = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    nrel = np.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2)
+    pu = rel[0] * u0 + rel[1] * u1 + rel[2] * u2
+    if not (nu > rho and pu > 0.0 and nrel < np.inf):  # NaN fails too
+        return False
+    # |u x rel| for the sine, not sqrt(1 - cos^2): no cancellation at small angles
+    x0, x1, x2 = u1 * rel[2] - u2 * rel[1], u2 * rel[0] - u0 * rel[2], u0 * rel[1] - u1 * rel[0]
+    sin_t = np.sqrt(x0 * x0 + x1 * x1 + x2 * x2) / (nu * nrel)
+    cos_t = pu / (nu * nrel)
+    sin_b = rho / nu
+    cos_b = np.sqrt(1.0 - sin_b * sin_b)
+    if not (cos_t * cos_b - sin_t * sin_b > 1e-6):  # theta + beta clearly below 90 degrees
+        return False
+    r = cones.r_pz[i]
+    return nrel * (sin_t * cos_b + cos_t * sin_b) <= r - 1e-9 * (r + nrel)
+
+
 @entry
 def _in_vos_kernel(
     cones: VOCones, pyramids: VOPyramids, v: np.ndarray, horizon: float, tol: float
