@@ -23,7 +23,7 @@ from vo3d_opt.formulations.common import (
 from vo3d_opt.formulations.fallback import (
     first_safe,
     grid_of,
-    py_grid_search,
+    py_fallback,
     py_least_bad,
     py_polar_grid,
 )
@@ -148,35 +148,44 @@ def test_fallbacks_with_blocks_are_the_point_by_point_answers(seed):
     cfg = enc.options.config
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)
     G3, h3 = enc.linear_bounds()
-    found, v, p = py_grid_search(enc.vos, planes, G3, h3, enc.bounds, cfg)
+    rng = np.random.default_rng(seed)
+    tried = np.ascontiguousarray(rng.uniform(-4.0, 4.0, (8, 3)))
+    position = np.asarray(enc.position, float)
+    found, v, p = py_fallback(enc.vos, planes, tried, position, enc.v_now, G3, h3, enc.bounds, cfg)
     ref = _grid_reference(enc, planes, py_polar_grid(enc.bounds, cfg))
     assert found == ref[0]
+    v_ref, t_ref, dev_ref = _reference(enc, planes, tried)
+    # least_bad alone (no cones known to hold the blocks), and after grid_search when it found
+    # nothing (with the cones it found)
+    answers = [py_least_bad(enc.vos, planes, tried, position, enc.v_now, G3, h3, enc.bounds, cfg)]
     if found:
         assert p == ref[1]
         np.testing.assert_array_equal(v, ref[2])
-    rng = np.random.default_rng(seed)
-    tried = np.ascontiguousarray(rng.uniform(-4.0, 4.0, (8, 3)))
-    got = py_least_bad(enc.vos, planes, tried, np.asarray(enc.position, float), enc.v_now, G3, h3,
-                       enc.bounds, cfg)
-    v_ref, t_ref, dev_ref = _reference(enc, planes, tried)
-    assert min(enc.time_to_intrusion(got)[0], NEVER) == t_ref
-    assert abs(np.linalg.norm(got - enc.v_pref) - dev_ref) <= 1e-12
-    np.testing.assert_allclose(got, v_ref, atol=1e-9)
+    else:
+        answers.append(v)
+    for got in answers:
+        assert min(enc.time_to_intrusion(got)[0], NEVER) == t_ref
+        assert abs(np.linalg.norm(got - enc.v_pref) - dev_ref) <= 1e-12
+        np.testing.assert_allclose(got, v_ref, atol=1e-9)
 
 
 def test_the_crowds_use_the_blocks():
     """The crowds above are ones where blocks decide: most grid points on most planes lie in a
-    VO cone's block (else the test above would not test them)."""
-    covered = []
-    for seed in range(6):
-        kw = _crowd(seed, n=30)
+    VO cone's block (else the test above would not test them); the grid finds a safe velocity
+    in some of them and none in others (the least-bad fallback)."""
+    covered, found = [], []
+    for seed in range(24):
+        kw = _crowd(seed, n=20 + seed, inside=seed % 4 == 3)
         enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
                       kw["limits"], kw["dt"], Options())
         planes = py_decision_planes(enc.vos, enc.v_now, enc.options.config)
         grid = _grid_of(enc.bounds, enc.options.config)
         covered.append(np.mean([_block_covered(enc.vos.cones, planes.to_plane, grid.discs, b, p)
                                 for p in range(len(planes.phi)) for b in range(len(grid.discs))]))
-    assert np.mean(covered) > 0.5
+        G3, h3 = enc.linear_bounds()
+        found.append(py_fallback(enc.vos, planes, np.zeros((0, 3)), np.asarray(enc.position, float),
+                                 enc.v_now, G3, h3, enc.bounds, enc.options.config)[0])
+    assert np.mean(covered) > 0.5 and 0 < sum(found) < len(found)
 
 
 # ------------------------------------------- the blocks' certificates against brute force

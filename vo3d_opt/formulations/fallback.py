@@ -165,12 +165,14 @@ def grid_search(
     h3: np.ndarray,
     bounds: Bounds,
     cfg: Config,
+    cover: np.ndarray,
 ) -> tuple[bool, np.ndarray, int]:
     """The velocity of ``grid`` on the planes nearest the preferred one that ``safe_by_margin``
     accepts: (found, velocity, plane index). Grid points equally far from it are tried plane
     by plane. A point whose block lies in a VO cone on that plane is not safe: it is skipped
     (the block is looked at once, when the first of its points comes up; without a horizon
-    only, the cones' certificate's condition)."""
+    only, the cones' certificate's condition). ``cover`` (planes, blocks) int64, filled: the
+    cone that holds each block on each plane, -1 none, -2 not looked at (for ``least_bad``)."""
     T, points = planes.to_plane, grid.points
     w0 = T[0, 0, 0] * vos.v_pref[0] + T[0, 0, 1] * vos.v_pref[1] + T[0, 0, 2] * vos.v_pref[2]
     dev = np.empty(points.shape[0])
@@ -178,8 +180,7 @@ def grid_search(
         dev[g] = np.sqrt((points[g, 0] - w0) ** 2 + points[g, 1] ** 2)
     order = np.argsort(dev, kind="mergesort")  # stable: equal deviations in grid order
     hint, block_hint = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)
-    # per plane and block: 0 not looked at yet, 1 in a VO cone, 2 to check point by point
-    state = np.zeros((planes.phi.shape[0], grid.discs.shape[0]), dtype=np.int8)
+    cover[:, :] = -2
     by_block = cfg.horizon < 0.0 and vos.cones.d_oi.shape[0] > 0
     v, c = np.empty(3), np.empty(3)
     a = 0
@@ -194,9 +195,10 @@ def grid_search(
                     continue
                 if by_block:
                     k = grid.block[order[q]]
-                    if state[p, k] == 0:
-                        state[p, k] = 1 if _covered(vos, planes, grid, k, p, c, block_hint) else 2
-                    if state[p, k] == 1:
+                    if cover[p, k] == -2:
+                        in_one = _covered(vos, planes, grid, k, p, c, block_hint)
+                        cover[p, k] = block_hint[0] if in_one else -1
+                    if cover[p, k] >= 0:
                         continue
                 for j in range(3):  # e1 is the same on every plane
                     v[j] = x * T[0, 0, j] + y * T[p, 1, j]
@@ -260,6 +262,7 @@ def least_bad(
     vos: VOs,
     planes: AvoidancePlanes,
     grid: Grid,
+    cover: np.ndarray,
     tried: np.ndarray,
     p: np.ndarray,
     v_now: np.ndarray,
@@ -272,7 +275,10 @@ def least_bad(
     limits, the velocity whose first protected-zone intrusion comes latest (ties: nearest the
     preferred velocity). With an acceleration limit each is also tried clipped into the
     reachable box (few grid points lie in it). None within the limits (e.g. v_min > 0 and
-    zero): the limits' own closest point to hovering."""
+    zero): the limits' own closest point to hovering. ``cover``: the cone that holds each
+    block on each plane, as ``grid_search`` leaves it (< 0: none known); a block is skipped
+    once a zone's time bound for it (that cone's, or the zone's that beat the last point)
+    comes before the best so far (the answer is the same, in the same order)."""
     T, points = planes.to_plane, grid.points
     best, key, hint = np.empty(3), np.empty(2), np.zeros(1, dtype=np.int64)
     best[0], key[0], key[1] = np.nan, np.inf, np.inf
@@ -297,6 +303,8 @@ def least_bad(
                     continue
                 if not clip and n > 0:  # its block enters a zone before the best so far: skip
                     b = grid.block[g]
+                    if by_zone[pl, b] == -1 and cover[pl, b] >= 0:  # first, the cone holding it
+                        by[pl, b] = _block_time(vos, planes, grid, b, pl, centre, cover[pl, b])
                     if by_zone[pl, b] != hint[0]:  # a zone not tried on this block yet
                         t = _block_time(vos, planes, grid, b, pl, centre, hint[0])
                         by[pl, b], by_zone[pl, b] = min(by[pl, b], t), hint[0]
@@ -324,12 +332,26 @@ def py_polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
 
 
 @entry
-def py_grid_search(
-    vos: VOs, planes: AvoidancePlanes, G3: np.ndarray, h3: np.ndarray, bounds: Bounds, cfg: Config
+def py_fallback(
+    vos: VOs,
+    planes: AvoidancePlanes,
+    tried: np.ndarray,
+    p: np.ndarray,
+    v_now: np.ndarray,
+    G3: np.ndarray,
+    h3: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
 ) -> tuple[bool, np.ndarray, int]:
-    """``grid_search`` on ``grid_of`` for Python callers (compiled code calls
-    ``grid_search``: no Python wrapper)."""
-    return grid_search(vos, planes, grid_of(bounds, cfg), G3, h3, bounds, cfg)
+    """The kernel's fallbacks for Python callers: ``grid_search``, and when it finds nothing
+    ``least_bad`` (with the cones grid_search found holding the blocks), on one ``grid_of``:
+    (found on the grid, velocity, its plane's index or -1)."""
+    grid = grid_of(bounds, cfg)
+    cover = np.empty((planes.phi.shape[0], grid.discs.shape[0]), dtype=np.int64)
+    found, v, plane = grid_search(vos, planes, grid, G3, h3, bounds, cfg, cover)
+    if found:
+        return True, v, plane
+    return False, least_bad(vos, planes, grid, cover, tried, p, v_now, G3, h3, bounds, cfg), -1
 
 
 @entry
@@ -346,7 +368,9 @@ def py_least_bad(
 ) -> np.ndarray:
     """``least_bad`` on ``grid_of`` for Python callers (compiled code calls ``least_bad``: no
     Python wrapper)."""
-    return least_bad(vos, planes, grid_of(bounds, cfg), tried, p, v_now, G3, h3, bounds, cfg)
+    grid = grid_of(bounds, cfg)
+    cover = np.full((planes.phi.shape[0], grid.discs.shape[0]), -2, dtype=np.int64)
+    return least_bad(vos, planes, grid, cover, tried, p, v_now, G3, h3, bounds, cfg)
 
 
 @entry
@@ -379,16 +403,7 @@ def fallback(
     margin decide, not its sections); if none is safe either, the least-bad velocity. When the
     backend failed on every problem the status says so whatever the fallback found."""
     G3, h3 = enc.linear_bounds()
-    cfg = enc.options.config
-    found, v, p = py_grid_search(enc.vos, planes, G3, h3, enc.bounds, cfg)
-    if found:
-        return Outcome(
-            v,
-            Status.SOLVER_FAILED_FALLBACK if all_failed else Status.OPTIMAL,
-            float(planes.phi[p]),
-            {"round": "sampled"},
-        )
-    v = py_least_bad(
+    found, v, p = py_fallback(
         enc.vos,
         planes,
         np.ascontiguousarray(tried, dtype=float).reshape(-1, 3),
@@ -397,7 +412,14 @@ def fallback(
         G3,
         h3,
         enc.bounds,
-        cfg,
+        enc.options.config,
     )
+    if found:
+        return Outcome(
+            v,
+            Status.SOLVER_FAILED_FALLBACK if all_failed else Status.OPTIMAL,
+            float(planes.phi[p]),
+            {"round": "sampled"},
+        )
     status = Status.SOLVER_FAILED_FALLBACK if all_failed else Status.INFEASIBLE_MIN_VIOLATION
     return Outcome(v, status, None, {"round": "least_bad"})

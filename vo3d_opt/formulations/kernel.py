@@ -491,10 +491,11 @@ def decide_one(
         lift(planes, qps.sol[r, plane], plane, v)
         return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], 1 + r, solved)
     grid = grid_of(bounds, cfg)  # 5
-    found, v, plane = grid_search(vos, planes, grid, G3, h3, bounds, cfg)
+    cover = np.empty((P, grid.discs.shape[0]), dtype=np.int64)  # the cones holding its blocks
+    found, v, plane = grid_search(vos, planes, grid, G3, h3, bounds, cfg, cover)
     if found:
         return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], SAMPLED, solved)
-    v = least_bad(vos, planes, grid, tried[:n_tried], p, v_now, G3, h3, bounds, cfg)
+    v = least_bad(vos, planes, grid, cover, tried[:n_tried], p, v_now, G3, h3, bounds, cfg)
     return KernelOut(  # 6
         enforce_limits(v, p, bounds), INFEASIBLE_MIN_VIOLATION, np.nan, LEAST_BAD, solved
     )
