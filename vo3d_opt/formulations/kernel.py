@@ -36,7 +36,7 @@ import numpy as np
 
 from .._jit import entry, inline, inline_alloc, jit, kernel
 from ..geometry import AvoidancePlanes
-from ..solvers.exact2d import nearest_in_disc
+from ..solvers.exact2d import nearest_in_order, seidel_order
 from .common import (
     Bounds,
     Config,
@@ -93,10 +93,13 @@ class PlaneQPs(NamedTuple):
     exact: np.ndarray  # (R, P) bool: key is the QP's optimum (else a lower bound)
     complete: np.ndarray  # (P,) bool: the plane has the rows of every VO its QPs start with
     sol: np.ndarray  # (R, P, 2)
+    plane_key: np.ndarray  # (P,) scratch of search: each plane's least key ...
+    plane_r: np.ndarray  # (P,) int ... and the first round that has it
     w0: np.ndarray  # (2,) the preferred velocity in plane coordinates (the same on every plane)
     rows: np.ndarray  # (V + L, 2) scratch: one QP's rows ...
     rhs: np.ndarray  # (V + L,) ... their right-hand sides
-    order: np.ndarray  # (V + L,) scratch of the solver
+    orders: np.ndarray  # (V + L + 1, V + L) the solver's row order for m rows, in row m ...
+    ordered: np.ndarray  # (V + L + 1,) bool ... once computed
     into: np.ndarray  # (V,) scratch: the VOs a velocity is in
     todo: np.ndarray  # (V * P, 2) scratch: the (VO, plane) rows still to build
     v: np.ndarray  # (3,) scratch: a velocity
@@ -150,10 +153,13 @@ def plane_qps(
         np.zeros((R, P), dtype=np.bool_),
         np.ones(P, dtype=np.bool_),
         np.empty((R, P, 2)),
+        np.empty(P),
+        np.empty(P, dtype=np.int64),
         w0,
         np.empty((V + L, 2)),
         np.empty(V + L),
-        np.empty(V + L, dtype=np.int64),
+        np.empty((V + L + 1, V + L), dtype=np.int64),
+        np.zeros(V + L + 1, dtype=np.bool_),
         np.empty(V, dtype=np.bool_),
         np.empty((V * P, 2), dtype=np.int64),
         np.empty(3),
@@ -230,8 +236,11 @@ def gather(qps: PlaneQPs, r: int, p: int) -> int:
 def solve_qp(qps: PlaneQPs, r: int, p: int, bounds: Bounds) -> None:
     """QP (r, p) solved exactly: its optimum into sol[r, p], its deviation into key[r, p]."""
     m = gather(qps, r, p)
-    out = qps.sol[r, p]
-    if nearest_in_disc(qps.rows, qps.rhs, m, qps.w0, bounds.v_max, bounds.v_min, qps.order, out):
+    out, order = qps.sol[r, p], qps.orders[m]
+    if not qps.ordered[m]:  # the order depends on m alone: computed once per decision
+        seidel_order(m, order)
+        qps.ordered[m] = True
+    if nearest_in_order(qps.rows, qps.rhs, m, qps.w0, bounds.v_max, bounds.v_min, order, out):
         qps.key[r, p] = np.sqrt((out[0] - qps.w0[0]) ** 2 + (out[1] - qps.w0[1]) ** 2)
     else:
         qps.key[r, p] = np.inf
@@ -262,6 +271,9 @@ def search(
     into, v, todo = qps.into, qps.v, qps.todo
     n_todo = np.int64(0)  # not the literal 0: see plane_qps
     solved = n_tried = 0
+    # each plane's least key and its first round (an iteration changes the keys of its own
+    # plane only: that plane's entry is refreshed at the next one)
+    plane_key, plane_r, p = qps.plane_key, qps.plane_r, 0
     for it in range(
         1 + R * P * (2 + 2 * into.shape[0])
     ):  # per QP: its solve, then each VO it gains
@@ -272,7 +284,11 @@ def search(
             for r in range(R):
                 for p in range(P):
                     qps.key[r, p], qps.exact[r, p] = _bound(qps, r, p), False
-        r, p = _argmin(qps.key)
+            for p in range(P):
+                _least_round(qps.key, p, plane_key, plane_r)
+        else:
+            _least_round(qps.key, p, plane_key, plane_r)
+        r, p = _argmin(plane_key, plane_r)
         if qps.key[r, p] == np.inf:
             break
         if not qps.complete[p]:  # its bound is the probe's alone: build the rest, bound again
@@ -333,14 +349,27 @@ def _beyond(qps: PlaneQPs, k: int, r: int, p: int) -> float:
 
 
 @inline
-def _argmin(key: np.ndarray) -> tuple[int, int]:
-    """The first (r, p) of the least key."""
-    br, bp = 0, 0
-    for r in range(key.shape[0]):
-        for p in range(key.shape[1]):
-            if key[r, p] < key[br, bp]:
-                br, bp = r, p
-    return br, bp
+def _least_round(key: np.ndarray, p: int, plane_key: np.ndarray, plane_r: np.ndarray) -> None:
+    """Plane p's least key and the first round that has it, into plane_key[p], plane_r[p]."""
+    br = 0
+    for r in range(1, key.shape[0]):
+        if key[r, p] < key[br, p]:
+            br = r
+    plane_key[p], plane_r[p] = key[br, p], br
+
+
+@inline
+def _argmin(plane_key: np.ndarray, plane_r: np.ndarray) -> tuple[int, int]:
+    """The first (r, p) of the least key in (round, plane) order, from each plane's least key
+    and its first round (``_least_round``): the least key, then the first round, then the
+    first plane. A scan of the planes, not of every QP."""
+    bp = 0
+    for p in range(1, plane_key.shape[0]):
+        if plane_key[p] < plane_key[bp] or (
+            plane_key[p] == plane_key[bp] and plane_r[p] < plane_r[bp]
+        ):
+            bp = p
+    return plane_r[bp], bp
 
 
 @inline

@@ -35,7 +35,7 @@ EPS = 1e-12
 
 
 @inline
-def _order(m: int, out: np.ndarray) -> None:
+def seidel_order(m: int, out: np.ndarray) -> None:
     """A fixed pseudo-random permutation of range(m) (Fisher–Yates with an xorshift): the
     random order of Seidel's algorithm, the same on every call so that answers are
     reproducible to the last bit."""
@@ -131,6 +131,23 @@ def nearest_in_disc(
     """The exact optimum of the module's problem over the first ``m`` rows of G w <= h, written
     into ``out`` (2,); False when the problem is infeasible. ``order`` is scratch (>= m ints).
     ``r_max`` may be inf (no disc); ``r_min`` <= 0 means no inner bound."""
+    seidel_order(m, order)
+    return nearest_in_order(G, h, m, w0, r_max, r_min, order, out)
+
+
+@kernel
+def nearest_in_order(
+    G: np.ndarray,
+    h: np.ndarray,
+    m: int,
+    w0: np.ndarray,
+    r_max: float,
+    r_min: float,
+    order: np.ndarray,
+    out: np.ndarray,
+) -> bool:
+    """``nearest_in_disc`` with ``order`` already ``seidel_order(m, order)``: a caller that solves
+    many problems of the same size computes it once."""
     tol = EPS * (1.0 + r_max if np.isfinite(r_max) else 1.0 + abs(w0[0]) + abs(w0[1]))
     for k in range(m):  # empty rows: 0 <= h or nothing
         if G[k, 0] == 0.0 and G[k, 1] == 0.0 and h[k] < -tol:
@@ -138,7 +155,6 @@ def nearest_in_disc(
     n0 = np.sqrt(w0[0] * w0[0] + w0[1] * w0[1])
     scale = min(1.0, r_max / n0) if n0 > 0 else 1.0
     out[0], out[1] = w0[0] * scale, w0[1] * scale
-    _order(m, order)
     for k in range(m):
         i = order[k]
         gx, gy = G[i, 0], G[i, 1]
