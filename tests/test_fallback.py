@@ -243,3 +243,30 @@ def test_block_certificates_hold_for_every_velocity_of_the_ball(seed):
             assert (times <= bound).all()
             tight += times.max() >= bound / 3
     assert refused > 0 and (seed == 5 or (certified > 0 and timed > 0 and tight > 0))
+
+
+def test_time_bound_near_a_tangent_holds_as_computed():
+    """A vehicle 1.5e-12 m outside a zone and a velocity ball grazing it: the root's argument
+    pu^2 - |u|^2 Q is of the order of its rounding (pu's terms cancel), and one velocity of the
+    ball (exactly within rho) is computed never to enter. The bound must then be inf, not a
+    time (a fresh reviewer's case)."""
+    from vo3d_opt.formulations.common import VOs
+    from vo3d_opt.geometry.cone import vo_cones
+    from vo3d_opt.geometry.membership import _no_pyramids
+
+    rel = np.array([-37.91702773376036, 18.35885856840399, 41.07263569166567])
+    apex = np.array([-0.022728666465307645, 0.16346027022509538, 0.004123117819953033])
+    cones = vo_cones(np.zeros(3), rel[None], apex[None], 58.83629902328598, virtual_sphere=False)
+    vos = VOs(cones, _no_pyramids(), np.zeros(3))
+    c = np.array([26.799554736298717, -24.69884877053471, 35.878752010620246])
+    v = np.array([26.79955473694235, -24.698848770846762, 35.87875200992142])
+    rho = 1e-9
+    assert np.linalg.norm(v - c) <= rho and _zone_times(vos, 0, v[None])[0] == np.inf
+    assert _time_bound(vos, 0, c, rho) == np.inf
+    rng = np.random.default_rng(0)
+    for scale in (1e-9, 1e-7, 1e-5, 1e-3):  # balls about c, of every size: none may lie
+        for _ in range(50):
+            cc = c + rng.normal(size=3) * scale
+            bound = _time_bound(vos, 0, cc, scale)
+            if bound < np.inf:
+                assert (_zone_times(vos, 0, _ball_points(rng, cc, scale)) <= bound).all()

@@ -412,13 +412,15 @@ def zone_time_bound(vos: VOs, k: int, c: np.ndarray, rho: float) -> float:
     nu = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
     nrel = np.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2)
     pu_lo = rel[0] * u0 + rel[1] * u1 + rel[2] * u2 - nrel * rho
-    Q = cones.d_oi[k] ** 2 - cones.r_pz[k] ** 2
+    pu_hi, Q = nrel * (nu + rho), cones.d_oi[k] ** 2 - cones.r_pz[k] ** 2
     disc_lo = pu_lo * pu_lo - (nu + rho) ** 2 * Q
-    if not (nu > rho and pu_lo > 0.0 and Q > 0.0 and disc_lo > 0.0):  # NaN fails too
-        return np.inf
-    t, pu_hi, uu_lo = Q / (pu_lo + np.sqrt(disc_lo)), nrel * (nu + rho), (nu - rho) ** 2
-    # the root's rounding: pu^2 - |u|^2 Q is off by a few ulp of pu_hi^2, its square root by
-    # that over sqrt(disc_lo) (large near a tangent), the root by those over |u|^2
+    # pu as computed is off by a few ulp of pu_hi (its terms cancel), pu^2 - |u|^2 Q by a few
+    # ulp of pu_hi^2: both must stay positive as computed at every velocity of the ball
+    if not (nu > rho and Q > 0.0 and pu_lo > 1e-13 * pu_hi and disc_lo > 1e-13 * pu_hi**2):
+        return np.inf  # NaN fails too
+    t, uu_lo = Q / (pu_lo + np.sqrt(disc_lo)), (nu - rho) ** 2
+    # the root's rounding: that of pu over |u|^2, and of the square root (the argument's
+    # over sqrt(disc_lo): large near a tangent) over |u|^2
     return t + 1e-9 * (t + pu_hi / uu_lo) + 1e-12 * pu_hi * pu_hi / np.sqrt(disc_lo) / uu_lo
 
 
