@@ -36,7 +36,7 @@ import numpy as np
 
 from .._jit import entry, inline, inline_alloc, jit, kernel
 from ..geometry import AvoidancePlanes
-from ..solvers.exact2d import nearest_in_order, seidel_order
+from ..solvers.exact2d import nearest_in_disc, seidel_order
 from .common import (
     Bounds,
     Config,
@@ -240,7 +240,7 @@ def solve_qp(qps: PlaneQPs, r: int, p: int, bounds: Bounds) -> None:
     if not qps.ordered[m]:  # the order depends on m alone: computed once per decision
         seidel_order(m, order)
         qps.ordered[m] = True
-    if nearest_in_order(qps.rows, qps.rhs, m, qps.w0, bounds.v_max, bounds.v_min, order, out):
+    if nearest_in_disc(qps.rows, qps.rhs, m, qps.w0, bounds.v_max, bounds.v_min, order, out):
         qps.key[r, p] = np.sqrt((out[0] - qps.w0[0]) ** 2 + (out[1] - qps.w0[1]) ** 2)
     else:
         qps.key[r, p] = np.inf

@@ -129,25 +129,10 @@ def nearest_in_disc(
     out: np.ndarray,
 ) -> bool:
     """The exact optimum of the module's problem over the first ``m`` rows of G w <= h, written
-    into ``out`` (2,); False when the problem is infeasible. ``order`` is scratch (>= m ints).
-    ``r_max`` may be inf (no disc); ``r_min`` <= 0 means no inner bound."""
-    seidel_order(m, order)
-    return nearest_in_order(G, h, m, w0, r_max, r_min, order, out)
-
-
-@kernel
-def nearest_in_order(
-    G: np.ndarray,
-    h: np.ndarray,
-    m: int,
-    w0: np.ndarray,
-    r_max: float,
-    r_min: float,
-    order: np.ndarray,
-    out: np.ndarray,
-) -> bool:
-    """``nearest_in_disc`` with ``order`` already ``seidel_order(m, order)``: a caller that solves
-    many problems of the same size computes it once."""
+    into ``out`` (2,); False when the problem is infeasible. ``order``: ``seidel_order(m,
+    order)``, the rows' random order (it depends on m alone: a caller that solves many
+    problems of the same size computes it once). ``r_max`` may be inf (no disc); ``r_min``
+    <= 0 means no inner bound."""
     tol = EPS * (1.0 + r_max if np.isfinite(r_max) else 1.0 + abs(w0[0]) + abs(w0[1]))
     for k in range(m):  # empty rows: 0 <= h or nothing
         if G[k, 0] == 0.0 and G[k, 1] == 0.0 and h[k] < -tol:
@@ -179,7 +164,9 @@ def py_nearest_in_disc(
     order: np.ndarray,
     out: np.ndarray,
 ) -> bool:
-    """``nearest_in_disc`` for Python callers (compiled code calls it directly)."""
+    """``nearest_in_disc`` for Python callers, ``order`` scratch (>= m ints) that it fills
+    with ``seidel_order`` (compiled code calls ``nearest_in_disc`` directly)."""
+    seidel_order(m, order)
     return nearest_in_disc(G, h, m, w0, r_max, r_min, order, out)
 
 
