@@ -27,6 +27,7 @@ from vo3d_opt.formulations.fallback import (
     py_least_bad,
     py_polar_grid,
 )
+from vo3d_opt.formulations.kernel import py_plane_qps, py_search
 from vo3d_opt.geometry.membership import ball_in_cone, in_vo_cones
 
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
@@ -92,10 +93,12 @@ def test_least_bad_is_the_latest_intrusion(kw, accel, n_tried, seed):
 
 # ------------------------------------------------------------- the grid's blocks, in a crowd
 
-def _crowd(seed: int, n: int = 30, inside: bool = False):
+def _crowd(seed: int, n: int = 30, inside: bool = False, closing: float = 0.0):
     """A vehicle amid n neighbours 6–30 m away (r_pz 5) closing in from all sides: most of the
     grid lies in some VO, so the fallbacks' blocks decide most points. ``inside``: one
-    neighbour's zone already holds the vehicle (its VO is then a half-space, no block's)."""
+    neighbour's zone already holds the vehicle (its VO is then a half-space, no block's).
+    ``closing``: each neighbour's least speed towards it (then, as in the sphere swap's
+    centre, every velocity enters some zone and the least-bad search is by time)."""
     rng = np.random.default_rng(seed)
     p = np.array([0.0, 0.0, 30.0])
     nbs = []
@@ -103,7 +106,7 @@ def _crowd(seed: int, n: int = 30, inside: bool = False):
         d = rng.normal(size=3)
         d /= np.linalg.norm(d)
         dist = 3.0 if (inside and k == 0) else rng.uniform(6.0, 30.0)
-        vel = -d * rng.uniform(0.0, 4.0) + rng.normal(size=3) * 0.5
+        vel = -d * rng.uniform(closing, 4.0) + rng.normal(size=3) * 0.5
         nbs.append(Neighbor(position=p + dist * d, velocity=vel, r_pz=5.0))
     v_pref = rng.normal(size=3)
     v_pref *= rng.uniform(1.0, 4.0) / np.linalg.norm(v_pref)
@@ -136,20 +139,37 @@ def _grid_reference(enc, planes, grid):
     return (False, -1) if k is None else (True, where[k], cands[k])
 
 
-@pytest.mark.parametrize("seed", range(24))
+@pytest.mark.parametrize("seed", range(40))
 def test_fallbacks_with_blocks_are_the_point_by_point_answers(seed):
     """In crowds (most points decided by their block) grid_search returns the reference's point
     and plane, least_bad the reference's key and velocity; with and without a horizon (which
-    turns the grid's blocks off), with A inside a zone (a VO no block lies in)."""
-    kw = _crowd(seed, n=20 + seed, inside=seed % 4 == 3)
-    horizon = 8.0 if seed % 3 == 2 else None
-    enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
-                  kw["limits"], kw["dt"], Options(horizon=horizon))
+    turns the grid's blocks off: 1–8 s), with an acceleration limit (least_bad's clipped pass,
+    where no block is skipped), with A inside a zone (a VO no block lies in)."""
+    for case in range(5 * seed, 5 * seed + 5):  # 200 crowds in all
+        _check_fallbacks(case)
+
+
+def _check_fallbacks(seed):
+    kw = _crowd(seed, n=20 + seed % 24, inside=seed % 4 == 3, closing=(0.0, 3.0)[seed % 3 == 0])
+    horizon = (None, None, 8.0, None, 2.0, 1.0)[seed % 6]
+    accel = 3.0 if seed % 5 == 4 else None
+    limits = Limits(speed=kw["limits"].speed, altitude=kw["limits"].altitude, acceleration=accel)
+    own = AgentState(position=kw["own"].position,
+                     velocity=np.asarray(kw["preferred_velocity"]) * (0.5 if accel else 1.0))
+    enc = prepare(own, np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
+                  limits, kw["dt"], Options(horizon=horizon))
     cfg = enc.options.config
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)
     G3, h3 = enc.linear_bounds()
     rng = np.random.default_rng(seed)
-    tried = np.ascontiguousarray(rng.uniform(-4.0, 4.0, (8, 3)))
+    if seed % 2:  # random tried answers, or the QP search's, as the kernel passes them
+        tried = np.ascontiguousarray(rng.uniform(-4.0, 4.0, (8, 3)))
+    else:
+        qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg, True)
+        R, P = qps.key.shape
+        tried = np.empty((R * P * (len(enc.pref_in) + 1), 3))
+        n_tried = py_search(enc.vos, planes, qps, G3, h3, enc.bounds, cfg, tried)[3]
+        tried = np.ascontiguousarray(tried[:n_tried])
     position = np.asarray(enc.position, float)
     found, v, p = py_fallback(enc.vos, planes, tried, position, enc.v_now, G3, h3, enc.bounds, cfg)
     ref = _grid_reference(enc, planes, py_polar_grid(enc.bounds, cfg))
@@ -202,12 +222,32 @@ _time_bound = numba.njit(lambda vos, k, c, rho: zone_time_bound(vos, k, c, rho))
 _ball_in = numba.njit(lambda cones, k, c, rho: ball_in_cone(cones, k, c, rho))
 
 
-def _ball_points(rng, c, rho, m=400):
-    """m velocities in the ball of radius rho about c, half of them on its surface."""
+def _ball_points(rng, c, rho, m=400, worst=None):
+    """m velocities in the ball of radius rho about c, half of them on its surface; with
+    ``worst`` (apex, rel) also the ball's points that certificates find hardest: farthest
+    from rel's direction seen from the apex, and c - rho rel/|rel| (least rel·u)."""
     d = rng.normal(size=(m, 3))
     d /= np.linalg.norm(d, axis=1)[:, None]
     r = np.where(np.arange(m) % 2 == 0, rho, rho * rng.uniform(0, 1, m) ** (1 / 3))
-    return np.ascontiguousarray(c + d * r[:, None])
+    pts = c + d * r[:, None]
+    if worst is not None:
+        apex, rel = worst
+        axis, u = rel / np.linalg.norm(rel), c - apex
+        away = u / np.linalg.norm(u) - axis  # in the plane of u and rel, away from rel
+        if np.linalg.norm(away) > 0:
+            away /= np.linalg.norm(away)
+            pts = np.vstack([pts, c + rho * away, c - rho * axis])
+    return np.ascontiguousarray(pts)
+
+
+def _bisect(accepts, lo=0.0, hi=10.0, steps=60):
+    """The largest radius (to 2^-60 of hi) that ``accepts`` takes, or 0."""
+    if not accepts(hi * 2.0**-steps):
+        return 0.0
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if accepts(mid) else (lo, mid)
+    return lo
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -230,7 +270,7 @@ def test_block_certificates_hold_for_every_velocity_of_the_ball(seed):
         off = rng.normal(size=3) * rng.choice([0.05, 0.3, 1.0])
         c = cones.apex[k] + (axis + off) / np.linalg.norm(axis + off) * rng.uniform(0.2, 8.0)
         rho = float(rng.choice([1e-6, 0.05, 0.5, 2.0]) * rng.uniform(0.5, 1.0))
-        pts = _ball_points(rng, c, rho)
+        pts = _ball_points(rng, c, rho, worst=(cones.apex[k], cones.rel[k]))
         if _ball_in(cones, k, c, rho):
             certified += 1
             assert in_vo_cones(cones, pts)[k].all()
@@ -270,3 +310,32 @@ def test_time_bound_near_a_tangent_holds_as_computed():
             bound = _time_bound(vos, 0, cc, scale)
             if bound < np.inf:
                 assert (_zone_times(vos, 0, _ball_points(rng, cc, scale)) <= bound).all()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_block_certificates_hold_at_their_largest_ball(seed):
+    """The largest ball each certificate takes about a centre (found by bisection: the ball
+    on the edge of the margins), with its hardest points: ``in_cone`` and the zone time, as
+    computed, still hold at every one."""
+    rng = np.random.default_rng(100 + seed)
+    kw = _crowd(seed, n=12)
+    enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
+                  kw["limits"], kw["dt"], Options())
+    cones = enc.vos.cones
+    edges = 0
+    for _ in range(60):
+        k = int(rng.integers(cones.d_oi.shape[0]))
+        axis = cones.rel[k] / np.linalg.norm(cones.rel[k])
+        off = rng.normal(size=3) * rng.choice([0.05, 0.2])
+        c = cones.apex[k] + (axis + off) / np.linalg.norm(axis + off) * rng.uniform(0.5, 8.0)
+        worst = (cones.apex[k], cones.rel[k])
+        rho = _bisect(lambda r: _ball_in(cones, k, c, r))
+        if rho > 0:
+            edges += 1
+            assert in_vo_cones(cones, _ball_points(rng, c, rho, worst=worst))[k].all()
+        rho = _bisect(lambda r: _time_bound(enc.vos, k, c, r) < np.inf)
+        if rho > 0:
+            edges += 1
+            pts = _ball_points(rng, c, rho, worst=worst)
+            assert (_zone_times(enc.vos, k, pts) <= _time_bound(enc.vos, k, c, rho)).all()
+    assert edges > 20

@@ -71,6 +71,10 @@ class KernelOut(NamedTuple):
     solved: int  # plane QPs solved
 
 
+#: Row counts whose solver order a decision keeps (a table of KEPT_ORDERS² ints at most).
+KEPT_ORDERS = 32
+
+
 class PlaneQPs(NamedTuple):
     """The (round, plane) QPs of one decision and their rows, filled as VOs join.
 
@@ -98,8 +102,9 @@ class PlaneQPs(NamedTuple):
     w0: np.ndarray  # (2,) the preferred velocity in plane coordinates (the same on every plane)
     rows: np.ndarray  # (V + L, 2) scratch: one QP's rows ...
     rhs: np.ndarray  # (V + L,) ... their right-hand sides
-    orders: np.ndarray  # (V + L + 1, V + L) the solver's row order for m rows, in row m ...
-    ordered: np.ndarray  # (V + L + 1,) bool ... once computed
+    orders: np.ndarray  # (S + 1, S) the solver's row order for m <= S rows, in row m ...
+    ordered: np.ndarray  # (S + 1,) bool ... once computed (S = min(V + L, KEPT_ORDERS))
+    order: np.ndarray  # (V + L,) scratch: the row order of a QP of more rows
     into: np.ndarray  # (V,) scratch: the VOs a velocity is in
     todo: np.ndarray  # (V * P, 2) scratch: the (VO, plane) rows still to build
     v: np.ndarray  # (3,) scratch: a velocity
@@ -158,8 +163,9 @@ def plane_qps(
         w0,
         np.empty((V + L, 2)),
         np.empty(V + L),
-        np.empty((V + L + 1, V + L), dtype=np.int64),
-        np.zeros(V + L + 1, dtype=np.bool_),
+        np.empty((min(V + L, KEPT_ORDERS) + 1, min(V + L, KEPT_ORDERS)), dtype=np.int64),
+        np.zeros(min(V + L, KEPT_ORDERS) + 1, dtype=np.bool_),
+        np.empty(V + L, dtype=np.int64),
         np.empty(V, dtype=np.bool_),
         np.empty((V * P, 2), dtype=np.int64),
         np.empty(3),
@@ -236,10 +242,15 @@ def gather(qps: PlaneQPs, r: int, p: int) -> int:
 def solve_qp(qps: PlaneQPs, r: int, p: int, bounds: Bounds) -> None:
     """QP (r, p) solved exactly: its optimum into sol[r, p], its deviation into key[r, p]."""
     m = gather(qps, r, p)
-    out, order = qps.sol[r, p], qps.orders[m]
-    if not qps.ordered[m]:  # the order depends on m alone: computed once per decision
+    out = qps.sol[r, p]
+    if m >= qps.ordered.shape[0]:  # many rows: the order computed each time
+        order = qps.order
         seidel_order(m, order)
-        qps.ordered[m] = True
+    else:  # the order depends on m alone: computed once per decision
+        order = qps.orders[m]
+        if not qps.ordered[m]:
+            seidel_order(m, order)
+            qps.ordered[m] = True
     if nearest_in_disc(qps.rows, qps.rhs, m, qps.w0, bounds.v_max, bounds.v_min, order, out):
         qps.key[r, p] = np.sqrt((out[0] - qps.w0[0]) ** 2 + (out[1] - qps.w0[1]) ** 2)
     else:
