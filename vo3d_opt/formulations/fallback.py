@@ -138,15 +138,22 @@ def safe_by_margin(
 
 
 @inline
+def _disc_centre(planes: AvoidancePlanes, grid: Grid, b: int, p: int, c: np.ndarray) -> None:
+    """Block b's disc centre on plane p, in 3D into ``c``, lifted as a grid point is."""
+    T = planes.to_plane
+    for j in range(3):
+        c[j] = grid.discs[b, 0] * T[0, 0, j] + grid.discs[b, 1] * T[p, 1, j]
+
+
+@inline
 def _covered(
     vos: VOs, planes: AvoidancePlanes, grid: Grid, b: int, p: int, c: np.ndarray, hint: np.ndarray
 ) -> bool:
     """Whether some VO cone holds block b's disc on plane p (``ball_in_cone``), trying first
     hint[0], the cone that held the last block (0 <= hint[0] < the cone count). ``c`` (3,):
     scratch for the disc's centre."""
-    n, T = vos.cones.d_oi.shape[0], planes.to_plane
-    for j in range(3):  # lifted as a grid point is
-        c[j] = grid.discs[b, 0] * T[0, 0, j] + grid.discs[b, 1] * T[p, 1, j]
+    n = vos.cones.d_oi.shape[0]
+    _disc_centre(planes, grid, b, p, c)
     k = hint[0]
     for _ in range(n):
         if ball_in_cone(vos.cones, k, c, grid.discs[b, 2]):
@@ -251,9 +258,7 @@ def _block_time(
     grid point (inf when k is a pyramid). ``c`` (3,): scratch for the disc's centre."""
     if k >= vos.cones.d_oi.shape[0]:
         return np.inf
-    T = planes.to_plane
-    for j in range(3):  # lifted as a grid point is
-        c[j] = grid.discs[b, 0] * T[0, 0, j] + grid.discs[b, 1] * T[p, 1, j]
+    _disc_centre(planes, grid, b, p, c)
     return zone_time_bound(vos, k, c, grid.discs[b, 2])
 
 
@@ -283,10 +288,11 @@ def least_bad(
     best, key, hint = np.empty(3), np.empty(2), np.zeros(1, dtype=np.int64)
     best[0], key[0], key[1] = np.nan, np.inf, np.inf
     v, centre, n = np.empty(3), np.empty(3), vos.cones.d_oi.shape[0]
-    # per plane and block: a time by which each of its points enters a zone, by the zones
-    # that beat a grid point just before one of its points came up (the last in by_zone): a
-    # point that enters before the best so far cannot win, and the best only gets later, so
-    # the block is skipped from then on (the answer is the same, in the same order)
+    # per plane and block: a time by which each of its points enters a zone, by the cone that
+    # holds it and the zones that beat a grid point just before one of its points came up
+    # (the last tried in by_zone, -1 before its first point): a point that enters before the
+    # best so far cannot win, and the best only gets later, so the block is skipped from then
+    # on (the answer is the same, in the same order)
     by = np.full((planes.phi.shape[0], grid.discs.shape[0]), np.inf)
     by_zone = np.full((planes.phi.shape[0], grid.discs.shape[0]), -1, dtype=np.int64)
     for pass_ in range(1 if np.isnan(bounds.acceleration) else 2):
@@ -305,6 +311,7 @@ def least_bad(
                     b = grid.block[g]
                     if by_zone[pl, b] == -1 and cover[pl, b] >= 0:  # first, the cone holding it
                         by[pl, b] = _block_time(vos, planes, grid, b, pl, centre, cover[pl, b])
+                        by_zone[pl, b] = cover[pl, b]
                     if by_zone[pl, b] != hint[0]:  # a zone not tried on this block yet
                         t = _block_time(vos, planes, grid, b, pl, centre, hint[0])
                         by[pl, b], by_zone[pl, b] = min(by[pl, b], t), hint[0]
