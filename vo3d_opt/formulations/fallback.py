@@ -37,14 +37,17 @@ def _polar(bounds: Bounds, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
     L = cfg.speed_levels
     H = int(np.ceil(2.0 * np.pi / cfg.heading_step - 1e-9))
     out, where = np.empty((L * H, 2)), np.empty((L * H, 2), dtype=np.int64)
+    cos_h, sin_h = np.empty(H), np.empty(H)  # per heading, not per point: most of the cost
+    for k in range(H):
+        cos_h[k], sin_h[k] = np.cos(k * cfg.heading_step), np.sin(k * cfg.heading_step)
     m = 0
     for a in range(L):
         s = bounds.v_min + (bounds.v_max - bounds.v_min) * a / (L - 1)
         if a > 0 and s == bounds.v_min + (bounds.v_max - bounds.v_min) * (a - 1) / (L - 1):
             continue
         for k in range(1 if s == 0.0 else H):  # rounded as numpy's round(12) does
-            out[m, 0] = np.rint(s * np.cos(k * cfg.heading_step) * 1e12) / 1e12
-            out[m, 1] = np.rint(s * np.sin(k * cfg.heading_step) * 1e12) / 1e12
+            out[m, 0] = np.rint(s * cos_h[k] * 1e12) / 1e12
+            out[m, 1] = np.rint(s * sin_h[k] * 1e12) / 1e12
             where[m, 0], where[m, 1] = a, k
             m += 1
     return out[:m], where[:m]
