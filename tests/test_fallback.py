@@ -151,27 +151,30 @@ def test_fallbacks_with_blocks_are_the_point_by_point_answers(seed):
 
 @pytest.mark.parametrize("seed", range(20))
 def test_fallbacks_in_a_swap_centre_are_the_point_by_point_answers(seed):
-    """As above, in the sphere swap's centre: crowds of 20–79 all closing in, with the swap's
-    options (reciprocal, the zones widened by 1.6), where most decisions end least-bad and the
-    best time so far lets least_bad skip blocks often; a third with an acceleration limit.
-    (Skipping blocks whose bound is only below 1.5 x the best time changes answers here, and
-    not in the crowds above; so does skipping in the clipped pass.)"""
+    """As above, in crowds like the sphere swap's centre: 20–79 neighbours all closing in, with
+    the swap's options (reciprocal, the zones widened by 1.6 m), where most decisions end
+    least-bad and the best time so far lets least_bad skip blocks often; a third with an
+    acceleration limit. (Skipping blocks whose bound is only below 1.5 x the best time changes
+    answers here, and not in the crowds above; so does skipping in the clipped pass.)"""
     for case in range(5 * seed, 5 * seed + 5):  # 100 crowds in all
         kw = _crowd(1000 + case, n=20 + case % 60, closing=3.0)
-        _check_fallbacks(case, kw, dict(reciprocal=True, pz_buffer=1.6), accel=case % 3 == 2)
+        _check_crowd(case, kw, Options(reciprocal=True, pz_buffer=1.6),
+                     accel=3.0 if case % 3 == 2 else None)
 
 
-def _check_fallbacks(seed, kw=None, options=None, accel=None):
-    if kw is None:
-        kw = _crowd(seed, n=20 + seed % 24, inside=seed % 4 == 3,
-                    closing=(0.0, 3.0)[seed % 3 == 0])
-    horizon = (None, None, 8.0, None, 2.0, 1.0)[seed % 6] if options is None else None
-    accel = 3.0 if (seed % 5 == 4 if accel is None else accel) else None
+def _check_fallbacks(seed):
+    kw = _crowd(seed, n=20 + seed % 24, inside=seed % 4 == 3, closing=(0.0, 3.0)[seed % 3 == 0])
+    horizon = (None, None, 8.0, None, 2.0, 1.0)[seed % 6]
+    _check_crowd(seed, kw, Options(horizon=horizon), accel=3.0 if seed % 5 == 4 else None)
+
+
+def _check_crowd(seed, kw, options, accel):
+    """py_fallback on crowd ``kw`` against the numpy references (``seed``: its tried answers)."""
     limits = Limits(speed=kw["limits"].speed, altitude=kw["limits"].altitude, acceleration=accel)
     own = AgentState(position=kw["own"].position,
                      velocity=np.asarray(kw["preferred_velocity"]) * (0.5 if accel else 1.0))
     enc = prepare(own, np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
-                  limits, kw["dt"], Options(horizon=horizon, **(options or {})))
+                  limits, kw["dt"], options)
     cfg = enc.options.config
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)
     G3, h3 = enc.linear_bounds()
