@@ -23,11 +23,12 @@ SOLVER_OPTIONS: dict[str, dict[str, float | int | bool]] = {
     "OSQP": dict(eps_abs=1e-8, eps_rel=1e-8, polishing=False, max_iter=20_000),
     "SCS": dict(eps_abs=1e-9, eps_rel=1e-9, max_iters=20_000),
     "CLARABEL": dict(tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10),
-    # CVXOPT's defaults (abstol 1e-7, reltol 1e-6, feastol 1e-7) stop up to ~1e-4 away; at
-    # 1e-9 it needs 3 refinement steps of the KKT solves, else some QPs end in a solver error;
-    # at feastol 1e-9, 2 of the tests' QPs still end in a solver error on an AMD EPYC (none on
-    # an Intel Xeon)
-    "CVXOPT": dict(abstol=1e-9, reltol=1e-9, feastol=1e-8, refinement=3),
+    # CVXOPT's defaults (abstol 1e-7, reltol 1e-6, feastol 1e-7) stop up to ~1e-4 away. At
+    # 1e-9 its default KKT solver (Cholesky) ends some QPs in a solver error, and which ones
+    # changes with the machine and the BLAS (one of the tests' QPs with 3 refinement steps on
+    # an AMD EPYC with cvxpy 1.9.3 / cvxopt 1.3.3, none with 2 or 4): cvxpy's LDL-based
+    # "robust" KKT solver solves them all
+    "CVXOPT": dict(abstol=1e-9, reltol=1e-9, feastol=1e-8, refinement=3, kktsolver="robust"),
 }
 
 #: Solvers whose "infeasible" is not trustworthy here (ProxQP calls some narrow feasible QPs
