@@ -19,7 +19,7 @@ from vo3d_opt.status import Status
 
 #: Extra options per cvxpy solver, for answers as tight as the direct backends'. OSQP is left
 #: unpolished: OSQP 1.x prints a line per polished solve without an active set.
-SOLVER_OPTIONS: dict[str, dict[str, float | int | bool]] = {
+SOLVER_OPTIONS: dict[str, dict[str, float | int | bool | str]] = {
     "OSQP": dict(eps_abs=1e-8, eps_rel=1e-8, polishing=False, max_iter=20_000),
     "SCS": dict(eps_abs=1e-9, eps_rel=1e-9, max_iters=20_000),
     "CLARABEL": dict(tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10),
