@@ -16,7 +16,15 @@ $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet -e '.[dev,baselines,batched]'
 	@touch $(STAMP)
 
-install: $(STAMP)
+# select()'s decision kernel compiled ahead of time (`vo3d compile`, vo3d_opt/formulations/aot.py),
+# so that a first select() does not wait ~30 s for numba's JIT; rebuilt after an edit of
+# vo3d_opt/ (a module built from other sources is never used: select() would JIT-compile).
+AOT_STAMP := $(VENV)/.aot-kernel
+$(AOT_STAMP): $(shell find vo3d_opt -name "*.py") $(STAMP)
+	@$(VENV)/bin/vo3d compile || echo "(not built: select() compiles its kernel with numba's JIT on first use)"
+	@touch $@
+
+install: $(STAMP) $(AOT_STAMP)
 
 # numba's on-disk cache is keyed on each function's own file, not on the files of the functions
 # it inlines: after an edit of vo3d_opt/, drop every cached kernel so nothing stale is loaded.
@@ -25,10 +33,10 @@ $(NUMBA_STAMP): $(shell find vo3d_opt -name '*.py') | $(PY)
 	@find vo3d_opt -name '*.nb[ic]' -delete
 	@touch $@
 
-demo: $(STAMP) $(NUMBA_STAMP)
+demo: $(STAMP) $(NUMBA_STAMP) $(AOT_STAMP)
 	$(PY) -m vo3d_opt.demo
 
-test: $(STAMP) $(NUMBA_STAMP)
+test: $(STAMP) $(NUMBA_STAMP) $(AOT_STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider -n 2
 
 # ruff (lint + format check) and mypy, configured in pyproject.toml. The notebooks' .py

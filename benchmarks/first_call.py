@@ -1,14 +1,17 @@
 """Time of the first select() in a fresh process: numba compiles the kernels on a new checkout
 and loads them from its on-disk cache afterwards (README, Speed).
 
-Runs two child processes on the contract's example: one with an empty numba cache directory
-(a new checkout), one with the project's own cache (after the first run). Each then times its
-first ``select_many`` (two vehicles and the cylinder), which compiles the swarm kernel on top.
+Runs child processes on the contract's example: with numba's JIT kernel (``VO3D_AOT=0``) and
+an empty numba cache directory (a new checkout), then with the project's own cache (after the
+first run); and, when ``vo3d compile`` has built the ahead-of-time kernel for this code, with it
+(an empty numba cache, then the project's). Each then times its first ``select_many`` (two
+vehicles and the cylinder), which compiles the swarm kernel (always JIT) on top.
 
-    python benchmarks/first_call.py
+    python benchmarks/first_call.py [--build]
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -16,6 +19,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 CHILD = """
 import json, time
@@ -41,15 +45,35 @@ def run(env: dict[str, str]) -> dict[str, float]:
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--build", action="store_true",
+                    help="also time `vo3d compile` (building the ahead-of-time kernel) in a "
+                         "scratch directory")
+    args = ap.parse_args()
+    from vo3d_opt.formulations import aot
+
     print(f"# {platform.processor() or platform.machine()}, {platform.python_implementation()} "
           f"{platform.python_version()}, {time.strftime('%Y-%m-%d')}")
-    print("| cache | import s | first select() s | then first select_many() s |")
-    print("|---|---:|---:|---:|")
-    with tempfile.TemporaryDirectory() as empty:
-        rows = [("empty (new checkout)", run({**os.environ, "NUMBA_CACHE_DIR": empty})),
-                ("warm (numba's on-disk cache)", run(dict(os.environ)))]
-    for name, r in rows:
-        print(f"| {name} | {r['import_s']:.2f} | {r['first_select_s']:.2f} | "
+    compiled, note = aot.load()
+    print(f"# {note}")
+    if args.build:
+        with tempfile.TemporaryDirectory() as scratch:
+            _, seconds = aot.build(Path(scratch))
+        print(f"# building the ahead-of-time kernel (vo3d compile): {seconds:.1f} s")
+    print("| kernel | numba cache | import s | first select() s | then first select_many() s |")
+    print("|---|---|---:|---:|---:|")
+    jit = {**os.environ, "VO3D_AOT": "0"}
+    rows = []
+    with tempfile.TemporaryDirectory() as empty, tempfile.TemporaryDirectory() as empty2:
+        if compiled is not None:
+            rows.append(("ahead of time", "empty (new checkout)",
+                         run({**os.environ, "NUMBA_CACHE_DIR": empty2})))
+        rows += [("JIT (VO3D_AOT=0)", "empty (new checkout)", run({**jit, "NUMBA_CACHE_DIR": empty})),
+                 ("JIT (VO3D_AOT=0)", "warm (numba's on-disk cache)", run(jit))]
+        if compiled is not None:
+            rows.append(("ahead of time", "warm (numba's on-disk cache)", run(dict(os.environ))))
+    for kernel, cache, r in rows:
+        print(f"| {kernel} | {cache} | {r['import_s']:.2f} | {r['first_select_s']:.3f} | "
               f"{r['then_select_many_s']:.2f} |")
 
 

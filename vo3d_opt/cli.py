@@ -349,6 +349,28 @@ def _first_sentence(text: str) -> str:
     return text[: match.start() + 1] if match else text
 
 
+def cmd_compile(args: argparse.Namespace) -> int:
+    """Build the ahead-of-time decision kernel (formulations/aot.py) next to the package."""
+    from .formulations import aot
+
+    if args.check:
+        compiled, note = aot.load()
+        print(note)
+        return EXIT_OK if compiled is not None else EXIT_FAIL
+    log.info("compiling the decision kernel ahead of time (about half a minute)...")
+    try:
+        path, seconds = aot.build()
+    except (RuntimeError, OSError) as exc:
+        log.error("vo3d compile: %s", one_line(exc))
+        return EXIT_FAIL
+    compiled, note = aot.load()
+    if compiled is None:
+        log.error("vo3d compile: built %s, but it does not load: %s", path, note)
+        return EXIT_FAIL
+    print(f"built {path} in {seconds:.0f} s: select() runs it from now on")
+    return EXIT_OK
+
+
 def cmd_list(args: argparse.Namespace) -> int:
     rows, bad = [], 0
     for path in bundled_files():
@@ -616,6 +638,23 @@ def build_parser() -> argparse.ArgumentParser:
     )
     lst.set_defaults(func=cmd_list)
     _add_sweep(sub, common)
+
+    comp = sub.add_parser(
+        "compile",
+        parents=common,
+        help="compile select()'s decision kernel ahead of time",
+        description="Compile the decision kernel of select() ahead of time (numba.pycc) into "
+        "the installed package, so that a first select() in a new process does not wait for "
+        "numba's JIT compiler (about 30 s). A module built from other sources, numba, numpy "
+        "or another CPU is ignored: run it again after an edit or an upgrade. `make install` "
+        "runs it.",
+    )
+    comp.add_argument(
+        "--check",
+        action="store_true",
+        help="only say whether select() would use an ahead-of-time kernel (exit 1 if not)",
+    )
+    comp.set_defaults(func=cmd_compile)
     return p
 
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import swarm
-from .formulations import cone_qp, kernel, nlp, plane_qp, sampled
+from .formulations import aot, cone_qp, kernel, nlp, plane_qp, sampled
 from .formulations.common import (
     Bounds,
     Encounter,
@@ -60,6 +60,10 @@ _COMPILE_NOTICE_AFTER = 3.0
 _warm_lock = threading.Lock()
 _warm = False
 _warm_many = False
+#: The compiled decision ``select`` calls, set by ``warm_up``: the ahead-of-time module when one
+#: built from this code for this machine is there (formulations/aot.py), else numba's JIT kernel.
+_decide_kernel: Callable[..., None] = kernel.decide
+_kernel_note = "not loaded yet"
 
 
 @dataclass
@@ -121,12 +125,17 @@ def _checked(backend: Backend, method: str):
 
 
 def warm_up() -> None:
-    """Compile the decision kernel, or load it from numba's on-disk cache, once per process,
-    saying on stderr when that takes a while (a first run on a machine compiles it). Called by
-    the selector's constructor, so that no reported time includes it."""
-    global _warm
+    """Load the decision kernel once per process: the ahead-of-time module when it matches
+    this code and machine (``vo3d compile``), else numba's JIT kernel, compiled or loaded from
+    numba's on-disk cache, saying on stderr when that takes a while (a first run on a machine
+    compiles it). Called by the selector's constructor, so that no reported time includes it."""
+    global _warm, _decide_kernel, _kernel_note
     with _warm_lock:
         if _warm:
+            return
+        compiled, _kernel_note = aot.load()
+        if compiled is not None:
+            _decide_kernel, _warm = compiled, True
             return
         own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
         nbrs = neighbor_rows(
@@ -144,18 +153,29 @@ def warm_up() -> None:
                 *Options().packed,
                 np.empty(kernel.OUT_SIZE),
             ),
+            hint="; `vo3d compile` builds it ahead of time",
         )
         _warm = True
 
 
-def _compiling(what: str, run: Callable[[], object]) -> None:
+def decision_kernel() -> str:
+    """Which compiled decision ``select`` runs: the ahead-of-time module (its path) or numba's
+    JIT kernel, and why."""
+    warm_up()
+    return _kernel_note if _decide_kernel is not kernel.decide else f"JIT kernel: {_kernel_note}"
+
+
+def _compiling(what: str, run: Callable[[], object], hint: str = "") -> None:
     """``run()``, saying on stderr that ``what`` compiles when that takes over
     _COMPILE_NOTICE_AFTER s (a first run on a machine; numba caches it on disk), and then
-    when it is ready. Loading from the cache says nothing."""
+    when it is ready. Loading from the cache says nothing. ``hint``: a clause added to the
+    notice."""
     shown = threading.Event()
 
     def tell() -> None:
-        log.warning("vo3d-opt: compiling %s (once per machine; numba caches it on disk)...", what)
+        log.warning(
+            "vo3d-opt: compiling %s (once per machine; numba caches it on disk%s)...", what, hint
+        )
         shown.set()
 
     notice = threading.Timer(_COMPILE_NOTICE_AFTER, tell)
@@ -390,7 +410,7 @@ class VelocitySelector:
     ) -> Decision:
         """The compiled decision and its ``Decision``."""
         out = np.empty(kernel.OUT_SIZE)
-        kernel.decide(p, v_now, v_pref, nbrs, prisms, limits, *self.options.packed, out)
+        _decide_kernel(p, v_now, v_pref, nbrs, prisms, limits, *self.options.packed, out)
         vx, vy, vz, status, phi, rnd, solved = out.tolist()
         return Decision(
             velocity=out[:3],
@@ -563,6 +583,7 @@ __all__ = [
     "VelocitySelector",
     "DEFAULT_SOLVERS",
     "FORMULATIONS",
+    "decision_kernel",
     "warm_up",
     "warm_up_many",
 ]

@@ -1,0 +1,174 @@
+"""The ahead-of-time decision kernel (``vo3d compile``, formulations/aot.py): bitwise the JIT
+kernel's answers, never loaded when built from other code or for another machine, and never
+handed arguments it would crash on."""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from test_fallback import _crowd
+
+from encounters import encounters
+from vo3d_opt import VelocitySelector, cli, selector
+from vo3d_opt.formulations import aot, kernel
+from vo3d_opt.formulations.common import Options, bounds_array, neighbor_rows
+from vo3d_opt.geometry.pyramid import prism_rows
+from vo3d_opt.types import Limits
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A directory holding a current module: the package's own when ``make`` built it for
+    this code, else one built here (about half a minute)."""
+    if aot.load()[0] is not None:
+        return aot.HERE
+    directory = tmp_path_factory.mktemp("aot")
+    aot.build(directory)
+    return directory
+
+
+@pytest.fixture(scope="module")
+def compiled(built: Path):
+    fn, note = aot.load(built)
+    assert fn is not None, note
+    return fn
+
+
+def _arrays(kw: dict, options: Options) -> tuple:
+    return (
+        kw["own"].position,
+        kw["own"].velocity,
+        np.asarray(kw["preferred_velocity"], dtype=float),
+        neighbor_rows(kw["neighbors"]),
+        prism_rows(kw["obstacles"]),
+        bounds_array(kw["limits"], kw["dt"]),
+        *options.packed,
+    )
+
+
+def _both(compiled, args: tuple) -> tuple[np.ndarray, np.ndarray]:
+    a, b = np.empty(kernel.OUT_SIZE), np.empty(kernel.OUT_SIZE)
+    compiled.compiled(*args, a)  # the module itself, not the checked call around it
+    kernel.decide(*args, b)
+    return a, b
+
+
+@settings(max_examples=150, deadline=None)
+@given(kw=encounters())
+def test_the_compiled_module_answers_bitwise_as_the_jit_kernel(compiled, kw: dict) -> None:
+    a, b = _both(compiled, _arrays(kw, Options()))
+    assert np.array_equal(a, b, equal_nan=True), (a, b)
+
+
+@pytest.mark.parametrize("seed", range(24))
+def test_the_compiled_module_answers_bitwise_in_crowds(compiled, seed: int) -> None:
+    """Crowds reach every step of the kernel (QP rounds, the sampled grid, the least-bad
+    fallback), with the options and limits that change them."""
+    kw = _crowd(500 + seed, n=20 + seed, closing=3.0 if seed % 2 else 0.0, inside=seed % 5 == 0)
+    if seed % 3 == 0:
+        kw["limits"] = Limits(speed=(0.0, 4.0), altitude=(0.0, 60.0), acceleration=3.0)
+    options = Options(reciprocal=True, pz_buffer=1.6) if seed % 4 == 1 else Options()
+    a, b = _both(compiled, _arrays(kw, options))
+    assert np.array_equal(a, b, equal_nan=True), (a, b)
+
+
+def test_the_crowds_reach_the_fallbacks(compiled) -> None:
+    """The crowds above are not all easy: some end on the grid or the least-bad velocity."""
+    rounds = set()
+    for seed in range(24):
+        kw = _crowd(500 + seed, n=20 + seed, closing=3.0 if seed % 2 else 0.0)
+        a, _ = _both(compiled, _arrays(kw, Options()))
+        rounds.add(kernel.ROUND_NAMES[int(a[5])])
+    assert "least_bad" in rounds and rounds & {"near", "left", "right"}, rounds
+
+
+def test_arguments_it_cannot_take_go_to_the_jit_kernel(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The module does not check its arguments' types (a list where an array belongs would
+    crash the process): the checked call sends anything but float64 C arrays and a writable
+    output to the JIT kernel, which dispatches on them (and raises where it must)."""
+    calls: list[str] = []
+    monkeypatch.setattr(kernel, "decide", lambda *a: calls.append("jit"))
+    checked = aot._checked(lambda *a: calls.append("compiled"))
+    args = [*_arrays(_crowd(7, n=12), Options()), np.empty(kernel.OUT_SIZE)]
+    checked(*args)
+    assert calls == ["compiled"]
+    frozen = np.empty(kernel.OUT_SIZE)
+    frozen.flags.writeable = False
+    odd = [
+        (2, [float(x) for x in args[2]]),  # a list
+        (2, args[2].astype(np.float32)),  # another dtype
+        (3, np.asfortranarray(args[3])),  # not C-contiguous
+        (4, np.zeros((0, 4), dtype=np.int64)),  # integers
+        (0, args[0][None, :]),  # another dimension
+        (9, frozen),  # a read-only output
+    ]
+    for k, value in odd:
+        calls.clear()
+        checked(*args[:k], value, *args[k + 1 :])
+        assert calls == ["jit"], k
+    calls.clear()
+    checked(*args[:-1])  # too few
+    assert calls == ["jit"]
+
+
+def _copy(built: Path, to: Path) -> Path:
+    for path in (aot.module_path(built), aot.stamp_path(built)):
+        shutil.copy(path, to / path.name)
+    return to
+
+
+@pytest.mark.parametrize("key", ["sources", "numba", "numpy", "cpu", "cpu_features", "python"])
+def test_a_module_built_from_other_code_or_for_another_machine_is_not_used(
+    built: Path, tmp_path: Path, key: str
+) -> None:
+    directory = _copy(built, tmp_path)
+    assert aot.load(directory)[0] is not None
+    stamp = json.loads(aot.stamp_path(directory).read_text())
+    stamp[key] = "something else"
+    aot.stamp_path(directory).write_text(json.dumps(stamp))
+    fn, note = aot.load(directory)
+    assert fn is None and "stale" in note and key in note
+
+
+def test_no_stamp_a_broken_stamp_or_vo3d_aot_0_means_the_jit_kernel(
+    built: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    directory = _copy(built, tmp_path)
+    monkeypatch.setenv("VO3D_AOT", "0")
+    assert aot.load(directory) == (None, "the ahead-of-time kernel is turned off (VO3D_AOT=0)")
+    monkeypatch.delenv("VO3D_AOT")
+    aot.stamp_path(directory).write_text("{not json")
+    assert aot.load(directory)[0] is None
+    aot.stamp_path(directory).unlink()
+    fn, note = aot.load(directory)
+    assert fn is None and "vo3d compile" in note
+    assert aot.load(tmp_path / "nowhere")[0] is None
+
+
+def test_select_runs_the_module_when_it_is_current(
+    built: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A selector loads it once per process (``warm_up``) and its answers are the JIT's."""
+    monkeypatch.setattr(selector, "_warm", False)
+    monkeypatch.setattr(selector, "_decide_kernel", kernel.decide)
+    load = aot.load
+    monkeypatch.setattr(aot, "load", lambda: load(built))
+    kw = _crowd(11, n=15)
+    got = VelocitySelector().select(**kw)
+    assert selector.decision_kernel().startswith("ahead-of-time kernel")
+    assert selector._decide_kernel is not kernel.decide
+    want = np.empty(kernel.OUT_SIZE)
+    kernel.decide(*_arrays(kw, Options()), want)
+    assert np.array_equal(got.velocity, want[:3])
+
+
+def test_vo3d_compile_check_says_whether_select_would_use_one(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    fn, note = aot.load()
+    assert cli.main(["compile", "--check"]) == (0 if fn is not None else 1)
+    assert capsys.readouterr().out.strip() == note
