@@ -76,7 +76,7 @@ def kernel_times(selector: VelocitySelector, cases: list[dict], repeat: int) -> 
     arrays ``select`` builds for each case."""
     packed, out = selector.options.packed, np.empty(kernel.OUT_SIZE)
     compiled, _ = aot.load()
-    decide = kernel.decide if compiled is None else compiled.compiled
+    decide = kernel.decide if compiled is None else compiled.decide.compiled
     args = [(kw["own"].position, kw["own"].velocity, np.asarray(kw["preferred_velocity"], dtype=float),
              neighbor_rows(kw["neighbors"]), prism_rows(kw["obstacles"]), bounds_array(kw["limits"], kw["dt"]))
             for kw in cases]

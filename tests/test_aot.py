@@ -13,9 +13,12 @@ from hypothesis import given, settings
 from test_fallback import _crowd
 
 from encounters import encounters
-from vo3d_opt import VelocitySelector, cli, selector
+from test_swarm import LIMITS, OBSTACLES, SPHERES, random_swarm
+
+from vo3d_opt import VelocitySelector, cli, selector, swarm
 from vo3d_opt.formulations import aot, kernel
 from vo3d_opt.formulations.common import Options, bounds_array, neighbor_rows
+from vo3d_opt.formulations.swarm import MANY_OUT_SIZE, Swarm
 from vo3d_opt.geometry.pyramid import prism_rows
 from vo3d_opt.types import Limits
 
@@ -52,7 +55,7 @@ def _arrays(kw: dict, options: Options) -> tuple:
 
 def _both(compiled, args: tuple) -> tuple[np.ndarray, np.ndarray]:
     a, b = np.empty(kernel.OUT_SIZE), np.empty(kernel.OUT_SIZE)
-    compiled.compiled(*args, a)  # the module itself, not the checked call around it
+    compiled.decide.compiled(*args, a)  # the module itself, not the checked call around it
     kernel.decide(*args, b)
     return a, b
 
@@ -86,13 +89,14 @@ def test_the_crowds_reach_the_fallbacks(compiled) -> None:
     assert "least_bad" in rounds and rounds & {"near", "left", "right"}, rounds
 
 
-def test_arguments_it_cannot_take_go_to_the_jit_kernel(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_arguments_it_cannot_take_go_to_the_jit_kernel() -> None:
     """The module does not check its arguments' types (a list where an array belongs would
     crash the process): the checked call sends anything but float64 C arrays and a writable
     output to the JIT kernel, which dispatches on them (and raises where it must)."""
     calls: list[str] = []
-    monkeypatch.setattr(kernel, "decide", lambda *a: calls.append("jit"))
-    checked = aot._checked(lambda *a: calls.append("compiled"))
+    checked = aot._checked(
+        lambda *a: calls.append("compiled"), lambda *a: calls.append("jit"), aot._decide_args_ok
+    )
     args = [*_arrays(_crowd(7, n=12), Options()), np.empty(kernel.OUT_SIZE)]
     checked(*args)
     assert calls == ["compiled"]
@@ -113,6 +117,49 @@ def test_arguments_it_cannot_take_go_to_the_jit_kernel(monkeypatch: pytest.Monke
     calls.clear()
     checked(*args[:-1])  # too few
     assert calls == ["jit"]
+
+
+def _swarm(seed: int, n: int = 40) -> Swarm:
+    P, V, W, R = random_swarm(seed, n=n)
+    return swarm.SwarmInputs.checked(
+        P, V, W, R, OBSTACLES, LIMITS, 0.2, 55.0, 6 if seed % 2 else None, None, spheres=SPHERES
+    ).arrays()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_swarm_entry_answers_bitwise_as_the_jit_kernel_on_two_threads(
+    compiled, seed: int
+) -> None:
+    """``select_many``'s entry, run by ``decide_all`` on two threads (the module's wrapper
+    releases the GIL, as the JIT's nogil one does)."""
+    sw, packed = _swarm(seed), Options().packed
+    got = swarm.decide_all(sw, packed, 2, compiled.decide_range.compiled)
+    want = swarm.decide_all(sw, packed, 1)
+    assert np.array_equal(got, want, equal_nan=True)
+
+
+def test_swarm_arguments_it_cannot_take_go_to_the_jit_kernel() -> None:
+    calls: list[str] = []
+    checked = aot._checked(
+        lambda *a: calls.append("compiled"), lambda *a: calls.append("jit"), aot._range_args_ok
+    )
+    sw = _swarm(1, n=8)
+    args = [sw, 0, 8, *Options().packed, np.empty((8, MANY_OUT_SIZE))]
+    checked(*args)
+    checked(sw, np.int64(0), np.int64(8), *args[3:])
+    assert calls == ["compiled", "compiled"]
+    odd = [
+        (0, tuple(sw)),  # a plain tuple
+        (0, sw._replace(who=sw.who.astype(np.int32))),  # another dtype in a field
+        (0, sw._replace(agents=np.asfortranarray(sw.agents))),  # not C-contiguous
+        (1, 0.0),  # a float index
+        (2, True),
+        (6, np.empty((8, MANY_OUT_SIZE), dtype=np.float32)),
+    ]
+    for k, value in odd:
+        calls.clear()
+        checked(*args[:k], value, *args[k + 1 :])
+        assert calls == ["jit"], k
 
 
 def _copy(built: Path, to: Path) -> Path:
@@ -155,6 +202,7 @@ def test_select_runs_the_module_when_it_is_current(
     """A selector loads it once per process (``warm_up``) and its answers are the JIT's."""
     monkeypatch.setattr(selector, "_warm", False)
     monkeypatch.setattr(selector, "_decide_kernel", kernel.decide)
+    monkeypatch.setattr(selector, "_range_kernel", selector.decide_range)
     load = aot.load
     monkeypatch.setattr(aot, "load", lambda: load(built))
     kw = _crowd(11, n=15)
@@ -164,6 +212,12 @@ def test_select_runs_the_module_when_it_is_current(
     want = np.empty(kernel.OUT_SIZE)
     kernel.decide(*_arrays(kw, Options()), want)
     assert np.array_equal(got.velocity, want[:3])
+    assert selector._range_kernel is not selector.decide_range
+    P, V, W, R = random_swarm(3, n=30)
+    many = VelocitySelector().select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0)
+    monkeypatch.setattr(selector, "_range_kernel", selector.decide_range)
+    jit = VelocitySelector().select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0)
+    assert np.array_equal(many.velocities, jit.velocities)
 
 
 def test_vo3d_compile_check_says_whether_select_would_use_one(

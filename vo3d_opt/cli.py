@@ -361,13 +361,13 @@ def cmd_compile(args: argparse.Namespace) -> int:
     try:
         path, seconds = aot.build()
     except (RuntimeError, OSError) as exc:
-        log.error("vo3d compile: %s", one_line(exc))
+        log.error("%s", one_line(exc))
         return EXIT_FAIL
     compiled, note = aot.load()
     if compiled is None:
-        log.error("vo3d compile: built %s, but it does not load: %s", path, note)
+        log.error("built %s, but it does not load: %s", path, note)
         return EXIT_FAIL
-    print(f"built {path} in {seconds:.0f} s: select() runs it from now on")
+    print(f"built {path} in {seconds:.0f} s: select() and select_many() run it from now on")
     return EXIT_OK
 
 

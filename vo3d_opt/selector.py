@@ -30,6 +30,7 @@ from .formulations.common import (
     neighbor_rows,
     py_build_vos,
 )
+from .formulations.swarm import decide_range
 from .geometry.pyramid import prism_rows
 from .solvers import (
     FEAS_TOL,
@@ -63,6 +64,8 @@ _warm_many = False
 #: The compiled decision ``select`` calls, set by ``warm_up``: the ahead-of-time module when one
 #: built from this code for this machine is there (formulations/aot.py), else numba's JIT kernel.
 _decide_kernel: Callable[..., None] = kernel.decide
+#: The same for ``select_many``'s ``decide_range``.
+_range_kernel: Callable[..., None] = decide_range
 _kernel_note = "not loaded yet"
 
 
@@ -129,13 +132,13 @@ def warm_up() -> None:
     this code and machine (``vo3d compile``), else numba's JIT kernel, compiled or loaded from
     numba's on-disk cache, saying on stderr when that takes a while (a first run on a machine
     compiles it). Called by the selector's constructor, so that no reported time includes it."""
-    global _warm, _decide_kernel, _kernel_note
+    global _warm, _decide_kernel, _range_kernel, _kernel_note
     with _warm_lock:
         if _warm:
             return
         compiled, _kernel_note = aot.load()
         if compiled is not None:
-            _decide_kernel, _warm = compiled, True
+            _decide_kernel, _range_kernel, _warm = compiled.decide, compiled.decide_range, True
             return
         own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
         nbrs = neighbor_rows(
@@ -159,10 +162,10 @@ def warm_up() -> None:
 
 
 def decision_kernel() -> str:
-    """Which compiled decision ``select`` runs: the ahead-of-time module (its path) or numba's
-    JIT kernel, and why."""
+    """Which compiled decision ``select`` and ``select_many`` run: the ahead-of-time module
+    (its path) or numba's JIT kernels, and why."""
     warm_up()
-    return _kernel_note if _decide_kernel is not kernel.decide else f"JIT kernel: {_kernel_note}"
+    return _kernel_note if _decide_kernel is not kernel.decide else f"JIT kernels: {_kernel_note}"
 
 
 def _compiling(what: str, run: Callable[[], object], hint: str = "") -> None:
@@ -214,7 +217,7 @@ def _select_many_compiled(
 ) -> SwarmDecision:
     """``select_many`` compiled: every deciding vehicle, on ``threads`` threads."""
     sw = inputs.arrays()
-    out = swarm.decide_all(sw, options.packed, threads)
+    out = swarm.decide_all(sw, options.packed, threads, _range_kernel)
     result = _swarm_decision(
         inputs.V,
         sw.who,

@@ -25,7 +25,7 @@ import itertools
 import math
 import numbers
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
@@ -617,22 +617,26 @@ def thread_count(threads: Any) -> int:
 
 
 def decide_all(
-    sw: Swarm, packed: tuple[np.ndarray, np.ndarray, np.ndarray], threads: int
+    sw: Swarm,
+    packed: tuple[np.ndarray, np.ndarray, np.ndarray],
+    threads: int,
+    kernel: Callable[..., None] = decide_range,
 ) -> np.ndarray:
-    """Every deciding vehicle of ``sw`` by the compiled ``decide_range``: (D, MANY_OUT_SIZE).
-    With several threads, each takes the next CHUNK vehicles until none are left (the compiled
-    code releases the GIL); the rows do not depend on who computed them."""
+    """Every deciding vehicle of ``sw`` by the compiled ``kernel`` (``decide_range``, numba's
+    JIT or the ahead-of-time module's): (D, MANY_OUT_SIZE). With several threads, each takes
+    the next CHUNK vehicles until none are left (the compiled code releases the GIL); the rows
+    do not depend on who computed them."""
     D = sw.who.shape[0]
     out = np.empty((D, MANY_OUT_SIZE))
     chunks = -(-D // CHUNK)
     if threads <= 1 or chunks <= 1:
-        decide_range(sw, 0, D, *packed, out)
+        kernel(sw, 0, D, *packed, out)
         return out
     claim = itertools.count()  # next() on it is atomic under the GIL
 
     def work() -> None:
         while (c := next(claim)) < chunks:
-            decide_range(sw, c * CHUNK, min(D, (c + 1) * CHUNK), *packed, out)
+            kernel(sw, c * CHUNK, min(D, (c + 1) * CHUNK), *packed, out)
 
     helpers = [_workers(threads - 1).submit(work) for _ in range(min(threads, chunks) - 1)]
     work()

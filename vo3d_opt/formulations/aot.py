@@ -1,19 +1,22 @@
-"""The decision kernel compiled ahead of time, so that a first ``select()`` does not wait for
-numba's JIT (issue 9 §5: 27–50 s with an empty cache on the 2-core test machines).
+"""The decision kernels compiled ahead of time, so that a first ``select()`` or ``select_many()``
+does not wait for numba's JIT (issue 9 §5: 27–50 s with an empty cache on the 2-core test
+machines).
 
-``build()`` compiles ``kernel.decide`` with numba's ahead-of-time compiler (``numba.pycc``) into
-an extension module next to this file (``vo3d compile``; ``make install`` runs it), with a stamp
-of what it was built from: the package's sources, the Python, numpy and numba versions and the
-CPU (the module is built for this machine's CPU, as numba's JIT would). ``load()`` returns the
-compiled ``decide`` only when the stamp matches the running code and machine; otherwise the
-selector uses the JIT kernel, so an edited source or a moved environment can never run a stale
-or foreign kernel. It is the same code: the functions below ``decide`` are compiled by the same
-dispatchers (their flags, ``error_model="numpy"``) and linked into the module, and the answers
-are bitwise those of the JIT kernel (tests/test_aot.py).
+``build()`` compiles ``kernel.decide`` (``select``) and ``swarm.decide_range`` (``select_many``)
+with numba's ahead-of-time compiler (``numba.pycc``) into one extension module next to this
+file (``vo3d compile``; ``make install`` runs it), with a stamp of what it was built from: the
+package's sources, the Python, numpy and numba versions and the CPU (built for this machine's
+CPU, as numba's JIT would). ``load()`` returns the compiled entries only when the stamp matches
+the running code and machine; otherwise the selector uses the JIT kernels, so an edited source
+or a moved environment never runs a stale or foreign kernel. It is the same code: everything
+below the two entries is compiled by the same dispatchers (their flags, ``error_model="numpy"``)
+and linked into the module, and the answers are bitwise those of the JIT kernels
+(tests/test_aot.py). The module's wrappers release the GIL, as the JIT's ``nogil`` ones do, so
+``vo3d_opt.swarm.decide_all`` runs ``decide_range`` on several threads as before (a flag set in
+the compiling process only).
 
 ``numba.pycc`` has been "pending deprecation" since numba 0.57 with no replacement yet; when it
-goes, ``build()`` fails with its error and everything runs on the JIT kernel as before.
-``select_many`` stays on the JIT (``prange`` over vehicles is not available ahead of time).
+goes, ``build()`` fails with its error and everything runs on the JIT kernels as before.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import time
 import warnings
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -39,12 +43,20 @@ import numpy as np
 NAME = "_kernel_aot"
 HERE = Path(__file__).resolve().parent
 PACKAGE = HERE.parent
-#: ``decide``'s arguments: p, v_now, v_pref, nbrs, prisms, limits, options, plane_tab,
-#: gen_tab, out (``kernel.decide``), with their dimensions.
-NDIMS = (1, 1, 1, 2, 2, 1, 1, 2, 2, 1)
-SIGNATURE = "void(" + ", ".join("f8[::1]" if d == 1 else "f8[:, ::1]" for d in NDIMS) + ")"
+#: ``kernel.decide``'s arguments (p, v_now, v_pref, nbrs, prisms, limits, options, plane_tab,
+#: gen_tab, out): the dimensions of its float64 C arrays.
+DECIDE_NDIMS = (1, 1, 1, 2, 2, 1, 1, 2, 2, 1)
+#: ``swarm.decide_range``'s arrays after (sw, lo, hi): options, plane_tab, gen_tab, out.
+RANGE_NDIMS = (1, 2, 2, 2)
 
-Decide = Callable[..., None]
+Kernel = Callable[..., None]
+
+
+class Kernels(NamedTuple):
+    """The compiled entries, each behind a check of its arguments (``_checked``)."""
+
+    decide: Kernel  # kernel.decide
+    decide_range: Kernel  # formulations.swarm.decide_range
 
 
 def module_path(directory: Path = HERE) -> Path:
@@ -78,19 +90,42 @@ def stamp() -> dict[str, str]:
 
 def _export(directory: str) -> None:
     """Compile the module into ``directory`` (in a process of its own: see ``build``)."""
+    import numba
+    import numba.pycc.compiler as pycc_compiler
+    from numba import types
     from numba.pycc import CC
 
     from .kernel import decide
+    from .swarm import SWARM_FIELDS, Swarm, decide_range
+
+    compile_extra = pycc_compiler.compile_extra
+
+    def compile_nogil(*args: Any, **kwargs: Any) -> Any:
+        args[5].release_gil = True  # the flags: as the JIT kernels' nogil, for select_many
+        return compile_extra(*args, **kwargs)
+
+    pycc_compiler.compile_extra = compile_nogil  # this process only compiles the module
 
     def decide_aot(p, v_now, v_pref, nbrs, prisms, limits, options, plane_tab, gen_tab, out):  # noqa: ANN001
         # only a call: decide and everything below it compile with their own flags
         decide(p, v_now, v_pref, nbrs, prisms, limits, options, plane_tab, gen_tab, out)
 
+    def decide_range_aot(sw, lo, hi, options, plane_tab, gen_tab, out):  # noqa: ANN001
+        decide_range(sw, lo, hi, options, plane_tab, gen_tab, out)
+
+    def array(dtype: type, ndim: int) -> types.Array:
+        return types.Array(numba.from_dtype(np.dtype(dtype)), ndim, "C")
+
+    f8 = [array(np.float64, nd) for nd in RANGE_NDIMS]
+    swarm_type = types.NamedTuple([array(dt, nd) for dt, nd in SWARM_FIELDS], Swarm)
     cc = CC(NAME)
     cc.output_dir = directory
     cc.target_cpu = "host"  # as the JIT compiles; the stamp names the CPU
     cc.verbose = False
-    cc.export("decide", SIGNATURE)(decide_aot)
+    cc.export("decide", types.void(*[array(np.float64, nd) for nd in DECIDE_NDIMS]))(decide_aot)
+    cc.export("decide_range", types.void(swarm_type, types.int64, types.int64, *f8))(
+        decide_range_aot
+    )
     with warnings.catch_warnings():  # pycc's pending-deprecation notice: said in the docstring
         warnings.simplefilter("ignore")
         cc.compile()
@@ -120,10 +155,10 @@ def build(directory: Path = HERE) -> tuple[Path, float]:
     return module_path(directory), time.perf_counter() - t0
 
 
-def load(directory: Path = HERE) -> tuple[Decide | None, str]:
-    """The compiled ``decide`` when a module built from this code for this machine is in
+def load(directory: Path = HERE) -> tuple[Kernels | None, str]:
+    """The compiled entries when a module built from this code for this machine is in
     ``directory``, else None; and a sentence saying which. The environment variable
-    ``VO3D_AOT=0`` turns it off (the JIT kernel, e.g. to time it)."""
+    ``VO3D_AOT=0`` turns it off (the JIT kernels, e.g. to time them)."""
     if os.environ.get("VO3D_AOT", "").strip() == "0":
         return None, "the ahead-of-time kernel is turned off (VO3D_AOT=0)"
     path, stamp_file = module_path(directory), stamp_path(directory)
@@ -143,26 +178,56 @@ def load(directory: Path = HERE) -> tuple[Decide | None, str]:
         return None, f"{path} cannot be imported"
     module = importlib.util.module_from_spec(spec)
     loader.exec_module(module)
-    return _checked(module.decide), f"ahead-of-time kernel {path}"
+    from . import kernel, swarm
+
+    kernels = Kernels(
+        _checked(module.decide, kernel.decide, _decide_args_ok),
+        _checked(module.decide_range, swarm.decide_range, _range_args_ok),
+    )
+    return kernels, f"ahead-of-time kernel {path}"
 
 
-def _checked(compiled: Decide) -> Decide:
+def _arrays_ok(arrays: tuple, kinds: tuple[tuple[type, int], ...]) -> bool:
+    """Each of ``arrays`` an ndarray of its (dtype, dimensions), C-contiguous."""
+    if len(arrays) != len(kinds):
+        return False
+    for a, (dtype, ndim) in zip(arrays, kinds, strict=True):
+        if not (type(a) is np.ndarray and a.dtype == dtype and a.ndim == ndim):
+            return False
+        if not a.flags.c_contiguous:
+            return False
+    return True
+
+
+_DECIDE_KINDS = tuple((np.float64, nd) for nd in DECIDE_NDIMS)
+_RANGE_KINDS = tuple((np.float64, nd) for nd in RANGE_NDIMS)
+
+
+def _decide_args_ok(args: tuple) -> bool:
+    return _arrays_ok(args, _DECIDE_KINDS) and args[-1].flags.writeable
+
+
+def _range_args_ok(args: tuple) -> bool:
+    from .swarm import SWARM_FIELDS, Swarm
+
+    if len(args) != 3 + len(RANGE_NDIMS) or type(args[0]) is not Swarm:
+        return False
+    ints = all(isinstance(i, int | np.integer) and not isinstance(i, bool) for i in args[1:3])
+    return (
+        ints
+        and _arrays_ok(tuple(args[0]), SWARM_FIELDS)
+        and _arrays_ok(args[3:], _RANGE_KINDS)
+        and args[-1].flags.writeable
+    )
+
+
+def _checked(compiled: Kernel, jit: Kernel, ok: Callable[[tuple], bool]) -> Kernel:
     """``compiled`` behind a check of its arguments' types: a compiled module does not check
     them (a list where an array belongs would crash the process), so anything else goes to the
-    JIT kernel, which dispatches on them."""
-    from .kernel import decide as jit_decide
+    JIT kernel ``jit``, which dispatches on them (and raises where it must)."""
 
-    f8 = np.dtype(np.float64)
+    def call(*args: object) -> None:
+        (compiled if ok(args) else jit)(*args)
 
-    def decide(*args: np.ndarray) -> None:
-        if len(args) != len(NDIMS):
-            jit_decide(*args)
-            return
-        ok = True
-        for a, nd in zip(args, NDIMS, strict=True):
-            ok = ok and type(a) is np.ndarray and a.dtype == f8 and a.ndim == nd
-            ok = ok and a.flags.c_contiguous
-        (compiled if ok and args[-1].flags.writeable else jit_decide)(*args)
-
-    decide.compiled = compiled  # type: ignore[attr-defined]  # the unchecked call, for timing
-    return decide
+    call.compiled = compiled  # type: ignore[attr-defined]  # the unchecked call, for timing
+    return call

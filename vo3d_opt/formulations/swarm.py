@@ -49,6 +49,23 @@ class Swarm(NamedTuple):
     ob_idx: np.ndarray  # (G,) int64
 
 
+#: (dtype, dimensions) of each field of ``Swarm``, all C-contiguous (``SwarmInputs.arrays``
+#: builds them so): the type the ahead-of-time kernel is compiled for (formulations/aot.py).
+SWARM_FIELDS = (
+    (np.float64, 2),
+    (np.float64, 2),
+    (np.int64, 1),
+    (np.int64, 2),
+    (np.int64, 1),
+    (np.float64, 2),
+    (np.int64, 2),
+    (np.int64, 1),
+    (np.float64, 2),
+    (np.int64, 2),
+    (np.int64, 1),
+)
+
+
 @inline_alloc
 def vehicle_rows(sw: Swarm, d: int) -> tuple[np.ndarray, np.ndarray]:
     """Vehicle who[d]'s ``nbrs`` (its neighbours, each with r_pz = max(own, theirs), then the
