@@ -2,9 +2,8 @@
 and loads them from its on-disk cache afterwards (README, Speed).
 
 Runs child processes on the contract's example: with numba's JIT kernel (``VO3D_AOT=0``) and
-an empty numba cache directory (a new checkout), then with the project's own cache (after the
-first run); and, when ``vo3d compile`` has built the ahead-of-time kernel for this code, with it
-(an empty numba cache, then the project's). Each then times its first ``select_many`` (two
+an empty numba cache directory (a new checkout), then again with that cache (now filled); and,
+when ``vo3d compile`` has built the ahead-of-time kernel for this code, the same with it. Each then times its first ``select_many`` (two
 vehicles and the cylinder), which compiles the swarm kernel (always JIT) on top.
 
     python benchmarks/first_call.py [--build]
@@ -64,14 +63,13 @@ def main() -> None:
     print("|---|---|---:|---:|---:|")
     jit = {**os.environ, "VO3D_AOT": "0"}
     rows = []
-    with tempfile.TemporaryDirectory() as empty, tempfile.TemporaryDirectory() as empty2:
-        if compiled is not None:
-            rows.append(("ahead of time", "empty (new checkout)",
-                         run({**os.environ, "NUMBA_CACHE_DIR": empty2})))
-        rows += [("JIT (VO3D_AOT=0)", "empty (new checkout)", run({**jit, "NUMBA_CACHE_DIR": empty})),
-                 ("JIT (VO3D_AOT=0)", "warm (numba's on-disk cache)", run(jit))]
-        if compiled is not None:
-            rows.append(("ahead of time", "warm (numba's on-disk cache)", run(dict(os.environ))))
+    with tempfile.TemporaryDirectory() as cache_jit, tempfile.TemporaryDirectory() as cache_aot:
+        # each kernel: a new numba cache directory, then the same one again (now warm)
+        for when in ("empty (new checkout)", "warm (the run before it filled it)"):
+            if compiled is not None:
+                rows.append(("ahead of time", when,
+                             run({**os.environ, "NUMBA_CACHE_DIR": cache_aot})))
+            rows.append(("JIT (VO3D_AOT=0)", when, run({**jit, "NUMBA_CACHE_DIR": cache_jit})))
     for kernel, cache, r in rows:
         print(f"| {kernel} | {cache} | {r['import_s']:.2f} | {r['first_select_s']:.3f} | "
               f"{r['then_select_many_s']:.2f} |")
