@@ -187,20 +187,21 @@ def load(directory: Path = HERE) -> tuple[Kernels | None, str]:
     return kernels, f"ahead-of-time kernel {path}"
 
 
-def _arrays_ok(arrays: tuple, kinds: tuple[tuple[type, int], ...]) -> bool:
+def _arrays_ok(arrays: tuple, kinds: tuple[tuple[np.dtype, int], ...]) -> bool:
     """Each of ``arrays`` an ndarray of its (dtype, dimensions), C-contiguous."""
     if len(arrays) != len(kinds):
         return False
     for a, (dtype, ndim) in zip(arrays, kinds, strict=True):
-        if not (type(a) is np.ndarray and a.dtype == dtype and a.ndim == ndim):
+        if type(a) is not np.ndarray or a.dtype != dtype or a.ndim != ndim:
             return False
         if not a.flags.c_contiguous:
             return False
     return True
 
 
-_DECIDE_KINDS = tuple((np.float64, nd) for nd in DECIDE_NDIMS)
-_RANGE_KINDS = tuple((np.float64, nd) for nd in RANGE_NDIMS)
+_F8 = np.dtype(np.float64)
+_DECIDE_KINDS = tuple((_F8, nd) for nd in DECIDE_NDIMS)
+_RANGE_KINDS = tuple((_F8, nd) for nd in RANGE_NDIMS)
 
 
 def _decide_args_ok(args: tuple) -> bool:
@@ -213,9 +214,10 @@ def _range_args_ok(args: tuple) -> bool:
     if len(args) != 3 + len(RANGE_NDIMS) or type(args[0]) is not Swarm:
         return False
     ints = all(isinstance(i, int | np.integer) and not isinstance(i, bool) for i in args[1:3])
+    kinds = tuple((np.dtype(dtype), nd) for dtype, nd in SWARM_FIELDS)
     return (
         ints
-        and _arrays_ok(tuple(args[0]), SWARM_FIELDS)
+        and _arrays_ok(tuple(args[0]), kinds)
         and _arrays_ok(args[3:], _RANGE_KINDS)
         and args[-1].flags.writeable
     )
