@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test install bench lint clean notebooks notebooks-sync
+.PHONY: demo test install bench lint clean notebooks notebooks-sync aot
 
 $(PY):
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) on PATH (or run: make PYTHON=python3 ...)"; exit 2; }
@@ -16,15 +16,14 @@ $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet -e '.[dev,baselines,batched]'
 	@touch $(STAMP)
 
-# select()'s decision kernel compiled ahead of time (`vo3d compile`, vo3d_opt/formulations/aot.py),
-# so that a first select() does not wait ~30 s for numba's JIT; rebuilt after an edit of
-# vo3d_opt/ (a module built from other sources is never used: select() would JIT-compile).
-AOT_STAMP := $(VENV)/.aot-kernel
-$(AOT_STAMP): $(shell find vo3d_opt -name "*.py") $(STAMP)
-	@$(VENV)/bin/vo3d compile || echo "(not built: select() compiles its kernel with numba's JIT on first use)"
-	@touch $@
+# The decision kernels of select() and select_many() compiled ahead of time (`vo3d compile`,
+# vo3d_opt/formulations/aot.py), so that a first select() does not wait ~30 s for numba's JIT.
+# Checked on every make (a second): rebuilt when the sources, numba, numpy or the machine
+# changed (a module built from other sources is never used: select() would JIT-compile).
+aot: $(STAMP)
+	@$(VENV)/bin/vo3d compile --check >/dev/null 2>&1 || $(VENV)/bin/vo3d compile || echo "(not built: select() compiles its kernel with numba's JIT on first use)"
 
-install: $(STAMP) $(AOT_STAMP)
+install: $(STAMP) aot
 
 # numba's on-disk cache is keyed on each function's own file, not on the files of the functions
 # it inlines: after an edit of vo3d_opt/, drop every cached kernel so nothing stale is loaded.
@@ -33,10 +32,10 @@ $(NUMBA_STAMP): $(shell find vo3d_opt -name '*.py') | $(PY)
 	@find vo3d_opt -name '*.nb[ic]' -delete
 	@touch $@
 
-demo: $(STAMP) $(NUMBA_STAMP) $(AOT_STAMP)
+demo: $(STAMP) $(NUMBA_STAMP) aot
 	$(PY) -m vo3d_opt.demo
 
-test: $(STAMP) $(NUMBA_STAMP) $(AOT_STAMP)
+test: $(STAMP) $(NUMBA_STAMP) aot
 	$(PY) -m pytest -q -p no:cacheprovider -n 2
 
 # ruff (lint + format check) and mypy, configured in pyproject.toml. The notebooks' .py
@@ -58,9 +57,9 @@ notebooks-sync: $(STAMP)
 	$(VENV)/bin/jupytext --update --to ipynb notebooks/[0-9]*.py
 	$(VENV)/bin/jupyter nbconvert --log-level WARN --clear-output --inplace notebooks/[0-9]*.ipynb
 
-bench: $(STAMP) $(NUMBA_STAMP)
+bench: $(STAMP) $(NUMBA_STAMP) aot
 	$(PY) benchmarks/bench_select.py
 
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) out vo3d_opt/formulations/_kernel_aot*
 	find vo3d_opt -name '*.nb[ic]' -delete

@@ -1,14 +1,16 @@
-"""Time of the first select() in a fresh process: numba compiles the kernels on a new checkout
-and loads them from its on-disk cache afterwards (README, Speed).
+"""Time of the first select() in a fresh process (README, Speed): with the ahead-of-time
+kernel of ``vo3d compile``, and with numba's JIT, which compiles the kernels on a new checkout
+and loads them from its on-disk cache afterwards.
 
 Runs child processes on the contract's example: with numba's JIT kernel (``VO3D_AOT=0``) and
 an empty numba cache directory (a new checkout), then again with that cache (now filled); and,
-when ``vo3d compile`` has built the ahead-of-time kernel for this code, the same with it. Each then times its first ``select_many`` (two
-vehicles and the cylinder), which compiles the swarm kernel (always JIT) on top.
+when ``vo3d compile`` has built the ahead-of-time kernel for this code, the same with it. Each
+then times its first ``select_many`` (two vehicles and the cylinder), which compiles the rest
+of the swarm kernel on top (all of it on the JIT; only the k-d tree's neighbour lists with the
+ahead-of-time module).
 
     python benchmarks/first_call.py [--build]
-"""
-from __future__ import annotations
+"""from __future__ import annotations
 
 import argparse
 import json

@@ -4,15 +4,18 @@ handed arguments it would crash on."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import subprocess
+from collections.abc import Iterator
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
+from encounters import encounters
 from hypothesis import given, settings
 from test_fallback import _crowd
-
-from encounters import encounters
 from test_swarm import LIMITS, OBSTACLES, SPHERES, random_swarm
 
 from vo3d_opt import VelocitySelector, cli, selector, swarm
@@ -24,18 +27,25 @@ from vo3d_opt.types import Limits
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def built(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     """A directory holding a current module: the package's own when ``make`` built it for
-    this code, else one built here (about half a minute)."""
-    if aot.load()[0] is not None:
-        return aot.HERE
-    directory = tmp_path_factory.mktemp("aot")
-    aot.build(directory)
-    return directory
+    this code, else one built here (about 40 s, once per test worker). VO3D_AOT is cleared
+    for the module's tests (they turn it on and off themselves)."""
+    saved = os.environ.pop("VO3D_AOT", None)
+    try:
+        if aot.load()[0] is not None:
+            yield aot.HERE
+        else:
+            directory = tmp_path_factory.mktemp("aot")
+            aot.build(directory)
+            yield directory
+    finally:
+        if saved is not None:
+            os.environ["VO3D_AOT"] = saved
 
 
 @pytest.fixture(scope="module")
-def compiled(built: Path):
+def compiled(built: Path) -> aot.Kernels:
     fn, note = aot.load(built)
     assert fn is not None, note
     return fn
@@ -53,7 +63,7 @@ def _arrays(kw: dict, options: Options) -> tuple:
     )
 
 
-def _both(compiled, args: tuple) -> tuple[np.ndarray, np.ndarray]:
+def _both(compiled: aot.Kernels, args: tuple) -> tuple[np.ndarray, np.ndarray]:
     a, b = np.empty(kernel.OUT_SIZE), np.empty(kernel.OUT_SIZE)
     compiled.decide.compiled(*args, a)  # the module itself, not the checked call around it
     kernel.decide(*args, b)
@@ -62,13 +72,15 @@ def _both(compiled, args: tuple) -> tuple[np.ndarray, np.ndarray]:
 
 @settings(max_examples=150, deadline=None)
 @given(kw=encounters())
-def test_the_compiled_module_answers_bitwise_as_the_jit_kernel(compiled, kw: dict) -> None:
+def test_the_compiled_module_answers_bitwise_as_the_jit_kernel(
+    compiled: aot.Kernels, kw: dict
+) -> None:
     a, b = _both(compiled, _arrays(kw, Options()))
     assert np.array_equal(a, b, equal_nan=True), (a, b)
 
 
 @pytest.mark.parametrize("seed", range(24))
-def test_the_compiled_module_answers_bitwise_in_crowds(compiled, seed: int) -> None:
+def test_the_compiled_module_answers_bitwise_in_crowds(compiled: aot.Kernels, seed: int) -> None:
     """Crowds reach every step of the kernel (QP rounds, the sampled grid, the least-bad
     fallback), with the options and limits that change them."""
     kw = _crowd(500 + seed, n=20 + seed, closing=3.0 if seed % 2 else 0.0, inside=seed % 5 == 0)
@@ -79,7 +91,7 @@ def test_the_compiled_module_answers_bitwise_in_crowds(compiled, seed: int) -> N
     assert np.array_equal(a, b, equal_nan=True), (a, b)
 
 
-def test_the_crowds_reach_the_fallbacks(compiled) -> None:
+def test_the_crowds_reach_the_fallbacks(compiled: aot.Kernels) -> None:
     """The crowds above are not all easy: some end on the grid or the least-bad velocity."""
     rounds = set()
     for seed in range(24):
@@ -108,15 +120,19 @@ def test_arguments_it_cannot_take_go_to_the_jit_kernel() -> None:
         (3, np.asfortranarray(args[3])),  # not C-contiguous
         (4, np.zeros((0, 4), dtype=np.int64)),  # integers
         (0, args[0][None, :]),  # another dimension
+        (1, args[1].astype(">f8")),  # byte-swapped
+        (1, np.frombuffer(bytearray(25), dtype=np.float64, count=3, offset=1)),  # unaligned
+        (5, args[5].view(np.ndarray.__class__("Sub", (np.ndarray,), {}))),  # a subclass
         (9, frozen),  # a read-only output
     ]
     for k, value in odd:
         calls.clear()
         checked(*args[:k], value, *args[k + 1 :])
         assert calls == ["jit"], k
-    calls.clear()
-    checked(*args[:-1])  # too few
-    assert calls == ["jit"]
+    for wrong in (args[:-1], [*args, args[-1]]):  # too few, too many
+        calls.clear()
+        checked(*wrong)
+        assert calls == ["jit"]
 
 
 def _swarm(seed: int, n: int = 40) -> Swarm:
@@ -128,7 +144,7 @@ def _swarm(seed: int, n: int = 40) -> Swarm:
 
 @pytest.mark.parametrize("seed", range(6))
 def test_the_swarm_entry_answers_bitwise_as_the_jit_kernel_on_two_threads(
-    compiled, seed: int
+    compiled: aot.Kernels, seed: int
 ) -> None:
     """``select_many``'s entry, run by ``decide_all`` on two threads (the module's wrapper
     releases the GIL, as the JIT's nogil one does)."""
@@ -155,11 +171,19 @@ def test_swarm_arguments_it_cannot_take_go_to_the_jit_kernel() -> None:
         (1, 0.0),  # a float index
         (2, True),
         (6, np.empty((8, MANY_OUT_SIZE), dtype=np.float32)),
+        (6, np.empty((8, MANY_OUT_SIZE))[:, :]),  # a view: still C, still writable: compiled
+        (6, _frozen(np.empty((8, MANY_OUT_SIZE)))),  # a read-only output
     ]
     for k, value in odd:
         calls.clear()
         checked(*args[:k], value, *args[k + 1 :])
-        assert calls == ["jit"], k
+        assert calls == (["compiled"] if value.__class__ is np.ndarray and value.flags.writeable
+                         and value.dtype == np.float64 else ["jit"]), k
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
 
 
 def _copy(built: Path, to: Path) -> Path:
@@ -168,7 +192,9 @@ def _copy(built: Path, to: Path) -> Path:
     return to
 
 
-@pytest.mark.parametrize("key", ["sources", "numba", "numpy", "cpu", "cpu_features", "python"])
+@pytest.mark.parametrize(
+    "key", ["sources", "numba", "numpy", "cpu", "cpu_features", "python", "machine"]
+)
 def test_a_module_built_from_other_code_or_for_another_machine_is_not_used(
     built: Path, tmp_path: Path, key: str
 ) -> None:
@@ -201,6 +227,7 @@ def test_select_runs_the_module_when_it_is_current(
 ) -> None:
     """A selector loads it once per process (``warm_up``) and its answers are the JIT's."""
     monkeypatch.setattr(selector, "_warm", False)
+    monkeypatch.setattr(selector, "_kernel_note", selector._kernel_note)
     monkeypatch.setattr(selector, "_decide_kernel", kernel.decide)
     monkeypatch.setattr(selector, "_range_kernel", selector.decide_range)
     load = aot.load
@@ -220,9 +247,90 @@ def test_select_runs_the_module_when_it_is_current(
     assert np.array_equal(many.velocities, jit.velocities)
 
 
-def test_vo3d_compile_check_says_whether_select_would_use_one(
-    capsys: pytest.CaptureFixture[str],
+def test_vo3d_compile_check_says_which_kernel_select_would_run(
+    compiled: aot.Kernels, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    fn, note = aot.load()
-    assert cli.main(["compile", "--check"]) == (0 if fn is not None else 1)
-    assert capsys.readouterr().out.strip() == note
+    monkeypatch.setattr(aot, "load", lambda: (None, "stale, say"))
+    assert cli.main(["compile", "--check"]) == 1
+    assert capsys.readouterr().out.strip() == "stale, say"
+    monkeypatch.setattr(aot, "load", lambda: (compiled, "current, say"))
+    assert cli.main(["compile", "--check"]) == 0
+    assert capsys.readouterr().out.strip() == "current, say"
+
+
+@pytest.mark.parametrize("error", [RuntimeError("numba.pycc could not compile"), OSError("read-only")])
+def test_vo3d_compile_says_why_it_failed_in_one_line(
+    error: Exception, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def fail() -> None:
+        raise error
+
+    monkeypatch.setattr(aot, "build", fail)
+    assert cli.main(["compile"]) == 1
+    last = capsys.readouterr().err.strip().splitlines()[-1]  # after the "compiling..." notice
+    assert last == f"vo3d: {error}"
+
+
+def _fake_compiler(monkeypatch: pytest.MonkeyPatch, stamps: list[dict]) -> None:
+    """``build`` without numba: the child writes an empty 'module', ``stamp`` returns
+    ``stamps`` in turn."""
+
+    def run(cmd: list[str], **kwargs: object) -> subprocess.CompletedProcess:
+        directory = Path(cmd[-1].split("_export(")[1].rstrip(")").strip("'"))
+        aot.module_path(directory).write_bytes(b"not a module")
+        return subprocess.CompletedProcess(cmd, 0, "", "")
+
+    monkeypatch.setattr(aot.subprocess, "run", run)
+    monkeypatch.setattr(aot, "stamp", lambda: stamps.pop(0))
+
+
+def test_build_puts_the_module_then_its_stamp_in_place(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _fake_compiler(monkeypatch, [{"sources": "a"}, {"sources": "a"}])
+    path, _ = aot.build(tmp_path)
+    assert path == aot.module_path(tmp_path) and path.read_bytes() == b"not a module"
+    assert json.loads(aot.stamp_path(tmp_path).read_text()) == {"sources": "a"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [path.name, aot.stamp_path(tmp_path).name]
+    )  # the scratch folder is gone
+
+
+def test_a_build_during_which_the_sources_changed_is_thrown_away(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _fake_compiler(monkeypatch, [{"sources": "before"}, {"sources": "after"}])
+    with pytest.raises(RuntimeError, match="changed during the build"):
+        aot.build(tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_module_that_does_not_load_means_the_jit(built: Path, tmp_path: Path) -> None:
+    directory = _copy(built, tmp_path)
+    aot.module_path(directory).write_bytes(b"not a module")
+    fn, note = aot.load(directory)
+    assert fn is None and "does not load" in note
+
+
+def test_sources_edited_after_import_or_numba_debugging_mean_the_jit(
+    built: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    assert aot.load(built)[0] is not None
+    monkeypatch.setattr(aot, "SOURCES_AT_IMPORT", "edited since")
+    fn, note = aot.load(built)
+    assert fn is None and "sources" in note
+    monkeypatch.undo()
+    monkeypatch.setattr(numba.config, "BOUNDSCHECK", 1)
+    fn, note = aot.load(built)
+    assert fn is None and "NUMBA_BOUNDSCHECK" in note
+
+
+def test_the_source_hash_skips_editor_files(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    (tmp_path / "a.py").write_text("x = 1\n")
+    monkeypatch.setattr(aot, "PACKAGE", tmp_path)
+    clean = aot._source_hash()
+    (tmp_path / ".#a.py").symlink_to(tmp_path / "nowhere")  # an emacs lock: a dangling link
+    (tmp_path / ".a.py").write_text("backup")
+    assert aot._source_hash() == clean
+    (tmp_path / "a.py").write_text("x = 2\n")
+    assert aot._source_hash() != clean

@@ -645,9 +645,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="compile select()'s decision kernel ahead of time",
         description="Compile the decision kernel of select() ahead of time (numba.pycc) into "
         "the installed package, so that a first select() in a new process does not wait for "
-        "numba's JIT compiler (about 30 s). A module built from other sources, numba, numpy "
-        "or another CPU is ignored: run it again after an edit or an upgrade. `make install` "
-        "runs it.",
+        "numba's JIT compiler (about 30 s). A module built from other sources, Python, "
+        "numba, numpy or another CPU is ignored: run it again after an edit or an upgrade "
+        "(make does). The package's folder must be writable.",
     )
     comp.add_argument(
         "--check",

@@ -133,9 +133,10 @@ def check_number(value: Any) -> Any:
 
 
 def check_vector(value: Any, n: int) -> np.ndarray:
-    """``value`` as a read-only float array of shape (n,); ValueError if it is not n finite
-    numbers (booleans and strings are not numbers). Read-only float arrays of the right shape
-    come back as they are (every public type stores its vectors so)."""
+    """``value`` as a read-only, contiguous float array of shape (n,); ValueError if it is not
+    n finite numbers (booleans and strings are not numbers). Read-only contiguous float arrays
+    of the right shape come back as they are (every public type stores its vectors so: the
+    compiled kernels take them without a copy or a new compilation)."""
     if isinstance(value, (list, tuple)):
         if not all(_is_real(x) for x in value):
             raise ValueError(f"must be {n} numbers, got {short_repr(value)}")
@@ -151,6 +152,7 @@ def check_vector(value: Any, n: int) -> np.ndarray:
         if (
             raw.dtype == np.float64
             and not raw.flags.writeable
+            and raw.flags.c_contiguous
             and all(math.isfinite(x) for x in raw.tolist())
         ):
             return raw

@@ -1,19 +1,20 @@
-"""The decision kernels compiled ahead of time, so that a first ``select()`` or ``select_many()``
-does not wait for numba's JIT (issue 9 §5: 27–50 s with an empty cache on the 2-core test
-machines).
+"""The decision kernels compiled ahead of time, so that a first ``select()`` does not wait for
+numba's JIT (issue 9 §5: 27–50 s with an empty cache on the 2-core test machines).
 
-``build()`` compiles ``kernel.decide`` (``select``) and ``swarm.decide_range`` (``select_many``)
-with numba's ahead-of-time compiler (``numba.pycc``) into one extension module next to this
-file (``vo3d compile``; ``make install`` runs it), with a stamp of what it was built from: the
-package's sources, the Python, numpy and numba versions and the CPU (built for this machine's
-CPU, as numba's JIT would). ``load()`` returns the compiled entries only when the stamp matches
-the running code and machine; otherwise the selector uses the JIT kernels, so an edited source
-or a moved environment never runs a stale or foreign kernel. It is the same code: everything
-below the two entries is compiled by the same dispatchers (their flags, ``error_model="numpy"``)
-and linked into the module, and the answers are bitwise those of the JIT kernels
-(tests/test_aot.py). The module's wrappers release the GIL, as the JIT's ``nogil`` ones do, so
-``vo3d_opt.swarm.decide_all`` runs ``decide_range`` on several threads as before (a flag set in
-the compiling process only).
+``build()`` compiles ``kernel.decide`` (``select``) and ``swarm.decide_range`` (``select_many``'s
+loop over the vehicles) with numba's ahead-of-time compiler (``numba.pycc``) into one extension
+module next to this file (``vo3d compile``; ``make`` runs it), with a stamp of what it was built
+from: the package's sources, the Python, numpy and numba versions and the CPU (built for this
+machine's CPU, as numba's JIT would). ``load()`` returns the compiled entries only when the
+stamp matches the code this process imported and this machine, and numba is not asked to
+debug (``NUMBA_DISABLE_JIT``, ``NUMBA_BOUNDSCHECK``); otherwise the selector uses the JIT
+kernels, so an edited source or a moved environment never runs a stale or foreign kernel. It
+is the same code: everything below the two entries is compiled by the same dispatchers (their
+flags, ``error_model="numpy"``) and linked into the module, and the answers are bitwise those
+of the JIT kernels (tests/test_aot.py). The module's wrappers release the GIL, as the JIT's
+``nogil`` ones do, so ``vo3d_opt.swarm.decide_all`` runs ``decide_range`` on several threads as
+before (a flag set in the compiling process only). ``select_many``'s neighbour lists
+(``vo3d_opt.swarm.neighbor_lists``) stay on the JIT: a few seconds on a first call.
 
 ``numba.pycc`` has been "pending deprecation" since numba 0.57 with no replacement yet; when it
 goes, ``build()`` fails with its error and everything runs on the JIT kernels as before.
@@ -38,6 +39,9 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
+
+from . import kernel, swarm
+from .swarm import SWARM_FIELDS, Swarm
 
 #: The extension module's name (its file: NAME + the interpreter's extension suffix).
 NAME = "_kernel_aot"
@@ -67,18 +71,32 @@ def stamp_path(directory: Path = HERE) -> Path:
     return directory / (NAME + ".json")
 
 
-def stamp() -> dict[str, str]:
-    """What a compiled module must have been built from to be used: the package's sources,
-    the versions that compiled it and the CPU it was compiled for."""
+def _source_hash() -> str:
+    """A hash of the package's Python files as they are on disk now (editors' lock and backup
+    files, which start with a dot, and anything that is not a regular file left out)."""
+    digest = hashlib.sha256()
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.name.startswith(".") or not path.is_file():
+            continue
+        digest.update(path.relative_to(PACKAGE).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+#: The sources this process imported (the package imports this module at its own import): a
+#: module built from files edited since is refused, even if it is on disk now.
+SOURCES_AT_IMPORT = _source_hash()
+
+
+def stamp(sources: str | None = None) -> dict[str, str]:
+    """What a compiled module must have been built from to be used: the package's sources
+    (``sources``, else as they are on disk now), the versions that compiled it and the CPU it
+    was compiled for."""
     import llvmlite.binding as llvm
     import numba
 
-    digest = hashlib.sha256()
-    for path in sorted(PACKAGE.rglob("*.py")):
-        digest.update(path.relative_to(PACKAGE).as_posix().encode() + b"\0")
-        digest.update(path.read_bytes() + b"\0")
     return {
-        "sources": digest.hexdigest(),
+        "sources": _source_hash() if sources is None else sources,
         "python": sys.version,
         "numpy": np.__version__,
         "numba": numba.__version__,
@@ -95,13 +113,16 @@ def _export(directory: str) -> None:
     from numba import types
     from numba.pycc import CC
 
-    from .kernel import decide
-    from .swarm import SWARM_FIELDS, Swarm, decide_range
+    decide, decide_range = kernel.decide, swarm.decide_range
 
     compile_extra = pycc_compiler.compile_extra
 
     def compile_nogil(*args: Any, **kwargs: Any) -> Any:
-        args[5].release_gil = True  # the flags: as the JIT kernels' nogil, for select_many
+        flags = [a for a in (*args, *kwargs.values()) if isinstance(a, pycc_compiler.Flags)]
+        if len(flags) != 1:  # numba changed how pycc compiles: fail rather than hold the GIL
+            raise RuntimeError("numba.pycc's compile_extra no longer takes one Flags")
+        # as the JIT kernels' nogil, for select_many's threads (an Option numba's stubs omit)
+        setattr(flags[0], "release_gil", True)  # noqa: B010
         return compile_extra(*args, **kwargs)
 
     pycc_compiler.compile_extra = compile_nogil  # this process only compiles the module
@@ -133,14 +154,18 @@ def _export(directory: str) -> None:
 
 def build(directory: Path = HERE) -> tuple[Path, float]:
     """Compile the module and its stamp into ``directory``: (the module's path, seconds).
-    Runs in a child process with an empty numba cache of its own, so that every function is
-    compiled from its source, never loaded from a cache built for other code. Raises
-    RuntimeError (with the child's last lines) when the compiler fails."""
+    Runs in a child process with an empty numba cache of its own and no other ``NUMBA_*``
+    setting, so that every function is compiled from its source as the JIT would, never
+    loaded from a cache built for other code. The module and then its stamp replace the old
+    ones atomically (built in a scratch folder inside ``directory``, so a folder that cannot
+    be written fails at once). Raises RuntimeError when the compiler fails or the sources
+    change during the build, OSError when ``directory`` cannot be written."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="vo3d-aot-") as tmp:
-        env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(tmp) / "numba-cache")}
+    t0, before = time.perf_counter(), stamp()
+    with tempfile.TemporaryDirectory(prefix=".aot-build-", dir=directory) as tmp:
+        env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+        env["NUMBA_CACHE_DIR"] = str(Path(tmp) / "numba-cache")
         code = f"from vo3d_opt.formulations.aot import _export; _export({tmp!r})"
         child = subprocess.run(
             [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=False
@@ -149,18 +174,28 @@ def build(directory: Path = HERE) -> tuple[Path, float]:
         if child.returncode != 0 or not built.exists():
             tail = " | ".join((child.stderr or child.stdout).strip().splitlines()[-3:])
             raise RuntimeError(f"numba.pycc could not compile the kernel: {tail}")
+        if stamp() != before:
+            raise RuntimeError("the sources changed during the build: run it again")
         stamp_path(directory).unlink(missing_ok=True)  # no stamp until the new module is in
         os.replace(built, module_path(directory))
-    stamp_path(directory).write_text(json.dumps(stamp(), indent=1) + "\n")
+        written = Path(tmp) / stamp_path(directory).name
+        written.write_text(json.dumps(before, indent=1) + "\n")
+        os.replace(written, stamp_path(directory))
     return module_path(directory), time.perf_counter() - t0
 
 
 def load(directory: Path = HERE) -> tuple[Kernels | None, str]:
-    """The compiled entries when a module built from this code for this machine is in
-    ``directory``, else None; and a sentence saying which. The environment variable
-    ``VO3D_AOT=0`` turns it off (the JIT kernels, e.g. to time them)."""
+    """The compiled entries when a module built from the code this process imported, for this
+    machine, is in ``directory``, else None; and a sentence saying which. ``VO3D_AOT=0`` turns
+    it off (the JIT kernels, e.g. to time them), and so do numba's debugging switches. Never
+    raises: anything amiss means the JIT kernels. (A module is loaded once per path and
+    process: one rebuilt in place after that is used by the next process.)"""
+    import numba
+
     if os.environ.get("VO3D_AOT", "").strip() == "0":
         return None, "the ahead-of-time kernel is turned off (VO3D_AOT=0)"
+    if getattr(numba.config, "DISABLE_JIT", 0) or getattr(numba.config, "BOUNDSCHECK", 0):
+        return None, "numba is set to debug (NUMBA_DISABLE_JIT or NUMBA_BOUNDSCHECK)"
     path, stamp_file = module_path(directory), stamp_path(directory)
     if not path.exists() or not stamp_file.exists():
         return None, "no ahead-of-time kernel (`vo3d compile` builds one)"
@@ -168,65 +203,73 @@ def load(directory: Path = HERE) -> tuple[Kernels | None, str]:
         built = json.loads(stamp_file.read_text())
     except (OSError, ValueError):
         return None, f"{stamp_file} is unreadable"
-    now = stamp()
-    changed = sorted(k for k in now if built.get(k) != now[k])
+    now = stamp(SOURCES_AT_IMPORT)
+    changed = sorted(k for k in now if not isinstance(built, dict) or built.get(k) != now[k])
     if changed:
         return None, f"the ahead-of-time kernel is stale ({', '.join(changed)} changed)"
-    loader = importlib.machinery.ExtensionFileLoader(NAME, str(path))
-    spec = importlib.util.spec_from_loader(NAME, loader)
-    if spec is None:
-        return None, f"{path} cannot be imported"
-    module = importlib.util.module_from_spec(spec)
-    loader.exec_module(module)
-    from . import kernel, swarm
-
+    try:
+        loader = importlib.machinery.ExtensionFileLoader(NAME, str(path))
+        spec = importlib.util.spec_from_loader(NAME, loader)
+        assert spec is not None  # a loader is given
+        module = importlib.util.module_from_spec(spec)
+        loader.exec_module(module)
+        entries = module.decide, module.decide_range
+    except (ImportError, OSError, AttributeError) as exc:
+        return None, f"{path} does not load ({type(exc).__name__}: {exc})"
     kernels = Kernels(
-        _checked(module.decide, kernel.decide, _decide_args_ok),
-        _checked(module.decide_range, swarm.decide_range, _range_args_ok),
+        _checked(entries[0], kernel.decide, _decide_args_ok),
+        _checked(entries[1], swarm.decide_range, _range_args_ok),
     )
     return kernels, f"ahead-of-time kernel {path}"
 
 
-def _arrays_ok(arrays: tuple, kinds: tuple[tuple[np.dtype, int], ...]) -> bool:
-    """Each of ``arrays`` an ndarray of its (dtype, dimensions), C-contiguous."""
+Kinds = tuple[tuple[np.dtype, int], ...]
+
+
+def _arrays_ok(arrays: tuple[object, ...], kinds: Kinds) -> bool:
+    """Each of ``arrays`` an ndarray (not a subclass) of its (dtype, dimensions), C-contiguous
+    and aligned."""
     if len(arrays) != len(kinds):
         return False
     for a, (dtype, ndim) in zip(arrays, kinds, strict=True):
         if type(a) is not np.ndarray or a.dtype != dtype or a.ndim != ndim:
             return False
-        if not a.flags.c_contiguous:
+        flags = a.flags
+        if not (flags.c_contiguous and flags.aligned):
             return False
     return True
 
 
-_F8 = np.dtype(np.float64)
-_DECIDE_KINDS = tuple((_F8, nd) for nd in DECIDE_NDIMS)
-_RANGE_KINDS = tuple((_F8, nd) for nd in RANGE_NDIMS)
+def _kinds(fields: tuple[tuple[type, int], ...]) -> Kinds:
+    return tuple((np.dtype(dtype), ndim) for dtype, ndim in fields)
 
 
-def _decide_args_ok(args: tuple) -> bool:
-    return _arrays_ok(args, _DECIDE_KINDS) and args[-1].flags.writeable
+_DECIDE_KINDS = _kinds(tuple((np.float64, nd) for nd in DECIDE_NDIMS))
+_RANGE_KINDS = _kinds(tuple((np.float64, nd) for nd in RANGE_NDIMS))
+_SWARM_KINDS = _kinds(SWARM_FIELDS)
 
 
-def _range_args_ok(args: tuple) -> bool:
-    from .swarm import SWARM_FIELDS, Swarm
+def _decide_args_ok(args: tuple[object, ...]) -> bool:
+    return _arrays_ok(args, _DECIDE_KINDS) and args[-1].flags.writeable  # type: ignore[attr-defined]
 
+
+def _range_args_ok(args: tuple[object, ...]) -> bool:
     if len(args) != 3 + len(RANGE_NDIMS) or type(args[0]) is not Swarm:
         return False
     ints = all(isinstance(i, int | np.integer) and not isinstance(i, bool) for i in args[1:3])
-    kinds = tuple((np.dtype(dtype), nd) for dtype, nd in SWARM_FIELDS)
     return (
         ints
-        and _arrays_ok(tuple(args[0]), kinds)
+        and _arrays_ok(tuple(args[0]), _SWARM_KINDS)
         and _arrays_ok(args[3:], _RANGE_KINDS)
-        and args[-1].flags.writeable
+        and args[-1].flags.writeable  # type: ignore[attr-defined]
     )
 
 
-def _checked(compiled: Kernel, jit: Kernel, ok: Callable[[tuple], bool]) -> Kernel:
-    """``compiled`` behind a check of its arguments' types: a compiled module does not check
-    them (a list where an array belongs would crash the process), so anything else goes to the
-    JIT kernel ``jit``, which dispatches on them (and raises where it must)."""
+def _checked(compiled: Kernel, jit: Kernel, ok: Callable[[tuple[object, ...]], bool]) -> Kernel:
+    """``compiled`` behind a check of its arguments: a compiled module trusts the types it was
+    compiled for (an int64 array read as float64, a 2D array as 1D, a strided view as
+    contiguous: wrong answers or memory read out of bounds), so anything else goes to the JIT
+    kernel ``jit``, which dispatches on the types (and raises where it must)."""
 
     def call(*args: object) -> None:
         (compiled if ok(args) else jit)(*args)
