@@ -10,7 +10,8 @@ of the swarm kernel on top (all of it on the JIT; only the k-d tree's neighbour 
 ahead-of-time module).
 
     python benchmarks/first_call.py [--build]
-"""from __future__ import annotations
+"""
+from __future__ import annotations
 
 import argparse
 import json

@@ -642,17 +642,17 @@ def build_parser() -> argparse.ArgumentParser:
     comp = sub.add_parser(
         "compile",
         parents=common,
-        help="compile select()'s decision kernel ahead of time",
-        description="Compile the decision kernel of select() ahead of time (numba.pycc) into "
-        "the installed package, so that a first select() in a new process does not wait for "
-        "numba's JIT compiler (about 30 s). A module built from other sources, Python, "
-        "numba, numpy or another CPU is ignored: run it again after an edit or an upgrade "
-        "(make does). The package's folder must be writable.",
+        help="compile the decision kernels of select() and select_many() ahead of time",
+        description="Compile the decision kernels of select() and select_many() ahead of time "
+        "(numba.pycc) into the installed package, so that a first select() in a new process "
+        "does not wait for numba's JIT compiler (about 30 s). A module built from other "
+        "sources, Python, numba, numpy or another CPU is ignored: run it again after an edit "
+        "or an upgrade (make does). The package's folder must be writable.",
     )
     comp.add_argument(
         "--check",
         action="store_true",
-        help="only say whether select() would use an ahead-of-time kernel (exit 1 if not)",
+        help="only say whether select() would run an ahead-of-time kernel, and why (exit 1 if not)",
     )
     comp.set_defaults(func=cmd_compile)
     return p
