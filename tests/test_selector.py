@@ -321,3 +321,42 @@ def test_nothing_to_avoid_but_the_preferred_velocity_breaks_the_limits():
     assert list(many.statuses) == ["optimal", "optimal"]
     for v in many.velocities:
         np.testing.assert_allclose(v, d.velocity, atol=1e-9)
+
+
+# ------------------------------------------------------------ warming a non-default selector
+
+def test_a_non_default_selector_runs_its_path_once_per_process_in_its_constructor(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """So that numba compiles the geometry its Python formulation calls there (with the
+    notice on stderr), not inside the first decision's solve_time."""
+    from vo3d_opt import selector as sel_module
+
+    monkeypatch.setattr(sel_module, "_warm_paths", set())
+    calls: list[str] = []
+    real = VelocitySelector.select
+
+    def counted(self, **kw):
+        calls.append(self.formulation)
+        return real(self, **kw)
+
+    monkeypatch.setattr(VelocitySelector, "select", counted)
+    VelocitySelector("plane_qp", "osqp")
+    VelocitySelector("plane_qp", "osqp")
+    assert calls == ["plane_qp", "plane_qp"]  # the two encounters, once
+    VelocitySelector()  # the default: its kernel is warmed by warm_up, not by decisions
+    VelocitySelector("sampled")
+    assert calls == ["plane_qp", "plane_qp", "sampled", "sampled"]
+
+
+@pytest.mark.parametrize("formulation,solver", [("plane_qp", "osqp"), ("cone_qp", None)])
+def test_the_warm_up_encounters_avoid_and_reach_the_least_bad_fallback(
+    formulation: str, solver: str | None
+) -> None:
+    from vo3d_opt.selector import _warm_encounters
+
+    sel = VelocitySelector(formulation, solver)
+    avoid, surrounded = (sel.select(**kw) for kw in _warm_encounters())
+    assert avoid.status == "optimal" and not np.allclose(avoid.velocity, (4.0, 0.0, 0.0))
+    assert surrounded.status == "infeasible_min_violation"
+    assert surrounded.info["round"] == "least_bad"

@@ -357,7 +357,7 @@ def cmd_compile(args: argparse.Namespace) -> int:
         compiled, note = aot.load()
         print(note)
         return EXIT_OK if compiled is not None else EXIT_FAIL
-    log.info("compiling the decision kernel ahead of time (about half a minute)...")
+    log.info("compiling the decision kernels ahead of time (about 40 s)...")
     try:
         path, seconds = aot.build()
     except (RuntimeError, OSError) as exc:

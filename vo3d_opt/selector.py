@@ -161,6 +161,51 @@ def warm_up() -> None:
         _warm = True
 
 
+_warm_paths: set[tuple[str, str | None, str | None]] = set()
+_warm_paths_lock = threading.Lock()
+
+
+def _warm_formulation(selector: VelocitySelector) -> None:
+    """Run a selector that is not the compiled default once per process (per formulation and
+    backends) on two small encounters, an avoidance and a vehicle surrounded by closing
+    neighbours (the fallbacks), so that the compiled geometry its Python formulation calls is
+    compiled (or loaded from numba's cache) here, with the notice on stderr, and not inside
+    the first decision's ``solve_time``."""
+    key = (
+        selector.formulation,
+        selector.solver,
+        None if selector._qp is None else selector._qp.name,
+    )
+    with _warm_paths_lock:
+        if key in _warm_paths:
+            return
+        what = f"the geometry for {selector.formulation}" + (
+            f" on {selector.solver}" if selector.solver else ""
+        )
+        _compiling(what, lambda: [selector.select(**kw) for kw in _warm_encounters()])
+        _warm_paths.add(key)
+
+
+def _warm_encounters() -> list[dict]:
+    """``_warm_formulation``'s encounters: a neighbour head-on with a cylinder and a box on the
+    way; then 14 neighbours on a sphere 12 m round, all closing in (no safe velocity)."""
+    own = AgentState(position=(0.0, 0.0, 30.0), velocity=(4.0, 0.0, 0.0))
+    ahead = [Neighbor(position=(30.0, 0.0, 30.0), velocity=(-4.0, 0.0, 0.0), r_pz=10.0)]
+    obstacles = [
+        Cylinder(center=(15.0, 3.0), radius=2.0, height=40.0),
+        Box(center=(20.0, -8.0), size=(4.0, 3.0), height=40.0, yaw=0.3),
+    ]
+    k = np.arange(14) + 0.5
+    z, phi = 1.0 - 2.0 * k / 14, np.pi * (1.0 + 5.0**0.5) * k  # a Fibonacci sphere
+    d = np.column_stack([np.sqrt(1.0 - z * z) * np.cos(phi), np.sqrt(1.0 - z * z) * np.sin(phi), z])
+    around = [Neighbor(position=own.position + 12.0 * u, velocity=-3.0 * u, r_pz=5.0) for u in d]
+    common = dict(own=own, preferred_velocity=(4.0, 0.0, 0.0), limits=Limits(), dt=0.2)
+    return [
+        dict(common, neighbors=ahead, obstacles=obstacles),
+        dict(common, neighbors=around, obstacles=[]),
+    ]
+
+
 def decision_kernel() -> str:
     """Which compiled decision ``select`` and ``select_many`` run: the ahead-of-time module
     (its path) or numba's JIT kernels, and why."""
@@ -177,7 +222,7 @@ def _compiling(what: str, run: Callable[[], object], hint: str = "") -> None:
 
     def tell() -> None:
         log.warning(
-            "vo3d-opt: compiling %s (once per machine; numba caches it on disk%s)...", what, hint
+            "vo3d-opt: compiling %s (numba caches it on disk for later runs%s)...", what, hint
         )
         shown.set()
 
@@ -205,8 +250,10 @@ def warm_up_many() -> None:
         inputs = swarm.SwarmInputs.checked(
             [[0.0, 0.0, 10.0], [10.0, 0.0, 10.0]], v, v, 3.0, [], None, 0.2, 55.0, None, None
         )
+        # with the ahead-of-time module only the k-d tree's neighbour lists are left to compile
+        aot_loaded = _range_kernel is not decide_range
         _compiling(
-            "the swarm kernel",
+            "select_many's neighbour lists" if aot_loaded else "the swarm kernel",
             lambda: _select_many_compiled(Options(), inputs, 1, time.perf_counter()),
         )
         _warm_many = True
@@ -326,6 +373,8 @@ class VelocitySelector:
         self._compiled = self._qp is not None and self._qp.name == "exact2d"
         if self._compiled:
             warm_up()
+        if not self.compiled:
+            _warm_formulation(self)
 
     @staticmethod
     def _qp_backend(name: str, formulation: str) -> Backend:

@@ -220,7 +220,7 @@ def load(directory: Path = HERE) -> tuple[Kernels | None, str]:
         _checked(entries[0], kernel.decide, _decide_args_ok),
         _checked(entries[1], swarm.decide_range, _range_args_ok),
     )
-    return kernels, f"ahead-of-time kernel {path}"
+    return kernels, f"ahead-of-time kernel {path} (built from this code for this machine)"
 
 
 Kinds = tuple[tuple[np.dtype, int], ...]
