@@ -6,8 +6,8 @@ Runs child processes on the contract's example: with numba's JIT kernel (``VO3D_
 an empty numba cache directory (a new checkout), then again with that cache (now filled); and,
 when ``vo3d compile`` has built the ahead-of-time kernel for this code, the same with it. Each
 then times its first ``select_many`` (two vehicles and the cylinder), which compiles the rest
-of the swarm kernel on top (all of it on the JIT; only the k-d tree's neighbour lists with the
-ahead-of-time module).
+of the swarm kernel on top on the JIT (nothing with the ahead-of-time module, which holds the
+k-d tree's neighbour lists too).
 
     python benchmarks/first_call.py [--build]
 """

@@ -181,6 +181,66 @@ def test_swarm_arguments_it_cannot_take_go_to_the_jit_kernel() -> None:
                          and value.dtype == np.float64 else ["jit"]), k
 
 
+def _pairs(seed: int, n: int) -> tuple:
+    """``neighbor_lists``' arguments for n vehicles on a coarse lattice (tied distances), some
+    not deciding: every pair within reach, as ``vehicle_links`` gets them from the tree."""
+    rng = np.random.default_rng(seed)
+    P = rng.integers(0, 6, size=(n, 3)).astype(float) * 4.0
+    a, b = (np.ascontiguousarray(x, dtype=np.int64) for x in np.triu_indices(n, 1))
+    dist = np.linalg.norm(P[a] - P[b], axis=-1)
+    who = np.flatnonzero(rng.random(n) < 0.8)
+    place = np.full(n, -1, dtype=np.int64)
+    place[who] = np.arange(who.shape[0])
+    return a, b, dist, 9.0 + 4.0 * (seed % 4), place
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("k", [-1, 0, 3, 10, 60])
+def test_the_neighbour_lists_entry_answers_as_the_jit(
+    compiled: aot.Kernels, seed: int, k: int
+) -> None:
+    """The k-d tree's pairs as neighbour lists: the module's and the JIT's are the same, with
+    tied distances, rows past the insertion sort's 48 (seeds >= 4: 200 vehicles in a small
+    lattice, ranges 9 to 21 m) and every k (-1: all within range)."""
+    a, b, dist, reach, place = _pairs(seed, 200 if seed >= 4 else 30)
+    D = int(np.count_nonzero(place >= 0))
+    got_span, want_span = np.empty((D, 2), dtype=np.int64), np.empty((D, 2), dtype=np.int64)
+    got = compiled.neighbor_lists.compiled(a, b, dist, reach, place, k, got_span)
+    want = swarm.neighbor_lists(a, b, dist, reach, place, k, want_span)
+    assert np.array_equal(got, want) and np.array_equal(got_span, want_span)
+    if seed >= 5 and k in (-1, 60):  # the crowds' path (a row of more than 48) is taken
+        assert np.max(want_span[:, 1] - want_span[:, 0]) > 48
+
+
+def test_neighbour_list_arguments_it_cannot_take_go_to_the_jit() -> None:
+    calls: list[str] = []
+    checked = aot._checked(
+        lambda *a: calls.append("compiled"), lambda *a: calls.append("jit"), aot._lists_args_ok
+    )
+    a, b, dist, reach, place = _pairs(0, 10)
+    span = np.empty((int(np.count_nonzero(place >= 0)), 2), dtype=np.int64)
+    args = [a, b, dist, reach, place, 4, span]
+    checked(*args)
+    assert calls == ["compiled"]
+    odd = [
+        (0, a.astype(np.int32)),  # another dtype
+        (2, dist.astype(np.float32)),
+        (3, 9),  # an int range
+        (5, 4.0),  # a float k
+        (5, True),
+        (4, list(place)),  # a list
+        (6, np.asfortranarray(np.empty((span.shape[0], 3), dtype=np.int64))[:, :2]),  # strided
+        (6, _frozen(span.copy())),  # a read-only output
+    ]
+    for k, value in odd:
+        calls.clear()
+        checked(*args[:k], value, *args[k + 1 :])
+        assert calls == ["jit"], k
+    calls.clear()
+    checked(*args[:-1])
+    assert calls == ["jit"]
+
+
 def _frozen(a: np.ndarray) -> np.ndarray:
     a.flags.writeable = False
     return a
@@ -230,6 +290,7 @@ def test_select_runs_the_module_when_it_is_current(
     monkeypatch.setattr(selector, "_kernel_note", selector._kernel_note)
     monkeypatch.setattr(selector, "_decide_kernel", kernel.decide)
     monkeypatch.setattr(selector, "_range_kernel", selector.decide_range)
+    monkeypatch.setattr(swarm, "_neighbor_lists", swarm.neighbor_lists)
     load = aot.load
     monkeypatch.setattr(aot, "load", lambda: load(built))
     kw = _crowd(11, n=15)
@@ -240,9 +301,11 @@ def test_select_runs_the_module_when_it_is_current(
     kernel.decide(*_arrays(kw, Options()), want)
     assert np.array_equal(got.velocity, want[:3])
     assert selector._range_kernel is not selector.decide_range
+    assert swarm._neighbor_lists is not swarm.neighbor_lists
     P, V, W, R = random_swarm(3, n=30)
     many = VelocitySelector().select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0)
     monkeypatch.setattr(selector, "_range_kernel", selector.decide_range)
+    monkeypatch.setattr(swarm, "_neighbor_lists", swarm.neighbor_lists)
     jit = VelocitySelector().select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0)
     assert np.array_equal(many.velocities, jit.velocities)
 

@@ -138,7 +138,9 @@ def warm_up() -> None:
             return
         compiled, _kernel_note = aot.load()
         if compiled is not None:
-            _decide_kernel, _range_kernel, _warm = compiled.decide, compiled.decide_range, True
+            _decide_kernel, _range_kernel = compiled.decide, compiled.decide_range
+            swarm.use_neighbor_lists(compiled.neighbor_lists)
+            _warm = True
             return
         own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
         nbrs = neighbor_rows(
@@ -250,10 +252,9 @@ def warm_up_many() -> None:
         inputs = swarm.SwarmInputs.checked(
             [[0.0, 0.0, 10.0], [10.0, 0.0, 10.0]], v, v, 3.0, [], None, 0.2, 55.0, None, None
         )
-        # with the ahead-of-time module only the k-d tree's neighbour lists are left to compile
-        aot_loaded = _range_kernel is not decide_range
+        # nothing compiles here with the ahead-of-time module (it imports the k-d tree's code)
         _compiling(
-            "select_many's neighbour lists" if aot_loaded else "the swarm kernel",
+            "the swarm kernel",
             lambda: _select_many_compiled(Options(), inputs, 1, time.perf_counter()),
         )
         _warm_many = True

@@ -34,11 +34,22 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ._jit import entry, inline
 from .formulations.common import bounds_array
-from .formulations.swarm import AGENT_COLUMNS, MANY_OUT_SIZE, Swarm, decide_range
+from .formulations.swarm import AGENT_COLUMNS, MANY_OUT_SIZE, Swarm, decide_range, neighbor_lists
 from .geometry.pyramid import prism_rows
 from .types import Box, Cylinder, Limits
+
+#: The compiled ``neighbor_lists`` that ``vehicle_links`` calls: numba's JIT one, or the
+#: ahead-of-time module's once the selector has loaded it (``use_neighbor_lists``).
+_neighbor_lists: Callable[..., np.ndarray] = neighbor_lists
+
+
+def use_neighbor_lists(fn: Callable[..., np.ndarray]) -> None:
+    """Make ``vehicle_links`` call ``fn`` (``formulations.swarm.neighbor_lists`` compiled
+    ahead of time: formulations/aot.py) instead of numba's JIT one."""
+    global _neighbor_lists
+    _neighbor_lists = fn
+
 
 #: The k-d trees propose candidates within range·(1 + _REACH) + _REACH, m: a hair more than the
 #: range, so that a rounding difference between the tree's distance and numpy's never drops a
@@ -225,7 +236,7 @@ def vehicle_links(
     place[who] = np.arange(D)
     span = np.empty((D, 2), dtype=np.int64)
     k = -1 if max_neighbors is None else int(max_neighbors)
-    idx = neighbor_lists(a, b, dist, float(sensing_range), place, k, span)
+    idx = _neighbor_lists(a, b, dist, float(sensing_range), place, k, span)
     return span, idx
 
 
@@ -309,91 +320,6 @@ def _nearest_links(
     ends = np.cumsum(count)
     span = np.stack([ends - count, ends], axis=1).astype(np.int64)
     return span, np.ascontiguousarray(chosen[chosen < n], dtype=np.int64)
-
-
-#: Neighbour lists up to this long are sorted in place (insertion sort), longer ones by numpy.
-_SMALL_ROW = 48
-
-
-@inline
-def _insertion(key_i: np.ndarray, key_d: np.ndarray, c: int, by_distance: bool) -> None:
-    """Stable insertion sort of the first c entries of (key_i, key_d) by key_d (``by_distance``)
-    or by key_i."""
-    for q in range(1, c):
-        i, d = key_i[q], key_d[q]
-        r = q
-        while r > 0 and ((key_d[r - 1] > d) if by_distance else (key_i[r - 1] > i)):
-            key_i[r], key_d[r] = key_i[r - 1], key_d[r - 1]
-            r -= 1
-        key_i[r], key_d[r] = i, d
-
-
-@entry
-def neighbor_lists(
-    a: np.ndarray,
-    b: np.ndarray,
-    dist: np.ndarray,
-    sensing_range: float,
-    place: np.ndarray,
-    k: int,
-    span: np.ndarray,
-) -> np.ndarray:
-    """The pairs (a[e], b[e]) at distance dist[e] as each deciding vehicle's neighbour list
-    (``place``: a vehicle's row, -1 when it does not decide): those within ``sensing_range``,
-    the k nearest of them when k >= 0 (ties: the lower index), in increasing index order, into
-    ``span`` (D, 2); returns the concatenated lists. A counting sort by row: O(pairs)."""
-    D = span.shape[0]
-    count = np.zeros(D + 1, dtype=np.int64)
-    for e in range(a.shape[0]):
-        if dist[e] <= sensing_range:
-            if place[a[e]] >= 0:
-                count[place[a[e]] + 1] += 1
-            if place[b[e]] >= 0:
-                count[place[b[e]] + 1] += 1
-    start = np.cumsum(count)
-    fill = start.copy()
-    idx, near = np.empty(start[D], dtype=np.int64), np.empty(start[D])
-    for e in range(a.shape[0]):
-        if dist[e] <= sensing_range:
-            for x, y in ((a[e], b[e]), (b[e], a[e])):
-                r = place[x]
-                if r >= 0:
-                    idx[fill[r]], near[fill[r]] = y, dist[e]
-                    fill[r] += 1
-    out, m = np.empty(start[D], dtype=np.int64), 0
-    widest = 0
-    for r in range(D):
-        widest = max(widest, start[r + 1] - start[r])
-    key_i, key_d = np.empty(widest, dtype=np.int64), np.empty(widest)
-    for r in range(D):
-        c = start[r + 1] - start[r]
-        if c > _SMALL_ROW:  # a crowd: sorting with allocations is cheaper than insertion
-            # Every sort a stable merge sort (one compiled sort, not three: numba's quicksort
-            # and np.sort each compile for seconds); a row's indices are distinct, so sorting
-            # them by any method gives the same order.
-            row, d = idx[start[r] : start[r + 1]], near[start[r] : start[r + 1]]
-            by_index = np.argsort(row, kind="mergesort")
-            row, d = row[by_index], d[by_index]
-            if 0 <= k < c:
-                row = row[np.argsort(d, kind="mergesort")[:k]]  # stable: ties by index
-                row = row[np.argsort(row, kind="mergesort")]
-            c = row.shape[0]
-            for q in range(c):  # a loop, not a slice assignment: no shape check to compile
-                out[m + q] = row[q]
-        else:
-            for q in range(c):  # by index, then (stable) by distance: ties keep the lower index
-                key_i[q], key_d[q] = idx[start[r] + q], near[start[r] + q]
-            _insertion(key_i, key_d, c, False)
-            if 0 <= k < c:
-                _insertion(key_i, key_d, c, True)
-                c = k
-                _insertion(key_i, key_d, c, False)
-            for q in range(c):
-                out[m + q] = key_i[q]
-        span[r, 0] = m
-        m += c
-        span[r, 1] = m
-    return out[:m].copy()
 
 
 def _all(D: int, m: int) -> tuple[np.ndarray, np.ndarray]:

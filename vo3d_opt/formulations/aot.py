@@ -14,7 +14,8 @@ flags, ``error_model="numpy"``) and linked into the module, and the answers are 
 of the JIT kernels (tests/test_aot.py). The module's wrappers release the GIL, as the JIT's
 ``nogil`` ones do, so ``vo3d_opt.swarm.decide_all`` runs ``decide_range`` on several threads as
 before (a flag set in the compiling process only). ``select_many``'s neighbour lists
-(``vo3d_opt.swarm.neighbor_lists``) stay on the JIT: a few seconds on a first call.
+(``swarm.neighbor_lists``, the counting sort of the k-d tree's pairs) are in the module too,
+so that a first ``select_many`` compiles nothing either.
 
 ``numba.pycc`` has been "pending deprecation" since numba 0.57 with no replacement yet; when it
 goes, ``build()`` fails with its error and everything runs on the JIT kernels as before.
@@ -52,8 +53,19 @@ PACKAGE = HERE.parent
 DECIDE_NDIMS = (1, 1, 1, 2, 2, 1, 1, 2, 2, 1)
 #: ``swarm.decide_range``'s arrays after (sw, lo, hi): options, plane_tab, gen_tab, out.
 RANGE_NDIMS = (1, 2, 2, 2)
+#: ``swarm.neighbor_lists``' arguments (a, b, dist, sensing_range, place, k, span): (dtype,
+#: dimensions) of each C array, None for the float and the int between them.
+LISTS_KINDS = (
+    (np.int64, 1),
+    (np.int64, 1),
+    (np.float64, 1),
+    None,
+    (np.int64, 1),
+    None,
+    (np.int64, 2),
+)
 
-Kernel = Callable[..., None]
+Kernel = Callable[..., Any]
 
 
 class Kernels(NamedTuple):
@@ -61,6 +73,7 @@ class Kernels(NamedTuple):
 
     decide: Kernel  # kernel.decide
     decide_range: Kernel  # formulations.swarm.decide_range
+    neighbor_lists: Kernel  # formulations.swarm.neighbor_lists (returns the lists)
 
 
 def module_path(directory: Path = HERE) -> Path:
@@ -113,7 +126,7 @@ def _export(directory: str) -> None:
     from numba import types
     from numba.pycc import CC
 
-    decide, decide_range = kernel.decide, swarm.decide_range
+    decide, decide_range, neighbor_lists = kernel.decide, swarm.decide_range, swarm.neighbor_lists
 
     compile_extra = pycc_compiler.compile_extra
 
@@ -134,6 +147,9 @@ def _export(directory: str) -> None:
     def decide_range_aot(sw, lo, hi, options, plane_tab, gen_tab, out):  # noqa: ANN001
         decide_range(sw, lo, hi, options, plane_tab, gen_tab, out)
 
+    def neighbor_lists_aot(a, b, dist, sensing_range, place, k, span):  # noqa: ANN001
+        return neighbor_lists(a, b, dist, sensing_range, place, k, span)
+
     def array(dtype: type, ndim: int) -> types.Array:
         return types.Array(numba.from_dtype(np.dtype(dtype)), ndim, "C")
 
@@ -147,6 +163,9 @@ def _export(directory: str) -> None:
     cc.export("decide_range", types.void(swarm_type, types.int64, types.int64, *f8))(
         decide_range_aot
     )
+    scalars = iter((types.float64, types.int64))
+    lists_args = [next(scalars) if kind is None else array(*kind) for kind in LISTS_KINDS]
+    cc.export("neighbor_lists", array(np.int64, 1)(*lists_args))(neighbor_lists_aot)
     with warnings.catch_warnings():  # pycc's pending-deprecation notice: said in the docstring
         warnings.simplefilter("ignore")
         cc.compile()
@@ -213,12 +232,13 @@ def load(directory: Path = HERE) -> tuple[Kernels | None, str]:
         assert spec is not None  # a loader is given
         module = importlib.util.module_from_spec(spec)
         loader.exec_module(module)
-        entries = module.decide, module.decide_range
+        entries = module.decide, module.decide_range, module.neighbor_lists
     except (ImportError, OSError, AttributeError) as exc:
         return None, f"{path} does not load ({type(exc).__name__}: {exc})"
     kernels = Kernels(
         _checked(entries[0], kernel.decide, _decide_args_ok),
         _checked(entries[1], swarm.decide_range, _range_args_ok),
+        _checked(entries[2], swarm.neighbor_lists, _lists_args_ok),
     )
     return kernels, f"ahead-of-time kernel {path} (built from this code for this machine)"
 
@@ -265,14 +285,32 @@ def _range_args_ok(args: tuple[object, ...]) -> bool:
     )
 
 
+_LISTS_ARRAYS = tuple(i for i, kind in enumerate(LISTS_KINDS) if kind is not None)
+_LISTS_KINDS = _kinds(tuple(kind for kind in LISTS_KINDS if kind is not None))
+
+
+def _lists_args_ok(args: tuple[object, ...]) -> bool:
+    """``neighbor_lists``' arguments: its arrays as compiled, a float range and an int k."""
+    if len(args) != len(LISTS_KINDS):
+        return False
+    k = args[5]
+    return (
+        isinstance(args[3], float)
+        and isinstance(k, int)
+        and not isinstance(k, bool)
+        and _arrays_ok(tuple(args[i] for i in _LISTS_ARRAYS), _LISTS_KINDS)
+        and args[-1].flags.writeable  # type: ignore[attr-defined]
+    )
+
+
 def _checked(compiled: Kernel, jit: Kernel, ok: Callable[[tuple[object, ...]], bool]) -> Kernel:
     """``compiled`` behind a check of its arguments: a compiled module trusts the types it was
     compiled for (an int64 array read as float64, a 2D array as 1D, a strided view as
     contiguous: wrong answers or memory read out of bounds), so anything else goes to the JIT
     kernel ``jit``, which dispatches on the types (and raises where it must)."""
 
-    def call(*args: object) -> None:
-        (compiled if ok(args) else jit)(*args)
+    def call(*args: object) -> Any:
+        return (compiled if ok(args) else jit)(*args)
 
     call.compiled = compiled  # type: ignore[attr-defined]  # the unchecked call, for timing
     return call

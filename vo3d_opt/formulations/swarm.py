@@ -2,10 +2,14 @@
 
 The Python side (``vo3d_opt.swarm``) finds who senses whom with a k-d tree and hands the answer
 over as index lists (a vehicle's neighbours are ``nb_idx[nb_span[d, 0]:nb_span[d, 1]]``, the
-same for the static spheres and the obstacles). Here, in one ``prange`` loop over the deciding
+same for the static spheres and the obstacles). Here, in one loop over the deciding
 vehicles, each vehicle's ``nbrs`` and ``prisms`` rows are built from those lists and
 ``kernel.decide_one`` decides for it: exactly what ``select`` computes for that vehicle, with
 no Python object per vehicle or neighbour.
+
+``neighbor_lists`` turns the k-d tree's pairs into those lists (a counting sort by vehicle);
+it lives here, beside ``decide_range``, so that ``vo3d compile`` (formulations/aot.py) puts
+both in its module and a first ``select_many`` compiles nothing.
 
 Parallel over vehicles: ``decide_range`` is compiled ``nogil`` and ``vo3d_opt.swarm.decide_all``
 runs ranges of vehicles on several threads at once. Not numba's ``prange``: a ``parallel=True``
@@ -21,7 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import entry, inline_alloc
+from .._jit import entry, inline, inline_alloc
 from .common import bounds_of, config_of
 from .kernel import OUT_SIZE, decide_one
 
@@ -135,3 +139,88 @@ def decide_range(
     several ranges at once on threads."""
     for d in range(lo, hi):
         decide_vehicle(sw, d, options, plane_tab, gen_tab, out[d])
+
+
+#: Neighbour lists up to this long are sorted in place (insertion sort), longer ones by numpy.
+_SMALL_ROW = 48
+
+
+@inline
+def _insertion(key_i: np.ndarray, key_d: np.ndarray, c: int, by_distance: bool) -> None:
+    """Stable insertion sort of the first c entries of (key_i, key_d) by key_d (``by_distance``)
+    or by key_i."""
+    for q in range(1, c):
+        i, d = key_i[q], key_d[q]
+        r = q
+        while r > 0 and ((key_d[r - 1] > d) if by_distance else (key_i[r - 1] > i)):
+            key_i[r], key_d[r] = key_i[r - 1], key_d[r - 1]
+            r -= 1
+        key_i[r], key_d[r] = i, d
+
+
+@entry
+def neighbor_lists(
+    a: np.ndarray,
+    b: np.ndarray,
+    dist: np.ndarray,
+    sensing_range: float,
+    place: np.ndarray,
+    k: int,
+    span: np.ndarray,
+) -> np.ndarray:
+    """The pairs (a[e], b[e]) at distance dist[e] as each deciding vehicle's neighbour list
+    (``place``: a vehicle's row, -1 when it does not decide): those within ``sensing_range``,
+    the k nearest of them when k >= 0 (ties: the lower index), in increasing index order, into
+    ``span`` (D, 2); returns the concatenated lists. A counting sort by row: O(pairs)."""
+    D = span.shape[0]
+    count = np.zeros(D + 1, dtype=np.int64)
+    for e in range(a.shape[0]):
+        if dist[e] <= sensing_range:
+            if place[a[e]] >= 0:
+                count[place[a[e]] + 1] += 1
+            if place[b[e]] >= 0:
+                count[place[b[e]] + 1] += 1
+    start = np.cumsum(count)
+    fill = start.copy()
+    idx, near = np.empty(start[D], dtype=np.int64), np.empty(start[D])
+    for e in range(a.shape[0]):
+        if dist[e] <= sensing_range:
+            for x, y in ((a[e], b[e]), (b[e], a[e])):
+                r = place[x]
+                if r >= 0:
+                    idx[fill[r]], near[fill[r]] = y, dist[e]
+                    fill[r] += 1
+    out, m = np.empty(start[D], dtype=np.int64), 0
+    widest = 0
+    for r in range(D):
+        widest = max(widest, start[r + 1] - start[r])
+    key_i, key_d = np.empty(widest, dtype=np.int64), np.empty(widest)
+    for r in range(D):
+        c = start[r + 1] - start[r]
+        if c > _SMALL_ROW:  # a crowd: sorting with allocations is cheaper than insertion
+            # Every sort a stable merge sort (one compiled sort, not three: numba's quicksort
+            # and np.sort each compile for seconds); a row's indices are distinct, so sorting
+            # them by any method gives the same order.
+            row, d = idx[start[r] : start[r + 1]], near[start[r] : start[r + 1]]
+            by_index = np.argsort(row, kind="mergesort")
+            row, d = row[by_index], d[by_index]
+            if 0 <= k < c:
+                row = row[np.argsort(d, kind="mergesort")[:k]]  # stable: ties by index
+                row = row[np.argsort(row, kind="mergesort")]
+            c = row.shape[0]
+            for q in range(c):  # a loop, not a slice assignment: no shape check to compile
+                out[m + q] = row[q]
+        else:
+            for q in range(c):  # by index, then (stable) by distance: ties keep the lower index
+                key_i[q], key_d[q] = idx[start[r] + q], near[start[r] + q]
+            _insertion(key_i, key_d, c, False)
+            if 0 <= k < c:
+                _insertion(key_i, key_d, c, True)
+                c = k
+                _insertion(key_i, key_d, c, False)
+            for q in range(c):
+                out[m + q] = key_i[q]
+        span[r, 0] = m
+        m += c
+        span[r, 1] = m
+    return out[:m].copy()
