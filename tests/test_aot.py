@@ -23,7 +23,7 @@ from vo3d_opt.formulations import aot, kernel
 from vo3d_opt.formulations.common import Options, bounds_array, neighbor_rows
 from vo3d_opt.formulations.swarm import MANY_OUT_SIZE, Swarm
 from vo3d_opt.geometry.pyramid import prism_rows
-from vo3d_opt.types import Limits
+from vo3d_opt.types import AgentState, Limits
 
 
 @pytest.fixture(scope="module")
@@ -133,6 +133,40 @@ def test_arguments_it_cannot_take_go_to_the_jit_kernel() -> None:
         calls.clear()
         checked(*wrong)
         assert calls == ["jit"]
+
+
+@settings(max_examples=60, deadline=None)
+@given(kw=encounters())
+def test_select_passes_the_unchecked_module_only_arguments_it_would_pass(kw: dict) -> None:
+    """``select`` calls the module's entry without its check (``selector._decide_unchecked``):
+    every argument it builds must be one the check would let through."""
+    seen: list[bool] = []
+
+    def unchecked(*args: object) -> None:
+        seen.append(aot._decide_args_ok(args))
+        kernel.decide(*args)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(selector, "_decide_unchecked", unchecked)
+        VelocitySelector().select(**kw)
+    assert seen in ([], [True]), seen  # [] where it returned before the kernel
+
+
+def test_an_agent_state_built_without_validation_goes_through_the_check(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """pydantic's ``model_construct`` skips ``check_vector``: such a position reaches the
+    checked entry (which sends a list to the JIT kernel), never the unchecked one."""
+    calls: list[str] = []
+    monkeypatch.setattr(selector, "_decide_unchecked", lambda *a: calls.append("unchecked"))
+    monkeypatch.setattr(selector, "_decide_kernel", lambda *a: calls.append("checked"))
+    kw = _crowd(3, n=4)
+    VelocitySelector().select(**kw)
+    state = AgentState.model_construct(position=[0.0, 0.0, 30.0], velocity=kw["own"].velocity)
+    VelocitySelector().select(**{**kw, "own": state})
+    strided = AgentState.model_construct(position=np.zeros(6)[::2], velocity=kw["own"].velocity)
+    VelocitySelector().select(**{**kw, "own": strided})
+    assert calls == ["unchecked", "checked", "checked"]
 
 
 def _swarm(seed: int, n: int = 40) -> Swarm:

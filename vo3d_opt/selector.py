@@ -64,6 +64,13 @@ _warm_many = False
 #: The compiled decision ``select`` calls, set by ``warm_up``: the ahead-of-time module when one
 #: built from this code for this machine is there (formulations/aot.py), else numba's JIT kernel.
 _decide_kernel: Callable[..., None] = kernel.decide
+#: The same without the module's check of its arguments' types (``aot._checked``: 2.6 µs a
+#: call), for ``select``: it builds every other array it passes itself, float64, C-contiguous and
+#: of the compiled dimensions (``check_vector``, ``neighbor_rows``, ``prism_rows``,
+#: ``bounds_array``, ``Options.packed``; tests/test_aot.py holds it to that), and checks the
+#: two it takes from ``AgentState`` (``_vec3_ok``: a model built without validation).
+_decide_unchecked: Callable[..., None] = kernel.decide
+_F8 = np.dtype(np.float64)
 #: The same for ``select_many``'s ``decide_range``.
 _range_kernel: Callable[..., None] = decide_range
 _kernel_note = "not loaded yet"
@@ -87,6 +94,11 @@ def _vec3(value, name: str) -> np.ndarray:
         return check_vector(value, 3)
     except ValueError as exc:
         raise ValueError(f"{name}: {exc}") from None
+
+
+def _vec3_ok(a: object) -> bool:
+    """``a`` as ``check_vector`` leaves a vector: a (3,) float64 C-contiguous ndarray."""
+    return type(a) is np.ndarray and a.dtype == _F8 and a.shape == (3,) and a.flags.c_contiguous
 
 
 def _items(value, cls, name: str) -> list:
@@ -132,13 +144,14 @@ def warm_up() -> None:
     this code and machine (``vo3d compile``), else numba's JIT kernel, compiled or loaded from
     numba's on-disk cache, saying on stderr when that takes a while (a first run on a machine
     compiles it). Called by the selector's constructor, so that no reported time includes it."""
-    global _warm, _decide_kernel, _range_kernel, _kernel_note
+    global _warm, _decide_kernel, _decide_unchecked, _range_kernel, _kernel_note
     with _warm_lock:
         if _warm:
             return
         compiled, _kernel_note = aot.load()
         if compiled is not None:
             _decide_kernel, _range_kernel = compiled.decide, compiled.decide_range
+            _decide_unchecked = compiled.decide.compiled  # type: ignore[attr-defined]
             swarm.use_neighbor_lists(compiled.neighbor_lists)
             _warm = True
             return
@@ -463,7 +476,8 @@ class VelocitySelector:
     ) -> Decision:
         """The compiled decision and its ``Decision``."""
         out = np.empty(kernel.OUT_SIZE)
-        _decide_kernel(p, v_now, v_pref, nbrs, prisms, limits, *self.options.packed, out)
+        decide = _decide_unchecked if _vec3_ok(p) and _vec3_ok(v_now) else _decide_kernel
+        decide(p, v_now, v_pref, nbrs, prisms, limits, *self.options.packed, out)
         vx, vy, vz, status, phi, rnd, solved = out.tolist()
         return Decision(
             velocity=out[:3],

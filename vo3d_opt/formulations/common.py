@@ -469,7 +469,7 @@ def decision_planes(vos: VOs, v_now: np.ndarray, cfg: Config) -> AvoidancePlanes
         direction[k] = (
             vos.v_pref[k] if use_pref else (v_now[k] if use_now else (1.0 if k == 0 else 0.0))
         )
-    return build_planes(direction, cfg.phi)
+    return build_planes(direction, cfg.phi, cfg.cos_phi, cfg.sin_phi)
 
 
 @entry

@@ -91,6 +91,8 @@ class PlaneQPs(NamedTuple):
     base: np.ndarray  # (V, 3, K + 3)
     based: np.ndarray  # (V,) bool
     included: np.ndarray  # (R, P, V) bool
+    starts: np.ndarray  # (V,) int: the VOs every QP starts with (``initial``), n_starts of them
+    n_starts: int
     G_lim: np.ndarray  # (P, L, 2)
     h_lim: np.ndarray  # (L,)
     key: np.ndarray  # (R, P)
@@ -138,12 +140,16 @@ def plane_qps(
     w0 = np.zeros(2)
     # v_pref lies in every plane
     w0[0] = e1[0] * vos.v_pref[0] + e1[1] * vos.v_pref[1] + e1[2] * vos.v_pref[2]
-    included, key = np.empty((R, P, V), dtype=np.bool_), np.empty((R, P))
+    starts, n_starts = np.empty(V, dtype=np.int64), 0
+    for k in range(V):
+        if initial[k]:
+            starts[n_starts], n_starts = k, n_starts + 1
+    included, key = np.zeros((R, P, V), dtype=np.bool_), np.empty((R, P))
     for r in range(R):
         for p in range(P):
             key[r, p] = np.inf
-            for k in range(V):
-                included[r, p, k] = initial[k]
+            for q in range(n_starts):
+                included[r, p, starts[q]] = True
     qps = PlaneQPs(
         np.empty((V, R, P, 2)),
         np.empty((V, R, P)),
@@ -152,6 +158,8 @@ def plane_qps(
         np.empty((V, 3, cfg.t.shape[0] + 3)),
         np.zeros(V, dtype=np.bool_),
         included,
+        starts,
+        n_starts,
         G_lim,
         h3,
         key,
@@ -340,12 +348,13 @@ def search(
 
 @inline
 def _bound(qps: PlaneQPs, r: int, p: int) -> float:
-    """A lower bound on QP (r, p)'s deviation: its feasible set lies inside each of its
-    half-planes (those built: see ``plane_qps``), so it is at least as far from w0 as the
-    farthest of them."""
+    """A lower bound on QP (r, p)'s deviation, before it is solved (it then constrains the VOs
+    it starts with: ``starts``): its feasible set lies inside each of its half-planes (those
+    built: see ``plane_qps``), so it is at least as far from w0 as the farthest of them."""
     lb = 0.0
-    for k in range(qps.included.shape[2]):
-        if qps.included[r, p, k] and qps.active[k, p]:
+    for q in range(qps.n_starts):
+        k = qps.starts[q]
+        if qps.active[k, p]:
             over = _beyond(qps, k, r, p)
             if over > 0.0:
                 lb = max(lb, over)

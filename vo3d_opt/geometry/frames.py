@@ -80,13 +80,16 @@ def avoidance_frame(direction: np.ndarray) -> np.ndarray:
 
 
 @jit
-def build_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
-    """The planes P_phi for angles ``phi`` (rad) about the axis ``direction``: eq. (8),
-    R_{P_phi} @ frame for every phi; the rotation only mixes e_y0 and e_z0."""
+def build_planes(
+    direction: np.ndarray, phi: np.ndarray, cos_phi: np.ndarray, sin_phi: np.ndarray
+) -> AvoidancePlanes:
+    """The planes P_phi for angles ``phi`` (rad, with their cosines and sines: a decision takes
+    them from its ``Config``, where the rows take them too) about the axis ``direction``:
+    eq. (8), R_{P_phi} @ frame for every phi; the rotation only mixes e_y0 and e_z0."""
     frame = avoidance_frame(direction)
     to_plane = np.empty((phi.shape[0], 3, 3))
     for p in range(phi.shape[0]):
-        c, s = np.cos(phi[p]), np.sin(phi[p])
+        c, s = cos_phi[p], sin_phi[p]
         for k in range(3):
             to_plane[p, 0, k] = frame[0, k]
             to_plane[p, 1, k] = c * frame[1, k] + s * frame[2, k]
@@ -98,7 +101,7 @@ def build_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
 def py_build_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
     """``build_planes`` for Python callers (compiled code calls ``build_planes``: no Python
     wrapper)."""
-    return build_planes(direction, phi)
+    return build_planes(direction, phi, np.cos(phi), np.sin(phi))
 
 
 def avoidance_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
