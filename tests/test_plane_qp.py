@@ -13,7 +13,7 @@ from vo3d_opt import AgentState, Cylinder, Limits, Neighbor, VelocitySelector
 from vo3d_opt.formulations import plane_qp
 from vo3d_opt.formulations.common import Options, prepare, py_decision_planes
 from vo3d_opt.formulations.kernel import py_add_rows, py_gather, py_lift, py_plane_qps, py_search
-from vo3d_opt.formulations.rows import ROUNDS
+from vo3d_opt.formulations.rows import ROUNDS, py_pick
 from vo3d_opt.solvers import QP, get_backend
 from vo3d_opt.status import Status
 
@@ -128,3 +128,45 @@ def test_rows_on_demand_give_the_same_search_bit_for_bit(kw):
     np.testing.assert_array_equal(tried_a[: a[3]], tried_b[: b[3]])
     if a[0] >= 0:
         np.testing.assert_array_equal(sol_a[a[0], a[1]], sol_b[b[0], b[1]])
+
+
+def _pick_reference(curve: np.ndarray, chord: np.ndarray, w0: np.ndarray) -> tuple[int, int, int]:
+    """The boundary candidates of the three rounds, written out: "near" the first of the least
+    distance to w0, "left" / "right" the first of the least distance with y at or above /
+    at or below the candidates' mean y (the nearest when none); NaN x: no candidate."""
+    pts = np.concatenate([curve.T, chord])
+    ok = ~np.isnan(pts[:, 0])
+    dist = np.where(ok, ((pts - w0) ** 2).sum(axis=1), np.inf)
+    total = 0.0
+    for y in pts[ok, 1]:  # the kernel's order of summation
+        total += y
+    centre = total / max(int(ok.sum()), 1)
+
+    def first_least(mask: np.ndarray) -> int:
+        best, d_best = -1, np.inf
+        for k in np.flatnonzero(mask):
+            if dist[k] < d_best:
+                best, d_best = k, dist[k]
+        return best
+
+    near = max(first_least(np.ones(len(pts), dtype=bool)), 0)
+    left, right = first_least(pts[:, 1] >= centre), first_least(pts[:, 1] <= centre)
+    return near, (near if left < 0 else left), (near if right < 0 else right)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_the_rounds_boundary_points_are_the_nearest_of_each_half(seed: int) -> None:
+    """``_pick`` (which searches only the half the nearest is not in) against the reference, on
+    candidates with missing points, tied distances and points on the centre line."""
+    rng = np.random.default_rng(seed)
+    K = int(rng.integers(4, 40))
+    for _ in range(50):
+        # coarse coordinates: ties in distance and y on the mean are common
+        curve = rng.integers(-3, 4, size=(2, K)).astype(float)
+        chord = rng.integers(-3, 4, size=(2, 2)).astype(float)
+        curve[0, rng.random(K) < rng.uniform(0.0, 1.0)] = np.nan
+        chord[rng.random(2) < 0.5, 0] = np.nan
+        if rng.random() < 0.2:  # symmetric about y = 0: the mean is 0, points on it
+            curve[1] = np.where(np.arange(K) % 2 == 0, 1.0, -1.0) * np.abs(curve[1])
+        w0 = rng.integers(-3, 4, size=2).astype(float)
+        assert py_pick(curve, chord.copy(), w0) == _pick_reference(curve, chord, w0)

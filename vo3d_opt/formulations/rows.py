@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import inline, jit
+from .._jit import entry, inline, jit
 from ..geometry import AvoidancePlanes
 from ..geometry.cone import outward_normal
 from ..geometry.sections import (
@@ -51,7 +51,7 @@ def _pick(sec: Section, K: int, w0: np.ndarray, scratch: np.ndarray) -> tuple[in
     (0..K-1) and the chord points of eq. (17) (K, K + 1): "near" the nearest, "left" / "right"
     the nearest in the upper / lower half of the section (by in-plane y about the candidates'
     mean), or the nearest when that half is empty. A candidate exists if its x is not NaN.
-    Two passes (the mean and "near", then the halves); ``scratch`` (2, K + 2)."""
+    Two passes (the mean and "near", then the half "near" is not in); ``scratch`` (2, K + 2)."""
     dist, side_y = scratch[0], scratch[1]
     count, total, near, d_near = 0, 0.0, 0, np.inf
     for k in range(K + 2):
@@ -65,13 +65,25 @@ def _pick(sec: Section, K: int, w0: np.ndarray, scratch: np.ndarray) -> tuple[in
         if dist[k] < d_near:
             near, d_near = k, dist[k]
     centre = total / max(count, 1)
-    left, right, d_left, d_right = -1, -1, np.inf, np.inf
+    # The nearest is the first of the least distance, so it is also the nearest of its own
+    # half: only the other half needs a search (above: y >= centre, below: y <= centre; on
+    # the centre line it is in both, and that search finds it again).
+    above = side_y[near] >= centre
+    other, d_other = -1, np.inf
     for k in range(K + 2):
-        if side_y[k] >= centre and dist[k] < d_left:
-            left, d_left = k, dist[k]
-        if side_y[k] <= centre and dist[k] < d_right:
-            right, d_right = k, dist[k]
-    return near, (left if left >= 0 else near), (right if right >= 0 else near)
+        if ((side_y[k] <= centre) if above else (side_y[k] >= centre)) and dist[k] < d_other:
+            other, d_other = k, dist[k]
+    other = other if other >= 0 else near
+    return (near, near, other) if above else (near, other, near)
+
+
+@entry
+def py_pick(curve: np.ndarray, chord: np.ndarray, w0: np.ndarray) -> tuple[int, int, int]:
+    """``_pick`` for Python callers (tests): the candidates ``curve`` (2, K), ``chord`` (2, 2)
+    (rows: points), NaN x where there is none."""
+    K = curve.shape[1]
+    sec = Section(curve, chord, np.empty((2, 2)), np.empty(2), np.empty(2), np.empty(3))
+    return _pick(sec, K, w0, np.empty((2, K + 2)))
 
 
 @inline
