@@ -135,21 +135,75 @@ def test_arguments_it_cannot_take_go_to_the_jit_kernel() -> None:
         assert calls == ["jit"]
 
 
-@settings(max_examples=60, deadline=None)
-@given(kw=encounters())
-def test_select_passes_the_unchecked_module_only_arguments_it_would_pass(kw: dict) -> None:
-    """``select`` calls the module's entry without its check (``selector._decide_unchecked``):
-    every argument it builds must be one the check would let through."""
+#: The selector's module-level state that loading a kernel sets (``warm_up``).
+_SELECTOR_STATE = (
+    "_warm",
+    "_warm_many",
+    "_module_tried",
+    "_decide_kernel",
+    "_decide_unchecked",
+    "_range_kernel",
+    "_kernel_note",
+)
+
+
+def _keep_selector_state(mp: pytest.MonkeyPatch) -> None:
+    """Warm the selector up (as any selector's constructor does) and have ``mp`` put its
+    module-level state back as it is now when it undoes its changes."""
+    selector.warm_up()
+    for name in _SELECTOR_STATE:
+        mp.setattr(selector, name, getattr(selector, name))
+    mp.setattr(swarm, "_neighbor_lists", swarm._neighbor_lists)
+
+
+def _spy_on_unchecked(mp: pytest.MonkeyPatch) -> list[bool]:
+    """Whether each call of ``selector._decide_unchecked`` had arguments that the module's
+    check lets through (then the JIT kernel decides)."""
     seen: list[bool] = []
 
     def unchecked(*args: object) -> None:
         seen.append(aot._decide_args_ok(args))
         kernel.decide(*args)
 
+    _keep_selector_state(mp)
+    mp.setattr(selector, "_decide_unchecked", unchecked)
+    return seen
+
+
+@settings(max_examples=60, deadline=None)
+@given(kw=encounters())
+def test_select_passes_the_unchecked_module_only_arguments_it_would_pass(kw: dict) -> None:
+    """``select`` calls the module's entry without its check (``selector._decide_unchecked``):
+    every argument it builds must be one the check would let through."""
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(selector, "_decide_unchecked", unchecked)
+        seen = _spy_on_unchecked(mp)
         VelocitySelector().select(**kw)
-    assert seen in ([], [True]), seen  # [] where it returned before the kernel
+    assert seen == [True]
+
+
+def _read_only_unaligned(values: tuple[float, ...]) -> np.ndarray:
+    """float64s at an odd offset of a bytes object (as from a socket): read-only, unaligned."""
+    a = np.frombuffer(b"\0" * 4 + np.array(values).tobytes(), dtype=np.float64, offset=4)
+    assert not a.flags.aligned and not a.flags.writeable
+    return a
+
+
+def test_read_only_unaligned_vectors_are_copied_before_the_unchecked_call(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``check_vector`` keeps a read-only float64 vector as it is only when it is also aligned:
+    an unaligned one (a view into a received packet) is copied, so ``select`` still hands the
+    module aligned arrays."""
+    seen = _spy_on_unchecked(monkeypatch)
+    kw = _crowd(5, n=6)
+    own = AgentState(
+        position=_read_only_unaligned((0.0, 0.0, 30.0)),
+        velocity=_read_only_unaligned(tuple(kw["own"].velocity)),
+    )
+    assert own.position.flags.aligned and own.velocity.flags.aligned
+    pref = _read_only_unaligned(tuple(kw["preferred_velocity"]))
+    VelocitySelector().select(**{**kw, "own": own, "preferred_velocity": pref})
+    assert seen == [True]
 
 
 def test_an_agent_state_built_without_validation_goes_through_the_check(
@@ -157,16 +211,22 @@ def test_an_agent_state_built_without_validation_goes_through_the_check(
 ) -> None:
     """pydantic's ``model_construct`` skips ``check_vector``: such a position reaches the
     checked entry (which sends a list to the JIT kernel), never the unchecked one."""
+    _keep_selector_state(monkeypatch)
     calls: list[str] = []
     monkeypatch.setattr(selector, "_decide_unchecked", lambda *a: calls.append("unchecked"))
     monkeypatch.setattr(selector, "_decide_kernel", lambda *a: calls.append("checked"))
     kw = _crowd(3, n=4)
     VelocitySelector().select(**kw)
-    state = AgentState.model_construct(position=[0.0, 0.0, 30.0], velocity=kw["own"].velocity)
-    VelocitySelector().select(**{**kw, "own": state})
-    strided = AgentState.model_construct(position=np.zeros(6)[::2], velocity=kw["own"].velocity)
-    VelocitySelector().select(**{**kw, "own": strided})
-    assert calls == ["unchecked", "checked", "checked"]
+    velocity = kw["own"].velocity
+    odd = [
+        [0.0, 0.0, 30.0],  # a list
+        np.zeros(6)[::2],  # strided
+        _read_only_unaligned((0.0, 0.0, 30.0)),  # unaligned
+    ]
+    for position in odd:
+        state = AgentState.model_construct(position=position, velocity=velocity)
+        VelocitySelector().select(**{**kw, "own": state})
+    assert calls == ["unchecked", "checked", "checked", "checked"]
 
 
 def _swarm(seed: int, n: int = 40) -> Swarm:
@@ -320,10 +380,15 @@ def test_select_runs_the_module_when_it_is_current(
     built: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A selector loads it once per process (``warm_up``) and its answers are the JIT's."""
-    monkeypatch.setattr(selector, "_warm", False)
-    monkeypatch.setattr(selector, "_kernel_note", selector._kernel_note)
-    monkeypatch.setattr(selector, "_decide_kernel", kernel.decide)
-    monkeypatch.setattr(selector, "_range_kernel", selector.decide_range)
+    _keep_selector_state(monkeypatch)
+    for name, value in [
+        ("_warm", False),
+        ("_module_tried", False),
+        ("_decide_kernel", kernel.decide),
+        ("_decide_unchecked", kernel.decide),
+        ("_range_kernel", selector.decide_range),
+    ]:
+        monkeypatch.setattr(selector, name, value)
     monkeypatch.setattr(swarm, "_neighbor_lists", swarm.neighbor_lists)
     load = aot.load
     monkeypatch.setattr(aot, "load", lambda: load(built))
@@ -331,6 +396,7 @@ def test_select_runs_the_module_when_it_is_current(
     got = VelocitySelector().select(**kw)
     assert selector.decision_kernel().startswith("ahead-of-time kernel")
     assert selector._decide_kernel is not kernel.decide
+    assert selector._decide_unchecked is selector._decide_kernel.compiled  # type: ignore[attr-defined]
     want = np.empty(kernel.OUT_SIZE)
     kernel.decide(*_arrays(kw, Options()), want)
     assert np.array_equal(got.velocity, want[:3])
@@ -342,6 +408,21 @@ def test_select_runs_the_module_when_it_is_current(
     monkeypatch.setattr(swarm, "_neighbor_lists", swarm.neighbor_lists)
     jit = VelocitySelector().select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0)
     assert np.array_equal(many.velocities, jit.velocities)
+
+
+def test_a_looped_selector_takes_the_neighbour_lists_from_the_module(
+    built: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``select_many`` of a selector that loops over ``select`` (here ``sampled``) lists the
+    neighbours with the module too: its constructor loads it, outside every reported time."""
+    _keep_selector_state(monkeypatch)
+    monkeypatch.setattr(selector, "_module_tried", False)
+    monkeypatch.setattr(selector, "_warm_paths", set())
+    monkeypatch.setattr(swarm, "_neighbor_lists", swarm.neighbor_lists)
+    load = aot.load
+    monkeypatch.setattr(aot, "load", lambda: load(built))
+    VelocitySelector("sampled")
+    assert swarm._neighbor_lists is not swarm.neighbor_lists
 
 
 def test_vo3d_compile_check_says_which_kernel_select_would_run(

@@ -61,6 +61,7 @@ _COMPILE_NOTICE_AFTER = 3.0
 _warm_lock = threading.Lock()
 _warm = False
 _warm_many = False
+_module_tried = False
 #: The compiled decision ``select`` calls, set by ``warm_up``: the ahead-of-time module when one
 #: built from this code for this machine is there (formulations/aot.py), else numba's JIT kernel.
 _decide_kernel: Callable[..., None] = kernel.decide
@@ -97,8 +98,11 @@ def _vec3(value, name: str) -> np.ndarray:
 
 
 def _vec3_ok(a: object) -> bool:
-    """``a`` as ``check_vector`` leaves a vector: a (3,) float64 C-contiguous ndarray."""
-    return type(a) is np.ndarray and a.dtype == _F8 and a.shape == (3,) and a.flags.c_contiguous
+    """``a`` as ``check_vector`` leaves a vector: a (3,) float64, C-contiguous, aligned ndarray."""
+    if type(a) is not np.ndarray or a.dtype != _F8 or a.shape != (3,):
+        return False
+    flags = a.flags
+    return flags.c_contiguous and flags.aligned
 
 
 def _items(value, cls, name: str) -> list:
@@ -139,20 +143,31 @@ def _checked(backend: Backend, method: str):
     return call
 
 
-def warm_up() -> None:
-    """Load the decision kernel once per process: the ahead-of-time module when it matches
-    this code and machine (``vo3d compile``), else numba's JIT kernel, compiled or loaded from
-    numba's on-disk cache, saying on stderr when that takes a while (a first run on a machine
-    compiles it). Called by the selector's constructor, so that no reported time includes it."""
-    global _warm, _decide_kernel, _decide_unchecked, _range_kernel, _kernel_note
-    with _warm_lock:
-        if _warm:
-            return
+def _use_module() -> bool:
+    """Load the ahead-of-time module once per process, under ``_warm_lock``, when it matches
+    this code and machine (``vo3d compile``): ``select``, ``select_many`` and the neighbour
+    lists of every selector (the looped ones too) then run it. Whether it is in use."""
+    global _module_tried, _decide_kernel, _decide_unchecked, _range_kernel, _kernel_note
+    if not _module_tried:
         compiled, _kernel_note = aot.load()
         if compiled is not None:
             _decide_kernel, _range_kernel = compiled.decide, compiled.decide_range
             _decide_unchecked = compiled.decide.compiled  # type: ignore[attr-defined]
             swarm.use_neighbor_lists(compiled.neighbor_lists)
+        _module_tried = True
+    return _decide_kernel is not kernel.decide
+
+
+def warm_up() -> None:
+    """Load the decision kernel once per process: the ahead-of-time module when it matches
+    this code and machine (``vo3d compile``), else numba's JIT kernel, compiled or loaded from
+    numba's on-disk cache, saying on stderr when that takes a while (a first run on a machine
+    compiles it). Called by the selector's constructor, so that no reported time includes it."""
+    global _warm
+    with _warm_lock:
+        if _warm:
+            return
+        if _use_module():
             _warm = True
             return
         own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
@@ -197,7 +212,16 @@ def _warm_formulation(selector: VelocitySelector) -> None:
         what = f"the geometry for {selector.formulation}" + (
             f" on {selector.solver}" if selector.solver else ""
         )
-        _compiling(what, lambda: [selector.select(**kw) for kw in _warm_encounters()])
+        with _warm_lock:
+            module = _use_module()
+
+        def run() -> None:
+            for kw in _warm_encounters():
+                selector.select(**kw)
+            if not module:  # select_many's neighbour lists, on numba's JIT
+                swarm.vehicle_links(np.zeros((2, 3)), np.arange(2), 1.0, None)
+
+        _compiling(what, run)
         _warm_paths.add(key)
 
 
@@ -265,7 +289,7 @@ def warm_up_many() -> None:
         inputs = swarm.SwarmInputs.checked(
             [[0.0, 0.0, 10.0], [10.0, 0.0, 10.0]], v, v, 3.0, [], None, 0.2, 55.0, None, None
         )
-        # nothing compiles here with the ahead-of-time module (it imports the k-d tree's code)
+        # with the ahead-of-time module nothing compiles here (scipy's k-d tree gets imported)
         _compiling(
             "the swarm kernel",
             lambda: _select_many_compiled(Options(), inputs, 1, time.perf_counter()),

@@ -134,8 +134,8 @@ def check_number(value: Any) -> Any:
 
 def check_vector(value: Any, n: int) -> np.ndarray:
     """``value`` as a read-only, contiguous float array of shape (n,); ValueError if it is not
-    n finite numbers (booleans and strings are not numbers). Read-only contiguous float arrays
-    of the right shape come back as they are (every public type stores its vectors so: the
+    n finite numbers (booleans and strings are not numbers). Read-only, contiguous, aligned float
+    arrays of the right shape come back as they are (every public type stores its vectors so: the
     compiled kernels take them without a copy or a new compilation)."""
     if isinstance(value, (list, tuple)):
         if not all(_is_real(x) for x in value):
@@ -153,6 +153,7 @@ def check_vector(value: Any, n: int) -> np.ndarray:
             raw.dtype == np.float64
             and not raw.flags.writeable
             and raw.flags.c_contiguous
+            and raw.flags.aligned  # the compiled kernels assume aligned arrays
             and all(math.isfinite(x) for x in raw.tolist())
         ):
             return raw

@@ -1,21 +1,26 @@
 """The decision kernels compiled ahead of time, so that a first ``select()`` does not wait for
 numba's JIT (issue 9 §5: 27–50 s with an empty cache on the 2-core test machines).
 
-``build()`` compiles ``kernel.decide`` (``select``) and ``swarm.decide_range`` (``select_many``'s
-loop over the vehicles) with numba's ahead-of-time compiler (``numba.pycc``) into one extension
-module next to this file (``vo3d compile``; ``make`` runs it), with a stamp of what it was built
-from: the package's sources, the Python, numpy and numba versions and the CPU (built for this
-machine's CPU, as numba's JIT would). ``load()`` returns the compiled entries only when the
-stamp matches the code this process imported and this machine, and numba is not asked to
-debug (``NUMBA_DISABLE_JIT``, ``NUMBA_BOUNDSCHECK``); otherwise the selector uses the JIT
-kernels, so an edited source or a moved environment never runs a stale or foreign kernel. It
-is the same code: everything below the two entries is compiled by the same dispatchers (their
+``build()`` compiles ``kernel.decide`` (``select``), ``swarm.decide_range`` (``select_many``'s
+loop over the vehicles) and ``swarm.neighbor_lists`` (its neighbour lists) with numba's
+ahead-of-time compiler (``numba.pycc``) into one extension module next to this file
+(``vo3d compile``; ``make`` runs it), with a stamp of what it was built from: the package's
+sources, the Python, numpy and numba versions and the CPU (built for this machine's CPU, as
+numba's JIT would). ``load()`` returns the compiled entries only when the stamp matches the
+code this process imported and this machine, and numba is not asked to debug
+(``NUMBA_DISABLE_JIT``, ``NUMBA_BOUNDSCHECK``); otherwise the selector uses the JIT kernels, so
+an edited source or a moved environment never runs a stale or foreign kernel. It is the same
+code: everything below the three entries is compiled by the same dispatchers (their
 flags, ``error_model="numpy"``) and linked into the module, and the answers are bitwise those
 of the JIT kernels (tests/test_aot.py). The module's wrappers release the GIL, as the JIT's
 ``nogil`` ones do, so ``vo3d_opt.swarm.decide_all`` runs ``decide_range`` on several threads as
-before (a flag set in the compiling process only). ``select_many``'s neighbour lists
-(``swarm.neighbor_lists``, the counting sort of the k-d tree's pairs) are in the module too,
-so that a first ``select_many`` compiles nothing either.
+before (a flag set in the compiling process only). With the neighbour lists (the counting
+sort of the k-d tree's pairs) in the module too, a first ``select_many`` compiles nothing
+either.
+
+Each entry is loaded behind a check of its arguments' types (``_checked``: the module trusts
+them); ``select`` calls ``decide`` without it, as it builds every array itself
+(``selector._decide_unchecked``).
 
 ``numba.pycc`` has been "pending deprecation" since numba 0.57 with no replacement yet; when it
 goes, ``build()`` fails with its error and everything runs on the JIT kernels as before.
@@ -312,5 +317,5 @@ def _checked(compiled: Kernel, jit: Kernel, ok: Callable[[tuple[object, ...]], b
     def call(*args: object) -> Any:
         return (compiled if ok(args) else jit)(*args)
 
-    call.compiled = compiled  # type: ignore[attr-defined]  # the unchecked call, for timing
+    call.compiled = compiled  # type: ignore[attr-defined]  # the unchecked call (select, timing)
     return call
