@@ -315,11 +315,13 @@ def least_bad(
                     if by_zone[pl, b] == -1 and cover[pl, b] >= 0:  # first, the cone holding it
                         by[pl, b] = _block_time(vos, planes, grid, b, pl, centre, cover[pl, b])
                         by_zone[pl, b] = cover[pl, b]
+                    if by[pl, b] < -key[0]:  # skipped for good: the best only gets later
+                        continue
                     if by_zone[pl, b] != hint[0]:  # a zone not tried on this block yet
                         t = _block_time(vos, planes, grid, b, pl, centre, hint[0])
                         by[pl, b], by_zone[pl, b] = min(by[pl, b], t), hint[0]
-                    if by[pl, b] < -key[0]:
-                        continue
+                        if by[pl, b] < -key[0]:
+                            continue
                 for c in range(3):
                     v[c] = points[g, 0] * T[pl, 0, c] + points[g, 1] * T[pl, 1, c]
                 _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
