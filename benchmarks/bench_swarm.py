@@ -1,7 +1,9 @@
 """Swarm scale: vo3d_opt's select_many (1 thread and every thread) against RVO2-3D's doStep.
 
 ``ours-guard`` is ours on every thread with the ``closing_guard`` option added to the
-simulator's (reciprocal, pz_buffer): README, "Safety in simulation".
+simulator's (reciprocal, pz_buffer): README, "Safety in simulation". ``ours-coarse`` is ours on
+every thread with avoidance planes every 30 degrees instead of 10 (``plane_step_deg``: 7 planes,
+21 QPs instead of 57; fewer velocities tried before the fallbacks, the same exact check).
 
 Both methods fly the same scenarios in the same loop (``vo3d_opt.sim.simulator.fly``: the same
 preferred velocities, dynamics and metrics), with the same dt (0.2 s), speeds (0-4 m/s),
@@ -22,7 +24,7 @@ process, so "peak MB" is that run's peak resident memory (the run, its record an
 (``--profile-steps K``: the first K, default 100; 0: the whole run).
 
     python benchmarks/bench_swarm.py [--sizes 100 1000 10000] [--cases swap crossing]
-        [--methods ours-1 ours-all ours-guard rvo2] [--max-neighbors 10] [--max-steps N=K ...]
+        [--methods ours-1 ours-all ours-guard ours-coarse rvo2] [--max-neighbors 10] [--max-steps N=K ...]
         [--profile [--profile-steps K]]
         [--out benchmarks/results_swarm.md]
 
@@ -44,7 +46,9 @@ from typing import Any
 
 import numpy as np
 
-METHODS = ("ours-1", "ours-all", "ours-guard", "rvo2")
+METHODS = ("ours-1", "ours-all", "ours-guard", "ours-coarse", "rvo2")
+#: Options each ``ours-*`` method adds to the simulator's (ours-1 and ours-all add none).
+EXTRA_OPTIONS = {"ours-guard": {"closing_guard": True}, "ours-coarse": {"plane_step_deg": 30.0}}
 
 
 def scenario(case: str, n: int):
@@ -73,9 +77,10 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
     else:
         threads = 1 if method == "ours-1" else numba.config.NUMBA_NUM_THREADS
         sel, formulation, solver = scenario_selector(sc)
-        if method == "ours-guard":  # the simulator's options plus the closing guard
+        if method in EXTRA_OPTIONS:  # the simulator's options plus the method's
             sel, formulation, solver = make_selector(
-                formulation, solver, {**default_selector_options(sc), **sc.selector_options, "closing_guard": True})
+                formulation, solver,
+                {**default_selector_options(sc), **sc.selector_options, **EXTRA_OPTIONS[method]})
         step = SwarmSelect(sc, sel, formulation=formulation, solver=solver, max_neighbors=max_neighbors,
                            threads=threads)
         from vo3d_opt.selector import warm_up_many
@@ -181,6 +186,7 @@ def _fmt(x: Any, spec: str = ".1f") -> str:
 def table_row(r: dict[str, Any]) -> str:
     name = {"ours-1": "vo3d_opt select_many, 1 thread", "ours-all": f"vo3d_opt select_many, {r['threads']} threads",
             "ours-guard": f"vo3d_opt select_many + closing_guard, {r['threads']} threads",
+            "ours-coarse": f"vo3d_opt select_many, plane_step_deg 30, {r['threads']} threads",
             "rvo2": "RVO2-3D doStep, 1 thread"}[r["method"]]
     flown = "whole run" if r["steps"] < r["n_steps"] or r["all_reached"] else f"{r['steps']} steps (max_time)"
     if r.get("capped"):
