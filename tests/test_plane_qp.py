@@ -11,7 +11,15 @@ from hypothesis import strategies as st
 from encounters import encounters
 from vo3d_opt import AgentState, Cylinder, Limits, Neighbor, VelocitySelector
 from vo3d_opt.formulations import plane_qp
-from vo3d_opt.formulations.common import Options, prepare, py_decision_planes
+from vo3d_opt.formulations.common import (
+    Bounds,
+    Options,
+    neighbor_rows,
+    prepare,
+    py_decision_planes,
+    py_pref_clear,
+)
+from vo3d_opt.geometry.pyramid import prism_rows
 from vo3d_opt.formulations.kernel import py_add_rows, py_gather, py_lift, py_plane_qps, py_search
 from vo3d_opt.formulations.rows import ROUNDS, py_pick
 from vo3d_opt.solvers import QP, get_backend
@@ -170,3 +178,39 @@ def test_the_rounds_boundary_points_are_the_nearest_of_each_half(seed: int) -> N
             curve[1] = np.where(np.arange(K) % 2 == 0, 1.0, -1.0) * np.abs(curve[1])
         w0 = rng.integers(-3, 4, size=2).astype(float)
         assert py_pick(curve, chord.copy(), w0) == _pick_reference(curve, chord, w0)
+
+
+@settings(max_examples=300, **SETTINGS)
+@given(
+    kw=encounters(),
+    reciprocal=st.booleans(),
+    pz_buffer=st.sampled_from([0.0, 2.0]),
+    horizon=st.sampled_from([None, 4.0]),
+    inside=st.booleans(),
+    fast=st.floats(0.0, 12.0),
+)
+def test_the_preferred_shortcut_agrees_with_the_exact_check(
+    kw, reciprocal, pz_buffer, horizon, inside, fast
+):
+    """The kernel returns the preferred velocity before building the cones' geometry when
+    ``pref_clear`` says it is free: that must hold for the cones ``build_vos`` builds (exact 3D
+    check, no zone A is inside) and be the same answer, also when a cone is left out for being
+    out of reach (a neighbour flying away faster than v_max: ``fast`` sets one up; the aimed
+    preferred velocity, within v_max, lies in no such cone)."""
+    own, nbrs = kw["own"], list(kw["neighbors"])
+    if inside:  # A inside the first neighbour's zone
+        b = nbrs[0]
+        nbrs[0] = Neighbor(position=own.position + [0.5 * b.r_pz, 0, 0], velocity=b.velocity,
+                           r_pz=b.r_pz)
+    away = own.position + [0.0, 30.0, 0.0]  # ahead of nothing in particular, receding at `fast`
+    nbrs.append(Neighbor(position=away, velocity=[0.0, fast, 0.0], r_pz=3.0))
+    options = Options(reciprocal=reciprocal, pz_buffer=pz_buffer, horizon=horizon)
+    enc = prepare(own, kw["preferred_velocity"], nbrs, kw["obstacles"], kw["limits"], kw["dt"],
+                  options)
+    clear = not (enc.unsafe(enc.v_pref)[0] or enc.vos.cones.inside.any()
+                 or enc.vos.pyramids.inside.any())
+    shortcut = py_pref_clear(
+        np.asarray(own.position, float), np.asarray(own.velocity, float),
+        np.asarray(kw["preferred_velocity"], float), neighbor_rows(nbrs),
+        prism_rows(kw["obstacles"]), Bounds.of(kw["limits"], kw["dt"]), options.config)
+    assert shortcut == clear

@@ -32,7 +32,14 @@ from ..geometry import (
     in_vos,
 )
 from ..geometry.cone import NO_VIRTUAL_SPHERE, TAU_MIN, min_speed
-from ..geometry.membership import NO_HORIZON, closest_approach, entry_time, in_cone, in_pyramid
+from ..geometry.membership import (
+    NO_HORIZON,
+    approach,
+    closest_approach,
+    entry_time,
+    in_cone,
+    in_pyramid,
+)
 from ..geometry.pyramid import prism_rows
 from ..geometry.sections import generator_angles
 from ..solvers import NLP, QP, Result
@@ -230,11 +237,27 @@ def build_vos(
       reaching far above (else a climb 'over' it, allowed one step at a time by the altitude
       rows, ends squeezed between the ceiling and the prism: sweep 'lagged' encounter 647).
     """
+    rows = cone_rows(p, v_now, nbrs, bounds, cfg)
+    return vos_of(p, aimed(v_pref, bounds), rows, vo_pyramids(p, prisms, bounds, cfg), bounds, cfg)
+
+
+@jit
+def aimed(v_pref: np.ndarray, bounds: Bounds) -> np.ndarray:
+    """The preferred velocity clamped to v_max (beyond reach it is aimed at the reachable one)."""
     speed = np.sqrt(v_pref[0] ** 2 + v_pref[1] ** 2 + v_pref[2] ** 2)
     pref = np.empty(3)
     for k in range(3):
         pref[k] = v_pref[k] * (bounds.v_max / speed) if speed > bounds.v_max else v_pref[k]
-    # Each neighbour's row for build_cones: p_B, apex, r_pz; kept rows first.
+    return pref
+
+
+@jit
+def cone_rows(
+    p: np.ndarray, v_now: np.ndarray, nbrs: np.ndarray, bounds: Bounds, cfg: Config
+) -> np.ndarray:
+    """Each neighbour's row for ``build_cones`` (k, 7): p_B, apex, r_pz, of the neighbours
+    ``build_vos`` keeps before the cones' geometry (the horizon; the buffer and the reciprocal
+    apex applied)."""
     rows, n = np.empty((nbrs.shape[0], 7)), 0
     for i in range(nbrs.shape[0]):
         d = np.sqrt((nbrs[i, 0] - p[0]) ** 2 + (nbrs[i, 1] - p[1]) ** 2 + (nbrs[i, 2] - p[2]) ** 2)
@@ -251,16 +274,13 @@ def build_vos(
             else r_pz
         )
         n += 1
-    reach = bounds.v_max if cfg.corrections.virtual_sphere else NO_VIRTUAL_SPHERE
-    cones = build_cones(p, rows[:n, 0:3], rows[:n, 3:6], rows[:n, 6], reach, TAU_MIN)
-    kept = 0
-    for i in range(n):
-        if min_speed(cones, i) <= bounds.v_max + 1e-6:
-            for k in range(7):
-                rows[kept, k] = rows[i, k]
-            kept += 1
-    if kept < n:
-        cones = build_cones(p, rows[:kept, 0:3], rows[:kept, 3:6], rows[:kept, 6], reach, TAU_MIN)
+    return rows[:n]
+
+
+@jit
+def vo_pyramids(p: np.ndarray, prisms: np.ndarray, bounds: Bounds, cfg: Config) -> VOPyramids:
+    """The VO pyramids of the prisms within reach (all without a horizon); a prism reaching the
+    ceiling planned as reaching far above it."""
     near, m = np.empty((prisms.shape[0], 4)), 0
     for j in range(prisms.shape[0]):
         dist = np.sqrt((prisms[j, 0] - p[0]) ** 2 + (prisms[j, 1] - p[1]) ** 2)
@@ -270,7 +290,55 @@ def build_vos(
             if prisms[j, 3] >= bounds.z_max:
                 near[m, 3] = max(prisms[j, 3], p[2]) + OVER_THE_CEILING
             m += 1
-    return VOs(cones, build_pyramids(p, near[:m]), pref)
+    return build_pyramids(p, near[:m])
+
+
+@jit
+def vos_of(
+    p: np.ndarray,
+    pref: np.ndarray,
+    rows: np.ndarray,
+    pyramids: VOPyramids,
+    bounds: Bounds,
+    cfg: Config,
+) -> VOs:
+    """``build_vos`` from its parts: the cones of ``cone_rows`` (eqs 1, 2, 6), less those no
+    velocity within v_max reaches (their rows are moved within ``rows``)."""
+    reach = bounds.v_max if cfg.corrections.virtual_sphere else NO_VIRTUAL_SPHERE
+    n = rows.shape[0]
+    cones = build_cones(p, rows[:, 0:3], rows[:, 3:6], rows[:, 6], reach, TAU_MIN)
+    kept = 0
+    for i in range(n):  # the kept rows first, in place (rows is this decision's own)
+        if min_speed(cones, i) <= bounds.v_max + 1e-6:
+            for k in range(7):
+                rows[kept, k] = rows[i, k]
+            kept += 1
+    if kept < n:
+        cones = build_cones(p, rows[:kept, 0:3], rows[:kept, 3:6], rows[:kept, 6], reach, TAU_MIN)
+    return VOs(cones, pyramids, pref)
+
+
+@jit
+def pref_clear(
+    p: np.ndarray, rows: np.ndarray, pyramids: VOPyramids, pref: np.ndarray, horizon: float
+) -> bool:
+    """Whether A is inside no zone and ``pref`` lies in no VO, before the cones' geometry:
+    ``in_cone``'s arithmetic on the rel (p_B - p_A) and apex that ``build_cones`` would be given,
+    so the same answer as ``containing`` on the cones (which may leave out cones no velocity
+    within v_max reaches: a False here is then checked again on the cones)."""
+    rel = np.empty(3)
+    for i in range(rows.shape[0]):
+        for k in range(3):
+            rel[k] = rows[i, k] - p[k]
+        if np.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2) <= rows[i, 6]:  # inside: d_oi <= r_pz
+            return False
+        closest, t_star, _ = approach(rows[i, 3:6], rel, pref, horizon)
+        if closest < rows[i, 6] + 0.0 and t_star > 0.0:
+            return False
+    for j in range(pyramids.L_pz.shape[0]):
+        if pyramids.inside[j] or in_pyramid(pyramids, j, pref, horizon):
+            return False
+    return True
 
 
 @entry
@@ -470,6 +538,21 @@ def decision_planes(vos: VOs, v_now: np.ndarray, cfg: Config) -> AvoidancePlanes
             vos.v_pref[k] if use_pref else (v_now[k] if use_now else (1.0 if k == 0 else 0.0))
         )
     return build_planes(direction, cfg.phi, cfg.cos_phi, cfg.sin_phi)
+
+
+@entry
+def py_pref_clear(
+    p: np.ndarray,
+    v_now: np.ndarray,
+    v_pref: np.ndarray,
+    nbrs: np.ndarray,
+    prisms: np.ndarray,
+    bounds: Bounds,
+    cfg: Config,
+) -> bool:
+    """``pref_clear`` on the parts ``build_vos`` starts from, for Python callers (tests)."""
+    rows, pyramids = cone_rows(p, v_now, nbrs, bounds, cfg), vo_pyramids(p, prisms, bounds, cfg)
+    return pref_clear(p, rows, pyramids, aimed(v_pref, bounds), cfg.horizon)
 
 
 @entry

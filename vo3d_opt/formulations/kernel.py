@@ -3,10 +3,13 @@
 Read top to bottom, ``decide`` is the whole algorithm (formulations/plane_qp.md), the way
 RVO2-3D's ``Agent.cc`` reads:
 
-1. the VOs (``build_vos``: cones of eqs 1–6 with the virtual sphere, pyramids of section 4) and
-   the limits as rows (altitude, acceleration);
+1. the VOs (``build_vos``'s parts: each neighbour's row, ``cone_rows``, then its cone of eqs
+   1–6 with the virtual sphere, ``vos_of``; the pyramids of section 4, ``vo_pyramids``) and the
+   limits as rows (altitude, acceleration);
 2. the preferred velocity itself, when it is within the limits and outside every VO (exact 3D
-   check), is the optimum of every formulation: returned at once;
+   check), is the optimum of every formulation: returned at once, checked on each neighbour's
+   apex and position before the cones' geometry (eqs 1, 2, 6), which it never needs
+   (``pref_clear``);
 3. the avoidance planes about the preferred direction (eq. 8); on each plane and in each
    linearisation round (near, left, right) one QP: the point nearest the preferred velocity
    inside the speed disc (or annulus), the altitude rows and one half-plane per VO that holds
@@ -41,12 +44,16 @@ from .common import (
     Bounds,
     Config,
     VOs,
+    aimed,
     bounds_of,
-    build_vos,
+    cone_rows,
     config_of,
     containing,
     decision_planes,
     limit_rows,
+    pref_clear,
+    vo_pyramids,
+    vos_of,
     vz_range,
     within_limits,
 )
@@ -519,8 +526,13 @@ def decide_one(
     cfg: Config,
 ) -> KernelOut:
     """``decide`` on the compiled side (``select_many`` calls it for every vehicle)."""
-    vos = build_vos(p, v_now, v_pref, nbrs, prisms, bounds, cfg)  # 1
+    pref, rows = aimed(v_pref, bounds), cone_rows(p, v_now, nbrs, bounds, cfg)  # 1
+    pyramids = vo_pyramids(p, prisms, bounds, cfg)
     G3, h3 = limit_rows(p, v_now, nbrs, bounds, cfg)
+    # 2 before the cones' geometry (eqs 1, 2, 6), which a free preferred velocity never needs
+    if pref_clear(p, rows, pyramids, pref, cfg.horizon) and within_limits(pref, G3, h3, bounds):
+        return KernelOut(enforce_limits(pref, p, bounds), OPTIMAL, np.nan, PREFERRED, 0)
+    vos = vos_of(p, pref, rows, pyramids, bounds, cfg)
     n, V = vos.cones.d_oi.shape[0], vos.cones.d_oi.shape[0] + vos.pyramids.L_pz.shape[0]
     initial = np.empty(V, dtype=np.bool_)
     pref_in = containing(vos, vos.v_pref, cfg.horizon, initial)
@@ -528,7 +540,8 @@ def decide_one(
     for k in range(V):  # the zones A is inside constrain every QP
         if vos.cones.inside[k] if k < n else vos.pyramids.inside[k - n]:
             initial[k], status = True, INSIDE_PROTECTED_ZONE
-    if status == OPTIMAL and not pref_in and within_limits(vos.v_pref, G3, h3, bounds):  # 2
+    # 2 again on the cones kept: pref_clear also turns down a cone no velocity within v_max reaches
+    if status == OPTIMAL and not pref_in and within_limits(vos.v_pref, G3, h3, bounds):
         return KernelOut(enforce_limits(vos.v_pref, p, bounds), OPTIMAL, np.nan, PREFERRED, 0)
     planes = decision_planes(vos, v_now, cfg)  # 3
     qps = plane_qps(vos, planes, G3, h3, initial, cfg, True)

@@ -32,7 +32,14 @@ def closest_approach(
 ) -> tuple[float, float, float]:
     """(closest distance to B's centre over t in [0, horizon] (horizon < 0: none), its time t*,
     the closing rate p·u) for velocity v against cone i, u = v - apex the relative velocity."""
-    a, rel = cones.apex[i], cones.rel[i]
+    return approach(cones.apex[i], cones.rel[i], v, horizon)
+
+
+@inline
+def approach(
+    a: np.ndarray, rel: np.ndarray, v: np.ndarray, horizon: float
+) -> tuple[float, float, float]:
+    """``closest_approach`` from the cone's apex a (3,) and B's position from A, rel (3,)."""
     u0, u1, u2 = v[0] - a[0], v[1] - a[1], v[2] - a[2]
     uu = u0 * u0 + u1 * u1 + u2 * u2
     pu = rel[0] * u0 + rel[1] * u1 + rel[2] * u2
