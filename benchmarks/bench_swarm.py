@@ -3,9 +3,10 @@
 ``ours-guard`` is ours on every thread with the ``closing_guard`` option added to the
 simulator's (reciprocal, pz_buffer): README, "Safety in simulation". ``ours-coarse`` is ours on
 every thread with avoidance planes every 30 degrees instead of 10 (``plane_step_deg``: 7 planes,
-21 QPs instead of 57; fewer velocities tried before the fallbacks, the same exact check).
+21 QPs instead of 57, and the fallbacks' grid on 7 planes: fewer velocities tried, the same
+exact check of each).
 
-Both methods fly the same scenarios in the same loop (``vo3d_opt.sim.simulator.fly``: the same
+Every method flies the same scenarios in the same loop (``vo3d_opt.sim.simulator.fly``: the same
 preferred velocities, dynamics and metrics), with the same dt (0.2 s), speeds (0-4 m/s),
 sensing range (55 m) and neighbour count (``--max-neighbors``, default 10 for both):
 
@@ -186,7 +187,8 @@ def _fmt(x: Any, spec: str = ".1f") -> str:
 def table_row(r: dict[str, Any]) -> str:
     name = {"ours-1": "vo3d_opt select_many, 1 thread", "ours-all": f"vo3d_opt select_many, {r['threads']} threads",
             "ours-guard": f"vo3d_opt select_many + closing_guard, {r['threads']} threads",
-            "ours-coarse": f"vo3d_opt select_many, plane_step_deg 30, {r['threads']} threads",
+            "ours-coarse": f"vo3d_opt select_many, plane_step_deg "
+                           f"{EXTRA_OPTIONS['ours-coarse']['plane_step_deg']:g}, {r['threads']} threads",
             "rvo2": "RVO2-3D doStep, 1 thread"}[r["method"]]
     flown = "whole run" if r["steps"] < r["n_steps"] or r["all_reached"] else f"{r['steps']} steps (max_time)"
     if r.get("capped"):

@@ -19,9 +19,9 @@ from vo3d_opt.formulations.common import (
     py_decision_planes,
     py_pref_clear,
 )
-from vo3d_opt.geometry.pyramid import prism_rows
 from vo3d_opt.formulations.kernel import py_add_rows, py_gather, py_lift, py_plane_qps, py_search
 from vo3d_opt.formulations.rows import ROUNDS, py_pick
+from vo3d_opt.geometry.pyramid import prism_rows
 from vo3d_opt.solvers import QP, get_backend
 from vo3d_opt.status import Status
 
@@ -186,31 +186,36 @@ def test_the_rounds_boundary_points_are_the_nearest_of_each_half(seed: int) -> N
     reciprocal=st.booleans(),
     pz_buffer=st.sampled_from([0.0, 2.0]),
     horizon=st.sampled_from([None, 4.0]),
-    inside=st.booleans(),
+    inside=st.sampled_from(["no", "sphere", "prism"]),
     fast=st.floats(0.0, 12.0),
 )
 def test_the_preferred_shortcut_agrees_with_the_exact_check(
-    kw, reciprocal, pz_buffer, horizon, inside, fast
-):
+    kw: dict, reciprocal: bool, pz_buffer: float, horizon: float | None, inside: str, fast: float
+) -> None:
     """The kernel returns the preferred velocity before building the cones' geometry when
     ``pref_clear`` says it is free: that must hold for the cones ``build_vos`` builds (exact 3D
-    check, no zone A is inside) and be the same answer, also when a cone is left out for being
-    out of reach (a neighbour flying away faster than v_max: ``fast`` sets one up; the aimed
-    preferred velocity, within v_max, lies in no such cone)."""
-    own, nbrs = kw["own"], list(kw["neighbors"])
-    if inside:  # A inside the first neighbour's zone
+    check, no zone A is inside) and be the same answer, also with A inside a neighbour's zone
+    or an obstacle's prism, and with a cone left out for being out of reach (a neighbour flying
+    away faster than v_max: ``fast`` sets one up; the aimed preferred velocity, within v_max,
+    lies in no such cone)."""
+    own, nbrs, obstacles = kw["own"], list(kw["neighbors"]), list(kw["obstacles"])
+    if inside == "sphere":  # A inside the first neighbour's zone
         b = nbrs[0]
         nbrs[0] = Neighbor(position=own.position + [0.5 * b.r_pz, 0, 0], velocity=b.velocity,
                            r_pz=b.r_pz)
-    away = own.position + [0.0, 30.0, 0.0]  # ahead of nothing in particular, receding at `fast`
+    elif inside == "prism":  # A inside a cylinder's prism
+        obstacles.append(Cylinder(center=own.position[:2] + 1.0, radius=3.0,
+                                  height=own.position[2] + 5.0))
+    away = own.position + [0.0, 30.0, 0.0]  # receding at `fast`
     nbrs.append(Neighbor(position=away, velocity=[0.0, fast, 0.0], r_pz=3.0))
     options = Options(reciprocal=reciprocal, pz_buffer=pz_buffer, horizon=horizon)
-    enc = prepare(own, kw["preferred_velocity"], nbrs, kw["obstacles"], kw["limits"], kw["dt"],
-                  options)
+    enc = prepare(own, kw["preferred_velocity"], nbrs, obstacles, kw["limits"], kw["dt"], options)
     clear = not (enc.unsafe(enc.v_pref)[0] or enc.vos.cones.inside.any()
                  or enc.vos.pyramids.inside.any())
     shortcut = py_pref_clear(
         np.asarray(own.position, float), np.asarray(own.velocity, float),
-        np.asarray(kw["preferred_velocity"], float), neighbor_rows(nbrs),
-        prism_rows(kw["obstacles"]), Bounds.of(kw["limits"], kw["dt"]), options.config)
+        np.asarray(kw["preferred_velocity"], float), neighbor_rows(nbrs), prism_rows(obstacles),
+        Bounds.of(kw["limits"], kw["dt"]), options.config)
     assert shortcut == clear
+    if inside != "no":
+        assert not shortcut

@@ -1,6 +1,6 @@
-"""What every formulation shares: the options, the VOs of one decision (built by one compiled
-function for the compiled kernel and for the Python formulations alike), the limits as linear
-constraints, the exact safety check and the time to the first intrusion.
+"""What every formulation shares: the options, the VOs of one decision (built by the same
+compiled parts for the compiled kernel and for the Python formulations alike: ``build_vos``), the
+limits as linear constraints, the exact safety check and the time to the first intrusion.
 
 Compiled code receives the options as a ``Config`` and the limits as ``Bounds`` (NamedTuples of
 numbers and arrays); the Python formulations wrap the same values in an ``Encounter``.
@@ -31,12 +31,12 @@ from ..geometry import (
     default_phis,
     in_vos,
 )
-from ..geometry.cone import NO_VIRTUAL_SPHERE, TAU_MIN, min_speed
+from ..geometry.cone import NO_VIRTUAL_SPHERE, TAU_MIN, min_speed, offset
 from ..geometry.membership import (
     NO_HORIZON,
-    approach,
     closest_approach,
     entry_time,
+    heads_into,
     in_cone,
     in_pyramid,
 )
@@ -238,7 +238,9 @@ def build_vos(
       rows, ends squeezed between the ceiling and the prism: sweep 'lagged' encounter 647).
     """
     rows = cone_rows(p, v_now, nbrs, bounds, cfg)
-    return vos_of(p, aimed(v_pref, bounds), rows, vo_pyramids(p, prisms, bounds, cfg), bounds, cfg)
+    return vos_of(
+        p, aimed(v_pref, bounds), rows, pyramids_in_reach(p, prisms, bounds, cfg), bounds, cfg
+    )
 
 
 @jit
@@ -278,7 +280,7 @@ def cone_rows(
 
 
 @jit
-def vo_pyramids(p: np.ndarray, prisms: np.ndarray, bounds: Bounds, cfg: Config) -> VOPyramids:
+def pyramids_in_reach(p: np.ndarray, prisms: np.ndarray, bounds: Bounds, cfg: Config) -> VOPyramids:
     """The VO pyramids of the prisms within reach (all without a horizon); a prism reaching the
     ceiling planned as reaching far above it."""
     near, m = np.empty((prisms.shape[0], 4)), 0
@@ -322,18 +324,16 @@ def vos_of(
 def pref_clear(
     p: np.ndarray, rows: np.ndarray, pyramids: VOPyramids, pref: np.ndarray, horizon: float
 ) -> bool:
-    """Whether A is inside no zone and ``pref`` lies in no VO, before the cones' geometry:
-    ``in_cone``'s arithmetic on the rel (p_B - p_A) and apex that ``build_cones`` would be given,
-    so the same answer as ``containing`` on the cones (which may leave out cones no velocity
-    within v_max reaches: a False here is then checked again on the cones)."""
+    """Whether A is inside no zone and ``pref`` lies in no VO, from each neighbour's row of
+    ``cone_rows`` before the cones' geometry: ``build_cones``' d_oi and ``in_cone``'s test on
+    the same numbers (``offset``, ``heads_into``), so the same answer as the exact check on the
+    cones (``vos_of`` may leave out cones that no velocity within v_max reaches; the aimed
+    ``pref`` lies in none of them)."""
     rel = np.empty(3)
     for i in range(rows.shape[0]):
-        for k in range(3):
-            rel[k] = rows[i, k] - p[k]
-        if np.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2) <= rows[i, 6]:  # inside: d_oi <= r_pz
+        if offset(rows[i, 0:3], p, rel) <= rows[i, 6]:  # inside: d_oi <= r_pz
             return False
-        closest, t_star, _ = approach(rows[i, 3:6], rel, pref, horizon)
-        if closest < rows[i, 6] + 0.0 and t_star > 0.0:
+        if heads_into(rows[i, 3:6], rel, rows[i, 6], pref, horizon, 0.0):
             return False
     for j in range(pyramids.L_pz.shape[0]):
         if pyramids.inside[j] or in_pyramid(pyramids, j, pref, horizon):
@@ -551,7 +551,10 @@ def py_pref_clear(
     cfg: Config,
 ) -> bool:
     """``pref_clear`` on the parts ``build_vos`` starts from, for Python callers (tests)."""
-    rows, pyramids = cone_rows(p, v_now, nbrs, bounds, cfg), vo_pyramids(p, prisms, bounds, cfg)
+    rows, pyramids = (
+        cone_rows(p, v_now, nbrs, bounds, cfg),
+        pyramids_in_reach(p, prisms, bounds, cfg),
+    )
     return pref_clear(p, rows, pyramids, aimed(v_pref, bounds), cfg.horizon)
 
 
@@ -565,7 +568,7 @@ def py_build_vos(
     bounds: Bounds,
     cfg: Config,
 ) -> VOs:
-    """``build_vos`` for Python callers (compiled code calls ``build_vos``: no Python wrapper)."""
+    """``build_vos`` for Python callers (the kernel calls its parts: ``decide_one``)."""
     return build_vos(p, v_now, v_pref, nbrs, prisms, bounds, cfg)
 
 

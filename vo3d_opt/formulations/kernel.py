@@ -3,18 +3,18 @@
 Read top to bottom, ``decide`` is the whole algorithm (formulations/plane_qp.md), the way
 RVO2-3D's ``Agent.cc`` reads:
 
-1. the VOs (``build_vos``'s parts: each neighbour's row, ``cone_rows``, then its cone of eqs
-   1–6 with the virtual sphere, ``vos_of``; the pyramids of section 4, ``vo_pyramids``) and the
-   limits as rows (altitude, acceleration);
+1. the VOs' inputs (``build_vos``'s parts): each neighbour's row (``cone_rows``: its position,
+   the cone's apex, r_pz; the horizon, the buffer and reciprocity applied), the pyramids of
+   section 4 (``pyramids_in_reach``), and the limits as rows (altitude, acceleration);
 2. the preferred velocity itself, when it is within the limits and outside every VO (exact 3D
-   check), is the optimum of every formulation: returned at once, checked on each neighbour's
-   apex and position before the cones' geometry (eqs 1, 2, 6), which it never needs
-   (``pref_clear``);
-3. the avoidance planes about the preferred direction (eq. 8); on each plane and in each
-   linearisation round (near, left, right) one QP: the point nearest the preferred velocity
-   inside the speed disc (or annulus), the altitude rows and one half-plane per VO that holds
-   the preferred velocity or that A is inside (``plane_rows``: the sections of section 3.1 / 4.2
-   linearised), solved exactly (``nearest_in_disc``);
+   check, on each neighbour's row: ``pref_clear``), is the optimum of every formulation:
+   returned at once, before the cones' geometry, which it never needs;
+3. the VO cones of eqs 1–6 with the virtual sphere (``vos_of``); the avoidance planes about the
+   preferred direction (eq. 8); on each plane and in each linearisation round (near, left,
+   right) one QP: the point nearest the preferred velocity inside the speed disc (or annulus),
+   the altitude rows and one half-plane per VO that holds the preferred velocity or that A is
+   inside (``plane_rows``: the sections of section 3.1 / 4.2 linearised), solved exactly
+   (``nearest_in_disc``);
 4. best first: the QP with the least deviation is checked with the exact 3D membership; a safe
    answer is the decision (every other QP's answer is at least as far: adding constraints only
    moves an answer away), an answer that enters VOs not yet constrained on that QP adds their
@@ -52,7 +52,7 @@ from .common import (
     decision_planes,
     limit_rows,
     pref_clear,
-    vo_pyramids,
+    pyramids_in_reach,
     vos_of,
     vz_range,
     within_limits,
@@ -527,12 +527,11 @@ def decide_one(
 ) -> KernelOut:
     """``decide`` on the compiled side (``select_many`` calls it for every vehicle)."""
     pref, rows = aimed(v_pref, bounds), cone_rows(p, v_now, nbrs, bounds, cfg)  # 1
-    pyramids = vo_pyramids(p, prisms, bounds, cfg)
+    pyramids = pyramids_in_reach(p, prisms, bounds, cfg)
     G3, h3 = limit_rows(p, v_now, nbrs, bounds, cfg)
-    # 2 before the cones' geometry (eqs 1, 2, 6), which a free preferred velocity never needs
     if pref_clear(p, rows, pyramids, pref, cfg.horizon) and within_limits(pref, G3, h3, bounds):
-        return KernelOut(enforce_limits(pref, p, bounds), OPTIMAL, np.nan, PREFERRED, 0)
-    vos = vos_of(p, pref, rows, pyramids, bounds, cfg)
+        return KernelOut(enforce_limits(pref, p, bounds), OPTIMAL, np.nan, PREFERRED, 0)  # 2
+    vos = vos_of(p, pref, rows, pyramids, bounds, cfg)  # 3
     n, V = vos.cones.d_oi.shape[0], vos.cones.d_oi.shape[0] + vos.pyramids.L_pz.shape[0]
     initial = np.empty(V, dtype=np.bool_)
     pref_in = containing(vos, vos.v_pref, cfg.horizon, initial)
@@ -540,10 +539,11 @@ def decide_one(
     for k in range(V):  # the zones A is inside constrain every QP
         if vos.cones.inside[k] if k < n else vos.pyramids.inside[k - n]:
             initial[k], status = True, INSIDE_PROTECTED_ZONE
-    # 2 again on the cones kept: pref_clear also turns down a cone no velocity within v_max reaches
+    # 2 on the cones kept, as the Python formulations check it: pref_clear's answer but for a
+    # rounding at min_speed's margin (a bit for bit guard, not a second chance)
     if status == OPTIMAL and not pref_in and within_limits(vos.v_pref, G3, h3, bounds):
         return KernelOut(enforce_limits(vos.v_pref, p, bounds), OPTIMAL, np.nan, PREFERRED, 0)
-    planes = decision_planes(vos, v_now, cfg)  # 3
+    planes = decision_planes(vos, v_now, cfg)
     qps = plane_qps(vos, planes, G3, h3, initial, cfg, True)
     R, P = qps.key.shape
     tried = np.empty((R * P * (V + 1), 3))  # at most every QP once, then once per VO it gains

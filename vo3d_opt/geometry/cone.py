@@ -118,6 +118,14 @@ def outward_normal(
     )
 
 
+@inline
+def offset(p_B: np.ndarray, p_A: np.ndarray, rel: np.ndarray) -> float:
+    """p_B - p_A into rel (3,), and its length d_oi (eq. 1)."""
+    for k in range(3):
+        rel[k] = p_B[k] - p_A[k]
+    return np.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2)
+
+
 @jit
 def build_cones(
     p_A: np.ndarray,
@@ -134,9 +142,7 @@ def build_cones(
     d_oi, theta_el, psi_az = np.empty(n), np.empty(n), np.empty(n)
     d_vo, r_vo, tau, sin_alpha = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     for i in range(n):
-        for k in range(3):
-            rel[i, k] = p_B[i, k] - p_A[k]
-        d = np.sqrt(rel[i, 0] ** 2 + rel[i, 1] ** 2 + rel[i, 2] ** 2)  # eq. (1)
+        d = offset(p_B[i], p_A, rel[i])  # eq. (1)
         safe_d = max(d, 1e-12)
         th = np.arcsin(min(max(rel[i, 2] / safe_d, -1.0), 1.0))  # eq. (1), = atan(dz / dxy)
         ps = np.arctan2(rel[i, 1], rel[i, 0])  # eq. (1)

@@ -54,10 +54,19 @@ def approach(
 def in_cone(cones: VOCones, i: int, v: np.ndarray, horizon: float, tol: float) -> bool:
     """Whether v lies in VO cone i (inside the zone: whether it still closes in). ``tol`` (m)
     widens (> 0) or shrinks (< 0) the protected sphere."""
-    closest, t_star, closing = closest_approach(cones, i, v, horizon)
     if cones.inside[i]:
-        return closing > 0.0
-    return closest < cones.r_pz[i] + tol and t_star > 0.0
+        return closest_approach(cones, i, v, horizon)[2] > 0.0
+    return heads_into(cones.apex[i], cones.rel[i], cones.r_pz[i], v, horizon, tol)
+
+
+@inline
+def heads_into(
+    a: np.ndarray, rel: np.ndarray, r_pz: float, v: np.ndarray, horizon: float, tol: float
+) -> bool:
+    """``in_cone`` for a zone A is outside of, from the cone's apex a (3,), B's position from
+    A, rel (3,), and its radius: whether v passes within r_pz + tol of B at a positive time."""
+    closest, t_star, _ = approach(a, rel, v, horizon)
+    return closest < r_pz + tol and t_star > 0.0
 
 
 @inline

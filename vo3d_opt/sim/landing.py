@@ -12,7 +12,7 @@ goal, no progress over a stall window) flies its preferred velocity, straight at
 instead of the selector's answer whenever that step keeps clear, over the whole period, of:
 
 * every vehicle that decides, moving at its command, by the selector's planning radius
-  ``r_pz + min(pz_buffer, 0.9 gap)`` (``formulations.common.build_vos``): it may manoeuvre;
+  ``r_pz + min(pz_buffer, 0.9 gap)`` (``formulations.common.cone_rows``): it may manoeuvre;
 * every vehicle that does not decide (hovering at its goal, or flying straight) and every
   static sphere, moving at its known command, by ``r_pz`` plus what the buffer holds beyond
   the two vehicles' motion in one step, ``pz_buffer - 2 v_max dt`` (tracking, noise,
