@@ -145,9 +145,9 @@ def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dic
 
     real_decide, real_arrays = swarm.decide_all, swarm.SwarmInputs.arrays
 
-    def arrays(self):
+    def arrays(self, threads=1):
         t0 = time.perf_counter()
-        sw = real_arrays(self)
+        sw = real_arrays(self, threads)
         spent["tree"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         rows_only(sw)

@@ -154,6 +154,7 @@ def _keep_selector_state(mp: pytest.MonkeyPatch) -> None:
     for name in _SELECTOR_STATE:
         mp.setattr(selector, name, getattr(selector, name))
     mp.setattr(swarm, "_neighbor_lists", swarm._neighbor_lists)
+    mp.setattr(swarm, "_nearest_lists", swarm._nearest_lists)
 
 
 def _spy_on_unchecked(mp: pytest.MonkeyPatch) -> list[bool]:
@@ -335,6 +336,65 @@ def test_neighbour_list_arguments_it_cannot_take_go_to_the_jit() -> None:
     assert calls == ["jit"]
 
 
+def _proposals(seed: int, n: int, k: int) -> tuple:
+    """``nearest_lists``' arguments for n vehicles on a coarse lattice (tied distances), some
+    not deciding, as ``vehicle_links`` gets them from one k-nearest query of the tree; and k."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(seed)
+    P = rng.integers(0, 6, size=(n, 3)).astype(float) * 4.0
+    who = np.flatnonzero(rng.random(n) < 0.8).astype(np.int64)
+    reach = 9.0 + 4.0 * (seed % 4)
+    far, near = cKDTree(P).query(P[who], k=k + 1 + swarm._SPARE, distance_upper_bound=reach)
+    chosen = np.empty((who.shape[0], k), dtype=np.int64)
+    return P, who, near, far, reach, chosen
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("k", [1, 3, 10])
+def test_the_nearest_lists_entry_answers_as_the_jit(
+    compiled: aot.Kernels, seed: int, k: int
+) -> None:
+    """Each vehicle's k nearest from the tree's proposals: the module's lists and settled flags
+    are the JIT's, with tied distances (some lists unsettled) and ranges of 9 to 21 m."""
+    P, who, near, far, reach, got = _proposals(seed, 30 if seed < 4 else 120, k)
+    want = got.copy()
+    got_settled = compiled.nearest_lists.compiled(P, who, near, far, reach, got)
+    want_settled = swarm.nearest_lists(P, who, near, far, reach, want)
+    assert np.array_equal(got, want) and np.array_equal(got_settled, want_settled)
+    if seed >= 4:  # 120 vehicles: ties at the edge leave lists the tree cannot settle
+        assert not want_settled.all()
+
+
+def test_nearest_list_arguments_it_cannot_take_go_to_the_jit() -> None:
+    calls: list[str] = []
+    checked = aot._checked(
+        lambda *a: calls.append("compiled"), lambda *a: calls.append("jit"), aot._nearest_args_ok
+    )
+    P, who, near, far, reach, chosen = _proposals(0, 20, 3)
+    args = [P, who, near, far, reach, chosen]
+    checked(*args)
+    assert calls == ["compiled"]
+    odd = [
+        (0, P.astype(np.float32)),  # another dtype
+        (0, np.ascontiguousarray(P[:, :2])),  # not three coordinates
+        (1, who.astype(np.int32)),
+        (1, who[:-1]),  # fewer vehicles than proposals
+        (2, near[:, :-1]),  # strided, and not far's shape
+        (3, far[:, :3].copy()),  # not near's shape
+        (4, 9),  # an int range
+        (5, np.empty((who.shape[0], near.shape[1] + 1), dtype=np.int64)),  # k beyond proposals
+        (5, _frozen(chosen.copy())),  # a read-only output
+    ]
+    for k, value in odd:
+        calls.clear()
+        checked(*args[:k], value, *args[k + 1 :])
+        assert calls == ["jit"], k
+    calls.clear()
+    checked(*args[:-1])
+    assert calls == ["jit"]
+
+
 def _frozen(a: np.ndarray) -> np.ndarray:
     a.flags.writeable = False
     return a
@@ -390,6 +450,7 @@ def test_select_runs_the_module_when_it_is_current(
     ]:
         monkeypatch.setattr(selector, name, value)
     monkeypatch.setattr(swarm, "_neighbor_lists", swarm.neighbor_lists)
+    monkeypatch.setattr(swarm, "_nearest_lists", swarm.nearest_lists)
     load = aot.load
     monkeypatch.setattr(aot, "load", lambda: load(built))
     kw = _crowd(11, n=15)
@@ -402,10 +463,12 @@ def test_select_runs_the_module_when_it_is_current(
     assert np.array_equal(got.velocity, want[:3])
     assert selector._range_kernel is not selector.decide_range
     assert swarm._neighbor_lists is not swarm.neighbor_lists
+    assert swarm._nearest_lists is not swarm.nearest_lists
     P, V, W, R = random_swarm(3, n=30)
     many = VelocitySelector().select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0)
     monkeypatch.setattr(selector, "_range_kernel", selector.decide_range)
     monkeypatch.setattr(swarm, "_neighbor_lists", swarm.neighbor_lists)
+    monkeypatch.setattr(swarm, "_nearest_lists", swarm.nearest_lists)
     jit = VelocitySelector().select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0)
     assert np.array_equal(many.velocities, jit.velocities)
 
@@ -419,10 +482,12 @@ def test_a_looped_selector_takes_the_neighbour_lists_from_the_module(
     monkeypatch.setattr(selector, "_module_tried", False)
     monkeypatch.setattr(selector, "_warm_paths", set())
     monkeypatch.setattr(swarm, "_neighbor_lists", swarm.neighbor_lists)
+    monkeypatch.setattr(swarm, "_nearest_lists", swarm.nearest_lists)
     load = aot.load
     monkeypatch.setattr(aot, "load", lambda: load(built))
     VelocitySelector("sampled")
     assert swarm._neighbor_lists is not swarm.neighbor_lists
+    assert swarm._nearest_lists is not swarm.nearest_lists
 
 
 def test_vo3d_compile_check_says_which_kernel_select_would_run(

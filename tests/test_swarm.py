@@ -240,17 +240,21 @@ def _kind_of_swarm(kind, rng):
     return np.round(rng.uniform(-1.0, 1.0, (n, 3)))  # pile: more than k + 5 on a spot
 
 
-@pytest.mark.parametrize(("crowded", "share"), [(False, 0.05), (True, 0.0), (True, 1.0)])
+@pytest.mark.parametrize(
+    ("crowded", "share", "threads"),
+    [(False, 0.05, 1), (True, 0.0, 1), (True, 1.0, 1), (True, 1.0, 3)],
+)
 @pytest.mark.parametrize("kind", SWARM_KINDS)
 def test_nearest_lists_are_brute_force_where_the_tree_cannot_settle_them(
-    kind, crowded, share, monkeypatch
+    kind, crowded, share, threads, monkeypatch
 ):
     """With max_neighbors, in a crowd (``_crowded``, forced here both ways) the lists come from
     one k-nearest query of the k-d tree; a vehicle whose proposals leave a tie possible at the
     edge ranks all within range instead, or, when more than ``_UNSETTLED`` of them would (0: at
     the first, 1: never), the whole call lists every pair within range. Every way the lists
     are the brute-force ones, ranges of 0 and inf included; ties (a grid, shared spots) take
-    the slow ways, random positions never do."""
+    the slow ways, random positions never do. On 3 threads (each ranking at least 8 vehicles
+    here) the lists are the same."""
     from vo3d_opt import swarm
 
     ranked, dropped = [], []
@@ -259,16 +263,40 @@ def test_nearest_lists_are_brute_force_where_the_tree_cannot_settle_them(
     monkeypatch.setattr(swarm, "_UNSETTLED", share)
     monkeypatch.setattr(swarm, "_ranked_within", lambda *a: ranked.append(1) or real_ranked(*a))
     monkeypatch.setattr(swarm, "_nearest_links", lambda *a: real_nearest(*a) or dropped.append(1))
+    monkeypatch.setattr(swarm, "_PART", 8)
     rng = np.random.default_rng(SWARM_KINDS.index(kind))
     for _ in range(20):
         P = _kind_of_swarm(kind, rng)
         who = np.flatnonzero(rng.random(P.shape[0]) < 0.8)
         k, reach = int(rng.integers(1, 12)), float(rng.choice([0.0, 2.0, 10.0, 55.0, np.inf]))
-        span, idx = swarm.vehicle_links(P, who, reach, k)
+        span, idx = swarm.vehicle_links(P, who, reach, k, threads)
         assert [list(idx[a:b]) for a, b in span] == _brute_lists(P, who, reach, k)
     tied = crowded and kind in TIED
     assert (len(ranked) > 0) == (tied and share == 1.0)
     assert (len(dropped) > 0) == (tied and share == 0.0)
+
+
+def test_the_nearest_query_serves_only_where_its_distance_is_numpys(monkeypatch):
+    """The k-nearest path ranks by a compiled distance that sums the squares as numpy's norm
+    does here; a numpy that summed otherwise would turn it off (every pair, numpy's own norm).
+    Which path serves depends on the pairs the tree would list per deciding vehicle, the
+    vehicles that do not decide counted too."""
+    from scipy.spatial import cKDTree
+
+    from vo3d_opt import swarm
+
+    assert swarm._NEAREST_OK  # numpy 2.x on x86-64: left to right, as the check found
+    rng = np.random.default_rng(0)
+    sparse = rng.uniform(-2000.0, 2000.0, (50, 3))  # about 0 within range of each other
+    assert not swarm._crowded(cKDTree(sparse), sparse, np.arange(50), 55.0, 10)
+    # the same 50 deciding beside 250 hovering in a cloud: the tree would list the cloud's pairs
+    P = np.concatenate([sparse, rng.normal(0.0, 5.0, (250, 3))])
+    tree, everyone = cKDTree(P), np.arange(300)
+    assert swarm._crowded(tree, P, everyone[:50], 55.0, 10)
+    monkeypatch.setattr(swarm, "_NEAREST_OK", False)
+    assert not swarm._crowded(tree, P, everyone, 55.0, 10)
+    span, idx = swarm.vehicle_links(P, everyone, 55.0, 10)
+    assert [list(idx[a:b]) for a, b in span] == _brute_lists(P, everyone, 55.0, 10)
 
 
 def test_crowded_swarm_equals_a_loop_of_select():

@@ -153,7 +153,7 @@ def _use_module() -> bool:
         if compiled is not None:
             _decide_kernel, _range_kernel = compiled.decide, compiled.decide_range
             _decide_unchecked = compiled.decide.compiled  # type: ignore[attr-defined]
-            swarm.use_neighbor_lists(compiled.neighbor_lists)
+            swarm.use_neighbor_lists(compiled.neighbor_lists, compiled.nearest_lists)
         _module_tried = True
     return _decide_kernel is not kernel.decide
 
@@ -219,7 +219,7 @@ def _warm_formulation(selector: VelocitySelector) -> None:
             for kw in _warm_encounters():
                 selector.select(**kw)
             if not module:  # select_many's neighbour lists, on numba's JIT
-                swarm.vehicle_links(np.zeros((2, 3)), np.arange(2), 1.0, None)
+                swarm.warm_lists()
 
         _compiling(what, run)
         _warm_paths.add(key)
@@ -301,7 +301,7 @@ def _select_many_compiled(
     options: Options, inputs: swarm.SwarmInputs, threads: int, t0: float
 ) -> SwarmDecision:
     """``select_many`` compiled: every deciding vehicle, on ``threads`` threads."""
-    sw = inputs.arrays()
+    sw = inputs.arrays(threads)
     out = swarm.decide_all(sw, options.packed, threads, _range_kernel)
     result = _swarm_decision(
         inputs.V,

@@ -35,20 +35,32 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .formulations.common import bounds_array
-from .formulations.swarm import AGENT_COLUMNS, MANY_OUT_SIZE, Swarm, decide_range, neighbor_lists
+from .formulations.swarm import (
+    AGENT_COLUMNS,
+    MANY_OUT_SIZE,
+    Swarm,
+    decide_range,
+    nearest_lists,
+    neighbor_lists,
+)
 from .geometry.pyramid import prism_rows
 from .types import Box, Cylinder, Limits
 
-#: The compiled ``neighbor_lists`` that ``vehicle_links`` calls: numba's JIT one, or the
-#: ahead-of-time module's once the selector has loaded it (``use_neighbor_lists``).
+#: The compiled ``neighbor_lists`` and ``nearest_lists`` that ``vehicle_links`` calls: numba's
+#: JIT ones, or the ahead-of-time module's once the selector has loaded it
+#: (``use_neighbor_lists``).
 _neighbor_lists: Callable[..., np.ndarray] = neighbor_lists
+_nearest_lists: Callable[..., np.ndarray] = nearest_lists
 
 
-def use_neighbor_lists(fn: Callable[..., np.ndarray]) -> None:
-    """Make ``vehicle_links`` call ``fn`` (``formulations.swarm.neighbor_lists`` compiled
-    ahead of time: formulations/aot.py) instead of numba's JIT one."""
-    global _neighbor_lists
-    _neighbor_lists = fn
+def use_neighbor_lists(
+    lists: Callable[..., np.ndarray], nearest: Callable[..., np.ndarray]
+) -> None:
+    """Make ``vehicle_links`` call ``lists`` and ``nearest`` (``formulations.swarm``'s
+    ``neighbor_lists`` and ``nearest_lists`` compiled ahead of time: formulations/aot.py)
+    instead of numba's JIT ones."""
+    global _neighbor_lists, _nearest_lists
+    _neighbor_lists, _nearest_lists = lists, nearest
 
 
 #: The k-d trees propose candidates within range·(1 + _REACH) + _REACH, m: a hair more than the
@@ -217,16 +229,18 @@ def vehicle_links(
     who: np.ndarray,
     sensing_range: float,
     max_neighbors: int | None,
+    threads: int = 1,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each deciding vehicle's neighbours (vehicle indices, increasing) as (span, idx): the
     vehicles within ``sensing_range`` (numpy's distance), or the ``max_neighbors`` nearest of
-    them (equally near: the lower index first)."""
+    them (equally near: the lower index first). ``threads``: how many may share a crowd's
+    k-nearest queries (the lists are the same)."""
     n, D = P.shape[0], who.shape[0]
     if D == 0 or n < 2 or max_neighbors == 0:
         return np.zeros((D, 2), dtype=np.int64), _EMPTY
     tree = cKDTree(P)
     if max_neighbors is not None and _crowded(tree, P, who, sensing_range, max_neighbors):
-        links = _nearest_links(tree, P, who, sensing_range, int(max_neighbors))
+        links = _nearest_links(tree, P, who, sensing_range, int(max_neighbors), threads)
         if links is not None:
             return links
     pairs = tree.query_pairs(_reach(sensing_range), output_type="ndarray")
@@ -243,26 +257,43 @@ def vehicle_links(
 #: With max_neighbors = k, the tree proposes each vehicle's k + 1 + _SPARE nearest (itself among
 #: them): the spare ones show whether a farther vehicle could tie with the k-th.
 _SPARE = 4
-#: That query replaces the list of every pair within range when a sample of the deciding
-#: vehicles has on average more than _CROWD times k + 1 + _SPARE vehicles within range: a pair
-#: costs about 0.1 µs, the query about 3 µs per vehicle (2-core VM, 2026-11-24).
-_CROWD = 3
+#: That query replaces the list of every pair within range when the pairs (estimated from a
+#: sample of the vehicles) number more than _CROWD times k + 1 + _SPARE per deciding vehicle:
+#: with k = 10, the query and its ranking cost about 2.4 µs per deciding vehicle, the list of
+#: every pair about 0.08 µs per vehicle and vehicle within range of it, break-even at about
+#: 30 within range (1,000 vehicles, 2-core Intel Xeon VM, 2026-11-25).
+_CROWD = 2
 #: The query is dropped for every pair again when more than this share of the deciding vehicles
 #: cannot settle their lists from its proposals (ties at the edge: a lattice), as each of those
 #: then costs a query of its own.
 _UNSETTLED = 0.05
+#: With several threads, each ranks at least this many vehicles' proposals (fewer are not
+#: worth handing over to a thread).
+_PART = 256
+
+
+def _norm_sums_left_to_right() -> bool:
+    """Whether numpy's ``np.linalg.norm(x, axis=-1)`` of rows of three sums the squares left to
+    right, as ``nearest_lists``' compiled distance does (numpy 2.x on x86-64 does; another
+    build might not, and the lists must rank by numpy's distance bit for bit)."""
+    x = np.random.default_rng(0).normal(size=(4096, 3)) * np.geomspace(1e-3, 1e3, 4096)[:, None]
+    s = x * x
+    return bool(np.array_equal(np.linalg.norm(x, axis=-1), np.sqrt((s[:, 0] + s[:, 1]) + s[:, 2])))
+
+
+#: Whether the k-nearest query may serve (else every pair within range, ranked by numpy).
+_NEAREST_OK = _norm_sums_left_to_right()
 
 
 def _crowded(tree: cKDTree, P: np.ndarray, who: np.ndarray, sensing_range: float, k: int) -> bool:
-    """Whether every pair within range costs more than one k-nearest query per vehicle, judged on
-    32 to 63 deciding vehicles spread over the index (every (D // 32)-th: a question of speed
-    only, both ways give the same lists)."""
-    K = k + 1 + _SPARE
-    if K >= P.shape[0]:
+    """Whether every pair within range (of all n vehicles: the tree lists them all) costs more
+    than one k-nearest query per deciding vehicle, judged on 32 to 63 vehicles spread over the
+    index (every (n // 32)-th: a question of speed only, both ways give the same lists)."""
+    n, K = P.shape[0], k + 1 + _SPARE
+    if K >= n or not _NEAREST_OK:
         return False
-    sample = who[:: max(1, who.shape[0] // 32)]
-    within = tree.query_ball_point(P[sample], _reach(sensing_range), return_length=True)
-    return bool(np.mean(within) > _CROWD * K)
+    within = tree.query_ball_point(P[:: max(1, n // 32)], _reach(sensing_range), return_length=True)
+    return bool(np.mean(within) * n > _CROWD * K * who.shape[0])
 
 
 def _pair_distance(P: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -283,43 +314,56 @@ def _ranked_within(
 
 
 def _nearest_links(
-    tree: cKDTree, P: np.ndarray, who: np.ndarray, sensing_range: float, k: int
+    tree: cKDTree, P: np.ndarray, who: np.ndarray, sensing_range: float, k: int, threads: int = 1
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """``vehicle_links`` with max_neighbors = k from one k-nearest query of the tree: O(D k log n)
     where every pair within range costs O(pairs), the whole swarm's square in a crowd (the
     sphere swap's centre). The same lists, tie for tie: numpy's distance ranks the proposed
-    vehicles (ties: the lower index). A vehicle whose proposals cannot settle its list (the
-    farthest proposed is not clearly farther than its k-th nearest or the range: a tie may hide
-    beyond) ranks all within range instead; None when more than _UNSETTLED of the vehicles
-    would (a lattice, where distances tie everywhere: every pair is then cheaper)."""
-    n, D, K = P.shape[0], who.shape[0], k + 1 + _SPARE
-    far, near = tree.query(P[who], k=K, distance_upper_bound=_reach(sensing_range))
-    ok = (near < n) & (near != who[:, None])
-    near = np.where(ok, near, n)  # n: no vehicle (sorts last)
-    dist = np.full((D, K), np.inf)
-    r_ok, c_ok = np.nonzero(ok)
-    dist[r_ok, c_ok] = _pair_distance(P, who[r_ok], near[r_ok, c_ok])
-    dist[dist > sensing_range] = np.inf
-    order = np.lexsort((near, dist))  # each row by distance, ties by index
-    rows = np.arange(D)[:, None]
-    dist, near = dist[rows, order], near[rows, order]
-    chosen = np.where(np.isfinite(dist[:, :k]), near[:, :k], n)
-    edge = np.minimum(dist[:, k - 1], sensing_range)  # the k-th's distance, or the range
-    # Every vehicle the tree did not propose is at least far[:, -1] away by its distance, which
-    # is numpy's within a few ulps: settled when that is clearly beyond the edge.
-    settled = np.isinf(far[:, -1]) | (far[:, -1] > edge * (1.0 + 1e-9) + 1e-12)
+    vehicles (ties: the lower index; compiled, ``formulations.swarm.nearest_lists``). A vehicle
+    whose proposals cannot settle its list (the farthest proposed is not clearly farther than
+    its k-th nearest or the range: a tie may hide beyond) ranks all within range instead; None
+    when more than _UNSETTLED of the vehicles would (a lattice, where distances tie everywhere:
+    every pair is then cheaper). With ``threads`` > 1 and many vehicles, the query and the
+    ranking run on that many threads, each on its share of the vehicles (both release the GIL;
+    a vehicle's list does not depend on who computed it)."""
+    n, D = P.shape[0], who.shape[0]
+    chosen, settled = np.empty((D, k), dtype=np.int64), np.empty(D, dtype=np.bool_)
+
+    def part(lo: int, hi: int) -> None:
+        far, near = tree.query(
+            P[who[lo:hi]], k=k + 1 + _SPARE, distance_upper_bound=_reach(sensing_range)
+        )
+        settled[lo:hi] = _nearest_lists(
+            P, who[lo:hi], near, far, float(sensing_range), chosen[lo:hi]
+        )
+
+    parts = max(1, min(threads, D // _PART))
+    cut = [D * t // parts for t in range(parts + 1)]
+    helpers = [_workers(parts - 1).submit(part, cut[t], cut[t + 1]) for t in range(1, parts)]
+    part(cut[0], cut[1])
+    for h in helpers:
+        h.result()
     unsettled = np.flatnonzero(~settled)
     if unsettled.shape[0] > _UNSETTLED * D:
         return None
     for r in unsettled:
-        pick = _ranked_within(tree, P, int(who[r]), sensing_range, k)
+        pick = np.sort(_ranked_within(tree, P, int(who[r]), sensing_range, k))
         chosen[r] = n
         chosen[r, : pick.shape[0]] = pick
-    chosen.sort(axis=1)  # each list in index order (_spans' lexsort: ~1 ms more at D = 1000)
-    count = (chosen < n).sum(axis=1)
+    count = (chosen < n).sum(axis=1)  # each list in index order, none (n) last
     ends = np.cumsum(count)
     span = np.stack([ends - count, ends], axis=1).astype(np.int64)
     return span, np.ascontiguousarray(chosen[chosen < n], dtype=np.int64)
+
+
+def warm_lists() -> None:
+    """Compile (or load from numba's cache) both ways of listing neighbours: every pair within
+    range and each vehicle's nearest."""
+    P = np.arange(24.0).reshape(8, 3)
+    who = np.arange(8, dtype=np.int64)
+    vehicle_links(P, who, 1.0, None)
+    tree = cKDTree(P)
+    _nearest_links(tree, P, who, 100.0, 1)
 
 
 def _all(D: int, m: int) -> tuple[np.ndarray, np.ndarray]:
@@ -467,22 +511,23 @@ class SwarmInputs:
             spheres=sphere_rows(spheres),
         )
 
-    def links(self) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
-        """(span, idx) of the deciding vehicles' neighbours, spheres and obstacles."""
+    def links(self, threads: int = 1) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+        """(span, idx) of the deciding vehicles' neighbours, spheres and obstacles (``threads``:
+        see ``vehicle_links``)."""
         who = self.who
         Pd = np.ascontiguousarray(self.P[who])
         return (
-            vehicle_links(self.P, who, self.sensing_range, self.max_neighbors),
+            vehicle_links(self.P, who, self.sensing_range, self.max_neighbors, threads),
             sphere_links(Pd, self.spheres, self.obstacle_range),
             obstacle_links(Pd, self.obstacles, self.obstacle_range),
         )
 
-    def arrays(self) -> Swarm:
-        """The ``Swarm`` arrays of the compiled call."""
+    def arrays(self, threads: int = 1) -> Swarm:
+        """The ``Swarm`` arrays of the compiled call (``threads``: see ``vehicle_links``)."""
         agents = np.empty((self.P.shape[0], AGENT_COLUMNS))
         agents[:, 0:3], agents[:, 3:6], agents[:, 6:9] = self.P, self.V, self.W
         agents[:, 9], agents[:, 10] = self.R, self.deciding
-        (nb_span, nb_idx), (sp_span, sp_idx), (ob_span, ob_idx) = self.links()
+        (nb_span, nb_idx), (sp_span, sp_idx), (ob_span, ob_idx) = self.links(threads)
         return Swarm(
             agents,
             self.bounds,

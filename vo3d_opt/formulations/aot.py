@@ -2,7 +2,8 @@
 numba's JIT (issue 9 §5: 27–50 s with an empty cache on the 2-core test machines).
 
 ``build()`` compiles ``kernel.decide`` (``select``), ``swarm.decide_range`` (``select_many``'s
-loop over the vehicles) and ``swarm.neighbor_lists`` (its neighbour lists) with numba's
+loop over the vehicles), ``swarm.neighbor_lists`` and ``swarm.nearest_lists`` (its neighbour
+lists, from every pair within range or from each vehicle's nearest) with numba's
 ahead-of-time compiler (``numba.pycc``) into one extension module next to this file
 (``vo3d compile``; ``make`` runs it), with a stamp of what it was built from: the package's
 sources, the Python, numpy and numba versions and the CPU (built for this machine's CPU, as
@@ -10,13 +11,13 @@ numba's JIT would). ``load()`` returns the compiled entries only when the stamp 
 code this process imported and this machine, and numba is not asked to debug
 (``NUMBA_DISABLE_JIT``, ``NUMBA_BOUNDSCHECK``); otherwise the selector uses the JIT kernels, so
 an edited source or a moved environment never runs a stale or foreign kernel. It is the same
-code: everything below the three entries is compiled by the same dispatchers (their
+code: everything below the four entries is compiled by the same dispatchers (their
 flags, ``error_model="numpy"``) and linked into the module, and the answers are bitwise those
 of the JIT kernels (tests/test_aot.py). The module's wrappers release the GIL, as the JIT's
 ``nogil`` ones do, so ``vo3d_opt.swarm.decide_all`` runs ``decide_range`` on several threads as
 before (a flag set in the compiling process only). With the neighbour lists (the counting
-sort of the k-d tree's pairs) in the module too, a first ``select_many`` compiles nothing
-either.
+sort of the k-d tree's pairs, the ranking of its nearest) in the module too, a first
+``select_many`` compiles nothing either.
 
 Each entry is loaded behind a check of its arguments' types (``_checked``: the module trusts
 them); ``select`` calls ``decide`` without it, as it builds every array itself
@@ -42,7 +43,7 @@ import time
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 
@@ -69,6 +70,15 @@ LISTS_KINDS = (
     None,
     (np.int64, 2),
 )
+#: ``swarm.nearest_lists``' arguments (P, who, near, far, sensing_range, chosen), as above.
+NEAREST_KINDS = (
+    (np.float64, 2),
+    (np.int64, 1),
+    (np.int64, 2),
+    (np.float64, 2),
+    None,
+    (np.int64, 2),
+)
 
 Kernel = Callable[..., Any]
 
@@ -79,6 +89,7 @@ class Kernels(NamedTuple):
     decide: Kernel  # kernel.decide
     decide_range: Kernel  # formulations.swarm.decide_range
     neighbor_lists: Kernel  # formulations.swarm.neighbor_lists (returns the lists)
+    nearest_lists: Kernel  # formulations.swarm.nearest_lists (returns the settled flags)
 
 
 def module_path(directory: Path = HERE) -> Path:
@@ -131,7 +142,8 @@ def _export(directory: str) -> None:
     from numba import types
     from numba.pycc import CC
 
-    decide, decide_range, neighbor_lists = kernel.decide, swarm.decide_range, swarm.neighbor_lists
+    decide, decide_range = kernel.decide, swarm.decide_range
+    neighbor_lists, nearest_lists = swarm.neighbor_lists, swarm.nearest_lists
 
     compile_extra = pycc_compiler.compile_extra
 
@@ -155,6 +167,9 @@ def _export(directory: str) -> None:
     def neighbor_lists_aot(a, b, dist, sensing_range, place, k, span):  # noqa: ANN001
         return neighbor_lists(a, b, dist, sensing_range, place, k, span)
 
+    def nearest_lists_aot(P, who, near, far, sensing_range, chosen):  # noqa: ANN001
+        return nearest_lists(P, who, near, far, sensing_range, chosen)
+
     def array(dtype: type, ndim: int) -> types.Array:
         return types.Array(numba.from_dtype(np.dtype(dtype)), ndim, "C")
 
@@ -171,6 +186,8 @@ def _export(directory: str) -> None:
     scalars = iter((types.float64, types.int64))
     lists_args = [next(scalars) if kind is None else array(*kind) for kind in LISTS_KINDS]
     cc.export("neighbor_lists", array(np.int64, 1)(*lists_args))(neighbor_lists_aot)
+    nearest_args = [types.float64 if kind is None else array(*kind) for kind in NEAREST_KINDS]
+    cc.export("nearest_lists", array(np.bool_, 1)(*nearest_args))(nearest_lists_aot)
     with warnings.catch_warnings():  # pycc's pending-deprecation notice: said in the docstring
         warnings.simplefilter("ignore")
         cc.compile()
@@ -237,13 +254,14 @@ def load(directory: Path = HERE) -> tuple[Kernels | None, str]:
         assert spec is not None  # a loader is given
         module = importlib.util.module_from_spec(spec)
         loader.exec_module(module)
-        entries = module.decide, module.decide_range, module.neighbor_lists
+        entries = module.decide, module.decide_range, module.neighbor_lists, module.nearest_lists
     except (ImportError, OSError, AttributeError) as exc:
         return None, f"{path} does not load ({type(exc).__name__}: {exc})"
     kernels = Kernels(
         _checked(entries[0], kernel.decide, _decide_args_ok),
         _checked(entries[1], swarm.decide_range, _range_args_ok),
         _checked(entries[2], swarm.neighbor_lists, _lists_args_ok),
+        _checked(entries[3], swarm.nearest_lists, _nearest_args_ok),
     )
     return kernels, f"ahead-of-time kernel {path} (built from this code for this machine)"
 
@@ -305,6 +323,30 @@ def _lists_args_ok(args: tuple[object, ...]) -> bool:
         and not isinstance(k, bool)
         and _arrays_ok(tuple(args[i] for i in _LISTS_ARRAYS), _LISTS_KINDS)
         and args[-1].flags.writeable  # type: ignore[attr-defined]
+    )
+
+
+_NEAREST_ARRAYS = tuple(i for i, kind in enumerate(NEAREST_KINDS) if kind is not None)
+_NEAREST_KINDS = _kinds(tuple(kind for kind in NEAREST_KINDS if kind is not None))
+
+
+def _nearest_args_ok(args: tuple[object, ...]) -> bool:
+    """``nearest_lists``' arguments: its arrays as compiled, a float range, and shapes that
+    agree (the module reads near and far by who's length and writes chosen's rows)."""
+    if len(args) != len(NEAREST_KINDS) or not isinstance(args[4], float):
+        return False
+    arrays = tuple(args[i] for i in _NEAREST_ARRAYS)
+    if not _arrays_ok(arrays, _NEAREST_KINDS):
+        return False
+    P, who, near, far, chosen = cast(tuple[np.ndarray, ...], arrays)
+    D = who.shape[0]
+    return (
+        P.shape[1] == 3
+        and near.shape == far.shape
+        and near.shape[0] == D
+        and chosen.shape[0] == D
+        and 1 <= chosen.shape[1] <= near.shape[1]
+        and bool(chosen.flags.writeable)
     )
 
 

@@ -224,3 +224,49 @@ def neighbor_lists(
         m += c
         span[r, 1] = m
     return out[:m].copy()
+
+
+@inline
+def _distance(P: np.ndarray, i: int, j: int) -> float:
+    """numpy's ``np.linalg.norm(P[i] - P[j])``: its squares summed left to right, as numpy's
+    reduction over a row of three does (``vo3d_opt.swarm`` checks that at import and keeps
+    numpy's own norm where it does not)."""
+    d0, d1, d2 = P[i, 0] - P[j, 0], P[i, 1] - P[j, 1], P[i, 2] - P[j, 2]
+    return np.sqrt((d0 * d0 + d1 * d1) + d2 * d2)
+
+
+@entry
+def nearest_lists(
+    P: np.ndarray,
+    who: np.ndarray,
+    near: np.ndarray,
+    far: np.ndarray,
+    sensing_range: float,
+    chosen: np.ndarray,
+) -> np.ndarray:
+    """Each deciding vehicle's k nearest within ``sensing_range`` (ties: the lower index) from
+    the k-d tree's proposals (its K nearest: ``near`` (D, K) indices, n for none, ``far`` (D, K)
+    the tree's distances), ranked by numpy's distance, into ``chosen`` (D, k) in increasing
+    index order (n for none). Returns whether each list is settled: whether every vehicle the
+    tree did not propose lies clearly beyond the k-th nearest (or the range), so that no tie
+    hides beyond the proposals (``vo3d_opt.swarm._nearest_links`` ranks the others anew)."""
+    n, (D, K), k = P.shape[0], near.shape, chosen.shape[1]
+    settled = np.empty(D, dtype=np.bool_)
+    key_i, key_d = np.empty(K, dtype=np.int64), np.empty(K)
+    for r in range(D):
+        i = who[r]
+        for q in range(K):  # a vehicle out of range or none: (inf, n), after every real one
+            j = near[r, q]
+            key_i[q], key_d[q] = n, np.inf
+            if j < n and j != i:
+                d = _distance(P, i, j)
+                if d <= sensing_range:
+                    key_i[q], key_d[q] = j, d
+        _insertion(key_i, key_d, K, False)  # by index, then (stable) by distance
+        _insertion(key_i, key_d, K, True)
+        edge = min(key_d[k - 1], sensing_range)
+        settled[r] = np.isinf(far[r, K - 1]) or far[r, K - 1] > edge * (1.0 + 1e-9) + 1e-12
+        _insertion(key_i, key_d, k, False)  # the k nearest in index order, none (n) last
+        for q in range(k):
+            chosen[r, q] = key_i[q]
+    return settled
