@@ -338,7 +338,8 @@ def test_neighbour_list_arguments_it_cannot_take_go_to_the_jit() -> None:
 
 def _proposals(seed: int, n: int, k: int) -> tuple:
     """``nearest_lists``' arguments for n vehicles on a coarse lattice (tied distances), some
-    not deciding, as ``vehicle_links`` gets them from one k-nearest query of the tree; and k."""
+    not deciding, as ``vehicle_links`` gets them from one k-nearest query of the tree, with
+    ``chosen`` for the k nearest."""
     from scipy.spatial import cKDTree
 
     rng = np.random.default_rng(seed)

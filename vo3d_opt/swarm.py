@@ -26,7 +26,7 @@ import math
 import numbers
 import threading
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -257,8 +257,9 @@ def vehicle_links(
 #: With max_neighbors = k, the tree proposes each vehicle's k + 1 + _SPARE nearest (itself among
 #: them): the spare ones show whether a farther vehicle could tie with the k-th.
 _SPARE = 4
-#: That query replaces the list of every pair within range when the pairs (estimated from a
-#: sample of the vehicles) number more than _CROWD times k + 1 + _SPARE per deciding vehicle:
+#: That query replaces the list of every pair within range when the vehicles within range of
+#: each vehicle (the mean of a sample, times n: twice the pairs) exceed _CROWD times
+#: k + 1 + _SPARE per deciding vehicle:
 #: with k = 10, the query and its ranking cost about 2.4 µs per deciding vehicle, the list of
 #: every pair about 0.08 µs per vehicle and vehicle within range of it, break-even at about
 #: 30 within range (1,000 vehicles, 2-core Intel Xeon VM, 2026-11-25).
@@ -274,11 +275,15 @@ _PART = 256
 
 def _norm_sums_left_to_right() -> bool:
     """Whether numpy's ``np.linalg.norm(x, axis=-1)`` of rows of three sums the squares left to
-    right, as ``nearest_lists``' compiled distance does (numpy 2.x on x86-64 does; another
-    build might not, and the lists must rank by numpy's distance bit for bit)."""
+    right, as ``nearest_lists``' compiled distance does, for 1 to 4096 rows (numpy 2.4 on this
+    project's x86-64 machines does; another build might not, and the lists must rank by
+    numpy's distance bit for bit)."""
     x = np.random.default_rng(0).normal(size=(4096, 3)) * np.geomspace(1e-3, 1e3, 4096)[:, None]
     s = x * x
-    return bool(np.array_equal(np.linalg.norm(x, axis=-1), np.sqrt((s[:, 0] + s[:, 1]) + s[:, 2])))
+    left = np.sqrt((s[:, 0] + s[:, 1]) + s[:, 2])
+    return all(
+        np.array_equal(np.linalg.norm(x[:m], axis=-1), left[:m]) for m in (1, 2, 3, 7, 64, 4096)
+    )
 
 
 #: Whether the k-nearest query may serve (else every pair within range, ranked by numpy).
@@ -289,11 +294,16 @@ def _crowded(tree: cKDTree, P: np.ndarray, who: np.ndarray, sensing_range: float
     """Whether every pair within range (of all n vehicles: the tree lists them all) costs more
     than one k-nearest query per deciding vehicle, judged on 32 to 63 vehicles spread over the
     index (every (n // 32)-th: a question of speed only, both ways give the same lists)."""
-    n, K = P.shape[0], k + 1 + _SPARE
-    if K >= n or not _NEAREST_OK:
+    n = P.shape[0]
+    if _proposed(k) >= n or not _NEAREST_OK:
         return False
     within = tree.query_ball_point(P[:: max(1, n // 32)], _reach(sensing_range), return_length=True)
-    return bool(np.mean(within) * n > _CROWD * K * who.shape[0])
+    return bool(np.mean(within) * n > _CROWD * _proposed(k) * who.shape[0])
+
+
+def _proposed(k: int) -> int:
+    """How many nearest the tree proposes for a list of k: k + 1 + _SPARE (itself among them)."""
+    return k + 1 + _SPARE
 
 
 def _pair_distance(P: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -331,7 +341,7 @@ def _nearest_links(
 
     def part(lo: int, hi: int) -> None:
         far, near = tree.query(
-            P[who[lo:hi]], k=k + 1 + _SPARE, distance_upper_bound=_reach(sensing_range)
+            P[who[lo:hi]], k=_proposed(k), distance_upper_bound=_reach(sensing_range)
         )
         settled[lo:hi] = _nearest_lists(
             P, who[lo:hi], near, far, float(sensing_range), chosen[lo:hi]
@@ -340,7 +350,10 @@ def _nearest_links(
     parts = max(1, min(threads, D // _PART))
     cut = [D * t // parts for t in range(parts + 1)]
     helpers = [_workers(parts - 1).submit(part, cut[t], cut[t + 1]) for t in range(1, parts)]
-    part(cut[0], cut[1])
+    try:
+        part(cut[0], cut[1])
+    finally:  # no helper left writing into the arrays, whatever raised
+        wait(helpers)
     for h in helpers:
         h.result()
     unsettled = np.flatnonzero(~settled)
@@ -362,8 +375,8 @@ def warm_lists() -> None:
     P = np.arange(24.0).reshape(8, 3)
     who = np.arange(8, dtype=np.int64)
     vehicle_links(P, who, 1.0, None)
-    tree = cKDTree(P)
-    _nearest_links(tree, P, who, 100.0, 1)
+    if _NEAREST_OK:
+        _nearest_links(cKDTree(P), P, who, 100.0, 1)
 
 
 def _all(D: int, m: int) -> tuple[np.ndarray, np.ndarray]:
@@ -610,7 +623,10 @@ def decide_all(
             kernel(sw, c * CHUNK, min(D, (c + 1) * CHUNK), *packed, out)
 
     helpers = [_workers(threads - 1).submit(work) for _ in range(min(threads, chunks) - 1)]
-    work()
+    try:
+        work()
+    finally:  # no helper left writing into ``out``, whatever raised
+        wait(helpers)
     for h in helpers:
         h.result()
     return out

@@ -332,7 +332,9 @@ _NEAREST_KINDS = _kinds(tuple(kind for kind in NEAREST_KINDS if kind is not None
 
 def _nearest_args_ok(args: tuple[object, ...]) -> bool:
     """``nearest_lists``' arguments: its arrays as compiled, a float range, and shapes that
-    agree (the module reads near and far by who's length and writes chosen's rows)."""
+    agree (the module reads near and far by who's length and writes chosen's rows). The
+    values are trusted, as ``neighbor_lists``' are: ``vehicle_links`` builds them (who from
+    ``np.flatnonzero``, near from the tree)."""
     if len(args) != len(NEAREST_KINDS) or not isinstance(args[4], float):
         return False
     arrays = tuple(args[i] for i in _NEAREST_ARRAYS)

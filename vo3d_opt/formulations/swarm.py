@@ -7,9 +7,10 @@ vehicles, each vehicle's ``nbrs`` and ``prisms`` rows are built from those lists
 ``kernel.decide_one`` decides for it: exactly what ``select`` computes for that vehicle, with
 no Python object per vehicle or neighbour.
 
-``neighbor_lists`` turns the k-d tree's pairs into those lists (a counting sort by vehicle);
-it lives here, beside ``decide_range``, so that ``vo3d compile`` (formulations/aot.py) puts
-both in its module and a first ``select_many`` compiles nothing.
+``neighbor_lists`` turns the k-d tree's pairs into those lists (a counting sort by vehicle),
+``nearest_lists`` ranks the tree's k-nearest proposals in a crowd; they live here, beside
+``decide_range``, so that ``vo3d compile`` (formulations/aot.py) puts them in its module and a
+first ``select_many`` compiles nothing.
 
 Parallel over vehicles: ``decide_range`` is compiled ``nogil`` and ``vo3d_opt.swarm.decide_all``
 runs ranges of vehicles on several threads at once. Not numba's ``prange``: a ``parallel=True``
