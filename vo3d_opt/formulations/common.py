@@ -81,6 +81,7 @@ class Config(NamedTuple):
     speed_levels: int  # the sampled grid: speeds v_min..v_max ...
     heading_step: float  # ... every this many rad on each plane
     closing_guard: bool  # see Options and limit_rows
+    least_bad_escape: bool  # see Options and fallback.least_bad
 
 
 class Bounds(NamedTuple):
@@ -140,6 +141,10 @@ class Options(Model):
     # the gap per dt, so that no two vehicles running it enter each other's zones within a step
     # (limit_rows; its conditions: formulations/plane_qp.md)
     closing_guard: StrictBool = False
+    # the least-bad fallback, when every velocity it tries enters a zone at once (A inside
+    # planning spheres, closing on one whichever way it turns): the one that closes slowest
+    # on the zones A is inside, not the one nearest the preferred velocity (fallback.least_bad)
+    least_bad_escape: StrictBool = False
 
     @cached_property
     def packed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -156,6 +161,7 @@ class Options(Model):
                 self.speed_levels,
                 math.radians(self.heading_step_deg),
                 self.closing_guard,
+                self.least_bad_escape,
                 *corr,  # last: a seventh correction would not shift the others
             ],
             dtype=float,
@@ -175,7 +181,7 @@ class Options(Model):
 def config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray) -> Config:
     """``Config`` from ``Options.packed``."""
     corr = Corrections(
-        values[7] > 0, values[8] > 0, values[9] > 0, values[10] > 0, values[11] > 0, values[12] > 0
+        values[8] > 0, values[9] > 0, values[10] > 0, values[11] > 0, values[12] > 0, values[13] > 0
     )
     return Config(
         values[0] > 0,
@@ -192,6 +198,7 @@ def config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray) ->
         int(values[4]),
         values[5],
         values[6] > 0,
+        values[7] > 0,
     )
 
 
@@ -510,6 +517,32 @@ def time_to_intrusion(vos: VOs, v: np.ndarray, floor: float, hint: np.ndarray) -
     return t
 
 
+@inline
+def closing_rate(vos: VOs, v: np.ndarray) -> float:
+    """The fastest rate (m/s) at which velocity v closes on a zone A is inside: on a neighbour's
+    centre (the relative velocity along the line of centres, as ``_zone_time`` judges closing)
+    or on an obstacle's prism (towards it, horizontally); 0 when it closes on none."""
+    c, worst = vos.cones, 0.0
+    for k in range(c.d_oi.shape[0]):
+        if c.inside[k]:
+            _, _, pu = closest_approach(c, k, v, NO_HORIZON)
+            worst = max(worst, pu / max(c.d_oi[k], 1e-12))
+    py = vos.pyramids
+    for j in range(py.L_pz.shape[0]):
+        if py.inside[j]:
+            h = py.frame[j, 0]
+            worst = max(worst, h[0] * v[0] + h[1] * v[1] + h[2] * v[2])
+    return worst
+
+
+@entry
+def _closing_rates(vos: VOs, v: np.ndarray) -> np.ndarray:
+    out = np.empty(v.shape[0])
+    for k in range(v.shape[0]):
+        out[k] = closing_rate(vos, v[k])
+    return out
+
+
 @entry
 def _times_to_intrusion(vos: VOs, v: np.ndarray) -> np.ndarray:
     out, hint = np.empty(v.shape[0]), np.zeros(1, dtype=np.int64)
@@ -667,6 +700,12 @@ class Encounter:
         """(M,) the earliest time any protected zone would be entered (inf: never; 0: inside
         and closing)."""
         return _times_to_intrusion(
+            self.vos, np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float)))
+        )
+
+    def closing_rate(self, v: np.ndarray) -> np.ndarray:
+        """(M,) the fastest rate at which each velocity closes on a zone A is inside."""
+        return _closing_rates(
             self.vos, np.ascontiguousarray(np.atleast_2d(np.asarray(v, dtype=float)))
         )
 

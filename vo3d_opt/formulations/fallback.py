@@ -24,6 +24,7 @@ from .common import (
     Encounter,
     Outcome,
     VOs,
+    closing_rate,
     time_to_intrusion,
     vz_range,
     within_limits,
@@ -230,10 +231,13 @@ def _consider(
     best: np.ndarray,
     key: np.ndarray,
     hint: np.ndarray,
+    escape: bool,
 ) -> None:
     """Keep v (first clipped into the reachable box |v - v_now| <= a·dt if ``clip``) in
-    ``best`` if it is within the limits and its (latest intrusion, least deviation) beats
-    ``key`` = (-time, deviation)."""
+    ``best`` if it is within the limits and its (latest intrusion, slowest closing, least
+    deviation) beats ``key`` = (-time, deviation, closing). The closing rate on the zones A
+    is inside counts only with ``escape`` (``least_bad_escape``) and only among velocities
+    that enter a zone at once (time 0); else it is 0 for all."""
     if clip:
         dv = bounds.acceleration * bounds.dt
         for c in range(3):
@@ -248,9 +252,10 @@ def _consider(
     dev = np.sqrt(
         (v[0] - vos.v_pref[0]) ** 2 + (v[1] - vos.v_pref[1]) ** 2 + (v[2] - vos.v_pref[2]) ** 2
     )
-    if t < key[0] or (t == key[0] and dev < key[1]):
+    cl = closing_rate(vos, v) if escape and t == 0.0 else 0.0
+    if t < key[0] or (t == key[0] and (cl < key[2] or (cl == key[2] and dev < key[1]))):
         best[0], best[1], best[2] = v[0], v[1], v[2]
-        key[0], key[1] = t, dev
+        key[0], key[1], key[2] = t, dev, cl
 
 
 @inline
@@ -281,15 +286,19 @@ def least_bad(
 ) -> np.ndarray:
     """Among the tried answers (k, 3), ``grid`` on every plane, zero and v_now, within the
     limits, the velocity whose first protected-zone intrusion comes latest (ties: nearest the
-    preferred velocity). With an acceleration limit each is also tried clipped into the
-    reachable box (few grid points lie in it). None within the limits (e.g. v_min > 0 and
-    zero): the limits' own closest point to hovering. ``cover``: the cone that holds each
-    block on each plane, as ``grid_search`` leaves it (< 0: none known); a block is skipped
-    once a zone's time bound for it (that cone's, or the zone's that beat the last point)
-    comes before the best so far (the answer is the same, in the same order)."""
+    preferred velocity; with ``least_bad_escape``, ties at once, inside zones, first the one
+    closing slowest on them: else, among velocities that all close on a zone A is inside, the
+    nearest the preferred one may fly straight at a neighbour). With an acceleration limit
+    each is also tried clipped into the reachable box (few grid points lie in it). None within
+    the limits (e.g. v_min > 0 and zero): the limits' own closest point to hovering.
+    ``cover``: the cone that holds each block on each plane, as ``grid_search`` leaves it (< 0:
+    none known); a block is skipped once a zone's time bound for it (that cone's, or the
+    zone's that beat the last point) comes before the best so far (the answer is the same, in
+    the same order)."""
     T, points = planes.to_plane, grid.points
-    best, key, hint = np.empty(3), np.empty(2), np.zeros(1, dtype=np.int64)
-    best[0], key[0], key[1] = np.nan, np.inf, np.inf
+    best, key, hint = np.empty(3), np.empty(3), np.zeros(1, dtype=np.int64)
+    best[0], key[0], key[1], key[2] = np.nan, np.inf, np.inf, np.inf
+    escape = cfg.least_bad_escape
     v, centre, n = np.empty(3), np.empty(3), vos.cones.d_oi.shape[0]
     # per plane and block: a time by which each of its points enters a zone, by the cone that
     # holds it and the zones that beat a grid point just before one of its points came up
@@ -305,7 +314,7 @@ def least_bad(
         for q in range(tried.shape[0]):
             for c in range(3):
                 v[c] = tried[q, c]
-            _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
+            _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint, escape)
         for pl in range(planes.phi.shape[0]):
             for g in range(points.shape[0]):
                 if points[g, 1] == 0.0 and pl > 0:  # on e1: plane 0's velocity, its key no better
@@ -324,13 +333,13 @@ def least_bad(
                             continue
                 for c in range(3):
                     v[c] = points[g, 0] * T[pl, 0, c] + points[g, 1] * T[pl, 1, c]
-                _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
+                _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint, escape)
         for c in range(3):
             v[c] = 0.0
-        _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
+        _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint, escape)
         for c in range(3):
             v[c] = v_now[c]
-        _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint)
+        _consider(vos, v, clip, v_now, G3, h3, bounds, best, key, hint, escape)
     if np.isnan(best[0]):
         lo, hi = vz_range(p[2], bounds)
         best[0], best[1], best[2] = 0.0, 0.0, min(max(0.0, lo), hi)
