@@ -1,13 +1,14 @@
 """The ahead-of-time decision kernel (``vo3d compile``, formulations/aot.py): bitwise the JIT
 kernel's answers, never loaded when built from other code or for another machine, and never
 handed arguments it would crash on."""
+
 from __future__ import annotations
 
 import json
 import os
 import shutil
 import subprocess
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numba
@@ -272,8 +273,11 @@ def test_swarm_arguments_it_cannot_take_go_to_the_jit_kernel() -> None:
     for k, value in odd:
         calls.clear()
         checked(*args[:k], value, *args[k + 1 :])
-        assert calls == (["compiled"] if value.__class__ is np.ndarray and value.flags.writeable
-                         and value.dtype == np.float64 else ["jit"]), k
+        assert calls == (
+            ["compiled"]
+            if value.__class__ is np.ndarray and value.flags.writeable and value.dtype == np.float64
+            else ["jit"]
+        ), k
 
 
 def _pairs(seed: int, n: int) -> tuple:
@@ -307,16 +311,25 @@ def test_the_neighbour_lists_entry_answers_as_the_jit(
         assert np.max(want_span[:, 1] - want_span[:, 0]) > 48
 
 
-def test_neighbour_list_arguments_it_cannot_take_go_to_the_jit() -> None:
+def _goes_to_the_jit(ok: Callable[[tuple[object, ...]], bool], args: list, odd: list) -> None:
+    """Behind ``aot._checked`` with the check ``ok``: ``args`` reach the module; each of ``odd``
+    ((position, value) put into ``args``), and ``args`` short of the last, reach the JIT."""
     calls: list[str] = []
-    checked = aot._checked(
-        lambda *a: calls.append("compiled"), lambda *a: calls.append("jit"), aot._lists_args_ok
-    )
-    a, b, dist, reach, place = _pairs(0, 10)
-    span = np.empty((int(np.count_nonzero(place >= 0)), 2), dtype=np.int64)
-    args = [a, b, dist, reach, place, 4, span]
+    checked = aot._checked(lambda *a: calls.append("compiled"), lambda *a: calls.append("jit"), ok)
     checked(*args)
     assert calls == ["compiled"]
+    for k, value in odd:
+        calls.clear()
+        checked(*args[:k], value, *args[k + 1 :])
+        assert calls == ["jit"], k
+    calls.clear()
+    checked(*args[:-1])
+    assert calls == ["jit"]
+
+
+def test_neighbour_list_arguments_it_cannot_take_go_to_the_jit() -> None:
+    a, b, dist, reach, place = _pairs(0, 10)
+    span = np.empty((int(np.count_nonzero(place >= 0)), 2), dtype=np.int64)
     odd = [
         (0, a.astype(np.int32)),  # another dtype
         (2, dist.astype(np.float32)),
@@ -327,13 +340,7 @@ def test_neighbour_list_arguments_it_cannot_take_go_to_the_jit() -> None:
         (6, np.asfortranarray(np.empty((span.shape[0], 3), dtype=np.int64))[:, :2]),  # strided
         (6, _frozen(span.copy())),  # a read-only output
     ]
-    for k, value in odd:
-        calls.clear()
-        checked(*args[:k], value, *args[k + 1 :])
-        assert calls == ["jit"], k
-    calls.clear()
-    checked(*args[:-1])
-    assert calls == ["jit"]
+    _goes_to_the_jit(aot._lists_args_ok, [a, b, dist, reach, place, 4, span], odd)
 
 
 def _proposals(seed: int, n: int, k: int) -> tuple:
@@ -368,14 +375,7 @@ def test_the_nearest_lists_entry_answers_as_the_jit(
 
 
 def test_nearest_list_arguments_it_cannot_take_go_to_the_jit() -> None:
-    calls: list[str] = []
-    checked = aot._checked(
-        lambda *a: calls.append("compiled"), lambda *a: calls.append("jit"), aot._nearest_args_ok
-    )
     P, who, near, far, reach, chosen = _proposals(0, 20, 3)
-    args = [P, who, near, far, reach, chosen]
-    checked(*args)
-    assert calls == ["compiled"]
     odd = [
         (0, P.astype(np.float32)),  # another dtype
         (0, np.ascontiguousarray(P[:, :2])),  # not three coordinates
@@ -387,13 +387,7 @@ def test_nearest_list_arguments_it_cannot_take_go_to_the_jit() -> None:
         (5, np.empty((who.shape[0], near.shape[1] + 1), dtype=np.int64)),  # k beyond proposals
         (5, _frozen(chosen.copy())),  # a read-only output
     ]
-    for k, value in odd:
-        calls.clear()
-        checked(*args[:k], value, *args[k + 1 :])
-        assert calls == ["jit"], k
-    calls.clear()
-    checked(*args[:-1])
-    assert calls == ["jit"]
+    _goes_to_the_jit(aot._nearest_args_ok, [P, who, near, far, reach, chosen], odd)
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -502,7 +496,9 @@ def test_vo3d_compile_check_says_which_kernel_select_would_run(
     assert capsys.readouterr().out.strip() == "current, say"
 
 
-@pytest.mark.parametrize("error", [RuntimeError("numba.pycc could not compile"), OSError("read-only")])
+@pytest.mark.parametrize(
+    "error", [RuntimeError("numba.pycc could not compile"), OSError("read-only")]
+)
 def test_vo3d_compile_says_why_it_failed_in_one_line(
     error: Exception, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -569,7 +565,9 @@ def test_sources_edited_after_import_or_numba_debugging_mean_the_jit(
     assert fn is None and "NUMBA_BOUNDSCHECK" in note
 
 
-def test_the_source_hash_skips_editor_files(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_source_hash_skips_editor_files(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     (tmp_path / "a.py").write_text("x = 1\n")
     monkeypatch.setattr(aot, "PACKAGE", tmp_path)
     clean = aot._source_hash()
