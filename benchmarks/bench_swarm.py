@@ -4,9 +4,10 @@
 simulator's (reciprocal, pz_buffer): README, "Safety in simulation". ``ours-coarse`` is ours on
 every thread with avoidance planes every 30 degrees instead of 10 (``plane_step_deg``: 7 planes,
 21 QPs instead of 57, and the fallbacks' grid on 7 planes: fewer velocities tried, the same
-exact check of each). ``ours-escape`` is ours on every thread with ``least_bad_escape``: the
-least-bad fallback, when every velocity enters a zone at once, closes slowest on the zones the
-vehicle is inside.
+exact check of each). ``ours-nearest`` is ours on every thread with ``least_bad_escape`` off
+(the rule of 0.1.0): the least-bad fallback, when every velocity enters a zone at once, takes
+the one nearest the preferred velocity, not the one closing slowest on the zones the vehicle is
+inside.
 
 Every method flies the same scenarios in the same loop (``vo3d_opt.sim.simulator.fly``: the same
 preferred velocities, dynamics and metrics), with the same dt (0.2 s), speeds (0-4 m/s),
@@ -27,7 +28,7 @@ process, so "peak MB" is that run's peak resident memory (the run, its record an
 (``--profile-steps K``: the first K, default 100; 0: the whole run).
 
     python benchmarks/bench_swarm.py [--sizes 100 1000 10000] [--cases swap crossing]
-        [--methods ours-1 ours-all ours-guard ours-coarse ours-escape rvo2] [--max-neighbors 10]
+        [--methods ours-1 ours-all ours-guard ours-coarse ours-nearest rvo2] [--max-neighbors 10]
         [--max-steps N=K ...]
         [--profile [--profile-steps K]]
         [--out benchmarks/results_swarm.md]
@@ -50,12 +51,12 @@ from typing import Any
 
 import numpy as np
 
-METHODS = ("ours-1", "ours-all", "ours-guard", "ours-coarse", "ours-escape", "rvo2")
+METHODS = ("ours-1", "ours-all", "ours-guard", "ours-coarse", "ours-nearest", "rvo2")
 #: Options each ``ours-*`` method adds to the simulator's (ours-1 and ours-all add none).
 EXTRA_OPTIONS = {
     "ours-guard": {"closing_guard": True},
     "ours-coarse": {"plane_step_deg": 30.0},
-    "ours-escape": {"least_bad_escape": True},
+    "ours-nearest": {"least_bad_escape": False},
 }
 
 
@@ -196,7 +197,7 @@ def table_row(r: dict[str, Any]) -> str:
             "ours-guard": f"vo3d_opt select_many + closing_guard, {r['threads']} threads",
             "ours-coarse": f"vo3d_opt select_many, plane_step_deg "
                            f"{EXTRA_OPTIONS['ours-coarse']['plane_step_deg']:g}, {r['threads']} threads",
-            "ours-escape": f"vo3d_opt select_many + least_bad_escape, {r['threads']} threads",
+            "ours-nearest": f"vo3d_opt select_many, least_bad_escape off, {r['threads']} threads",
             "rvo2": "RVO2-3D doStep, 1 thread"}[r["method"]]
     flown = "whole run" if r["steps"] < r["n_steps"] or r["all_reached"] else f"{r['steps']} steps (max_time)"
     if r.get("capped"):

@@ -84,7 +84,7 @@ CASES = {
     "spheres": (dict(reciprocal=True), dict(spheres=SPHERES)),
     "max_speed": ({}, dict(max_speed=np.linspace(2.0, 5.0, 24))),
     "closing_guard": (dict(reciprocal=True, closing_guard=True), {}),
-    "least_bad_escape": (dict(reciprocal=True, pz_buffer=3.0, least_bad_escape=True), {}),
+    "no_least_bad_escape": (dict(reciprocal=True, pz_buffer=3.0, least_bad_escape=False), {}),
     "everything": (dict(reciprocal=True, pz_buffer=1.0, horizon=8.0, closing_guard=True,
                         least_bad_escape=True),
                    dict(obstacles=OBSTACLES, spheres=SPHERES, obstacle_range=20.0, max_neighbors=4,
