@@ -4,9 +4,10 @@ Runs every scenarios/paper-*.yaml under the given formulations and prints a mark
 closest vehicle-vehicle and vehicle-obstacle distances, safety counts, and time per decision;
 then case 3's VO pyramid against the three-sphere workaround, beside the paper's MATLAB
 0.3035 s vs 1.4530 s per iteration; then the simulator's safety options (reciprocal, pz_buffer,
-closing_guard) against the paper's selection as published.
+closing_guard, least_bad_escape) against the paper's selection as published (``--safety-only``:
+that table alone, which has no timing column).
 
-    python benchmarks/paper_cases.py [--formulations plane_qp sampled]
+    python benchmarks/paper_cases.py [--formulations plane_qp sampled] [--safety-only]
 """
 from __future__ import annotations
 
@@ -38,9 +39,17 @@ def fmt(x: float | None, digits: int = 3) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--formulations", nargs="+", default=["plane_qp", "sampled"])
+    ap.add_argument("--safety-only", action="store_true", help="the safety options' table alone")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     print(f"# {platform.machine()}, Python {platform.python_version()}, {time.strftime('%Y-%m-%d')}")
+    if not args.safety_only:
+        cases(args.formulations)
+    safety()
+
+
+def cases(formulations: list[str]) -> None:
+    """The paper's cases under each formulation, then case 3's pyramid against the spheres."""
     print("| case | formulation | min vehicle dist. m (paper) | min obstacle dist. m (paper) | "
           "pz intrusions | collisions | arrived | median µs / decision |")
     print("|---|---|---|---|---:|---:|---|---:|")
@@ -48,7 +57,7 @@ def main() -> None:
     for path in bundled_files():
         if not path.stem.startswith("paper-"):
             continue
-        for form in args.formulations:
+        for form in formulations:
             s = summarize(run_scenario(path, formulation=form, progress=False))
             rows[(path.stem, form)] = s
             pv, po = PAPER[path.stem]
@@ -59,22 +68,30 @@ def main() -> None:
     print("| case 3 | formulation | median µs / decision | p99 µs | paper (MATLAB, s / iteration) |")
     print("|---|---|---:|---:|---|")
     for stem, paper in (("paper-case3-two-uav-two-cylinders", "0.3035"), ("paper-case3-three-spheres", "1.4530")):
-        for form in args.formulations:
+        for form in formulations:
             s = rows[(stem, form)]
             print(f"| {stem} | {form} | {s['decision_time_median_us']:.0f} | {s['decision_time_p99_us']:.0f} | {paper} |")
     print()
-    print("| scenario (plane_qp) | reciprocal | pz_buffer m | closing_guard | min vehicle dist. m | pz intrusions "
-          "| fallbacks |")
-    print("|---|---|---:|---|---:|---:|---:|")
+
+
+def safety() -> None:
+    """The simulator's safety options against the paper's selection as published (plane_qp);
+    the rows without reciprocity also with ``least_bad_escape`` off (the rule of 0.1.0)."""
+    print("| scenario (plane_qp) | reciprocal | pz_buffer m | closing_guard | least_bad_escape "
+          "| min vehicle dist. m | pz intrusions | collisions | fallbacks |")
+    print("|---|---|---:|---|---|---:|---:|---:|---:|")
     for stem in ("paper-case1-ten-uav-crossing", "sphere-swap-16"):
         sc = load_scenario(next(p for p in bundled_files() if p.stem == stem))
         buf = default_selector_options(sc)["pz_buffer"]
-        for rec, b, guard in ((False, 0.0, False), (True, 0.0, False), (False, buf, False), (True, buf, False),
-                              (False, 0.0, True), (True, buf, True)):
-            sel, _, _ = make_selector("plane_qp", None, {"reciprocal": rec, "pz_buffer": b, "closing_guard": guard})
+        for rec, b, guard, escape in ((False, 0.0, False, True), (False, 0.0, False, False),
+                                      (True, 0.0, False, True), (False, buf, False, True),
+                                      (False, buf, False, False), (True, buf, False, True),
+                                      (False, 0.0, True, True), (True, buf, True, True)):
+            opts = {"reciprocal": rec, "pz_buffer": b, "closing_guard": guard, "least_bad_escape": escape}
+            sel, _, _ = make_selector("plane_qp", None, opts)
             s = summarize(run_scenario(sc, sel, progress=False))
-            print(f"| {stem} | {rec} | {b:g} | {guard} | {fmt(s['min_vehicle_distance'])} | {s['pz_intrusions']} "
-                  f"| {s['fallbacks']} |", flush=True)
+            print(f"| {stem} | {rec} | {b:g} | {guard} | {escape} | {fmt(s['min_vehicle_distance'])} "
+                  f"| {s['pz_intrusions']} | {s['collisions']} | {s['fallbacks']} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -372,9 +372,10 @@ class VelocitySelector:
     Keyword options (see ``Options``): plane_step_deg, heading_step_deg, speed_levels,
     polygon_sides, reciprocal, horizon, corrections, n_samples, qp_samples, pz_buffer (m: plan
     with every neighbour's sphere this much larger), margin, closing_guard (the speed towards
-    each cooperative neighbour at most half the gap to its zone per dt), least_bad_escape (the
-    least-bad fallback, when every velocity enters a zone at once, takes the one closing
-    slowest on the zones the vehicle is inside).
+    each cooperative neighbour at most half the gap to its zone per dt), least_bad_escape (on
+    by default: the least-bad fallback, when every velocity enters a zone at once, takes the
+    one closing slowest on the zones the vehicle is inside; False: the one nearest the
+    preferred velocity).
     """
 
     def __init__(

@@ -24,7 +24,9 @@ class Status(StrEnum):
     #: found (not closing on any zone it is inside, outside the other VOs when possible).
     INSIDE_PROTECTED_ZONE = "inside_protected_zone"
     #: Decision: no velocity within the limits is outside every VO; the one whose first
-    #: protected-zone intrusion comes latest is returned (ties: nearest the preferred velocity).
+    #: protected-zone intrusion comes latest is returned (ties at once, inside zones: the one
+    #: closing slowest on them, ``least_bad_escape``, the default; then nearest the preferred
+    #: velocity).
     INFEASIBLE_MIN_VIOLATION = "infeasible_min_violation"
     #: Decision: the backend failed on every problem; the sampled grid's safe velocity or the
     #: least-bad one was used instead.

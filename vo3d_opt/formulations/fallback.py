@@ -285,10 +285,11 @@ def least_bad(
     cfg: Config,
 ) -> np.ndarray:
     """Among the tried answers (k, 3), ``grid`` on every plane, zero and v_now, within the
-    limits, the velocity whose first protected-zone intrusion comes latest (ties: nearest the
-    preferred velocity; with ``least_bad_escape``, ties at once, inside zones, first the one
-    closing slowest on them: else, among velocities that all close on a zone A is inside, the
-    nearest the preferred one may fly straight at a neighbour). With an acceleration limit
+    limits, the velocity whose first protected-zone intrusion comes latest (ties at once,
+    inside zones: first the one closing slowest on them, with ``least_bad_escape``, the
+    default: without it, among velocities that all close on a zone A is inside, the nearest
+    the preferred one may fly straight at a neighbour; then nearest the preferred velocity).
+    With an acceleration limit
     each is also tried clipped into the reachable box (few grid points lie in it). None within
     the limits (e.g. v_min > 0 and zero): the limits' own closest point to hovering.
     ``cover``: the cone that holds each block on each plane, as ``grid_search`` leaves it (< 0:
