@@ -235,9 +235,9 @@ def _consider(
 ) -> None:
     """Keep v (first clipped into the reachable box |v - v_now| <= a·dt if ``clip``) in
     ``best`` if it is within the limits and its (latest intrusion, slowest closing, least
-    deviation) beats ``key`` = (-time, deviation, closing). The closing rate on the zones A
-    is inside counts only with ``escape`` (``least_bad_escape``) and only among velocities
-    that enter a zone at once (time 0); else it is 0 for all."""
+    deviation) beats the best's, stored in ``key`` as (-time, deviation, closing). The
+    closing rate on the zones A is inside counts only with ``escape`` (``least_bad_escape``)
+    and only among velocities that enter a zone at once (time 0); else it is 0 for all."""
     if clip:
         dv = bounds.acceleration * bounds.dt
         for c in range(3):
@@ -289,9 +289,9 @@ def least_bad(
     inside zones: first the one closing slowest on them, with ``least_bad_escape``, the
     default: without it, among velocities that all close on a zone A is inside, the nearest
     the preferred one may fly straight at a neighbour; then nearest the preferred velocity).
-    With an acceleration limit
-    each is also tried clipped into the reachable box (few grid points lie in it). None within
-    the limits (e.g. v_min > 0 and zero): the limits' own closest point to hovering.
+    With an acceleration limit each is also tried clipped into the reachable box (few grid
+    points lie in it). None within the limits (e.g. v_min > 0 and zero): the limits' own
+    closest point to hovering.
     ``cover``: the cone that holds each block on each plane, as ``grid_search`` leaves it (< 0:
     none known); a block is skipped once a zone's time bound for it (that cone's, or the
     zone's that beat the last point) comes before the best so far (the answer is the same, in
