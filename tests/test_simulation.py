@@ -212,14 +212,15 @@ def hand_record(sc: Scenario, positions, velocities=None, statuses=None, times_s
     p = np.asarray(positions, dtype=float)
     t, n = p.shape[0] - 1, p.shape[1]
     v = np.diff(p, axis=0) / sc.dt if velocities is None else np.asarray(velocities, dtype=float)
-    st = np.full((t, n), "optimal", dtype=object) if statuses is None else np.array(statuses,
-                                                                                     dtype=object)
+    st = np.full((t, n), "optimal") if statuses is None else np.asarray(statuses, dtype=str)
+    names, codes = np.unique(np.concatenate([[""], st.ravel()]), return_inverse=True)  # "" first
     dtimes = np.full((t, n), 1e-3) if times_s is None else np.asarray(times_s, dtype=float)
     arrived = np.zeros((t + 1, n), dtype=bool)
     arrived[-1] = np.linalg.norm(p[-1] - sc.goals, axis=1) <= sc.goal_tolerance
     return RunRecord(scenario=sc, formulation="hand", solver="none", times=np.arange(t + 1) * sc.dt,
                      positions=p, velocities=v, commands=v.copy(), preferred=v.copy(),
-                     decided=np.ones((t, n), dtype=bool), statuses=st, decision_times=dtimes,
+                     decided=np.ones((t, n), dtype=bool), status_codes=codes[1:].reshape(t, n).astype(np.uint16),
+                     status_names=tuple(names), decision_times=dtimes,
                      solve_times=dtimes.copy(), arrived=arrived)
 
 

@@ -76,7 +76,7 @@ def write_csv(record: RunRecord, path: str | Path) -> Path:
     """Trajectories as CSV, one row per (sample, agent), the columns of :data:`COLUMNS`."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    ids, steps = record.ids, record.steps
+    ids, steps, names = record.ids, record.steps, record.status_names
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(COLUMNS)
@@ -87,7 +87,7 @@ def write_csv(record: RunRecord, path: str | Path) -> Path:
                 if k < steps:
                     v = [f"{c:.6f}" for c in record.velocities[k, i]]
                     c = [f"{c:.6f}" for c in record.commands[k, i]]
-                    st = record.statuses[k, i]
+                    st = names[record.status_codes[k, i]]
                     dtu = record.decision_times[k, i]
                     dtu = "" if np.isnan(dtu) else f"{dtu * 1e6:.1f}"
                 else:
@@ -110,8 +110,8 @@ def _table(record: RunRecord, lo: int, hi: int) -> Any:
         return np.where(last[..., None] if out.ndim == 3 else last, np.nan, out)
 
     vel, cmd = per_step(record.velocities), per_step(record.commands)
-    status = record.statuses[flown].astype(str) if steps else np.full((len(k), n), "")
-    status = np.where(last, "", status)
+    codes = record.status_codes[flown] if steps else np.zeros((len(k), n), dtype=np.uint16)
+    codes = np.where(last, 0, codes).astype(np.int32)  # code 0: "", no decision
     cols = {
         "step": np.repeat(k, n).astype(np.int32),
         "time": np.repeat(record.times[lo:hi], n),
@@ -121,7 +121,7 @@ def _table(record: RunRecord, lo: int, hi: int) -> Any:
         **{c: record.positions[lo:hi, :, j].ravel() for j, c in enumerate("xyz")},
         **{f"v{c}": vel[..., j].ravel() for j, c in enumerate("xyz")},
         **{f"cmd_v{c}": cmd[..., j].ravel() for j, c in enumerate("xyz")},
-        "status": pa.array(status.ravel()).dictionary_encode(),
+        "status": pa.DictionaryArray.from_arrays(codes.ravel(), pa.array(record.status_names)),
         "decision_time_us": per_step(record.decision_times).ravel() * 1e6,
         "arrived": record.arrived[lo:hi].ravel(),
     }
@@ -143,6 +143,7 @@ def write_parquet(record: RunRecord, path: str | Path) -> Path:
             if writer is None:
                 writer = pq.ParquetWriter(path, table.schema)
             writer.write_table(table)
+            record.drop_resident()
     finally:
         if writer is not None:
             writer.close()

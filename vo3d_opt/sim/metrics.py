@@ -25,7 +25,7 @@ and ``wall_time`` (s).
 
 from __future__ import annotations
 
-from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -111,6 +111,7 @@ def segment_min(r0: np.ndarray, r1: np.ndarray) -> np.ndarray:
 def close_pairs(
     positions: np.ndarray,
     threshold: float,
+    release: Callable[[], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(i, j, dmin), i < j: every vehicle pair whose closest approach over the run (continuous
     along the straight segments) is below ``threshold``, and the closest pair of the run
@@ -120,6 +121,7 @@ def close_pairs(
     Step by step, a k-d tree at the segment's start proposes the pairs within ``max(threshold,
     best) + 2 × the longest step flown`` (best: the smallest distance found so far, at first the
     nearest pair at the start): no pair outside can come closer than that within the segment.
+    ``release``: called every ``_CHUNK`` steps (a spilled record's ``drop_resident``).
     """
     S, n = positions.shape[0], positions.shape[1]
     empty = np.zeros(0, dtype=np.int64)
@@ -131,6 +133,8 @@ def close_pairs(
     best_key, best = -1, np.inf
     keys, dists = [], []
     for k in range(max(S - 1, 1)):
+        if release is not None and k % _CHUNK == _CHUNK - 1:
+            release()
         p0, p1 = positions[k], positions[min(k + 1, S - 1)]
         longest = float(np.max(np.linalg.norm(p1 - p0, axis=1)))
         reach = max(threshold, min(best, bound)) + 2.0 * longest
@@ -193,6 +197,7 @@ def obstacle_min_distances(
             d, e = _obstacle_distance(kind, ob, pts)
             dist[:, m] = np.minimum(dist[:, m], d.min(axis=0))
             entered[:, m] |= e.any(axis=0)
+        record.drop_resident()
     return dist, entered
 
 
@@ -278,7 +283,9 @@ def record_close_pairs(record: RunRecord) -> tuple[np.ndarray, np.ndarray, np.nd
     """:func:`close_pairs` of the record at :func:`pz_threshold`, computed once per record."""
     cache = record.cache
     if "close_pairs" not in cache:
-        cache["close_pairs"] = close_pairs(record.track[1], pz_threshold(record))
+        cache["close_pairs"] = close_pairs(
+            record.track[1], pz_threshold(record), release=record.drop_resident
+        )
     return cache["close_pairs"]
 
 
@@ -362,7 +369,30 @@ def _limits_and_paths(record: RunRecord) -> tuple[int, int, np.ndarray]:
         speed_bad += int(np.count_nonzero(bad))
         steps = np.diff(track[a * per : (a + _CHUNK) * per + 1], axis=0)
         path += np.linalg.norm(steps, axis=-1).sum(axis=0)
+        record.drop_resident()
     return altitude, speed_bad, path
+
+
+def _status_counts(record: RunRecord) -> tuple[dict[str, int], int]:
+    """How many decisions ended with each status, and how many there were, from the codes (a
+    chunk of steps at a time: no string per decision)."""
+    names = record.status_names
+    per_code = np.zeros(len(names), dtype=np.int64)
+    for a in range(0, record.steps, _CHUNK):
+        codes = record.status_codes[a : a + _CHUNK][record.decided[a : a + _CHUNK]]
+        per_code += np.bincount(codes, minlength=len(names))
+    counts = {str(names[c]): int(m) for c, m in enumerate(per_code) if m}
+    return counts, int(per_code.sum())
+
+
+def _decision_times_us(record: RunRecord) -> np.ndarray:
+    """The finite decision times (µs) of the decisions taken, in step order."""
+    parts = []
+    for a in range(0, record.steps, _CHUNK):
+        t = record.decision_times[a : a + _CHUNK][record.decided[a : a + _CHUNK]]
+        parts.append(t[np.isfinite(t)] * 1e6)
+    record.drop_resident()
+    return np.concatenate(parts) if parts else np.zeros(0)
 
 
 def summarize(record: RunRecord) -> dict[str, Any]:
@@ -388,11 +418,9 @@ def summarize(record: RunRecord) -> dict[str, Any]:
 
     altitude_violations, speed_violations, steps_flown = _limits_and_paths(record)
 
-    statuses = record.statuses[record.decided]
-    counts = Counter(str(s) for s in statuses)
+    counts, decisions = _status_counts(record)
     fallbacks = int(sum(c for s, c in counts.items() if s != "optimal"))
-    times_us = record.decision_times[record.decided] * 1e6
-    times_us = times_us[np.isfinite(times_us)]
+    times_us = _decision_times_us(record)
 
     reached_mask = record.arrived[-1]
     arrival = record.arrival_times()
@@ -418,7 +446,7 @@ def summarize(record: RunRecord) -> dict[str, Any]:
         "decision_time_median_us": float(np.median(times_us)) if times_us.size else None,
         "decision_time_p99_us": float(np.percentile(times_us, 99)) if times_us.size else None,
         # extras
-        "decisions": int(statuses.size),
+        "decisions": decisions,
         "status_counts": dict(sorted(counts.items())),
         "vehicle_collisions": vehicle_coll,
         "obstacle_collisions": obstacle_coll,

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -58,6 +59,7 @@ from tqdm import tqdm
 from vo3d_opt.sim.dynamics import Dynamics, make_dynamics
 from vo3d_opt.sim.safety import derive_margins, within_reach
 from vo3d_opt.sim.scenario import Scenario, load_scenario
+from vo3d_opt.sim.spill import SPILL_BYTES, Spill, spill_supported
 from vo3d_opt.sim.traffic import GoalWithDetours
 from vo3d_opt.types import AgentState, Limits, Neighbor
 
@@ -139,7 +141,14 @@ class RunRecord:
     arrived agents). ``decided[k, i]`` says whether agent i decided at step k; ``statuses``,
     ``decision_times`` (wall time of its decision, s: the ``select()`` call, or its equal share
     of the step's ``select_many()`` or ``doStep()`` call) and ``solve_times`` (the decision's
-    own ``solve_time``) are "" / NaN where it did not.
+    own ``solve_time``; the same array as ``decision_times`` when every step said the same)
+    are "" / NaN where it did not. The statuses are kept as ``status_codes`` (T, N) into
+    ``status_names`` (whose first is "", no decision); ``statuses`` spells them out (an object
+    array, built on first use).
+
+    A long run of a large swarm keeps its arrays in a temporary file (``spill``,
+    :mod:`vo3d_opt.sim.spill`): they read as any array; :meth:`drop_resident` lets go of the
+    pages read so far (the metrics and the writers call it as they go).
     """
 
     scenario: Scenario
@@ -151,7 +160,8 @@ class RunRecord:
     commands: np.ndarray
     preferred: np.ndarray
     decided: np.ndarray
-    statuses: np.ndarray
+    status_codes: np.ndarray
+    status_names: tuple[str, ...]
     decision_times: np.ndarray
     solve_times: np.ndarray
     arrived: np.ndarray
@@ -162,8 +172,27 @@ class RunRecord:
     #: at ``times[k]``; None when the steps are the samples (kinematic, first_order).
     samples: np.ndarray | None = None
     sample_velocities: np.ndarray | None = None
+    #: The temporary file holding the arrays, when the run spilled them (None: in memory).
+    spill: Spill | None = field(default=None, repr=False, compare=False)
     #: What the metrics computed once for this record (``metrics.record_close_pairs``).
     cache: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    @property
+    def statuses(self) -> np.ndarray:
+        """(T, N) object: each decision's status, "" where the agent did not decide."""
+        if "statuses" not in self.cache:
+            names = np.array(self.status_names, dtype=object)
+            self.cache["statuses"] = names[self.status_codes]
+        return self.cache["statuses"]
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled with its arrays' contents; a spilled record's file mapping stays behind."""
+        return {**self.__dict__, "spill": None, "cache": {}}
+
+    def drop_resident(self) -> None:
+        """Let go of the pages of a spilled record read so far (nothing for one in memory)."""
+        if self.spill is not None:
+            self.spill.drop()
 
     @property
     def dt(self) -> float:
@@ -210,9 +239,18 @@ class RunRecord:
             np.array_equal(self.positions, other.positions)
             and np.array_equal(self.velocities, other.velocities)
             and np.array_equal(self.commands, other.commands)
-            and np.array_equal(self.statuses, other.statuses)
+            and self._same_statuses(other)
             and np.array_equal(self.arrived, other.arrived)
         )
+
+    def _same_statuses(self, other: RunRecord) -> bool:
+        """Equal statuses, compared as codes into the union of both records' names."""
+        if self.status_codes.shape != other.status_codes.shape:
+            return False
+        union = sorted(set(self.status_names) | set(other.status_names))
+        mine = np.array([union.index(s) for s in self.status_names], dtype=np.int64)
+        theirs = np.array([union.index(s) for s in other.status_names], dtype=np.int64)
+        return np.array_equal(mine[self.status_codes], theirs[other.status_codes])
 
 
 class RunBuffers:
@@ -221,21 +259,67 @@ class RunBuffers:
     pages of ``np.empty``/``np.zeros`` cost nothing), so a 10,000-agent run allotted
     ``max_time / dt`` steps that ends early costs only what it flew. ``same_commands``: the
     commands are the velocities (kinematic dynamics): one array for both. Statuses are kept as
-    small codes and written out as strings in :meth:`record`."""
+    small codes, and the solve times only once they differ from the decision times.
 
-    def __init__(self, total: int, n: int, *, same_commands: bool = False) -> None:
-        self.pos = np.empty((total + 1, n, 3))
-        self.vel = np.zeros((total, n, 3))
-        self.cmd = self.vel if same_commands else np.zeros((total, n, 3))
-        self.pref = np.zeros((total, n, 3))
-        self.decided = np.zeros((total, n), dtype=bool)
-        self.status_codes = np.zeros((total, n), dtype=np.uint16)
+    ``spill`` (:mod:`vo3d_opt.sim.spill`): keep the arrays in a temporary file (in
+    ``spill_dir``) and let go of the steps written every ``DROP_EVERY`` steps; None: when the
+    allotment exceeds ``SPILL_BYTES`` and the platform can (if the disk cannot hold it, in
+    memory with a warning). The sub-step samples of rotorpy runs stay in memory."""
+
+    #: Steps between two ``Spill.drop`` calls of a spilled run.
+    DROP_EVERY = 32
+
+    def __init__(
+        self,
+        total: int,
+        n: int,
+        *,
+        same_commands: bool = False,
+        spill: bool | None = False,
+        spill_dir: str | Path | None = None,
+    ) -> None:
+        f8, per_step = np.float64, (total, n)
+        specs: dict[str, tuple[tuple[int, ...], Any]] = {
+            "pos": ((total + 1, n, 3), f8),
+            "vel": ((total, n, 3), f8),
+            "pref": ((total, n, 3), f8),
+            "decided": (per_step, np.bool_),
+            "status_codes": (per_step, np.uint16),
+            "dtimes": (per_step, f8),
+            "stimes": (per_step, f8),
+            "arrived": ((total + 1, n), np.bool_),
+        }
+        if not same_commands:
+            specs["cmd"] = ((total, n, 3), f8)
+        self.spill = _open_spill(specs, spill, spill_dir)
+        a = self.spill.arrays if self.spill is not None else _in_memory(specs)
+        self.pos, self.vel, self.pref = a["pos"], a["vel"], a["pref"]
+        self.cmd = self.vel if same_commands else a["cmd"]
+        self.decided, self.arrived = a["decided"], a["arrived"]
+        self.status_codes = a["status_codes"]
+        self.dtimes, self._stimes = a["dtimes"], a["stimes"]
+        self.stimes: np.ndarray | None = None  # the decision times' until a step differs
         self.status_names: list[str] = [""]
-        self.dtimes = np.empty((total, n))
-        self.stimes = np.empty((total, n))
-        self.arrived = np.zeros((total + 1, n), dtype=bool)
         self.samples: np.ndarray | None = None
         self.sample_vel: np.ndarray | None = None
+
+    def put_times(
+        self, k: int, decision_times: np.ndarray, solve_times: np.ndarray, mask: np.ndarray
+    ) -> None:
+        """Row k of the decision and solve times, NaN where not ``mask``."""
+        self.dtimes[k] = np.where(mask, decision_times, np.nan)
+        solve = np.where(mask, solve_times, np.nan)
+        if self.stimes is None:
+            if np.array_equal(solve, self.dtimes[k], equal_nan=True):
+                return
+            self.stimes = self._stimes
+            self.stimes[:k] = self.dtimes[:k]
+        self.stimes[k] = solve
+
+    def release(self, k: int) -> None:
+        """After step k: a spilled run lets go of the pages written so far, now and then."""
+        if self.spill is not None and (k + 1) % self.DROP_EVERY == 0:
+            self.spill.drop()
 
     def put_samples(
         self, k: int, sample_positions: np.ndarray, sample_velocities: np.ndarray
@@ -275,7 +359,6 @@ class RunBuffers:
         extra: dict[str, Any] | None = None,
     ) -> RunRecord:
         s = steps
-        statuses = np.array(self.status_names, dtype=object)[self.status_codes[:s]]
         return RunRecord(
             scenario=sc,
             formulation=formulation,
@@ -286,14 +369,16 @@ class RunBuffers:
             commands=self.cmd[:s],
             preferred=self.pref[:s],
             decided=self.decided[:s],
-            statuses=statuses,
+            status_codes=self.status_codes[:s],
+            status_names=tuple(self.status_names),
             decision_times=self.dtimes[:s],
-            solve_times=self.stimes[:s],
+            solve_times=(self.dtimes if self.stimes is None else self.stimes)[:s],
             arrived=self.arrived[: s + 1],
             wall_time=wall,
             extra=extra or {},
             samples=self._cut(self.samples, s),
             sample_velocities=self._cut(self.sample_vel, s),
+            spill=self.spill,
         )
 
     def _cut(self, arr: np.ndarray | None, steps: int) -> np.ndarray | None:
@@ -301,6 +386,44 @@ class RunBuffers:
             return None
         per = (arr.shape[0] - 1) // self.vel.shape[0]
         return arr[: steps * per + 1]
+
+
+def _in_memory(specs: dict[str, tuple[tuple[int, ...], Any]]) -> dict[str, np.ndarray]:
+    """``specs``' arrays in anonymous memory (positions and times left uninitialised: every
+    row a run reaches is written)."""
+    lazy = {"pos", "dtimes", "stimes"}
+    return {
+        name: (np.empty if name in lazy else np.zeros)(shape, dtype=dtype)
+        for name, (shape, dtype) in specs.items()
+    }
+
+
+def _open_spill(
+    specs: dict[str, tuple[tuple[int, ...], Any]],
+    spill: bool | None,
+    directory: str | Path | None,
+) -> Spill | None:
+    """The temporary file of ``RunBuffers(spill=...)``, or None to keep the arrays in memory."""
+    if spill is False:
+        return None
+    if not spill_supported():
+        if spill:
+            raise ValueError("spill: this platform's mmap cannot drop pages (MADV_DONTNEED)")
+        return None
+    if spill is None:
+        nbytes = sum(
+            int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+            for shape, dtype in specs.values()
+        )
+        if nbytes <= SPILL_BYTES:
+            return None
+    try:
+        return Spill(specs, directory)
+    except OSError as exc:
+        if spill:
+            raise
+        warnings.warn(f"spill: kept in memory ({exc})", RuntimeWarning, stacklevel=3)
+        return None
 
 
 def scenario_dynamics(sc: Scenario) -> Dynamics:
@@ -353,18 +476,24 @@ def fly(
     dynamics: Dynamics | None = None,
     progress: bool | None = None,
     max_steps: int | None = None,
+    spill: bool | None = None,
+    spill_dir: str | Path | None = None,
 ) -> RunRecord:
     """The one simulation loop (the module docstring): sense → ``step.decide`` → integrate,
     until every agent arrived or ``max_time`` (or ``max_steps``). ``preferred_velocity``:
     positions (N, 3) → preferred velocities (N, 3), default the scenario's goal rule;
-    ``dynamics``: default :func:`scenario_dynamics`; ``progress`` None = a bar only on a TTY."""
+    ``dynamics``: default :func:`scenario_dynamics`; ``progress`` None = a bar only on a TTY;
+    ``spill``: keep the record in a temporary file in ``spill_dir`` (:class:`RunBuffers`; None:
+    when its allotment exceeds ``vo3d_opt.sim.spill.SPILL_BYTES``)."""
     n, dt, tol = sc.n_agents, float(sc.dt), sc.goal_tolerance
     straight = ~sc.avoids  # avoids: false: fly the preferred (goal) velocity, never decide
     total = sc.n_steps if max_steps is None else min(max_steps, sc.n_steps)
     prefer = preferred_velocity or scenario_goal_velocity(sc)
     dyn = dynamics or scenario_dynamics(sc)
     dyn.reset(sc.starts)
-    buf = RunBuffers(total, n, same_commands=dyn.model == "kinematic")
+    buf = RunBuffers(
+        total, n, same_commands=dyn.model == "kinematic", spill=spill, spill_dir=spill_dir
+    )
     p, v = dyn.positions, dyn.velocities
     rate = derive_margins(sc).command_rate  # None: commands may change at once
     last = v  # the commands before: rate-limited models change them gradually from these
@@ -401,8 +530,7 @@ def fly(
                 last = u
             buf.pref[k], buf.cmd[k], buf.decided[k] = w, u, deciding
             buf.put_statuses(k, statuses, deciding)
-            buf.dtimes[k] = np.where(deciding, out.decision_times, np.nan)
-            buf.stimes[k] = np.where(deciding, out.solve_times, np.nan)
+            buf.put_times(k, out.decision_times, out.solve_times, deciding)
             flown = dyn.step(u, dt)
             p = flown.positions
             buf.vel[k] = flown.velocities
@@ -412,6 +540,7 @@ def fly(
             dyn.hold(arrived)  # an arrived agent hovers from now on: the others see it still
             v = dyn.velocities
             buf.pos[k + 1], buf.arrived[k + 1] = p, done
+            buf.release(k)
             bar.update(1)
             bar.set_postfix_str(f"arrived {int(done.sum())}/{n}", refresh=False)
         if done.all() and bar.total != steps:  # everyone arrived before max_time: complete

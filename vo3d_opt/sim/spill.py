@@ -1,0 +1,71 @@
+"""Run records kept on disk: the arrays of a long run of a large swarm in one unlinked temporary
+file, mapped into memory, whose pages the simulator and the metrics let go of as they go.
+
+A 10,000-vehicle run of 2,600 steps records 26 million agent-steps of positions, velocities,
+preferred velocities, statuses and times: more than 2 GB. Held in anonymous memory, all of it
+stays resident until the run's record is dropped. Here each array is a view of a shared file
+mapping: :meth:`Spill.drop` (``madvise(MADV_DONTNEED)``) unmaps the pages written so far from
+the process, the page cache keeps their contents (the kernel writes them out when it needs the
+memory) and the next read maps them back. The numbers are those of an in-memory record, bit
+for bit: only where they live changes.
+
+Linux and other systems whose ``mmap`` has ``madvise`` and ``MADV_DONTNEED``; elsewhere
+:func:`spill_supported` is False and the simulator keeps its records in memory.
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+import tempfile
+from typing import Any
+
+import numpy as np
+
+#: Records whose allotment (steps the run may take x agents x bytes per agent-step) exceeds
+#: this many bytes are spilled by default (``fly(spill=None)``).
+SPILL_BYTES = 1 << 30
+
+
+def spill_supported() -> bool:
+    """Whether this platform can drop a shared mapping's pages (``MADV_DONTNEED``)."""
+    return hasattr(mmap, "MADV_DONTNEED") and hasattr(mmap.mmap, "madvise")
+
+
+class Spill:
+    """The arrays ``specs`` (name: (shape, dtype)), zero-filled, each starting on a page of its
+    own in one temporary file (``directory``: where, default the system's temporary
+    directory; the file is unlinked at once, so it goes with the last array that maps it).
+    Its blocks are reserved up front (``posix_fallocate`` where there is one): a full disk
+    raises ``OSError`` here, not a bus error in the middle of a run."""
+
+    def __init__(
+        self,
+        specs: dict[str, tuple[tuple[int, ...], Any]],
+        directory: str | os.PathLike[str] | None = None,
+    ) -> None:
+        page, offsets, end = mmap.PAGESIZE, {}, 0
+        for name, (shape, dtype) in specs.items():
+            offsets[name] = end
+            nbytes = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+            end += -(-nbytes // page) * page
+        self.size = max(end, page)
+        with tempfile.TemporaryFile(dir=directory) as fh:
+            if hasattr(os, "posix_fallocate"):
+                os.posix_fallocate(fh.fileno(), 0, self.size)
+            else:
+                fh.truncate(self.size)
+            self.map = mmap.mmap(fh.fileno(), self.size)  # MAP_SHARED; it keeps its own fd
+        self.arrays = {
+            name: np.frombuffer(
+                self.map,
+                dtype=dtype,
+                count=int(np.prod(shape, dtype=np.int64)),
+                offset=offsets[name],
+            ).reshape(shape)
+            for name, (shape, dtype) in specs.items()
+        }
+
+    def drop(self) -> None:
+        """Unmap every page from the process (contents kept: the next read maps them back)."""
+        self.map.madvise(mmap.MADV_DONTNEED, 0, self.size)
