@@ -23,7 +23,9 @@ sensing range (55 m) and neighbour count (``--max-neighbors``, default 10 for bo
 and the compiled decisions) or ``doStep()`` (RVO2-3D: its k-d tree, its linear programs and its
 position update) divided by the agent-steps; "loop µs" the whole loop's wall time (preferred
 velocities, dynamics, recording, RVO2's Python setters) per agent-step. Each run is its own
-process, so "peak MB" is that run's peak resident memory (the run, its record and its metrics).
+process, so "peak MB" is that run's peak resident memory (the run, its record and its metrics;
+"(spilled)": the record was larger than ``SPILL_BYTES`` and lived in a temporary file,
+``vo3d_opt.sim.spill``).
 ``--profile`` adds where ours spends its time on the first steps of each N = 1000 case
 (``--profile-steps K``: the first K, default 100; 0: the whole run).
 
@@ -115,6 +117,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
         "altitude_violations": s["altitude_violations"], "fallbacks": s["fallbacks"],
         "status_counts": s["status_counts"],
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "load_start": load,
+        "record": "spilled" if rec.spill is not None else "memory",
         "load_end": os.getloadavg()[0],
     }
 
@@ -206,7 +209,8 @@ def table_row(r: dict[str, Any]) -> str:
     return (f"| {r['case']} | {r['n']} | {name} | {flown} | {_fmt(r['decide_us'])} | {_fmt(r['loop_us'])} "
             f"| {_fmt(r['min_vehicle_distance'], '.2f')} / {r['r_pz']:g} | {r['pz_intrusions']} | {r['collisions']} "
             f"| {r['reached']}/{r['n']} | {arrive} | {_fmt(r['fallbacks'], 'd') if r['fallbacks'] is not None else '—'} "
-            f"| {r['metrics_s']:.1f} | {r['peak_mb']:.0f} | {r['load_start']:.1f}–{r['load_end']:.1f} |")
+            f"| {r['metrics_s']:.1f} | {r['peak_mb']:.0f}{' (spilled)' if r.get('record') == 'spilled' else ''} "
+            f"| {r['load_start']:.1f}–{r['load_end']:.1f} |")
 
 
 HEADER = ("| case | N | method | flown | decide µs/agent-step | loop µs/agent-step | min distance / r_pz (m) "

@@ -67,8 +67,11 @@ def test_spilled_files_and_pickles_are_the_in_memory_ones(tmp_path):
 def test_large_allotments_spill_by_default(monkeypatch):
     sc = swap()
     assert flown(sc, max_steps=3).spill is None  # small: in memory
+    assert simulator.run_scenario(sc, max_steps=3, spill=True).spill is not None
     monkeypatch.setattr(simulator, "SPILL_BYTES", 0)
     assert flown(sc, max_steps=3).spill is not None
+    assert simulator.run_scenario(sc, max_steps=3).spill is not None
+    assert simulator.run_scenario(sc, max_steps=3, spill=False).spill is None
 
 
 def test_without_a_file_the_run_stays_in_memory_or_says_why(monkeypatch):

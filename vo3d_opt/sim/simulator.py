@@ -606,9 +606,16 @@ class Simulator:
             threads=threads,
         )
 
-    def run(self, *, progress: bool | None = None, max_steps: int | None = None) -> RunRecord:
-        """Simulate until every agent arrived or ``max_time``; ``progress`` None = only on a TTY."""
-        return fly(self.scenario, self.step, progress=progress, max_steps=max_steps)
+    def run(
+        self,
+        *,
+        progress: bool | None = None,
+        max_steps: int | None = None,
+        spill: bool | None = None,
+    ) -> RunRecord:
+        """Simulate until every agent arrived or ``max_time``; ``progress`` None = only on a
+        TTY; ``spill``: where the record lives (:func:`fly`)."""
+        return fly(self.scenario, self.step, progress=progress, max_steps=max_steps, spill=spill)
 
 
 def default_selector_options(sc: Scenario) -> dict[str, Any]:
@@ -649,10 +656,12 @@ def run_scenario(
     max_steps: int | None = None,
     max_neighbors: int | None = None,
     threads: int | None = None,
+    spill: bool | None = None,
 ) -> RunRecord:
     """Load (if a path) and run a scenario. Without ``selector``, build a ``VelocitySelector``
     from ``formulation``/``solver`` (falling back to the scenario's, then to plane_qp and the
-    selector's default solver); ``ValueError`` for unknown names."""
+    selector's default solver); ``ValueError`` for unknown names. ``spill``: where the record
+    lives (:func:`fly`; None: in a temporary file when larger than ``SPILL_BYTES``)."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     if selector is None:
         selector, formulation, solver = scenario_selector(sc, formulation, solver)
@@ -664,4 +673,4 @@ def run_scenario(
         max_neighbors=max_neighbors,
         threads=threads,
     )
-    return sim.run(progress=progress, max_steps=max_steps)
+    return sim.run(progress=progress, max_steps=max_steps, spill=spill)
