@@ -78,7 +78,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
 
     from vo3d_opt.baselines.rvo2 import RVO2Step, summarize_rvo2
     from vo3d_opt.sim.deciders import SwarmSelect
-    from vo3d_opt.sim.metrics import summarize
+    from vo3d_opt.sim.metrics import decision_times_us, summarize
     from vo3d_opt.sim.simulator import default_selector_options, fly, make_selector, scenario_selector
 
     sc = scenario(case, n)
@@ -105,7 +105,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
     s = summarize_rvo2(rec) if method == "rvo2" else summarize(rec)
     metrics = time.perf_counter() - t0
     agent_steps = int(rec.decided.sum())
-    decide = float(np.nansum(rec.decision_times[rec.decided]))
+    decide = float(decision_times_us(rec).sum()) / 1e6
     return {
         "case": case, "n": n, "method": method, "threads": threads, "max_neighbors": max_neighbors,
         "steps": rec.steps, "n_steps": sc.n_steps, "agent_steps": agent_steps,
@@ -133,7 +133,7 @@ def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dic
     from vo3d_opt.formulations.swarm import vehicle_rows
     from vo3d_opt.selector import warm_up_many
     from vo3d_opt.sim.deciders import SwarmSelect
-    from vo3d_opt.sim.metrics import summarize
+    from vo3d_opt.sim.metrics import decision_times_us, summarize
     from vo3d_opt.sim.simulator import fly, scenario_selector
 
     @numba.njit(nogil=True)
@@ -182,7 +182,7 @@ def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dic
     summarize(rec)
     metrics = time.perf_counter() - t0
     agent_steps = int(rec.decided.sum())
-    decide = float(np.nansum(rec.decision_times[rec.decided])) - spent["rows"]  # rows_only ran inside
+    decide = float(decision_times_us(rec).sum()) / 1e6 - spent["rows"]  # rows_only ran inside
     us = {k: v / agent_steps * 1e6 for k, v in spent.items()}
     return {"case": case, "n": n, "steps": rec.steps, "agent_steps": agent_steps,
             "checks_us": us["checks"], "tree_us": us["tree"], "kernel_us": us["kernel"], "rows_us": us["rows"],

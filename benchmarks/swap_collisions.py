@@ -69,6 +69,7 @@ def main() -> None:
     print(f"pairs within {args.within} m at some step: {len(first)}\n")
     shown = sorted(first.items(), key=lambda item: item[1])[: args.pairs]
     statuses: collections.Counter[str] = collections.Counter()
+    names = np.array(rec.status_names, dtype=object)  # codes spelt out only where read
     seen = 0
     print("| pair | step within r_pz | step within range | distances (m) | speeds i, j (m/s) "
           "| statuses i, j |")
@@ -76,11 +77,11 @@ def main() -> None:
     for n_shown, ((i, j), k) in enumerate(shown):
         lo = max(0, k - BEFORE)
         d = np.linalg.norm(rec.positions[: k + 1, i] - rec.positions[: k + 1, j], axis=1)
-        statuses.update(str(x) for x in rec.statuses[lo:k, [i, j]].ravel())
+        statuses.update(str(x) for x in names[rec.status_codes[lo:k, [i, j]]].ravel())
         seen += sees(rec, k - 1, i, j) if k >= 1 else 0
         if n_shown < 8:
             v = np.linalg.norm(rec.velocities[lo:k][:, [i, j]], axis=-1).round(2)
-            st = [sorted(set(map(str, rec.statuses[lo:k, a]))) for a in (i, j)]
+            st = [sorted(set(map(str, names[rec.status_codes[lo:k, a]]))) for a in (i, j)]
             inside = np.flatnonzero(d < float(sc.r_pz.max()))
             print(f"| {i}, {j} | {inside[0] if inside.size else '–'} | {k} | "
                   f"{d[lo : k + 1].round(2).tolist()} | {v.T.tolist()} | {st} |")

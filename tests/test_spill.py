@@ -2,6 +2,7 @@
 the same summary and files, and a clear way out when the file cannot be had."""
 from __future__ import annotations
 
+import dataclasses
 import mmap
 import pickle
 
@@ -44,6 +45,7 @@ def test_a_spilled_run_is_the_run_in_memory(tau, tmp_path):
     assert np.array_equal(spilled.preferred, kept.preferred)
     assert np.array_equal(spilled.decided, kept.decided)
     assert np.array_equal(spilled.decision_times, spilled.solve_times, equal_nan=True)
+    assert np.array_equal(np.isnan(spilled.decision_times), np.isnan(kept.decision_times))
     assert same_summary(summarize(spilled), summarize(kept))
     spilled.drop_resident()  # the pages go, the numbers stay
     assert spilled.same_trajectory(kept)
@@ -74,7 +76,7 @@ def test_large_allotments_spill_by_default(monkeypatch):
     assert simulator.run_scenario(sc, max_steps=3, spill=False).spill is None
 
 
-def test_without_a_file_the_run_stays_in_memory_or_says_why(monkeypatch):
+def test_without_a_file_the_run_stays_in_memory_or_says_why(monkeypatch, tmp_path):
     sc = swap()
 
     def full_disk(*args, **kwargs):
@@ -87,10 +89,62 @@ def test_without_a_file_the_run_stays_in_memory_or_says_why(monkeypatch):
     assert rec.spill is None and rec.steps == 3
     with pytest.raises(OSError, match="No space"):
         flown(sc, max_steps=3, spill=True)
+    monkeypatch.undo()
+    monkeypatch.setattr(simulator, "SPILL_BYTES", 0)
+    with pytest.raises(FileNotFoundError):  # a directory given: no quiet way out
+        flown(sc, max_steps=3, spill_dir=tmp_path / "missing")
+    monkeypatch.setattr(simulator, "in_memory_fs", lambda where: True)  # e.g. /tmp on tmpfs
+    with pytest.warns(RuntimeWarning, match="tmpfs"):
+        assert flown(sc, max_steps=3).spill is None
+    with pytest.raises(ValueError, match="spill_dir: .* held in memory"):
+        flown(sc, max_steps=3, spill=True)
     monkeypatch.setattr(simulator, "spill_supported", lambda: False)
-    with pytest.raises(ValueError, match="spill"):
+    with pytest.raises(ValueError, match="spill: .*Linux"):
         flown(sc, max_steps=3, spill=True)
     assert flown(sc, max_steps=3).spill is None
+
+
+MOUNTS = """/dev/vda / ext4 rw,relatime 0 0
+tmpfs /tmp tmpfs rw,nosuid 0 0
+/dev/vdb /tmp/disk ext4 rw 0 0
+tmpfs /run/my\\040dir tmpfs rw 0 0
+"""
+
+
+@pytest.mark.parametrize(
+    "directory, held",
+    [("/tmp", True), ("/tmp/x/y", True), ("/tmp/disk/x", False), ("/tmpfoo", False),
+     ("/work", False), ("/run/my dir/a", True)],
+)
+def test_directories_in_memory_are_found_by_their_mount(directory, held):
+    assert spill.in_memory_fs(directory, MOUNTS) is held
+
+
+def test_dropping_lets_go_of_the_pages_and_keeps_the_numbers():
+    def rss_file_kb() -> int:
+        with open("/proc/self/status") as fh:
+            return next(int(line.split()[1]) for line in fh if line.startswith("RssFile:"))
+
+    s = spill.Spill({"a": ((8 << 20,), np.float64)})  # 64 MiB
+    a = s.arrays["a"]
+    before = rss_file_kb()
+    a[:] = np.arange(a.size)
+    touched = rss_file_kb()
+    s.drop()
+    dropped = rss_file_kb()
+    assert touched - before > 60_000 and touched - dropped > 60_000
+    assert a[-1] == a.size - 1 and a[12345] == 12345
+
+
+def test_statuses_are_spelt_out_from_the_codes():
+    rec = flown(swap(), max_steps=4)
+    st = rec.statuses
+    assert st.dtype == object and st.shape == rec.status_codes.shape
+    assert all(st[k, i] == rec.status_names[rec.status_codes[k, i]] for k in range(4) for i in range(3))
+    st[:] = "changed"  # a copy each time
+    assert "changed" not in set(rec.statuses.ravel())
+    with pytest.raises(ValueError, match="status_names"):
+        dataclasses.replace(rec, status_names=rec.status_names[1:] + ("",))
 
 
 class TimedStep:

@@ -199,9 +199,8 @@ def summarize_record(record: RunRecord) -> dict[str, Any]:
     decision time / decisions) and ``steps_capped`` (the run stopped at a step cap before
     max_time and before all arrived)."""
     out = metrics.summarize(record)
-    t = record.decision_times[record.decided]
-    t = t[np.isfinite(t)]
-    out["compute_time_per_agent_step_us"] = float(t.sum() / t.size * 1e6) if t.size else None
+    t = metrics.decision_times_us(record)
+    out["compute_time_per_agent_step_us"] = float(t.sum() / t.size) if t.size else None
     out["steps_capped"] = bool(
         record.steps < record.scenario.n_steps and not record.arrived[-1].all()
     )

@@ -59,7 +59,13 @@ from tqdm import tqdm
 from vo3d_opt.sim.dynamics import Dynamics, make_dynamics
 from vo3d_opt.sim.safety import derive_margins, within_reach
 from vo3d_opt.sim.scenario import Scenario, load_scenario
-from vo3d_opt.sim.spill import SPILL_BYTES, Spill, spill_supported
+from vo3d_opt.sim.spill import (
+    SPILL_BYTES,
+    Spill,
+    in_memory_fs,
+    spill_directory,
+    spill_supported,
+)
 from vo3d_opt.sim.traffic import GoalWithDetours
 from vo3d_opt.types import AgentState, Limits, Neighbor
 
@@ -144,7 +150,7 @@ class RunRecord:
     own ``solve_time``; the same array as ``decision_times`` when every step said the same)
     are "" / NaN where it did not. The statuses are kept as ``status_codes`` (T, N) into
     ``status_names`` (whose first is "", no decision); ``statuses`` spells them out (an object
-    array, built on first use).
+    array, built at each call).
 
     A long run of a large swarm keeps its arrays in a temporary file (``spill``,
     :mod:`vo3d_opt.sim.spill`): they read as any array; :meth:`drop_resident` lets go of the
@@ -177,13 +183,15 @@ class RunRecord:
     #: What the metrics computed once for this record (``metrics.record_close_pairs``).
     cache: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
 
+    def __post_init__(self) -> None:
+        if not self.status_names or self.status_names[0] != "":
+            raise ValueError('status_names: the first must be "" (no decision)')
+
     @property
     def statuses(self) -> np.ndarray:
-        """(T, N) object: each decision's status, "" where the agent did not decide."""
-        if "statuses" not in self.cache:
-            names = np.array(self.status_names, dtype=object)
-            self.cache["statuses"] = names[self.status_codes]
-        return self.cache["statuses"]
+        """(T, N) object: each decision's status, "" where the agent did not decide; spelt out
+        from the codes at each call (a new array: writing into it changes nothing)."""
+        return np.array(self.status_names, dtype=object)[self.status_codes]
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickled with its arrays' contents; a spilled record's file mapping stays behind."""
@@ -263,8 +271,9 @@ class RunBuffers:
 
     ``spill`` (:mod:`vo3d_opt.sim.spill`): keep the arrays in a temporary file (in
     ``spill_dir``) and let go of the steps written every ``DROP_EVERY`` steps; None: when the
-    allotment exceeds ``SPILL_BYTES`` and the platform can (if the disk cannot hold it, in
-    memory with a warning). The sub-step samples of rotorpy runs stay in memory."""
+    allotment exceeds ``SPILL_BYTES`` and the platform can (if the disk cannot hold it, or the
+    directory is in memory, in memory with a warning). The sub-step samples of rotorpy runs
+    stay in memory."""
 
     #: Steps between two ``Spill.drop`` calls of a spilled run.
     DROP_EVERY = 32
@@ -308,12 +317,16 @@ class RunBuffers:
     ) -> None:
         """Row k of the decision and solve times, NaN where not ``mask``."""
         self.dtimes[k] = np.where(mask, decision_times, np.nan)
+        if self.stimes is None and solve_times is decision_times:
+            return
         solve = np.where(mask, solve_times, np.nan)
         if self.stimes is None:
-            if np.array_equal(solve, self.dtimes[k], equal_nan=True):
-                return
+            if np.array_equal(solve.view(np.uint64), self.dtimes[k].view(np.uint64)):
+                return  # bit for bit the same
             self.stimes = self._stimes
             self.stimes[:k] = self.dtimes[:k]
+            if self.spill is not None:
+                self.spill.drop()
         self.stimes[k] = solve
 
     def release(self, k: int) -> None:
@@ -403,12 +416,14 @@ def _open_spill(
     spill: bool | None,
     directory: str | Path | None,
 ) -> Spill | None:
-    """The temporary file of ``RunBuffers(spill=...)``, or None to keep the arrays in memory."""
-    if spill is False:
+    """The temporary file of ``RunBuffers(spill=...)``, or None to keep the arrays in memory.
+    ``spill=True`` or a ``directory`` given: any reason not to spill raises; ``spill=None``
+    without one: a full disk or a directory in memory keeps the record in memory, warned."""
+    if spill is not None and not spill:
         return None
     if not spill_supported():
         if spill:
-            raise ValueError("spill: this platform's mmap cannot drop pages (MADV_DONTNEED)")
+            raise ValueError("spill: this platform cannot spill a record (Linux only)")
         return None
     if spill is None:
         nbytes = sum(
@@ -417,12 +432,16 @@ def _open_spill(
         )
         if nbytes <= SPILL_BYTES:
             return None
+    strict = bool(spill) or directory is not None
+    where = spill_directory(directory)
     try:
-        return Spill(specs, directory)
-    except OSError as exc:
-        if spill:
+        if in_memory_fs(where):
+            raise ValueError(f"spill_dir: {where} is held in memory (tmpfs); set TMPDIR")
+        return Spill(specs, where)
+    except (OSError, ValueError) as exc:
+        if strict:
             raise
-        warnings.warn(f"spill: kept in memory ({exc})", RuntimeWarning, stacklevel=3)
+        warnings.warn(f"spill: kept in memory ({exc})", RuntimeWarning, stacklevel=4)
         return None
 
 
@@ -484,7 +503,8 @@ def fly(
     positions (N, 3) → preferred velocities (N, 3), default the scenario's goal rule;
     ``dynamics``: default :func:`scenario_dynamics`; ``progress`` None = a bar only on a TTY;
     ``spill``: keep the record in a temporary file in ``spill_dir`` (:class:`RunBuffers`; None:
-    when its allotment exceeds ``vo3d_opt.sim.spill.SPILL_BYTES``)."""
+    when its allotment exceeds ``vo3d_opt.sim.spill.SPILL_BYTES``; Linux only, never on a file
+    system held in memory)."""
     n, dt, tol = sc.n_agents, float(sc.dt), sc.goal_tolerance
     straight = ~sc.avoids  # avoids: false: fly the preferred (goal) velocity, never decide
     total = sc.n_steps if max_steps is None else min(max_steps, sc.n_steps)
@@ -612,10 +632,18 @@ class Simulator:
         progress: bool | None = None,
         max_steps: int | None = None,
         spill: bool | None = None,
+        spill_dir: str | Path | None = None,
     ) -> RunRecord:
         """Simulate until every agent arrived or ``max_time``; ``progress`` None = only on a
-        TTY; ``spill``: where the record lives (:func:`fly`)."""
-        return fly(self.scenario, self.step, progress=progress, max_steps=max_steps, spill=spill)
+        TTY; ``spill``, ``spill_dir``: where the record lives (:func:`fly`)."""
+        return fly(
+            self.scenario,
+            self.step,
+            progress=progress,
+            max_steps=max_steps,
+            spill=spill,
+            spill_dir=spill_dir,
+        )
 
 
 def default_selector_options(sc: Scenario) -> dict[str, Any]:
@@ -657,11 +685,13 @@ def run_scenario(
     max_neighbors: int | None = None,
     threads: int | None = None,
     spill: bool | None = None,
+    spill_dir: str | Path | None = None,
 ) -> RunRecord:
     """Load (if a path) and run a scenario. Without ``selector``, build a ``VelocitySelector``
     from ``formulation``/``solver`` (falling back to the scenario's, then to plane_qp and the
-    selector's default solver); ``ValueError`` for unknown names. ``spill``: where the record
-    lives (:func:`fly`; None: in a temporary file when larger than ``SPILL_BYTES``)."""
+    selector's default solver); ``ValueError`` for unknown names. ``spill``, ``spill_dir``:
+    where the record lives (:func:`fly`; None: in a temporary file when larger than
+    ``SPILL_BYTES``)."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     if selector is None:
         selector, formulation, solver = scenario_selector(sc, formulation, solver)
@@ -673,4 +703,4 @@ def run_scenario(
         max_neighbors=max_neighbors,
         threads=threads,
     )
-    return sim.run(progress=progress, max_steps=max_steps, spill=spill)
+    return sim.run(progress=progress, max_steps=max_steps, spill=spill, spill_dir=spill_dir)
