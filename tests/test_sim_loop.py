@@ -14,6 +14,7 @@ from vo3d_opt.sim.deciders import PerAgentSelect, SwarmSelect
 from vo3d_opt.sim.metrics import close_pairs, nearest_vehicle_distance, pair_min_distances, summarize
 from vo3d_opt.sim.scenario import bundled_dir, bundled_files, load_scenario, scenario_from_dict
 from vo3d_opt.sim.scenario.swarms import random_crossing_scenario
+from vo3d_opt.sim import simulator
 from vo3d_opt.sim.simulator import fly, scenario_selector
 
 SWARMS = {"random-crossing-1000"}
@@ -43,13 +44,18 @@ def test_first_order_dynamics_and_max_neighbors_in_the_loop():
     assert not np.allclose(few.positions, swarm.positions[:41])  # fewer neighbours, other paths
 
 
-def test_progress_bar_completes_when_everyone_arrives_early(capsys):
+def test_progress_bar_completes_when_everyone_arrives_early(capsys, monkeypatch):
     sc = load_scenario("vertical-encounter")
     sel, _, _ = scenario_selector(sc)
+    monkeypatch.setattr(simulator, "PROGRESS_DELAY", 0.0)  # shown from the first step
     rec = fly(sc, SwarmSelect(sc, sel), progress=True)
     assert rec.steps < sc.n_steps and rec.arrived[-1].all()
     err = capsys.readouterr().err
     assert f"{rec.steps}/{rec.steps}" in err and "100%" in err and "arrived 3/3" in err
+    assert err.endswith("\r") and err.rstrip("\r").endswith(" ")  # cleared on close
+    monkeypatch.undo()  # a run shorter than the delay: no bar at all, none left behind
+    fly(sc, SwarmSelect(sc, sel), progress=True)
+    assert capsys.readouterr().err == ""
 
 
 def test_random_crossing_1000_is_the_generator_output_and_its_first_steps_fly():

@@ -91,12 +91,17 @@ def test_without_a_file_the_run_stays_in_memory_or_says_why(monkeypatch, tmp_pat
         flown(sc, max_steps=3, spill=True)
     monkeypatch.undo()
     monkeypatch.setattr(simulator, "SPILL_BYTES", 0)
-    with pytest.raises(FileNotFoundError):  # a directory given: no quiet way out
-        flown(sc, max_steps=3, spill_dir=tmp_path / "missing")
+    for spill_flag in (None, True, False):  # a directory given must be one
+        with pytest.raises(ValueError, match="spill_dir: .*missing is not a directory"):
+            flown(sc, max_steps=3, spill=spill_flag, spill_dir=tmp_path / "missing")
+    with pytest.raises(ValueError, match="held in memory .*choose one on disk"):
+        with monkeypatch.context() as m:
+            m.setattr(simulator, "in_memory_fs", lambda where: True)
+            flown(sc, max_steps=3, spill_dir=tmp_path)
     monkeypatch.setattr(simulator, "in_memory_fs", lambda where: True)  # e.g. /tmp on tmpfs
     with pytest.warns(RuntimeWarning, match="tmpfs"):
         assert flown(sc, max_steps=3).spill is None
-    with pytest.raises(ValueError, match="spill_dir: .* held in memory"):
+    with pytest.raises(ValueError, match="spill_dir: .* held in memory.*set TMPDIR"):
         flown(sc, max_steps=3, spill=True)
     monkeypatch.setattr(simulator, "spill_supported", lambda: False)
     with pytest.raises(ValueError, match="spill: .*Linux"):

@@ -45,6 +45,7 @@ non-finite command becomes 0 with the status ``invalid_velocity (...)``).
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 import warnings
@@ -419,6 +420,8 @@ def _open_spill(
     """The temporary file of ``RunBuffers(spill=...)``, or None to keep the arrays in memory.
     ``spill=True`` or a ``directory`` given: any reason not to spill raises; ``spill=None``
     without one: a full disk or a directory in memory keeps the record in memory, warned."""
+    if directory is not None and not os.path.isdir(directory):
+        raise ValueError(f"spill_dir: {directory} is not a directory")
     if spill is not None and not spill:
         return None
     if not spill_supported():
@@ -436,7 +439,8 @@ def _open_spill(
     where = spill_directory(directory)
     try:
         if in_memory_fs(where):
-            raise ValueError(f"spill_dir: {where} is held in memory (tmpfs); set TMPDIR")
+            fix = "choose one on disk" if directory is not None else "set TMPDIR to one on disk"
+            raise ValueError(f"spill_dir: {where} is held in memory (tmpfs); {fix}")
         return Spill(specs, where)
     except (OSError, ValueError) as exc:
         if strict:
@@ -472,15 +476,19 @@ def _checked_commands(out: StepDecision, deciding: np.ndarray) -> tuple[np.ndarr
     return u, statuses
 
 
+#: Seconds a run goes before its progress bar shows (shorter runs show none).
+PROGRESS_DELAY = 1.0
+
+
 def _progress_bar(sc: Scenario, total: int, progress: bool | None) -> tqdm:
-    """Steps against the most the run may take, with the arrivals alongside (``finish`` sets
-    the total to the steps flown when everyone arrived early, so the bar ends at 100 %)."""
+    """Steps against the most the run may take, with the arrivals alongside (when everyone
+    arrived early, ``fly`` sets the total to the steps flown, so the bar ends at 100 %)."""
     return tqdm(
         total=total,
         desc=sc.name,
         unit="step",
         file=sys.stderr,
-        delay=1.0,
+        delay=PROGRESS_DELAY,
         leave=False,
         dynamic_ncols=True,
         disable=(None if progress is None else not progress),
@@ -565,7 +573,8 @@ def fly(
             bar.set_postfix_str(f"arrived {int(done.sum())}/{n}", refresh=False)
         if done.all() and bar.total != steps:  # everyone arrived before max_time: complete
             bar.total = steps
-            bar.refresh()
+            if bar.last_print_t >= bar.start_t + bar.delay:  # shown: else close() leaves it
+                bar.refresh()
     finally:
         bar.close()
     wall = time.perf_counter() - t_start

@@ -124,8 +124,22 @@ def _unknown_key(loc: tuple[Any, ...]) -> str:
             "at the top level of the scenario" if p == "" else f"in {p}" for p in places[key]
         )
         return f"unknown key here ({key!r} belongs {where})"
-    hint = difflib.get_close_matches(key, sorted(places), n=1)
+    here = _place_of(loc[:-1])  # hints among the keys valid where this one stands
+    near = sorted(k for k, ps in places.items() if here in ps)
+    hint = difflib.get_close_matches(key, near or sorted(places), n=1)
     return "unknown key" + (f" (did you mean {hint[0]!r}?)" if hint else "")
+
+
+def _place_of(loc: tuple[Any, ...]) -> str:
+    """A location as ``_key_places`` names places: ``agents[]``, ``selector_options``, ""."""
+    parts: list[str] = []
+    for x in loc:
+        if isinstance(x, int):
+            if parts:
+                parts[-1] += "[]"
+        elif x not in OBSTACLE_TAGS:
+            parts.append(str(x))
+    return ".".join(parts)
 
 
 def _describe(err: Any) -> tuple[str, str]:
