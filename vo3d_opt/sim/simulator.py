@@ -573,7 +573,8 @@ def fly(
             bar.set_postfix_str(f"arrived {int(done.sum())}/{n}", refresh=False)
         if done.all() and bar.total != steps:  # everyone arrived before max_time: complete
             bar.total = steps
-            if bar.last_print_t >= bar.start_t + bar.delay:  # shown: else close() leaves it
+            shown = not bar.disable and bar.last_print_t >= bar.start_t + bar.delay
+            if shown:  # a bar never shown is not drawn now: close() would leave it on screen
                 bar.refresh()
     finally:
         bar.close()
