@@ -158,12 +158,12 @@ class TimedStep:
     formulation = solver = "timed"
 
     def __init__(self, same: int) -> None:
-        self.same, self.k = same, 0
+        self.same = same
 
     def decide(self, snap):
         n = snap.positions.shape[0]
         dec = np.full(n, 1e-3 * (snap.k + 1))
-        solve = dec if snap.k < self.same else dec / 2
+        solve = dec.copy() if snap.k < self.same else dec / 2  # equal values, another array
         return StepDecision(np.zeros((n, 3)), np.full(n, "optimal"), dec, solve)
 
     def extra(self):
@@ -181,6 +181,8 @@ def test_solve_times_kept_apart_once_they_differ(use_spill):
     np.testing.assert_array_equal(rec.solve_times[3:], dec[3:] / 2)
     assert rec.solve_times is not rec.decision_times
     assert np.shares_memory(same.solve_times, same.decision_times)  # equal all along: one array
+    equal = fly(sc, TimedStep(same=10), progress=False, max_steps=6, spill=use_spill)
+    assert np.shares_memory(equal.solve_times, equal.decision_times)  # equal values: one array
 
 
 def test_spill_arrays_start_zeroed_on_pages_of_their_own():
