@@ -63,6 +63,7 @@ from vo3d_opt.sim.scenario import Scenario, load_scenario
 from vo3d_opt.sim.spill import (
     SPILL_BYTES,
     Spill,
+    array_bytes,
     in_memory_fs,
     spill_directory,
     spill_supported,
@@ -429,11 +430,7 @@ def _open_spill(
             raise ValueError("spill: this platform cannot spill a record (Linux only)")
         return None
     if spill is None:
-        nbytes = sum(
-            int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
-            for shape, dtype in specs.values()
-        )
-        if nbytes <= SPILL_BYTES:
+        if sum(array_bytes(shape, dtype) for shape, dtype in specs.values()) <= SPILL_BYTES:
             return None
     strict = bool(spill) or directory is not None
     where = spill_directory(directory)

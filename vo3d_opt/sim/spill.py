@@ -31,6 +31,11 @@ import numpy as np
 SPILL_BYTES = 1 << 30
 
 
+def array_bytes(shape: tuple[int, ...], dtype: Any) -> int:
+    """Bytes of an array of ``shape`` and ``dtype``."""
+    return int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+
+
 #: File systems whose files live in memory.
 MEMORY_FS = ("tmpfs", "ramfs")
 
@@ -88,8 +93,7 @@ class Spill:
         page, offsets, end = mmap.PAGESIZE, {}, 0
         for name, (shape, dtype) in specs.items():
             offsets[name] = end
-            nbytes = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
-            end += -(-nbytes // page) * page
+            end += -(-array_bytes(shape, dtype) // page) * page
         self.size = max(end, page)
         with tempfile.TemporaryFile(dir=directory) as fh:
             os.posix_fallocate(fh.fileno(), 0, self.size)
