@@ -42,6 +42,44 @@ def test_a_stalled_agent_turns_right_at_full_speed_then_seeks_its_goal_again():
     np.testing.assert_allclose(still[after], np.broadcast_to(straight, (after.sum(), 2, 3)))
 
 
+def _turned_right(w: np.ndarray, deg: float) -> np.ndarray:
+    c, s = np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))
+    return np.stack([c * w[:, 0] + s * w[:, 1], -s * w[:, 0] + c * w[:, 1], w[:, 2]], axis=1)
+
+
+def test_detours_in_a_row_turn_further_each_time_then_start_again():
+    """Held in place: each stall window (STALL_TIME) after a detour ends in another detour,
+    turned 90°, 180°, 270°, then 90° again (DETOUR_TURNS), each for STALL_TIME; the goal in
+    between."""
+    rule = GoalWithDetours(GOALS, 4.0, DT)
+    p = np.array([[0.0, 0.0, 20.0], [0.0, 0.0, 10.0]])
+    still = fly_rule(rule, [p] * int(8.5 * STALL_TIME / DT))
+    straight = goal_velocity(p, GOALS, 4.0, DT)
+    turns = []  # the turn of each run of equal velocities, in order
+    for w in still:
+        deg = next((d for d in (0.0, 90.0, 180.0, 270.0)
+                    if np.allclose(w, _turned_right(straight, d), atol=1e-12)), None)
+        assert deg is not None, w
+        if not turns or turns[-1][0] != deg:
+            turns.append([deg, 0])
+        turns[-1][1] += 1
+    assert [d for d, _ in turns] == [0.0, 90.0, 0.0, 180.0, 0.0, 270.0, 0.0, 90.0, 0.0]
+    assert all(abs(k * DT - STALL_TIME) <= DT + 1e-9 for _, k in turns[1:-1]), turns
+
+
+def test_a_window_without_a_stall_starts_the_detours_count_afresh():
+    rule = GoalWithDetours(GOALS[:1], 4.0, DT)
+    p = np.array([[0.0, 0.0, 20.0]])
+    fly_rule(rule, [p] * round(2 * STALL_TIME / DT))  # a first detour (90°), then the goal
+    for _ in range(round(STALL_TIME / DT)):  # a window of real progress towards the goal
+        w = rule(p)
+        p = p + w * DT
+    w = fly_rule(rule, [p] * round(1.5 * STALL_TIME / DT))  # stalled again: 90°, not 180°
+    straight = goal_velocity(p, GOALS[:1], 4.0, DT)
+    first = next(x for x in w if not np.allclose(x, straight))
+    np.testing.assert_allclose(first, _turned_right(straight, 90.0), atol=1e-12)
+
+
 def test_the_detour_keeps_the_vertical_part_and_the_top_speed():
     rule = GoalWithDetours(GOALS[:1], 3.0, DT, stall_time=1.0)
     p = np.array([[0.0, 0.0, 0.0]])  # the goal is up and ahead

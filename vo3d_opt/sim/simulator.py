@@ -663,10 +663,13 @@ def default_selector_options(sc: Scenario) -> dict[str, Any]:
     and sensing add (``vo3d_opt.sim.safety``: tracking error, noise, latency; the scenario's
     ``safety.pz_buffer`` overrides it). Without these the paper's non-reciprocal selection
     lets vehicles slide along each other's zones and dip into them (see README, "Safety in
-    simulation")."""
+    simulation"). ``closing_guard``: two vehicles that change velocity in the same step,
+    each planning against the other's last one, can still slide a few centimetres into each
+    other's zones; the guard caps the speed towards a cooperative neighbour near its zone at
+    half the gap per step (``formulations/plane_qp.md``, item 5)."""
     from vo3d_opt.sim.safety import derive_margins
 
-    return {"reciprocal": True, "pz_buffer": derive_margins(sc).pz_buffer}
+    return {"reciprocal": True, "pz_buffer": derive_margins(sc).pz_buffer, "closing_guard": True}
 
 
 def scenario_selector(

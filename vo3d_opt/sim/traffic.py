@@ -42,6 +42,11 @@ def goal_velocity(positions: Any, goals: Any, max_speed: Any, dt: float) -> np.n
 STALL_TIME = 4.0
 STALL_PROGRESS = 0.05
 STALL_MOTION = 0.25
+#: Detours in a row turn ``detour_deg`` times 1, 2, ..., DETOUR_TURNS, then 1 again (90°, 180°,
+#: 270°: right, back, left): one side may be walled (``dense`` encounter 5051 under the closing
+#: guard stalled among hovering vehicles, where the right turn's nearest safe velocity was
+#: hovering again; the back and left turns freed it).
+DETOUR_TURNS = 3
 
 
 class GoalWithDetours:
@@ -49,7 +54,9 @@ class GoalWithDetours:
     see round a wall of hovering or waiting vehicles: ``dense`` sweep encounter 576): an agent
     that has stalled (``STALL_PROGRESS``) over ``stall_time`` s prefers, for the next
     ``stall_time`` s, its goal direction turned ``detour_deg`` to the right about the vertical,
-    at full speed (all turn the same way, as traffic keeps right); then the goal again. The
+    at full speed (all turn the same way, as traffic keeps right); then the goal again. An agent
+    stalled again right after a detour turns further each time (``DETOUR_TURNS``: 90°, 180°,
+    270°, then 90° again), until a window without a stall starts the count afresh. The
     selector still keeps every zone clear: a detour changes only what the agent would like.
     Within ``near`` (m, per agent; the simulator passes its r_pz) of its goal an agent never
     detours: what blocks it is at the goal, and a detour there would only send it off again
@@ -81,12 +88,16 @@ class GoalWithDetours:
         self.v_max = np.broadcast_to(np.asarray(max_speed, dtype=float), (n,)).copy()
         self.near = np.broadcast_to(np.asarray(near, dtype=float), (n,)).copy()
         self.dt, self.stall_time = float(dt), float(stall_time)
-        self.turn = np.deg2rad(detour_deg)
+        turn = np.deg2rad(detour_deg)
+        # the k-th detour in a row turns k * detour_deg (one scalar cos and sin per k)
+        self.cos_k = np.array([np.cos(turn * k) for k in range(DETOUR_TURNS + 1)])
+        self.sin_k = np.array([np.sin(turn * k) for k in range(DETOUR_TURNS + 1)])
         self.t = 0.0
         self.ref_dist = np.full(n, np.inf)  # distance to goal at the last check
         self.ref_pos = np.zeros((n, 3))  # and position
         self.ref_t = np.zeros(n)
         self.detour_until = np.full(n, -np.inf)
+        self.in_row = np.zeros(n, dtype=np.int64)  # detours in a row: the last one's turn
         self.waiting = np.zeros(n, dtype=bool)
 
     def __call__(self, positions: Any) -> np.ndarray:
@@ -106,10 +117,12 @@ class GoalWithDetours:
         stalled &= dist > self.near  # at its goal's door, waiting is the way in
         self.detour_until[stalled] = self.t + self.stall_time
         self.ref_dist[stalled] = np.inf
+        self.in_row[stalled] = self.in_row[stalled] % DETOUR_TURNS + 1
+        self.in_row[check & ~stalled] = 0  # it moved on (or waits at its goal): count afresh
         self._mark(check & ~stalled, p, dist)
         on |= stalled
         if on.any():
-            w[on] = self._detour(w[on], self.v_max[on])
+            w[on] = self._detour(w[on], self.v_max[on], self.in_row[on])
         self.t += self.dt
         return w
 
@@ -117,9 +130,10 @@ class GoalWithDetours:
         """Start the next window of the agents ``which`` here and now."""
         self.ref_dist[which], self.ref_pos[which], self.ref_t[which] = dist[which], p[which], self.t
 
-    def _detour(self, w: np.ndarray, v_max: np.ndarray) -> np.ndarray:
-        """The goal directions of ``w`` turned right about the vertical, at ``v_max``."""
-        c, s = np.cos(self.turn), np.sin(self.turn)
+    def _detour(self, w: np.ndarray, v_max: np.ndarray, in_row: np.ndarray) -> np.ndarray:
+        """The goal directions of ``w`` turned right about the vertical by ``in_row`` times the
+        detour angle, at ``v_max``."""
+        c, s = self.cos_k[in_row], self.sin_k[in_row]
         x, y = w[:, 0], w[:, 1]
         turned = np.stack([c * x + s * y, -s * x + c * y, w[:, 2]], axis=1)
         norm = np.linalg.norm(turned, axis=1)
