@@ -135,7 +135,7 @@ def _add_selector_option(p: argparse.ArgumentParser, what: str) -> None:
         action="append",
         metavar="KEY=VALUE",
         help=f"a selector option for {what}, as the scenario key selector_options takes it "
-        "(the keyword arguments of VelocitySelector, README), e.g. closing_guard=true or "
+        "(the keyword arguments of VelocitySelector, README), e.g. closing_guard=false or "
         "margin=0.05; repeatable; overrides the scenario's",
     )
 
