@@ -547,7 +547,8 @@ FAILURES = Path(__file__).parent / "data" / "sweep-failures"
 @pytest.mark.parametrize(
     "name",
     ["lagged-s0-i413", "lagged-s0-i809", "lagged-s0-i647", "dense-s0-i576", "lagged-s0-i317",
-     "lagged-s0-i1893", *(f"dense-s0-i{i}" for i in (1121, 3502, 6534, 7803, 9350))],
+     "lagged-s0-i1893", *(f"dense-s0-i{i}" for i in (1121, 3502, 6534, 7803, 9350)),
+     "dense-s0-i5051"],
 )
 def test_sweep_failures_are_fixed(name):
     """`lagged` seed 0 before the margins derived from the scenario (sim/safety.py): encounter
@@ -565,7 +566,10 @@ def test_sweep_failures_are_fixed(name):
     clear (sim/landing.py). In the 10,000-encounter `lagged` sweep 1893 crossed the edge of a
     box's prism top 5.2 mm deep: its command grazed the flat top and the lag kept it lower;
     every prism's top is now raised by the tracking error while planning (sim/safety.py,
-    ``prism_rise``)."""
+    ``prism_rise``). In `dense` 5051, flown with the closing guard (now the simulator's
+    default), one agent hovered 11.8 m from its goal among three hovering vehicles, the 90°
+    detour's nearest safe velocity hovering again; detours in a row now turn further (90°,
+    180°, 270°: ``test_dense_5051_arrives_by_the_detours_in_a_row``)."""
     from vo3d_opt.sim.metrics import summarize
     from vo3d_opt.sim.simulator import run_scenario
 
@@ -573,3 +577,17 @@ def test_sweep_failures_are_fixed(name):
     assert s["collisions"] == 0 and s["pz_intrusions"] == 0
     assert s["obstacle_pz_intrusions"] == 0
     assert s["altitude_violations"] == 0 and s["all_reached"]
+
+
+def test_dense_5051_arrives_by_the_detours_in_a_row(monkeypatch):
+    """Under the guard, the right turn alone (DETOUR_TURNS = 1, the rule before) leaves one
+    agent of `dense` 5051 stalled; the turns in a row bring every agent home."""
+    from vo3d_opt.sim import traffic
+    from vo3d_opt.sim.metrics import summarize
+    from vo3d_opt.sim.simulator import run_scenario
+
+    sc = load_scenario(FAILURES / "dense-s0-i5051.yaml")
+    assert summarize(run_scenario(sc, progress=False))["all_reached"]
+    monkeypatch.setattr(traffic, "DETOUR_TURNS", 1)
+    s = summarize(run_scenario(sc, progress=False))
+    assert (s["reached"], s["agents"]) == (23, 24)

@@ -80,6 +80,36 @@ def test_a_window_without_a_stall_starts_the_detours_count_afresh():
     np.testing.assert_allclose(first, _turned_right(straight, 90.0), atol=1e-12)
 
 
+def test_the_first_detour_is_the_right_turn_as_before_bit_for_bit():
+    """The first of a row turns by cos/sin of the detour angle itself, as the single-turn rule
+    did (a run with no second detour in a row is unchanged)."""
+    rule = GoalWithDetours(GOALS, 4.0, DT)
+    w = np.array([[3.0, -1.0, 0.5], [0.1, 2.0, -0.3]])
+    v_max = np.array([4.0, 4.0])
+    turn = np.deg2rad(90.0)
+    c, s = np.cos(turn), np.sin(turn)
+    old = np.stack([c * w[:, 0] + s * w[:, 1], -s * w[:, 0] + c * w[:, 1], w[:, 2]], axis=1)
+    old = old * (v_max / np.linalg.norm(old, axis=1))[:, None]
+    assert np.array_equal(rule._detour(w, v_max, np.array([1, 1])), old)
+
+
+def test_waiting_at_the_goal_starts_the_detours_count_afresh():
+    """An agent that detoured, then waited at its goal's door (within ``near``: no detour
+    there), turns 90° again when it stalls farther off, not 180°."""
+    rule = GoalWithDetours(GOALS[:1], 4.0, DT, near=10.0)
+    far = np.array([[0.0, 0.0, 20.0]])
+    fly_rule(rule, [far] * round(STALL_TIME / DT + 2))  # stalled: a first detour (90°) begins
+    assert rule.in_row[0] == 1
+    door = GOALS[:1] - np.array([[5.0, 0.0, 0.0]])  # 5 m from the goal: within near
+    # there from within the detour: its window starts at the door, and stalls there
+    fly_rule(rule, [door] * round(2.5 * STALL_TIME / DT))
+    assert rule.waiting[0] and rule.in_row[0] == 0
+    w = fly_rule(rule, [far] * round(2.5 * STALL_TIME / DT))  # pushed off and stalled again
+    straight = goal_velocity(far, GOALS[:1], 4.0, DT)
+    first = next(x for x in w if not np.allclose(x, straight))
+    np.testing.assert_allclose(first, _turned_right(straight, 90.0), atol=1e-12)
+
+
 def test_the_detour_keeps_the_vertical_part_and_the_top_speed():
     rule = GoalWithDetours(GOALS[:1], 3.0, DT, stall_time=1.0)
     p = np.array([[0.0, 0.0, 0.0]])  # the goal is up and ahead
