@@ -169,18 +169,18 @@ def _behaviour(res: subprocess.CompletedProcess, options: dict | None = None) ->
 
 
 def test_selector_options_fly_as_the_scenario_key_and_override_it(small, tmp_path, run_json):
-    published = {"reciprocal": False, "pz_buffer": 0.0}
-    path = tmp_path / "published.yaml"
-    path.write_text(yaml.safe_dump({**SMALL, "selector_options": published}))
-    in_file = _behaviour(vo3d("run", path, "--json"), published)
+    unbuffered = {"reciprocal": False, "pz_buffer": 0.0}
+    path = tmp_path / "unbuffered.yaml"
+    path.write_text(yaml.safe_dump({**SMALL, "selector_options": unbuffered}))
+    in_file = _behaviour(vo3d("run", path, "--json"), unbuffered)
     flags = _behaviour(vo3d("run", small, "--json", "-o", "reciprocal=false",
-                            "--selector-option", "pz_buffer=0"), published)
+                            "--selector-option", "pz_buffer=0"), unbuffered)
     assert flags == in_file
     assert in_file != _behaviour(run_json, {})  # the options change the flight
     # -o merges into the file's options (not replacing them): one from each
     half = tmp_path / "half.yaml"
     half.write_text(yaml.safe_dump({**SMALL, "selector_options": {"reciprocal": False}}))
-    assert _behaviour(vo3d("run", half, "--json", "-o", "pz_buffer=0"), published) == in_file
+    assert _behaviour(vo3d("run", half, "--json", "-o", "pz_buffer=0"), unbuffered) == in_file
     # the command line's value wins over the file's: back to the defaults
     buffer = derive_margins(load_scenario(small)).pz_buffer
     back = vo3d("run", path, "--json", "-o", "reciprocal=true", "-o", f"pz_buffer={buffer!r}")
@@ -189,7 +189,7 @@ def test_selector_options_fly_as_the_scenario_key_and_override_it(small, tmp_pat
     res = vo3d("compare", small, "--json", "-o", "reciprocal=false", "-o", "pz_buffer=0")
     assert res.returncode == 0, res.stderr
     (row,) = json.loads(res.stdout)
-    assert row["selector_options"] == published
+    assert row["selector_options"] == unbuffered
     assert {k: v for k, v in row.items() if k not in TIMING_KEYS | {"selector_options"}} == in_file
 
 

@@ -381,8 +381,8 @@ def test_formulation_and_solver_pass_through_to_the_runs_and_the_replays():
 
 def test_selector_options_pass_through_to_the_runs_and_the_replays(tmp_path):
     """Each encounter flies as its scenario with the options in selector_options (as a file
-    written with them flies); the paper's selection as published (no reciprocity, no buffer)
-    flies differently from the defaults."""
+    written with them flies); without reciprocity and buffer the encounters fly differently
+    from the defaults."""
     options = {"pz_buffer": 0.0, "reciprocal": False}
     method = Method(selector_options=(("reciprocal", False), ("pz_buffer", 0)))
     assert method == Method(selector_options=tuple(options.items()))  # one form: sorted, valid

@@ -46,7 +46,7 @@ class Method:
     as ``vo3d run`` takes them; None = the defaults) or ``rvo2`` (RVO2-3D,
     ``vo3d_opt.baselines.run_rvo2``). ``selector_options``: (key, value) pairs merged into
     every encounter's ``selector_options`` (``vo3d`` only), e.g.
-    ``(("closing_guard", True),)``; kept validated, as a scenario file holds them, sorted by
+    ``(("closing_guard", False),)``; kept validated, as a scenario file holds them, sorted by
     key, the last of a repeated key (``ValueError`` naming a bad one)."""
 
     name: str = "vo3d"
