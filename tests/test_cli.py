@@ -369,14 +369,43 @@ def test_run_hands_threads_neighbours_and_spill_to_the_simulator(cli, small, tmp
 
 @pytest.mark.parametrize("args, flag", [
     (["--threads", "0"], "--threads"),
+    (["--threads", "-1"], "--threads"),
+    (["--threads", "9999"], "--threads"),  # above NUMBA_NUM_THREADS
     (["--max-neighbors", "two"], "--max-neighbors"),
     (["--spill-dir", "/no/such/dir"], "--spill-dir"),
+    (["--no-spill", "--spill-dir", "."], "--spill-dir"),
 ])
-def test_bad_swarm_flags_exit_2_naming_them(small, args, flag):
-    res = vo3d("run", small, "--json", *args)
+def test_bad_swarm_flags_exit_2_naming_them(small, tmp_path, args, flag):
+    out = tmp_path / "out"
+    res = vo3d("run", small, "--json", "--out", out, *args)
     assert res.returncode == 2 and res.stdout == "", res.stderr
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and flag in lines[0], res.stderr
+    assert "-1" not in args or ">= 1" in lines[0]
+    assert not out.exists()  # refused before --out is made
+
+
+def test_max_neighbors_needs_noiseless_immediate_sensing(tmp_path):
+    noisy = {**SMALL, "sensing": {**SMALL["sensing"], "position_noise": 0.1, "seed": 1}}
+    path = tmp_path / "noisy.yaml"
+    path.write_text(yaml.safe_dump(noisy, sort_keys=False))
+    res = vo3d("run", path, "--json", "--max-neighbors", "3")
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr.strip() == "vo3d: --max-neighbors: only with noiseless, immediate sensing"
+
+
+def test_an_unwritable_spill_dir_is_refused_before_the_run(cli, small, tmp_path, monkeypatch,
+                                                            capsys):
+    monkeypatch.setattr(cli, "in_memory_fs", lambda *a, **k: False)
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    if os.access(locked, os.W_OK):  # root writes anywhere: make the probe fail instead
+        def refuse(*args, **kwargs):
+            raise PermissionError(13, "Permission denied")
+        monkeypatch.setattr(cli.tempfile, "TemporaryFile", refuse)
+    assert cli.main(["run", str(small), "--json", "--spill-dir", str(locked)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("vo3d: --spill-dir: cannot write in "), err
 
 
 @pytest.mark.parametrize("args", [["--spill"], ["--spill-dir", "."]])
@@ -386,7 +415,7 @@ def test_spilling_into_memory_is_refused_before_the_run(cli, small, monkeypatch,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"vo3d: {args[0]}: ") and "held in memory" in err[0]
     # --no-spill keeps the record in memory: nothing to refuse
-    assert cli.main(["run", str(small), "--json", "--no-spill", "--spill-dir", "."]) == 0
+    assert cli.main(["run", str(small), "--json", "--no-spill"]) == 0
 
 
 def test_a_large_run_deciding_in_python_is_warned_about(cli, small, monkeypatch, capsys):

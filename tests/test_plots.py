@@ -358,20 +358,26 @@ def test_position_bounds_read_in_chunks_are_the_exact_extremes(swarm, monkeypatc
 
 
 def test_a_swarms_distances_are_bands_over_the_vehicles(swarm, monkeypatch):
-    """The least line is the closest pair's distance at each drawn sample (brute force over
-    every pair), the key names the bands, no colour bar names 120 vehicles."""
+    """The least line is the closest pair's distance at every sample (brute force over every
+    pair), the median and the band at the drawn samples (brute force too), the key names
+    them, and no colour bar names 120 vehicles."""
     from vo3d_opt import plots
 
     monkeypatch.setattr(plots, "BAND_SAMPLES", 4)
     fig = plots.figure_vehicle_distance(swarm)
     ax = fig.axes[0]
     idx = plots.drawn_samples(swarm.positions.shape[0], 4)
-    least = next(line for line in ax.get_lines() if line.get_color() == "k")
-    p = swarm.positions[idx]
+    assert len(idx) == 4 < swarm.positions.shape[0]
+    p = swarm.positions
     gaps = np.linalg.norm(p[:, :, None] - p[:, None, :], axis=-1)
     gaps[:, np.arange(swarm.n_agents), np.arange(swarm.n_agents)] = np.inf
-    np.testing.assert_allclose(least.get_xdata(), swarm.times[idx])
-    np.testing.assert_allclose(least.get_ydata(), gaps.min(axis=(1, 2)), rtol=1e-12)
+    nearest = gaps.min(axis=2)  # (T+1, N)
+    least = next(line for line in ax.get_lines() if line.get_color() == "k")
+    np.testing.assert_allclose(least.get_xdata(), swarm.times)
+    np.testing.assert_allclose(least.get_ydata(), nearest.min(axis=1), rtol=1e-12)
+    median = next(line for line in ax.get_lines() if line.get_color() == "tab:blue")
+    np.testing.assert_allclose(median.get_xdata(), swarm.times[idx])
+    np.testing.assert_allclose(median.get_ydata(), np.median(nearest[idx], axis=1), rtol=1e-12)
     texts = _legend_texts(fig)
     assert {"least over the vehicles", "5-95 % of the vehicles", "median"} <= set(texts)
     assert not any(a.get_ylabel().startswith("agent") for a in fig.axes)

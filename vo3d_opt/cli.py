@@ -311,8 +311,8 @@ def _zones(text: str) -> Any:
 def cmd_run(args: argparse.Namespace) -> int:
     plot_options = _figure_options(args)
     sc = _with_options(_load(args.scenario), args.selector_options)
+    _swarm_checked(args, sc)
     out = _out_dir(args.out) if args.out else None
-    _spill_checked(args)
     sel, formulation, solver = _selector(sc, args.formulation, args.solver)
     record, summary = _run(sc, sel, formulation, solver, args)
     status = EXIT_OK
@@ -566,7 +566,10 @@ def _common() -> _Parser:
 
 
 def _positive_int(text: str) -> int:
-    value = _non_negative_int(text)
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
     return value
@@ -585,15 +588,16 @@ def _add_swarm_flags(run: argparse.ArgumentParser) -> None:
         "--threads",
         type=_positive_int,
         metavar="K",
-        help="threads of the compiled decisions (select_many; default: every core); the "
-        "answers do not depend on it",
+        help="threads of the compiled decisions (select_many; default: every core, at most "
+        "NUMBA_NUM_THREADS); the answers do not depend on it. No effect where the agents "
+        "decide one at a time (noisy or late sensing, formulations run in Python)",
     )
     run.add_argument(
         "--max-neighbors",
         type=_positive_int,
         metavar="K",
         help="each agent avoids only its K nearest vehicles within sensing range (default: "
-        "every one in range)",
+        "every one in range); noiseless, immediate sensing only",
     )
     run.add_argument(
         "--spill",
@@ -605,22 +609,40 @@ def _add_swarm_flags(run: argparse.ArgumentParser) -> None:
         "--spill-dir",
         type=_directory,
         metavar="DIR",
-        help="an existing directory on disk (not tmpfs) for that file (default: $TMPDIR); "
-        "given, a record that cannot spill there is an error, not kept in memory",
+        help="an existing, writable directory on disk (not tmpfs) for that file (default: "
+        "$TMPDIR); given, a record that cannot spill there is an error, not kept in memory",
     )
 
 
-def _spill_checked(args: argparse.Namespace) -> None:
-    """Refuse before the run what ``fly`` would refuse at its start (--spill or --spill-dir
-    where a record cannot spill)."""
-    if args.spill is False or not (args.spill or args.spill_dir):
+def _swarm_checked(args: argparse.Namespace, sc: Scenario) -> None:
+    """Refuse before the run what the run would refuse at its start: --threads above numba's
+    limit, --max-neighbors under noisy or late sensing, a spill that cannot happen."""
+    if args.threads is not None:
+        from vo3d_opt.swarm import thread_count
+
+        try:
+            thread_count(args.threads)
+        except ValueError as exc:
+            raise _UsageError(f"--{exc}") from None
+    if args.max_neighbors is not None and not sc.sensing.perfect:
+        raise _UsageError("--max-neighbors: only with noiseless, immediate sensing")
+    flag = "--spill-dir" if args.spill_dir else "--spill"
+    if args.spill is False:
+        if args.spill_dir:
+            raise _UsageError("--spill-dir: has no effect with --no-spill")
+        return
+    if not (args.spill or args.spill_dir):
         return
     if not spill_supported():
-        raise _UsageError("--spill: this platform cannot spill a record (Linux only)")
+        raise _UsageError(f"{flag}: this platform cannot spill a record (Linux only)")
     where = spill_directory(args.spill_dir)
     if in_memory_fs(where):
-        flag = "--spill-dir" if args.spill_dir else "--spill"
         raise _UsageError(f"{flag}: {where} is held in memory (tmpfs); choose a directory on disk")
+    try:
+        with tempfile.TemporaryFile(dir=where):
+            pass
+    except OSError as exc:
+        raise _UsageError(f"{flag}: cannot write in {where}: {exc.strerror or exc}") from None
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -15,14 +15,14 @@ The distance curves are sampled every ``dt``; the marked minimum is the summary'
 (:func:`vo3d_opt.sim.metrics.closest_vehicle_approach`, continuous along each step), so it may
 lie a little below the sampled curves. A swarm (more than :data:`SWARM_AGENTS` vehicles) is
 drawn from samples of its record (:data:`PLOT_POINTS`, :data:`BAND_SAMPLES`): paths through
-evenly spaced samples, and distances as bands over the vehicles (nearest, 5-95 %, median).
+evenly spaced samples (straight chords between them), and distances as bands over the
+vehicles: the least at every sample, the 5-95 % and the median at the drawn ones.
 """
 
 from __future__ import annotations
 
 import math
-import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
@@ -64,7 +64,8 @@ LEGEND_MAX_AGENTS = 12
 SWARM_AGENTS = 100
 #: A swarm's figures (more than SWARM_AGENTS) draw its paths through at most this many points
 #: in all, each path sampled evenly in time (first and last sample kept), and its distances as
-#: bands over the vehicles at most BAND_SAMPLES times: a 10,000-agent run of 2,600 steps has
+#: bands over the vehicles (their 5-95 % and median at most BAND_SAMPLES times, their least at
+#: every sample): a 10,000-agent run of 2,600 steps has
 #: 26 million positions (630 MB), which matplotlib cannot draw in a useful time.
 PLOT_POINTS = 2_000_000
 BAND_SAMPLES = 500
@@ -722,11 +723,34 @@ def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figur
 
 
 def distance_samples(record: RunRecord) -> np.ndarray | None:
-    """The samples a distance figure draws: None (every one) up to SWARM_AGENTS vehicles,
-    else ``BAND_SAMPLES`` of them."""
+    """The samples at which a distance figure draws a swarm's bands: None (every vehicle's own
+    curve) up to SWARM_AGENTS vehicles, else ``BAND_SAMPLES`` of them."""
     if record.n_agents <= SWARM_AGENTS:
         return None
     return drawn_samples(record.positions.shape[0], BAND_SAMPLES)
+
+
+def swarm_bands(
+    record: RunRecord, distances: Callable[[RunRecord, np.ndarray], np.ndarray], samples: np.ndarray
+) -> np.ndarray:
+    """(T+1, 4): at every sample the least of the vehicles' distances (``distances(record,
+    [k])``: one row of N), and at ``samples`` their 5, 50 and 95 % (NaN elsewhere): one sample
+    at a time, so that no (T+1, N) array is built; vehicles without a distance (inf) left out."""
+    T = record.positions.shape[0]
+    out = np.full((T, 4), np.nan)
+    banded = np.zeros(T, dtype=bool)
+    banded[samples] = True
+    step = max(1, CHUNK_ELEMENTS // max(1, 3 * record.n_agents))
+    for k in range(T):
+        d = distances(record, np.array([k]))[0]
+        d = d[np.isfinite(d)]
+        if d.size:
+            out[k, 0] = d.min()
+            if banded[k]:
+                out[k, 1:] = np.percentile(d, [5.0, 50.0, 95.0])
+        if k % step == step - 1:
+            record.drop_resident()
+    return out
 
 
 def _distance_figure(
@@ -740,9 +764,9 @@ def _distance_figure(
     lines: dict[float, str],
     samples: np.ndarray | None = None,
 ) -> Figure:
-    """Per-vehicle distance curves d (samples, agents), or a swarm's bands over the vehicles at
-    ``samples`` (d's rows), the closest approach marked with the summary's figure, and
-    horizontal reference lines {value: label}."""
+    """Per-vehicle distance curves d (samples, agents), or a swarm's bands over the vehicles
+    (``swarm_bands``' d, its percentiles drawn at ``samples``), the closest approach marked with
+    the summary's figure, and horizontal reference lines {value: label}."""
     fig = new_figure((7.0, 4.2))
     ax = fig.add_subplot()
     colors = agent_colors(record.n_agents)
@@ -753,7 +777,7 @@ def _distance_figure(
         for i in range(record.n_agents):
             ax.plot(record.times, d[:, i], color=colors[i], linewidth=width)
     else:
-        handles, labels = _bands(ax, record.times[samples], d)
+        handles, labels = _bands(ax, record.times, d, samples)
     for value, label in sorted(lines.items()):
         handles.append(ax.axhline(value, color="red", linestyle="--", linewidth=1.0))
         labels.append(label)
@@ -780,17 +804,15 @@ def _distance_figure(
     return fig
 
 
-def _bands(ax: Axes, times: np.ndarray, d: np.ndarray) -> tuple[list[Any], list[str]]:
-    """A swarm's distances d (samples, agents) as the least over the vehicles, their 5-95 %
-    band and their median (vehicles without a distance, inf, left out); the key's entries."""
-    finite = np.where(np.isfinite(d), d, np.nan)
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # a sample with no finite distance
-        p5, p50, p95 = np.nanpercentile(finite, [5.0, 50.0, 95.0], axis=1)
-        least = np.nanmin(finite, axis=1)
-    band = ax.fill_between(times, p5, p95, color="tab:blue", alpha=0.25, linewidth=0)
-    (median,) = ax.plot(times, p50, color="tab:blue", linewidth=1.0)
-    (low,) = ax.plot(times, least, color="k", linewidth=0.8)
+def _bands(
+    ax: Axes, times: np.ndarray, d: np.ndarray, samples: np.ndarray
+) -> tuple[list[Any], list[str]]:
+    """A swarm's distances (``swarm_bands``' d) drawn: the least over the vehicles at every
+    sample, the 5-95 % band and the median at ``samples``; the key's entries."""
+    t = times[samples]
+    band = ax.fill_between(t, d[samples, 1], d[samples, 3], color="tab:blue", alpha=0.25, lw=0)
+    (median,) = ax.plot(t, d[samples, 2], color="tab:blue", linewidth=1.0)
+    (low,) = ax.plot(times, d[:, 0], color="k", linewidth=0.8)
     return [low, band, median], ["least over the vehicles", "5-95 % of the vehicles", "median"]
 
 
@@ -802,9 +824,14 @@ def figure_vehicle_distance(record: RunRecord) -> Figure | None:
         return None
     lines = {float(r): f"r_pz = {r:g} m" for r in np.unique(record.scenario.r_pz)}
     samples = distance_samples(record)
+    d = (
+        nearest_vehicle_distance(record)
+        if samples is None
+        else swarm_bands(record, nearest_vehicle_distance, samples)
+    )
     return _distance_figure(
         record,
-        nearest_vehicle_distance(record, samples),
+        d,
         closest,
         record.ids[closest.other],
         what="vehicle-vehicle distance",
@@ -838,9 +865,14 @@ def figure_obstacle_distance(record: RunRecord) -> Figure | None:
         lines = {float(m): f"prism margin = {m:g} m" for m in margins}
     other = physical_obstacle_names(record)[closest.other]
     samples = distance_samples(record)
+    d = (
+        nearest_obstacle_distance(record)
+        if samples is None
+        else swarm_bands(record, nearest_obstacle_distance, samples)
+    )
     return _distance_figure(
         record,
-        nearest_obstacle_distance(record, samples),
+        d,
         closest,
         other,
         what="vehicle-obstacle distance",

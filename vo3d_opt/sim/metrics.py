@@ -222,8 +222,8 @@ def nearest_vehicle_distance(record: RunRecord, samples: np.ndarray | None = Non
     """(T+1, N): each vehicle's distance to its nearest other vehicle at each sample (inf alone);
     ``samples``: only those sample indices, one row each (a large run's figures)."""
     rows = np.arange(record.positions.shape[0]) if samples is None else np.asarray(samples)
-    out = np.full((rows.size, record.n_agents), np.inf)
-    if record.n_agents < 2:
+    out = np.full((rows.size, record.positions.shape[1]), np.inf)
+    if out.shape[1] < 2:
         return out
     for r, k in enumerate(rows):
         pk = record.positions[k]
