@@ -313,3 +313,114 @@ def test_every_option_of_every_subcommand_is_described():
                 assert flag in text, (name, flag)
     for name in ("run", "compare"):
         assert f"else {DEFAULT_QP_SOLVER}" in " ".join(vo3d(name, "--help").stdout.split()), name
+
+
+# ------------------------------------------------------------------ a large swarm's flags
+TIMING = {"decision_time_median_us", "decision_time_p99_us", "decision_time_max_us", "wall_time"}
+
+
+@pytest.fixture
+def cli(monkeypatch):
+    """``vo3d_opt.cli`` to call ``main`` in this process; the package logger's handlers, level
+    and propagation (which ``main`` sets) as they were afterwards."""
+    import logging
+
+    from vo3d_opt import cli as module
+
+    logger = logging.getLogger("vo3d_opt")
+    monkeypatch.setattr(logger, "handlers", list(logger.handlers))
+    monkeypatch.setattr(logger, "propagate", logger.propagate)
+    monkeypatch.setattr(logger, "level", logger.level)
+    return module
+
+
+def test_run_hands_threads_neighbours_and_spill_to_the_simulator(cli, small, tmp_path,
+                                                                 monkeypatch, capsys, run_json):
+    """--threads, --max-neighbors, --spill, --spill-dir reach the simulator and its run; with
+    one thread and one neighbour of two vehicles, spilled, the summary is the default run's."""
+    from vo3d_opt.sim import simulator
+
+    seen: dict = {}
+    real = cli.Simulator
+
+    class Spy(real):
+        def __init__(self, *args, **kwargs):
+            seen.update(kwargs)
+            super().__init__(*args, **kwargs)
+
+        def run(self, **kwargs):
+            seen.update(kwargs)
+            record = super().run(**kwargs)
+            seen["spilled"] = record.spill is not None
+            return record
+
+    monkeypatch.setattr(cli, "Simulator", Spy)
+    for module in (cli, simulator):  # wherever the test's temporary directory is
+        monkeypatch.setattr(module, "in_memory_fs", lambda *a, **k: False)
+    status = cli.main(["run", str(small), "--json", "--threads", "1", "--max-neighbors", "1",
+                       "--spill", "--spill-dir", str(tmp_path)])
+    assert status == 0
+    assert (seen["threads"], seen["max_neighbors"]) == (1, 1)
+    assert (seen["spill"], seen["spill_dir"], seen["spilled"]) == (True, str(tmp_path), True)
+    summary, default = json.loads(capsys.readouterr().out), json.loads(run_json.stdout)
+    assert {k: v for k, v in summary.items() if k not in TIMING} == {
+        k: v for k, v in default.items() if k not in TIMING}
+
+
+@pytest.mark.parametrize("args, flag", [
+    (["--threads", "0"], "--threads"),
+    (["--threads", "-1"], "--threads"),
+    (["--threads", "9999"], "--threads"),  # above NUMBA_NUM_THREADS
+    (["--max-neighbors", "two"], "--max-neighbors"),
+    (["--spill-dir", "/no/such/dir"], "--spill-dir"),
+    (["--no-spill", "--spill-dir", "."], "--spill-dir"),
+])
+def test_bad_swarm_flags_exit_2_naming_them(small, tmp_path, args, flag):
+    out = tmp_path / "out"
+    res = vo3d("run", small, "--json", "--out", out, *args)
+    assert res.returncode == 2 and res.stdout == "", res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and flag in lines[0], res.stderr
+    assert "-1" not in args or ">= 1" in lines[0]
+    assert not out.exists()  # refused before --out is made
+
+
+def test_max_neighbors_needs_noiseless_immediate_sensing(tmp_path):
+    noisy = {**SMALL, "sensing": {**SMALL["sensing"], "position_noise": 0.1, "seed": 1}}
+    path = tmp_path / "noisy.yaml"
+    path.write_text(yaml.safe_dump(noisy, sort_keys=False))
+    res = vo3d("run", path, "--json", "--max-neighbors", "3")
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr.strip() == "vo3d: --max-neighbors: only with noiseless, immediate sensing"
+
+
+def test_an_unwritable_spill_dir_is_refused_before_the_run(cli, small, tmp_path, monkeypatch,
+                                                            capsys):
+    monkeypatch.setattr(cli, "in_memory_fs", lambda *a, **k: False)
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    if os.access(locked, os.W_OK):  # root writes anywhere: make the probe fail instead
+        def refuse(*args, **kwargs):
+            raise PermissionError(13, "Permission denied")
+        monkeypatch.setattr(cli.tempfile, "TemporaryFile", refuse)
+    assert cli.main(["run", str(small), "--json", "--spill-dir", str(locked)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("vo3d: --spill-dir: cannot write in "), err
+
+
+@pytest.mark.parametrize("args", [["--spill"], ["--spill-dir", "."]])
+def test_spilling_into_memory_is_refused_before_the_run(cli, small, monkeypatch, capsys, args):
+    monkeypatch.setattr(cli, "in_memory_fs", lambda *a, **k: True)
+    assert cli.main(["run", str(small), "--json", *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"vo3d: {args[0]}: ") and "held in memory" in err[0]
+    # --no-spill keeps the record in memory: nothing to refuse
+    assert cli.main(["run", str(small), "--json", "--no-spill"]) == 0
+
+
+def test_a_large_run_deciding_in_python_is_warned_about(cli, small, monkeypatch, capsys):
+    monkeypatch.setattr(cli, "SLOW_SWARM", 2)  # the small scenario's two agents count as many
+    assert cli.main(["run", str(small), "--json", "--formulation", "sampled"]) == 0
+    assert "warning: sampled / none decides in Python" in capsys.readouterr().err
+    assert cli.main(["run", str(small), "--json"]) == 0  # compiled: no warning
+    assert "decides in Python" not in capsys.readouterr().err

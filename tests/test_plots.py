@@ -310,3 +310,74 @@ def test_cli_rejects_bad_figure_options_before_running(small_file, tmp_path, arg
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and fragment in lines[0], res.stderr
     assert "running" not in res.stderr
+
+
+# ----------------------------------------------------------------------------- swarms
+@pytest.fixture(scope="module")
+def swarm():
+    return _run(_crowd(120))  # more than plots.SWARM_AGENTS
+
+
+def test_drawn_samples_spread_evenly_and_keep_both_ends():
+    from vo3d_opt.plots import drawn_samples
+
+    assert drawn_samples(7, 10).tolist() == list(range(7))
+    for n, budget in ((1001, 10), (2634, 200), (11, 4)):
+        idx = drawn_samples(n, budget)
+        assert idx[0] == 0 and idx[-1] == n - 1 and len(idx) <= budget
+        assert np.all(np.diff(idx) > 0) and np.ptp(np.diff(idx)) <= 1
+
+
+def test_a_swarms_paths_are_drawn_through_samples_of_its_record(swarm, monkeypatch):
+    from matplotlib.collections import LineCollection
+
+    from vo3d_opt import plots
+
+    assert swarm.n_agents > plots.SWARM_AGENTS and swarm.positions.shape[0] > 4
+    monkeypatch.setattr(plots, "PLOT_POINTS", 4 * swarm.n_agents)  # four points per path
+    lines = [c for c in figure_top_view(swarm).axes[0].collections
+             if isinstance(c, LineCollection)]
+    paths = lines[-1].get_segments()
+    assert len(paths) == swarm.n_agents and {len(s) for s in paths} == {4}
+    for i in (0, 57, swarm.n_agents - 1):
+        assert np.array_equal(paths[i][0], swarm.positions[0, i, :2])
+        assert np.array_equal(paths[i][-1], swarm.positions[-1, i, :2])
+    # the view still holds every position, not only the drawn ones
+    flat = swarm.positions.reshape(-1, 3)
+    lo, hi = scene_bounds(swarm)
+    assert np.all(lo <= flat.min(axis=0)) and np.all(hi >= flat.max(axis=0))
+
+
+def test_position_bounds_read_in_chunks_are_the_exact_extremes(swarm, monkeypatch):
+    from vo3d_opt import plots
+
+    monkeypatch.setattr(plots, "CHUNK_ELEMENTS", 3 * swarm.n_agents * 2)  # two samples a chunk
+    flat = swarm.positions.reshape(-1, 3)
+    assert np.array_equal(plots.position_bounds(swarm),
+                          np.stack([flat.min(axis=0), flat.max(axis=0)]))
+
+
+def test_a_swarms_distances_are_bands_over_the_vehicles(swarm, monkeypatch):
+    """The least line is the closest pair's distance at every sample (brute force over every
+    pair), the median and the band at the drawn samples (brute force too), the key names
+    them, and no colour bar names 120 vehicles."""
+    from vo3d_opt import plots
+
+    monkeypatch.setattr(plots, "BAND_SAMPLES", 4)
+    fig = plots.figure_vehicle_distance(swarm)
+    ax = fig.axes[0]
+    idx = plots.drawn_samples(swarm.positions.shape[0], 4)
+    assert len(idx) == 4 < swarm.positions.shape[0]
+    p = swarm.positions
+    gaps = np.linalg.norm(p[:, :, None] - p[:, None, :], axis=-1)
+    gaps[:, np.arange(swarm.n_agents), np.arange(swarm.n_agents)] = np.inf
+    nearest = gaps.min(axis=2)  # (T+1, N)
+    least = next(line for line in ax.get_lines() if line.get_color() == "k")
+    np.testing.assert_allclose(least.get_xdata(), swarm.times)
+    np.testing.assert_allclose(least.get_ydata(), nearest.min(axis=1), rtol=1e-12)
+    median = next(line for line in ax.get_lines() if line.get_color() == "tab:blue")
+    np.testing.assert_allclose(median.get_xdata(), swarm.times[idx])
+    np.testing.assert_allclose(median.get_ydata(), np.median(nearest[idx], axis=1), rtol=1e-12)
+    texts = _legend_texts(fig)
+    assert {"least over the vehicles", "5-95 % of the vehicles", "median"} <= set(texts)
+    assert not any(a.get_ylabel().startswith("agent") for a in fig.axes)

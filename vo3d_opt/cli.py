@@ -53,9 +53,14 @@ from vo3d_opt.sim.scenario import (
     scenario_variant,
 )
 from vo3d_opt.sim.simulator import DEFAULT_FORMULATION, Simulator, scenario_selector
+from vo3d_opt.sim.spill import in_memory_fs, spill_directory, spill_supported
 from vo3d_opt.types import one_line
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+#: A run of at least this many agents with a formulation or backend that decides in Python
+#: (not the compiled plane_qp on exact2d) is warned about: it takes a millisecond or more per
+#: agent and step.
+SLOW_SWARM = 200
 
 log = logging.getLogger("vo3d_opt.cli")
 
@@ -188,7 +193,11 @@ def _stdout_to_stderr() -> Iterator[None]:
         os.close(saved)
 
 
-def _run(sc: Scenario, sel: Any, formulation: str, solver: str) -> tuple[Any, dict[str, Any]]:
+def _run(
+    sc: Scenario, sel: Any, formulation: str, solver: str, args: argparse.Namespace | None = None
+) -> tuple[Any, dict[str, Any]]:
+    """Fly the scenario (``args``: ``vo3d run``'s --threads, --max-neighbors, --spill,
+    --spill-dir; None: the defaults); its record and summary."""
     log.info(
         "running %s (%d agents, %d obstacles) with %s / %s",
         sc.name,
@@ -197,9 +206,28 @@ def _run(sc: Scenario, sel: Any, formulation: str, solver: str) -> tuple[Any, di
         formulation,
         solver,
     )
+    if sc.n_agents >= SLOW_SWARM and not getattr(sel, "compiled", True):
+        log.warning(
+            "%s / %s decides in Python, a millisecond or more per agent and step: %d agents "
+            "will take long (plane_qp on exact2d, the default, is compiled)",
+            formulation,
+            solver,
+            sc.n_agents,
+        )
+    flags = vars(args) if args is not None else {}
     progress = None if log.isEnabledFor(logging.INFO) else False  # -q: no progress bar either
+    sim = Simulator(
+        sc,
+        sel,
+        formulation=formulation,
+        solver=solver,
+        max_neighbors=flags.get("max_neighbors"),
+        threads=flags.get("threads"),
+    )
     with _stdout_to_stderr():
-        record = Simulator(sc, sel, formulation=formulation, solver=solver).run(progress=progress)
+        record = sim.run(
+            progress=progress, spill=flags.get("spill"), spill_dir=flags.get("spill_dir")
+        )
     # what the run added to the simulator's default options: the file's and -o's
     summary = {**summarize(record), "selector_options": dict(sc.selector_options)}
     log.info(
@@ -283,9 +311,10 @@ def _zones(text: str) -> Any:
 def cmd_run(args: argparse.Namespace) -> int:
     plot_options = _figure_options(args)
     sc = _with_options(_load(args.scenario), args.selector_options)
+    _swarm_checked(args, sc)
     out = _out_dir(args.out) if args.out else None
     sel, formulation, solver = _selector(sc, args.formulation, args.solver)
-    record, summary = _run(sc, sel, formulation, solver)
+    record, summary = _run(sc, sel, formulation, solver, args)
     status = EXIT_OK
     if out is not None:
         try:
@@ -536,6 +565,86 @@ def _common() -> _Parser:
     return p
 
 
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _directory(text: str) -> str:
+    if not os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is not an existing directory")
+    return text
+
+
+def _add_swarm_flags(run: argparse.ArgumentParser) -> None:
+    """What a large swarm's run needs: the decisions' threads and neighbours, where the record
+    lives (``fly``'s ``spill``, ``spill_dir``)."""
+    run.add_argument(
+        "--threads",
+        type=_positive_int,
+        metavar="K",
+        help="threads of the compiled decisions (select_many; default: every core, at most "
+        "NUMBA_NUM_THREADS); the answers do not depend on it. No effect where the agents "
+        "decide one at a time (noisy or late sensing, formulations run in Python)",
+    )
+    run.add_argument(
+        "--max-neighbors",
+        type=_positive_int,
+        metavar="K",
+        help="each agent avoids only its K nearest vehicles within sensing range (default: "
+        "every one in range); noiseless, immediate sensing only",
+    )
+    run.add_argument(
+        "--spill",
+        action=argparse.BooleanOptionalAction,
+        help="keep the run's record in a temporary file on disk, not in memory (Linux only; "
+        "default: when its allotment exceeds 1 GiB; --no-spill: never)",
+    )
+    run.add_argument(
+        "--spill-dir",
+        type=_directory,
+        metavar="DIR",
+        help="an existing, writable directory on disk (not tmpfs) for that file (default: "
+        "$TMPDIR); given, a record that cannot spill there is an error, not kept in memory",
+    )
+
+
+def _swarm_checked(args: argparse.Namespace, sc: Scenario) -> None:
+    """Refuse before the run what the run would refuse at its start: --threads above numba's
+    limit, --max-neighbors under noisy or late sensing, a spill that cannot happen."""
+    if args.threads is not None:
+        from vo3d_opt.swarm import thread_count
+
+        try:
+            thread_count(args.threads)
+        except ValueError as exc:
+            raise _UsageError(f"--{exc}") from None
+    if args.max_neighbors is not None and not sc.sensing.perfect:
+        raise _UsageError("--max-neighbors: only with noiseless, immediate sensing")
+    flag = "--spill-dir" if args.spill_dir else "--spill"
+    if args.spill is False:
+        if args.spill_dir:
+            raise _UsageError("--spill-dir: has no effect with --no-spill")
+        return
+    if not (args.spill or args.spill_dir):
+        return
+    if not spill_supported():
+        raise _UsageError(f"{flag}: this platform cannot spill a record (Linux only)")
+    where = spill_directory(args.spill_dir)
+    if in_memory_fs(where):
+        raise _UsageError(f"{flag}: {where} is held in memory (tmpfs); choose a directory on disk")
+    try:
+        with tempfile.TemporaryFile(dir=where):
+            pass
+    except OSError as exc:
+        raise _UsageError(f"{flag}: cannot write in {where}: {exc.strerror or exc}") from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="vo3d", description="Improved 3D velocity obstacle: multi-UAV simulations.")
     p.add_argument(
@@ -594,6 +703,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="also write animation.gif, a replay of the run (at most 150 frames)",
     )
+    _add_swarm_flags(run)
     run.set_defaults(func=cmd_run)
 
     cmp_ = sub.add_parser(

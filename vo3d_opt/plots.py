@@ -13,16 +13,19 @@ are named in a legend up to :data:`LEGEND_MAX_AGENTS`, and by a colour bar beyon
 
 The distance curves are sampled every ``dt``; the marked minimum is the summary's own figure
 (:func:`vo3d_opt.sim.metrics.closest_vehicle_approach`, continuous along each step), so it may
-lie a little below the sampled curves.
+lie a little below the sampled curves. A swarm (more than :data:`SWARM_AGENTS` vehicles) is
+drawn from samples of its record (:data:`PLOT_POINTS`, :data:`BAND_SAMPLES`): paths through
+evenly spaced samples (straight chords between them), and distances as bands over the
+vehicles: the least at every sample, the 5-95 % and the median at the drawn ones.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 from matplotlib import colormaps, rc_context
@@ -59,6 +62,15 @@ LEGEND_MAX_AGENTS = 12
 #: Above this many agents the paths, starts and goals are drawn as one collection each (a
 #: thousand separate lines take a matplotlib figure most of a minute).
 SWARM_AGENTS = 100
+#: A swarm's figures (more than SWARM_AGENTS) draw its paths through at most this many points
+#: in all, each path sampled evenly in time (first and last sample kept), and its distances as
+#: bands over the vehicles (their 5-95 % and median at most BAND_SAMPLES times, their least at
+#: every sample): a 10,000-agent run of 2,600 steps has
+#: 26 million positions (630 MB), which matplotlib cannot draw in a useful time.
+PLOT_POINTS = 2_000_000
+BAND_SAMPLES = 500
+#: Positions read per chunk (of a record that may live in a file: ``RunRecord.drop_resident``).
+CHUNK_ELEMENTS = 8_000_000
 #: "closest": the protected spheres of the closest pair at its closest approach.
 DEFAULT_ZONES = "closest"
 
@@ -155,6 +167,34 @@ def prism_margin(body: Cylinder | Box) -> float:
     return float(
         min(body.side / 2.0 - body.footprint_extent() / 2.0, body.prism_height - body.height)
     )
+
+
+def drawn_samples(n_samples: int, budget: int) -> np.ndarray:
+    """Indices of at most ``budget`` (>= 2) samples of ``n_samples``, evenly spread, the first
+    and the last kept (all of them when there are no more)."""
+    if n_samples <= budget:
+        return np.arange(n_samples)
+    return np.unique(np.linspace(0, n_samples - 1, budget).round().astype(np.int64))
+
+
+def drawn_positions(record: RunRecord) -> np.ndarray:
+    """The positions the path figures draw: all of them, or a swarm's ``PLOT_POINTS``."""
+    if record.n_agents <= SWARM_AGENTS:
+        return record.positions
+    budget = max(2, PLOT_POINTS // record.n_agents)
+    return record.positions[drawn_samples(record.positions.shape[0], budget)]
+
+
+def position_bounds(record: RunRecord) -> np.ndarray:
+    """(2, 3) the least and greatest coordinates of every position, read a chunk at a time."""
+    p = record.positions
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    step = max(1, CHUNK_ELEMENTS // max(1, p.shape[1] * 3))
+    for a in range(0, p.shape[0], step):
+        part = p[a : a + step].reshape(-1, 3)
+        lo, hi = np.minimum(lo, part.min(axis=0)), np.maximum(hi, part.max(axis=0))
+        record.drop_resident()
+    return np.stack([lo, hi])
 
 
 def positions_at(record: RunRecord, t: float) -> np.ndarray:
@@ -411,7 +451,7 @@ def scene_bounds(record: RunRecord, snaps: Sequence[ZoneSnapshot] = ()) -> np.nd
     """(2, 3) lower and upper corners of what a view shows: paths, goals, obstacles (up to the
     altitude ceiling), spheres and the drawn protected spheres."""
     sc = record.scenario
-    pts = [record.positions.reshape(-1, 3), sc.goals]
+    pts = [position_bounds(record), sc.goals]
     z_top = sc.limits.altitude[1]
     for body in sc.bodies:
         r = body.side / 2.0
@@ -475,7 +515,7 @@ def figure_trajectories_3d(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -
             alpha=0.6 if s.physical else 0.3,
             linestyle="-" if s.physical else ":",
         )
-    p = record.positions
+    p = drawn_positions(record)
     if record.n_agents > SWARM_AGENTS:  # one artist per kind, not per agent: seconds, not minutes
         paths = Line3DCollection(list(p.transpose(1, 0, 2)), colors=colors, linewidths=0.6)
         ax.add_collection3d(paths)
@@ -642,7 +682,7 @@ def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figur
     ax = fig.add_subplot()
     colors = agent_colors(record.n_agents)
     draw_obstacles_2d(ax, record)
-    p = record.positions
+    p = drawn_positions(record)
     if record.n_agents > SWARM_AGENTS:  # one artist per kind, not per agent
         paths = LineCollection(list(p[:, :, :2].transpose(1, 0, 2)), colors=colors, linewidths=0.6)
         ax.add_collection(paths)
@@ -682,6 +722,37 @@ def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figur
 # ------------------------------------------------------------------------------ distances
 
 
+def distance_samples(record: RunRecord) -> np.ndarray | None:
+    """The samples at which a distance figure draws a swarm's bands: None (every vehicle's own
+    curve) up to SWARM_AGENTS vehicles, else ``BAND_SAMPLES`` of them."""
+    if record.n_agents <= SWARM_AGENTS:
+        return None
+    return drawn_samples(record.positions.shape[0], BAND_SAMPLES)
+
+
+def swarm_bands(
+    record: RunRecord, distances: Callable[[RunRecord, np.ndarray], np.ndarray], samples: np.ndarray
+) -> np.ndarray:
+    """(T+1, 4): at every sample the least of the vehicles' distances (``distances(record,
+    [k])``: one row of N), and at ``samples`` their 5, 50 and 95 % (NaN elsewhere): one sample
+    at a time, so that no (T+1, N) array is built; vehicles without a distance (inf) left out."""
+    T = record.positions.shape[0]
+    out = np.full((T, 4), np.nan)
+    banded = np.zeros(T, dtype=bool)
+    banded[samples] = True
+    step = max(1, CHUNK_ELEMENTS // max(1, 3 * record.n_agents))
+    for k in range(T):
+        d = distances(record, np.array([k]))[0]
+        d = d[np.isfinite(d)]
+        if d.size:
+            out[k, 0] = d.min()
+            if banded[k]:
+                out[k, 1:] = np.percentile(d, [5.0, 50.0, 95.0])
+        if k % step == step - 1:
+            record.drop_resident()
+    return out
+
+
 def _distance_figure(
     record: RunRecord,
     d: np.ndarray,
@@ -691,16 +762,22 @@ def _distance_figure(
     what: str,
     ylabel: str,
     lines: dict[float, str],
+    samples: np.ndarray | None = None,
 ) -> Figure:
-    """Per-vehicle distance curves d (samples, agents), the closest approach marked with the
-    summary's figure, and horizontal reference lines {value: label}."""
+    """Per-vehicle distance curves d (samples, agents), or a swarm's bands over the vehicles
+    (``swarm_bands``' d, its percentiles drawn at ``samples``), the closest approach marked with
+    the summary's figure, and horizontal reference lines {value: label}."""
     fig = new_figure((7.0, 4.2))
     ax = fig.add_subplot()
     colors = agent_colors(record.n_agents)
-    width = 1.0 if record.n_agents <= LEGEND_MAX_AGENTS else 0.6
-    for i in range(record.n_agents):
-        ax.plot(record.times, d[:, i], color=colors[i], linewidth=width)
-    handles, labels = [], []
+    handles: list[Any] = []
+    labels: list[str] = []
+    if samples is None:
+        width = 1.0 if record.n_agents <= LEGEND_MAX_AGENTS else 0.6
+        for i in range(record.n_agents):
+            ax.plot(record.times, d[:, i], color=colors[i], linewidth=width)
+    else:
+        handles, labels = _bands(ax, record.times, d, samples)
     for value, label in sorted(lines.items()):
         handles.append(ax.axhline(value, color="red", linestyle="--", linewidth=1.0))
         labels.append(label)
@@ -720,8 +797,23 @@ def _distance_figure(
     ax.set_ylabel(ylabel)
     ax.grid(True, linewidth=0.4, alpha=0.5)
     ax.set_title(f"{record.scenario.name}: {what}", fontsize="medium")
-    agent_key(fig, ax, record, colors, handles=handles, labels=labels)
+    if samples is None:
+        agent_key(fig, ax, record, colors, handles=handles, labels=labels)
+    else:  # no vehicle has a curve of its own: the bands' key, no colour bar
+        ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small")
     return fig
+
+
+def _bands(
+    ax: Axes, times: np.ndarray, d: np.ndarray, samples: np.ndarray
+) -> tuple[list[Any], list[str]]:
+    """A swarm's distances (``swarm_bands``' d) drawn: the least over the vehicles at every
+    sample, the 5-95 % band and the median at ``samples``; the key's entries."""
+    t = times[samples]
+    band = ax.fill_between(t, d[samples, 1], d[samples, 3], color="tab:blue", alpha=0.25, lw=0)
+    (median,) = ax.plot(t, d[samples, 2], color="tab:blue", linewidth=1.0)
+    (low,) = ax.plot(times, d[:, 0], color="k", linewidth=0.8)
+    return [low, band, median], ["least over the vehicles", "5-95 % of the vehicles", "median"]
 
 
 def figure_vehicle_distance(record: RunRecord) -> Figure | None:
@@ -731,14 +823,21 @@ def figure_vehicle_distance(record: RunRecord) -> Figure | None:
     if closest is None:
         return None
     lines = {float(r): f"r_pz = {r:g} m" for r in np.unique(record.scenario.r_pz)}
+    samples = distance_samples(record)
+    d = (
+        nearest_vehicle_distance(record)
+        if samples is None
+        else swarm_bands(record, nearest_vehicle_distance, samples)
+    )
     return _distance_figure(
         record,
-        nearest_vehicle_distance(record),
+        d,
         closest,
         record.ids[closest.other],
         what="vehicle-vehicle distance",
         ylabel="distance to nearest vehicle (m)",
         lines=lines,
+        samples=samples,
     )
 
 
@@ -765,14 +864,21 @@ def figure_obstacle_distance(record: RunRecord) -> Figure | None:
     else:
         lines = {float(m): f"prism margin = {m:g} m" for m in margins}
     other = physical_obstacle_names(record)[closest.other]
+    samples = distance_samples(record)
+    d = (
+        nearest_obstacle_distance(record)
+        if samples is None
+        else swarm_bands(record, nearest_obstacle_distance, samples)
+    )
     return _distance_figure(
         record,
-        nearest_obstacle_distance(record),
+        d,
         closest,
         other,
         what="vehicle-obstacle distance",
         ylabel="distance to nearest obstacle surface (m)",
         lines=lines,
+        samples=samples,
     )
 
 

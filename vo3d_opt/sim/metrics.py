@@ -218,20 +218,23 @@ def _obstacle_distance(kind: str, ob: Any, pts: np.ndarray) -> tuple[np.ndarray,
     )
 
 
-def nearest_vehicle_distance(record: RunRecord) -> np.ndarray:
-    """(T+1, N): each vehicle's distance to its nearest other vehicle at each sample (inf alone)."""
-    p = record.positions
-    out = np.full(p.shape[:2], np.inf)
-    if p.shape[1] < 2:
+def nearest_vehicle_distance(record: RunRecord, samples: np.ndarray | None = None) -> np.ndarray:
+    """(T+1, N): each vehicle's distance to its nearest other vehicle at each sample (inf alone);
+    ``samples``: only those sample indices, one row each (a large run's figures)."""
+    rows = np.arange(record.positions.shape[0]) if samples is None else np.asarray(samples)
+    out = np.full((rows.size, record.positions.shape[1]), np.inf)
+    if out.shape[1] < 2:
         return out
-    for k in range(p.shape[0]):
-        out[k] = cKDTree(p[k]).query(p[k], k=2)[0][:, 1]
+    for r, k in enumerate(rows):
+        pk = record.positions[k]
+        out[r] = cKDTree(pk).query(pk, k=2)[0][:, 1]
     return out
 
 
-def nearest_obstacle_distance(record: RunRecord) -> np.ndarray:
-    """(T+1, N): each vehicle's distance to the nearest obstacle surface (inf without any)."""
-    p = record.positions
+def nearest_obstacle_distance(record: RunRecord, samples: np.ndarray | None = None) -> np.ndarray:
+    """(T+1, N): each vehicle's distance to the nearest obstacle surface (inf without any);
+    ``samples``: only those sample indices."""
+    p = record.positions if samples is None else record.positions[np.asarray(samples)]
     out = np.full(p.shape[:2], np.inf)
     for kind, ob in _physical_obstacles(record):
         d = (

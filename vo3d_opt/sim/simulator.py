@@ -156,7 +156,10 @@ class RunRecord:
 
     A long run of a large swarm keeps its arrays in a temporary file (``spill``,
     :mod:`vo3d_opt.sim.spill`): they read as any array; :meth:`drop_resident` lets go of the
-    pages read so far (the metrics and the writers call it as they go).
+    pages read so far (the metrics and the writers call it as they go). The file is mapped
+    shared: a process forked while the record lives (``multiprocessing``'s ``fork``) sees the
+    same arrays, and what it writes into them the parent sees too; a pickled record (``spawn``,
+    Dask) carries copies of their contents instead.
     """
 
     scenario: Scenario
