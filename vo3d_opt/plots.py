@@ -43,6 +43,7 @@ from mpl_toolkits.mplot3d import Axes3D, proj3d
 from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
 from vo3d_opt.sim.metrics import (
+    CHUNK_ELEMENTS,
     Approach,
     closest_obstacle_approach,
     closest_vehicle_approach,
@@ -69,8 +70,6 @@ SWARM_AGENTS = 100
 #: 26 million positions (630 MB), which matplotlib cannot draw in a useful time.
 PLOT_POINTS = 2_000_000
 BAND_SAMPLES = 500
-#: Positions read per chunk (of a record that may live in a file: ``RunRecord.drop_resident``).
-CHUNK_ELEMENTS = 8_000_000
 #: "closest": the protected spheres of the closest pair at its closest approach.
 DEFAULT_ZONES = "closest"
 
@@ -185,11 +184,17 @@ def drawn_positions(record: RunRecord) -> np.ndarray:
     return record.positions[drawn_samples(record.positions.shape[0], budget)]
 
 
+def chunk_samples(record: RunRecord) -> int:
+    """Samples of positions read per chunk of a record that may live in a file (the metrics'
+    ``CHUNK_ELEMENTS``; ``RunRecord.drop_resident`` after each)."""
+    return max(1, CHUNK_ELEMENTS // max(1, 3 * record.positions.shape[1]))
+
+
 def position_bounds(record: RunRecord) -> np.ndarray:
     """(2, 3) the least and greatest coordinates of every position, read a chunk at a time."""
     p = record.positions
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    step = max(1, CHUNK_ELEMENTS // max(1, p.shape[1] * 3))
+    step = chunk_samples(record)
     for a in range(0, p.shape[0], step):
         part = p[a : a + step].reshape(-1, 3)
         lo, hi = np.minimum(lo, part.min(axis=0)), np.maximum(hi, part.max(axis=0))
@@ -740,7 +745,7 @@ def swarm_bands(
     out = np.full((T, 4), np.nan)
     banded = np.zeros(T, dtype=bool)
     banded[samples] = True
-    step = max(1, CHUNK_ELEMENTS // max(1, 3 * record.n_agents))
+    step = chunk_samples(record)
     for k in range(T):
         d = distances(record, np.array([k]))[0]
         d = d[np.isfinite(d)]

@@ -41,7 +41,7 @@ OBSTACLE_SUBSAMPLES = (0.25, 0.5, 0.75)
 #: Steps per chunk of the pairwise arrays, at most, and the elements per chunk (bounds memory to
 #: a few hundred MB however many vehicles: the arrays grow with the square of their number).
 _CHUNK = 256
-_CHUNK_ELEMENTS = 8_000_000
+CHUNK_ELEMENTS = 8_000_000
 
 CONTRACT_KEYS = (
     "scenario",
@@ -75,7 +75,7 @@ def pair_min_distances(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     if ii.size == 0:
         return ii, jj, dmin
     last = positions.shape[0] - 1
-    chunk = int(max(2, min(_CHUNK, _CHUNK_ELEMENTS // ii.size)))
+    chunk = int(max(2, min(_CHUNK, CHUNK_ELEMENTS // ii.size)))
     for a in range(0, max(last, 1), chunk):
         b = min(a + chunk, last)
         rel = positions[a : b + 1, ii] - positions[a : b + 1, jj]  # (S+1, P, 3)
