@@ -31,7 +31,7 @@ process, so "peak MB" is that run's peak resident memory (the run, its record an
 (``--profile-steps K``: the first K, default 100; 0: the whole run).
 
     python benchmarks/bench_swarm.py [--sizes 100 1000 10000] [--cases swap crossing]
-        [--methods ours-1 ours-all ours-noguard ours-coarse ours-nearest rvo2] [--max-neighbors 10]
+        [--methods ours-1 ours-all ours-noguard ours-coarse ours-nearest ours-fast rvo2] [--max-neighbors 10]
         [--max-steps N=K ...]
         [--profile [--profile-steps K]]
         [--out benchmarks/results_swarm.md]
@@ -54,12 +54,15 @@ from typing import Any
 
 import numpy as np
 
-METHODS = ("ours-1", "ours-all", "ours-noguard", "ours-coarse", "ours-nearest", "rvo2")
+from vo3d_opt import FAST_OPTIONS
+
+METHODS = ("ours-1", "ours-all", "ours-noguard", "ours-coarse", "ours-nearest", "ours-fast", "rvo2")
 #: Options each ``ours-*`` method adds to the simulator's (ours-1 and ours-all add none).
 EXTRA_OPTIONS = {
     "ours-noguard": {"closing_guard": False},
     "ours-coarse": {"plane_step_deg": 30.0},
     "ours-nearest": {"least_bad_escape": False},
+    "ours-fast": dict(FAST_OPTIONS),
 }
 
 
@@ -202,6 +205,7 @@ def table_row(r: dict[str, Any]) -> str:
             "ours-coarse": f"vo3d_opt select_many, plane_step_deg "
                            f"{EXTRA_OPTIONS['ours-coarse']['plane_step_deg']:g}, {r['threads']} threads",
             "ours-nearest": f"vo3d_opt select_many, least_bad_escape off, {r['threads']} threads",
+            "ours-fast": f"vo3d_opt select_many, FAST_OPTIONS, {r['threads']} threads",
             "rvo2": "RVO2-3D doStep, 1 thread"}[r["method"]]
     flown = "whole run" if r["steps"] < r["n_steps"] or r["all_reached"] else f"{r['steps']} steps (max_time)"
     if r.get("capped"):

@@ -193,6 +193,23 @@ def test_selector_options_fly_as_the_scenario_key_and_override_it(small, tmp_pat
     assert {k: v for k, v in row.items() if k not in TIMING_KEYS | {"selector_options"}} == in_file
 
 
+def test_fast_is_fast_options_in_its_place_among_the_o_flags(cli, small):
+    """--fast flies FAST_OPTIONS as -o would (summary and behaviour); a later -o overrides one
+    of them, an earlier one is overridden; sweep takes it too (parsed only: its run is the
+    sweep's -o path)."""
+    from vo3d_opt import FAST_OPTIONS
+
+    fast = vo3d("run", small, "--json", "--fast")
+    as_o = [arg for k, v in FAST_OPTIONS.items() for arg in ("-o", f"{k}={v}")]
+    assert _behaviour(fast, dict(FAST_OPTIONS)) == _behaviour(vo3d("run", small, "--json", *as_o))
+    later = vo3d("run", small, "--json", "--fast", "-o", "qp_samples=36")
+    _behaviour(later, {**FAST_OPTIONS, "qp_samples": 36})
+    earlier = vo3d("run", small, "--json", "-o", "qp_samples=36", "--fast")
+    _behaviour(earlier, dict(FAST_OPTIONS))
+    args = cli.build_parser().parse_args(["sweep", "pair", "--n", "1", "-o", "margin=0.01", "--fast"])
+    assert args.selector_options == [("margin", 0.01), *FAST_OPTIONS.items()]
+
+
 @pytest.mark.parametrize(
     "command, option, fragment",
     [

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 from encounters import encounters
-from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
+from vo3d_opt import FAST_OPTIONS, AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
 from vo3d_opt.formulations.common import Options, prepare
 from vo3d_opt.solvers import Result
 from vo3d_opt.solvers import Backend, available_qp_solvers, register_backend, unregister_backend
@@ -71,6 +71,18 @@ def test_plane_qp_safe_whenever_sampled_is_and_no_worse(kw):
         resolution = v_max / (o.speed_levels - 1) + v_max * np.deg2rad(o.heading_step_deg)
         dev = exact(kw).deviation
         assert dev(got.velocity)[0] <= dev(ref.velocity)[0] + resolution
+
+
+@settings(max_examples=60, **SETTINGS)
+@given(encounters())
+def test_fast_options_try_fewer_velocities_never_an_unchecked_one(kw):
+    """FAST_OPTIONS (fewer planes, tangent points and grid velocities): every answer within the
+    limits, every optimal one outside every VO by the exact 3D check, as with the defaults."""
+    d = VelocitySelector(**FAST_OPTIONS).select(**kw)
+    assert_within_limits(kw, d.velocity)
+    assert d.status in ("optimal", "inside_protected_zone", "infeasible_min_violation")
+    if d.status == "optimal":
+        assert safe(kw, d.velocity)
 
 
 @settings(max_examples=25, **SETTINGS)

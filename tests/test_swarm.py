@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
+from vo3d_opt import FAST_OPTIONS, AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
 
 TOL = 1e-9
 
@@ -85,6 +85,7 @@ CASES = {
     "max_speed": ({}, dict(max_speed=np.linspace(2.0, 5.0, 24))),
     "closing_guard": (dict(reciprocal=True, closing_guard=True), {}),
     "no_least_bad_escape": (dict(reciprocal=True, pz_buffer=3.0, least_bad_escape=False), {}),
+    "fast": (dict(FAST_OPTIONS, reciprocal=True, closing_guard=True), dict(obstacles=OBSTACLES)),
     "everything": (dict(reciprocal=True, pz_buffer=1.0, horizon=8.0, closing_guard=True),
                    dict(obstacles=OBSTACLES, spheres=SPHERES, obstacle_range=20.0, max_neighbors=4,
                         limits=Limits(speed=(0.5, 4.0), altitude=(0.0, 50.0), acceleration=5.0), dt=0.1)),

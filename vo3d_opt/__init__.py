@@ -1,8 +1,17 @@
 """vo3d-opt: safe velocities for multi-UAV systems by optimisation over the improved 3D velocity
 obstacle (VO cones, VO pyramids, avoidance planes)."""
 
-from .selector import Decision, VelocitySelector
+from .selector import FAST_OPTIONS, Decision, VelocitySelector
 from .types import AgentState, Box, Cylinder, Limits, Neighbor
 
-__all__ = ["VelocitySelector", "Decision", "AgentState", "Neighbor", "Cylinder", "Box", "Limits"]
+__all__ = [
+    "VelocitySelector",
+    "FAST_OPTIONS",
+    "Decision",
+    "AgentState",
+    "Neighbor",
+    "Cylinder",
+    "Box",
+    "Limits",
+]
 __version__ = "0.1.0"

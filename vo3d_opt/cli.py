@@ -14,7 +14,8 @@
   ``vo3d_opt.sweep``).
 * ``--selector-option KEY=VALUE`` (``-o``, repeatable, the last of a repeated key wins; run,
   compare, sweep): merged over the scenario's ``selector_options`` and checked as they are;
-  the summaries carry the scenario's ``selector_options`` so merged.
+  the summaries carry the scenario's ``selector_options`` so merged. ``--fast`` (same
+  commands) stands for ``-o`` of each of ``vo3d_opt.FAST_OPTIONS``, in its place.
 
 SCENARIO is a path or the name of a bundled scenario. Progress and logs go to stderr through
 ``logging`` (``-q``: warnings and errors only, ``-v``: debugging detail too). Exit status: 0 when
@@ -41,7 +42,7 @@ from typing import Any
 
 from vo3d_opt import __version__
 from vo3d_opt.report import CSV_MAX_ROWS, rounded, write_outputs
-from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FORMULATIONS
+from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FAST_OPTIONS, FORMULATIONS
 from vo3d_opt.sim.metrics import CONTRACT_KEYS, summarize
 from vo3d_opt.sim.scenario import (
     Scenario,
@@ -143,6 +144,29 @@ def _add_selector_option(p: argparse.ArgumentParser, what: str) -> None:
         "(the keyword arguments of VelocitySelector, README), e.g. closing_guard=false or "
         "margin=0.05; repeatable; overrides the scenario's",
     )
+    p.add_argument(
+        "--fast",
+        dest="selector_options",
+        action=_FastOptions,
+        nargs=0,
+        help="the selector options of vo3d_opt.FAST_OPTIONS ("
+        + ", ".join(f"{k}={v}" for k, v in FAST_OPTIONS.items())
+        + "): coarser choice, faster decisions (README, Swarms); a later -o overrides one",
+    )
+
+
+class _FastOptions(argparse.Action):
+    """``--fast``: FAST_OPTIONS as if given by ``-o`` here (so the last of a key still wins)."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        pairs = list(getattr(namespace, self.dest, None) or [])
+        setattr(namespace, self.dest, pairs + list(FAST_OPTIONS.items()))
 
 
 def _with_options(sc: Scenario, pairs: list[tuple[str, Any]] | None) -> Scenario:

@@ -56,6 +56,20 @@ FORMULATIONS = ("sampled", "plane_qp", "cone_qp", "nlp")
 DEFAULT_SOLVERS = {"plane_qp": "exact2d", "cone_qp": "daqp", "nlp": "casadi"}
 DEFAULT_QP_SOLVER = DEFAULT_SOLVERS["plane_qp"]
 DEFAULT_NLP_SOLVER = DEFAULT_SOLVERS["nlp"]
+#: Coarser options for swarms where the decision's time matters more than the shortest detour
+#: (``VelocitySelector(**FAST_OPTIONS)``, ``vo3d run --fast``; README, Swarms): avoidance
+#: planes every 45 degrees (5 planes, 15 plane QPs instead of 19 and 57), tangent points among
+#: 12 generator samples instead of 36, and the fallbacks' grid 8 headings by 3 speeds per
+#: plane instead of 36 by 9. Every answer still passes the same exact 3D membership check and
+#: the same limits; what it gives up is choice: fewer velocities are tried, so a decision may
+#: deviate further from the preferred velocity, or end least-bad where the defaults find a safe
+#: velocity. A plain dict: read-only by convention, copied wherever it is used.
+FAST_OPTIONS: dict[str, float | int] = {
+    "plane_step_deg": 45.0,
+    "qp_samples": 12,
+    "heading_step_deg": 45.0,
+    "speed_levels": 3,
+}
 #: Seconds a first compilation may take before the user is told about it on stderr.
 _COMPILE_NOTICE_AFTER = 3.0
 _warm_lock = threading.Lock()
