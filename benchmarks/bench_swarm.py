@@ -8,7 +8,9 @@ every thread with avoidance planes every 30 degrees instead of 10 (``plane_step_
 exact check of each). ``ours-nearest`` is ours on every thread with ``least_bad_escape`` off
 (the rule of 0.1.0): the least-bad fallback, when every velocity enters a zone at once, takes
 the one nearest the preferred velocity, not the one closing slowest on the zones the vehicle is
-inside.
+inside. ``ours-fast`` is ours on every thread with ``vo3d_opt.FAST_OPTIONS`` (``--fast`` on the
+command line) added: planes every 45 degrees (5 planes, 15 QPs), tangent points among 12
+generator samples instead of 36, the fallbacks' grid 8 headings by 3 speeds per plane.
 
 Every method flies the same scenarios in the same loop (``vo3d_opt.sim.simulator.fly``: the same
 preferred velocities, dynamics and metrics), with the same dt (0.2 s), speeds (0-4 m/s),
@@ -54,16 +56,24 @@ from typing import Any
 
 import numpy as np
 
-from vo3d_opt import FAST_OPTIONS
-
 METHODS = ("ours-1", "ours-all", "ours-noguard", "ours-coarse", "ours-nearest", "ours-fast", "rvo2")
-#: Options each ``ours-*`` method adds to the simulator's (ours-1 and ours-all add none).
+#: Options each ``ours-*`` method adds to the simulator's (ours-1 and ours-all add none;
+#: ours-fast adds ``vo3d_opt.FAST_OPTIONS``: ``extra_options``).
 EXTRA_OPTIONS = {
     "ours-noguard": {"closing_guard": False},
     "ours-coarse": {"plane_step_deg": 30.0},
     "ours-nearest": {"least_bad_escape": False},
-    "ours-fast": dict(FAST_OPTIONS),
 }
+
+
+def extra_options(method: str) -> dict[str, Any] | None:
+    """The options ``method`` adds to the simulator's (None: none). Imported here, not at the
+    top: the parent process of the runs loads no vo3d_opt."""
+    if method == "ours-fast":
+        from vo3d_opt import FAST_OPTIONS
+
+        return dict(FAST_OPTIONS)
+    return EXTRA_OPTIONS.get(method)
 
 
 def scenario(case: str, n: int):
@@ -92,10 +102,10 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
     else:
         threads = 1 if method == "ours-1" else numba.config.NUMBA_NUM_THREADS
         sel, formulation, solver = scenario_selector(sc)
-        if method in EXTRA_OPTIONS:  # the simulator's options plus the method's
+        extra = extra_options(method)
+        if extra is not None:  # the simulator's options plus the method's
             sel, formulation, solver = make_selector(
-                formulation, solver,
-                {**default_selector_options(sc), **sc.selector_options, **EXTRA_OPTIONS[method]})
+                formulation, solver, {**default_selector_options(sc), **sc.selector_options, **extra})
         step = SwarmSelect(sc, sel, formulation=formulation, solver=solver, max_neighbors=max_neighbors,
                            threads=threads)
         from vo3d_opt.selector import warm_up_many
@@ -122,6 +132,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
         "status_counts": s["status_counts"],
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "load_start": load,
         "record": "spilled" if rec.spill is not None else "memory",
+        "options": extra_options(method),
         "load_end": os.getloadavg()[0],
     }
 
@@ -199,13 +210,19 @@ def _fmt(x: Any, spec: str = ".1f") -> str:
     return "—" if x is None else format(x, spec)
 
 
+def _options_text(options: dict[str, Any] | None) -> str:
+    """``{"a": 1, "b": 2.0}`` as ``a 1, b 2``."""
+    return ", ".join(f"{k} {v:g}" for k, v in (options or {}).items())
+
+
 def table_row(r: dict[str, Any]) -> str:
     name = {"ours-1": "vo3d_opt select_many, 1 thread", "ours-all": f"vo3d_opt select_many, {r['threads']} threads",
             "ours-noguard": f"vo3d_opt select_many, closing_guard off, {r['threads']} threads",
             "ours-coarse": f"vo3d_opt select_many, plane_step_deg "
                            f"{EXTRA_OPTIONS['ours-coarse']['plane_step_deg']:g}, {r['threads']} threads",
             "ours-nearest": f"vo3d_opt select_many, least_bad_escape off, {r['threads']} threads",
-            "ours-fast": f"vo3d_opt select_many, FAST_OPTIONS, {r['threads']} threads",
+            "ours-fast": f"vo3d_opt select_many, FAST_OPTIONS ({_options_text(r.get('options'))}), "
+                         f"{r['threads']} threads",
             "rvo2": "RVO2-3D doStep, 1 thread"}[r["method"]]
     flown = "whole run" if r["steps"] < r["n_steps"] or r["all_reached"] else f"{r['steps']} steps (max_time)"
     if r.get("capped"):

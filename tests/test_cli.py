@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from vo3d_opt import FAST_OPTIONS
 from vo3d_opt.sim.metrics import CONTRACT_KEYS
 from vo3d_opt.sim.safety import derive_margins
 from vo3d_opt.sim.scenario import bundled_files, load_scenario
@@ -197,8 +198,6 @@ def test_fast_is_fast_options_in_its_place_among_the_o_flags(cli, small):
     """--fast flies FAST_OPTIONS as -o would (summary and behaviour); a later -o overrides one
     of them, an earlier one is overridden; sweep takes it too (parsed only: its run is the
     sweep's -o path)."""
-    from vo3d_opt import FAST_OPTIONS
-
     fast = vo3d("run", small, "--json", "--fast")
     as_o = [arg for k, v in FAST_OPTIONS.items() for arg in ("-o", f"{k}={v}")]
     assert _behaviour(fast, dict(FAST_OPTIONS)) == _behaviour(vo3d("run", small, "--json", *as_o))
@@ -208,6 +207,10 @@ def test_fast_is_fast_options_in_its_place_among_the_o_flags(cli, small):
     _behaviour(earlier, dict(FAST_OPTIONS))
     args = cli.build_parser().parse_args(["sweep", "pair", "--n", "1", "-o", "margin=0.01", "--fast"])
     assert args.selector_options == [("margin", 0.01), *FAST_OPTIONS.items()]
+    res = vo3d("compare", small, "--json", "--fast")
+    assert res.returncode == 0, res.stderr
+    (row,) = json.loads(res.stdout)
+    assert row["selector_options"] == FAST_OPTIONS
 
 
 @pytest.mark.parametrize(

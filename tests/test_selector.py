@@ -77,12 +77,18 @@ def test_plane_qp_safe_whenever_sampled_is_and_no_worse(kw):
 @given(encounters())
 def test_fast_options_try_fewer_velocities_never_an_unchecked_one(kw):
     """FAST_OPTIONS (fewer planes, tangent points and grid velocities): every answer within the
-    limits, every optimal one outside every VO by the exact 3D check, as with the defaults."""
-    d = VelocitySelector(**FAST_OPTIONS).select(**kw)
+    limits, every optimal one outside every VO by the exact 3D check, as with the defaults; an
+    answer on a plane is on one of its 5 planes (every 45 degrees), not the defaults' 19."""
+    sel = VelocitySelector(**FAST_OPTIONS)
+    assert sel.options.packed[1].shape[1] == 5
+    d = sel.select(**kw)
     assert_within_limits(kw, d.velocity)
     assert d.status in ("optimal", "inside_protected_zone", "infeasible_min_violation")
     if d.status == "optimal":
         assert safe(kw, d.velocity)
+    if d.plane is not None:
+        turns = np.degrees(d.plane) / 45.0
+        assert abs(turns - round(turns)) < 1e-9
 
 
 @settings(max_examples=25, **SETTINGS)

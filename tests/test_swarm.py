@@ -137,6 +137,20 @@ def test_least_bad_escape_in_a_tight_swarm_changes_answers_and_matches_select():
     assert np.abs(answers[0] - answers[1]).max(axis=1).max() > 0.1
 
 
+def test_fast_options_in_a_tight_swarm_change_answers_and_match_select():
+    """FAST_OPTIONS in a 30 m cube of 24 vehicles: other answers than the defaults' (fewer
+    velocities tried), and select_many still equals select."""
+    fast = VelocitySelector(**FAST_OPTIONS, reciprocal=True, closing_guard=True)
+    P, V, W, R = random_swarm(2, side=30.0)
+    kw = dict(sensing_range=30.0, limits=LIMITS)
+    many = fast.select_many(P, V, W, R, **kw)
+    vel, statuses = loop_of_select(fast, P, V, W, R, **kw)
+    np.testing.assert_allclose(many.velocities, vel, rtol=0, atol=TOL)
+    assert list(many.statuses) == list(statuses)
+    default = VelocitySelector(reciprocal=True, closing_guard=True).select_many(P, V, W, R, **kw)
+    assert np.abs(default.velocities - many.velocities).max(axis=1).max() > 0.1
+
+
 def test_decide_mask_keeps_the_others_and_makes_them_non_cooperative():
     sel = VelocitySelector(reciprocal=True)
     decide = np.arange(24) % 3 != 0

@@ -151,7 +151,8 @@ def _add_selector_option(p: argparse.ArgumentParser, what: str) -> None:
         nargs=0,
         help="the selector options of vo3d_opt.FAST_OPTIONS ("
         + ", ".join(f"{k}={v}" for k, v in FAST_OPTIONS.items())
-        + "): coarser choice, faster decisions (README, Swarms); a later -o overrides one",
+        + "): coarser choice, faster decisions (README, Swarms; with sampled, its whole grid); "
+        "a later -o overrides one",
     )
 
 
@@ -162,7 +163,7 @@ class _FastOptions(argparse.Action):
         self,
         parser: argparse.ArgumentParser,
         namespace: argparse.Namespace,
-        values: Any,
+        values: str | Sequence[Any] | None,
         option_string: str | None = None,
     ) -> None:
         pairs = list(getattr(namespace, self.dest, None) or [])

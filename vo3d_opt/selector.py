@@ -16,6 +16,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Final, TypedDict
 
 import numpy as np
 
@@ -56,6 +57,17 @@ FORMULATIONS = ("sampled", "plane_qp", "cone_qp", "nlp")
 DEFAULT_SOLVERS = {"plane_qp": "exact2d", "cone_qp": "daqp", "nlp": "casadi"}
 DEFAULT_QP_SOLVER = DEFAULT_SOLVERS["plane_qp"]
 DEFAULT_NLP_SOLVER = DEFAULT_SOLVERS["nlp"]
+
+
+class FastOptions(TypedDict):
+    """The keys of ``FAST_OPTIONS`` (options of ``Options``)."""
+
+    plane_step_deg: float
+    qp_samples: int
+    heading_step_deg: float
+    speed_levels: int
+
+
 #: Coarser options for swarms where the decision's time matters more than the shortest detour
 #: (``VelocitySelector(**FAST_OPTIONS)``, ``vo3d run --fast``; README, Swarms): avoidance
 #: planes every 45 degrees (5 planes, 15 plane QPs instead of 19 and 57), tangent points among
@@ -63,8 +75,10 @@ DEFAULT_NLP_SOLVER = DEFAULT_SOLVERS["nlp"]
 #: plane instead of 36 by 9. Every answer still passes the same exact 3D membership check and
 #: the same limits; what it gives up is choice: fewer velocities are tried, so a decision may
 #: deviate further from the preferred velocity, or end least-bad where the defaults find a safe
-#: velocity. A plain dict: read-only by convention, copied wherever it is used.
-FAST_OPTIONS: dict[str, float | int] = {
+#: velocity. For ``sampled``, heading_step_deg and speed_levels are its whole grid (5 planes of
+#: 17 velocities). A plain dict (typed, so that ``**FAST_OPTIONS`` type-checks): read-only by
+#: convention, copied wherever it is used.
+FAST_OPTIONS: Final[FastOptions] = {
     "plane_step_deg": 45.0,
     "qp_samples": 12,
     "heading_step_deg": 45.0,

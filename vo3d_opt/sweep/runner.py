@@ -57,7 +57,9 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
         from vo3d_opt.baselines import rvo2
 
         if method.formulation or method.solver or method.selector_options:
-            raise SweepError("--formulation/--solver/--selector-option: not used by --method rvo2")
+            raise SweepError(
+                "--formulation/--solver/--selector-option/--fast: not used by --method rvo2"
+            )
         if not family.obstacle_free:
             ok = ", ".join(f.name for f in FAMILIES.values() if f.obstacle_free)
             raise SweepError(
