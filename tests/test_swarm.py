@@ -104,18 +104,24 @@ def test_select_many_equals_a_loop_of_select(case):
     assert "optimal" in statuses
 
 
-def test_closing_guard_in_a_tight_swarm_changes_answers_and_matches_select():
+@pytest.mark.parametrize("options, baseline", [
+    pytest.param(dict(reciprocal=True, closing_guard=True), dict(reciprocal=True), id="closing_guard"),
+    pytest.param(dict(FAST_OPTIONS, reciprocal=True, closing_guard=True),
+                 dict(reciprocal=True, closing_guard=True), id="fast"),
+])
+def test_options_in_a_tight_swarm_change_answers_and_match_select(options, baseline):
     """24 vehicles in a 30 m cube: many pairs within a step of each other's zones, so the
-    guard's rows bind (some answers change) and select_many still equals select."""
-    guarded = VelocitySelector(reciprocal=True, closing_guard=True)
+    guard's rows bind, and FAST_OPTIONS' fewer velocities tried give other answers than the
+    defaults'; select_many still equals select."""
+    sel = VelocitySelector(**options)
     P, V, W, R = random_swarm(2, side=30.0)
     kw = dict(sensing_range=30.0, limits=LIMITS)
-    many = guarded.select_many(P, V, W, R, **kw)
-    vel, statuses = loop_of_select(guarded, P, V, W, R, **kw)
+    many = sel.select_many(P, V, W, R, **kw)
+    vel, statuses = loop_of_select(sel, P, V, W, R, **kw)
     np.testing.assert_allclose(many.velocities, vel, rtol=0, atol=TOL)
     assert list(many.statuses) == list(statuses)
-    plain = VelocitySelector(reciprocal=True).select_many(P, V, W, R, **kw)
-    assert np.abs(plain.velocities - many.velocities).max(axis=1).max() > 0.1
+    other = VelocitySelector(**baseline).select_many(P, V, W, R, **kw)
+    assert np.abs(other.velocities - many.velocities).max(axis=1).max() > 0.1
 
 
 def test_least_bad_escape_in_a_tight_swarm_changes_answers_and_matches_select():
@@ -135,20 +141,6 @@ def test_least_bad_escape_in_a_tight_swarm_changes_answers_and_matches_select():
     default = VelocitySelector(reciprocal=True, pz_buffer=3.0).select_many(P, V, W, R, **kw)
     np.testing.assert_array_equal(default.velocities, answers[0])
     assert np.abs(answers[0] - answers[1]).max(axis=1).max() > 0.1
-
-
-def test_fast_options_in_a_tight_swarm_change_answers_and_match_select():
-    """FAST_OPTIONS in a 30 m cube of 24 vehicles: other answers than the defaults' (fewer
-    velocities tried), and select_many still equals select."""
-    fast = VelocitySelector(**FAST_OPTIONS, reciprocal=True, closing_guard=True)
-    P, V, W, R = random_swarm(2, side=30.0)
-    kw = dict(sensing_range=30.0, limits=LIMITS)
-    many = fast.select_many(P, V, W, R, **kw)
-    vel, statuses = loop_of_select(fast, P, V, W, R, **kw)
-    np.testing.assert_allclose(many.velocities, vel, rtol=0, atol=TOL)
-    assert list(many.statuses) == list(statuses)
-    default = VelocitySelector(reciprocal=True, closing_guard=True).select_many(P, V, W, R, **kw)
-    assert np.abs(default.velocities - many.velocities).max(axis=1).max() > 0.1
 
 
 def test_decide_mask_keeps_the_others_and_makes_them_non_cooperative():
