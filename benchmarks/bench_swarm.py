@@ -33,7 +33,8 @@ process, so "peak MB" is that run's peak resident memory (the run, its record an
 (``--profile-steps K``: the first K, default 100; 0: the whole run).
 
     python benchmarks/bench_swarm.py [--sizes 100 1000 10000] [--cases swap crossing]
-        [--methods ours-1 ours-all ours-noguard ours-coarse ours-nearest ours-fast rvo2] [--max-neighbors 10]
+        [--methods ours-1 ours-all ours-noguard ours-coarse ours-nearest ours-fast rvo2]
+        [--max-neighbors 10]
         [--max-steps N=K ...]
         [--profile [--profile-steps K]]
         [--out benchmarks/results_swarm.md]
