@@ -34,7 +34,7 @@ from vo3d_opt.geometry.membership import ball_in_cone, in_vo_cones
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
 
 # the compiled helpers have no Python wrapper: called through these
-_grid_of = numba.njit(lambda bounds, cfg: grid_of(bounds, cfg))
+_grid_of = numba.njit(lambda bounds, cfg: grid_of(bounds, cfg, False))
 
 
 @numba.njit
@@ -230,7 +230,8 @@ def _check_crowd(seed, kw, options, accel):
         n_tried = py_search(enc.vos, planes, qps, G3, h3, enc.bounds, cfg, tried)[3]
         tried = np.ascontiguousarray(tried[:n_tried])
     position = np.asarray(enc.position, float)
-    found, v, p = py_fallback(enc.vos, planes, tried, position, enc.v_now, G3, h3, enc.bounds, cfg)
+    found, v, p = py_fallback(enc.vos, planes, tried, position, enc.v_now, G3, h3, enc.bounds, cfg,
+                              False)
     ref = _grid_reference(enc, planes, py_polar_grid(enc.bounds, cfg))
     assert found == ref[0]
     v_ref, t_ref, dev_ref = _reference(enc, planes, tried)
@@ -264,7 +265,7 @@ def test_the_crowds_use_the_blocks():
                                 for p in range(len(planes.phi)) for b in range(len(grid.discs))]))
         G3, h3 = enc.linear_bounds()
         found.append(py_fallback(enc.vos, planes, np.zeros((0, 3)), np.asarray(enc.position, float),
-                                 enc.v_now, G3, h3, enc.bounds, enc.options.config)[0])
+                                 enc.v_now, G3, h3, enc.bounds, enc.options.config, False)[0])
     assert np.mean(covered) > 0.5 and 0 < sum(found) < len(found)
 
 
@@ -399,3 +400,76 @@ def test_block_certificates_hold_at_their_largest_ball(seed):
             pts = _ball_points(rng, c, rho, worst=worst)
             assert (_zone_times(enc.vos, k, pts) <= _time_bound(enc.vos, k, c, rho)).all()
     assert edges > 20
+
+
+# ------------------------------- fine_fallback: the default grid with something that does not avoid
+
+def _hazard_decisions(n=120):
+    """Decisions near the ground under an acceleration limit (as in the lagged sweep family),
+    with cooperative neighbours and, in turn, obstacles in reach, a non-cooperative neighbour,
+    or neither."""
+    from vo3d_opt import Cylinder
+    rng = np.random.default_rng(7)
+    out = []
+    for t in range(n):
+        kind = ("obstacle", "noncoop", "none")[t % 3]
+        p = np.array([0.0, 0.0, rng.uniform(1.0, 10.0)])
+        v = rng.uniform(-4.0, 4.0, 3) * (1.0, 1.0, 0.3)
+        nbrs = [Neighbor(position=tuple(p + rng.uniform(-15.0, 15.0, 3)),
+                         velocity=tuple(rng.uniform(-3.0, 3.0, 3)), r_pz=6.0,
+                         cooperative=not (kind == "noncoop" and k == 0)) for k in range(4)]
+        obs = [Cylinder(center=tuple(rng.uniform(-12.0, 12.0, 2)), radius=rng.uniform(2.0, 5.0),
+                        height=40.0) for _ in range(3)] if kind == "obstacle" else []
+        out.append((kind, dict(own=AgentState(position=p, velocity=v), preferred_velocity=(4.5, 0.0, 0.0),
+                               neighbors=nbrs, obstacles=obs, dt=0.2,
+                               limits=Limits(speed=(0.0, 5.0), altitude=(0.0, 40.0), acceleration=9.6))))
+    return out
+
+
+@pytest.mark.parametrize("solver", ["exact2d", "daqp"])
+def test_fine_fallback_is_the_default_grid_where_something_does_not_avoid(solver):
+    """With FAST_OPTIONS' coarse grid, a decision with an obstacle in reach or a non-cooperative
+    neighbour falls back on the default grid (the same answer as FAST_OPTIONS' planes with the
+    default grid); one with cooperative neighbours only keeps the coarse grid (the same answer
+    as ``fine_fallback=False``). The compiled kernel and a Python formulation alike. The
+    decisions include fallbacks of both kinds, and answers the rule changes."""
+    from vo3d_opt import FAST_OPTIONS, VelocitySelector
+    fast = VelocitySelector("plane_qp", solver, **FAST_OPTIONS)
+    coarse = VelocitySelector("plane_qp", solver, **FAST_OPTIONS, fine_fallback=False)
+    fine_grid = VelocitySelector("plane_qp", solver, **{**FAST_OPTIONS, "heading_step_deg": 10.0,
+                                                        "speed_levels": 9})
+    fell_back, changed = {"obstacle": 0, "noncoop": 0, "none": 0}, 0
+    for kind, kw in _hazard_decisions(60 if solver == "daqp" else 120):
+        got = fast.select(**kw)
+        want = (coarse if kind == "none" else fine_grid).select(**kw)
+        np.testing.assert_array_equal(got.velocity, want.velocity)
+        assert got.status == want.status
+        if got.info.get("round") in ("sampled", "least_bad"):
+            fell_back[kind] += 1
+            changed += kind != "none" and not np.array_equal(got.velocity,
+                                                             coarse.select(**kw).velocity)
+    assert min(fell_back.values()) > 0 and changed > 0, (fell_back, changed)
+
+
+def test_fine_fallback_changes_nothing_with_the_default_grid():
+    """The default grid is the fine one: ``fine_fallback`` off gives the same answers."""
+    from vo3d_opt import VelocitySelector
+    on, off = VelocitySelector(), VelocitySelector(fine_fallback=False)
+    for _, kw in _hazard_decisions(60):
+        np.testing.assert_array_equal(on.select(**kw).velocity, off.select(**kw).velocity)
+
+
+def test_fast_options_keep_an_obstacle_zone_clear_in_a_lagged_encounter():
+    """Encounter 5573 of the lagged sweep (seed 0): with FAST_OPTIONS' coarse grid everywhere a
+    vehicle pinned to the altitude floor drifted into a box's protected prism on least-bad
+    velocities; with the default grid near obstacles (``fine_fallback``) it stays out."""
+    from vo3d_opt import FAST_OPTIONS
+    from vo3d_opt.sim.scenario import scenario_variant
+    from vo3d_opt.sim.simulator import run_scenario
+    from vo3d_opt.sim.metrics import summarize
+    from vo3d_opt.sweep import make_encounter
+    sc = make_encounter("lagged", 0, 5573).load()
+    for fine, intrusions in ((False, 1), (True, 0)):
+        fast = scenario_variant(sc, selector_options={**FAST_OPTIONS, "fine_fallback": fine})
+        s = summarize(run_scenario(fast, progress=False))
+        assert (s["obstacle_pz_intrusions"], s["collisions"]) == (intrusions, 0)

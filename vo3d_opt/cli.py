@@ -151,8 +151,8 @@ def _add_selector_option(p: argparse.ArgumentParser, what: str) -> None:
         nargs=0,
         help="the selector options of vo3d_opt.FAST_OPTIONS ("
         + ", ".join(f"{k}={v}" for k, v in FAST_OPTIONS.items())
-        + "): coarser choice, faster decisions, for obstacle-free swarms (README, Swarms; with "
-        "sampled, its whole grid); a later -o overrides one",
+        + "): coarser choice, faster decisions, for swarms (README, Swarms; with sampled, its "
+        "whole grid); a later -o overrides one",
     )
 
 

@@ -18,6 +18,8 @@ from ..geometry import AvoidancePlanes
 from ..geometry.membership import ball_in_cone, clearance, in_cone, in_pyramid
 from ..status import Status
 from .common import (
+    FINE_HEADING_STEP,
+    FINE_SPEED_LEVELS,
     NEVER,
     Bounds,
     Config,
@@ -33,14 +35,14 @@ from .common import (
 
 
 @jit
-def _polar(bounds: Bounds, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
-    """``polar_grid``'s points and, for each, its speed level and heading index (M, 2)."""
-    L = cfg.speed_levels
-    H = int(np.ceil(2.0 * np.pi / cfg.heading_step - 1e-9))
+def _polar(bounds: Bounds, L: int, heading_step: float) -> tuple[np.ndarray, np.ndarray]:
+    """``polar_grid``'s points (L speeds, a heading every ``heading_step`` rad) and, for each,
+    its speed level and heading index (M, 2)."""
+    H = int(np.ceil(2.0 * np.pi / heading_step - 1e-9))
     out, where = np.empty((L * H, 2)), np.empty((L * H, 2), dtype=np.int64)
     cos_h, sin_h = np.empty(H), np.empty(H)  # per heading, not per point: most of the cost
     for k in range(H):
-        cos_h[k], sin_h[k] = np.cos(k * cfg.heading_step), np.sin(k * cfg.heading_step)
+        cos_h[k], sin_h[k] = np.cos(k * heading_step), np.sin(k * heading_step)
     m = 0
     for a in range(L):
         s = bounds.v_min + (bounds.v_max - bounds.v_min) * a / (L - 1)
@@ -58,7 +60,7 @@ def _polar(bounds: Bounds, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
 def polar_grid(bounds: Bounds, cfg: Config) -> np.ndarray:
     """(M, 2) in-plane candidates: ``speed_levels`` speeds from v_min to v_max, headings every
     ``heading_step``; speed 0 once, repeated speeds once."""
-    return _polar(bounds, cfg)[0]
+    return _polar(bounds, cfg.speed_levels, cfg.heading_step)[0]
 
 
 class Grid(NamedTuple):
@@ -78,9 +80,26 @@ BLOCK = 3
 
 
 @jit
-def grid_of(bounds: Bounds, cfg: Config) -> Grid:
-    """The polar grid of one decision and its blocks."""
-    points, where = _polar(bounds, cfg)
+def has_hazard(vos: VOs, nbrs: np.ndarray) -> bool:
+    """Whether the decision has something that does not avoid: an obstacle's VO pyramid in
+    reach or a non-cooperative neighbour (``nbrs`` column 7 is 0)."""
+    if vos.pyramids.L_pz.shape[0] > 0:
+        return True
+    for i in range(nbrs.shape[0]):
+        if not nbrs[i, 7] > 0.0:
+            return True
+    return False
+
+
+@jit
+def grid_of(bounds: Bounds, cfg: Config, hazard: bool) -> Grid:
+    """The fallbacks' polar grid of one decision and its blocks: ``cfg``'s, but with
+    ``fine_fallback`` and a ``hazard`` (``has_hazard``) at least as fine as the default grid in
+    speeds and headings (``FINE_SPEED_LEVELS``, ``FINE_HEADING_STEP``: then nothing changes)."""
+    L, step = cfg.speed_levels, cfg.heading_step
+    if hazard and cfg.fine_fallback:
+        L, step = max(L, FINE_SPEED_LEVELS), min(step, FINE_HEADING_STEP)
+    points, where = _polar(bounds, L, step)
     M, per_row = points.shape[0], (where[:, 1].max() // BLOCK + 1) if points.shape[0] else 1
     block = np.empty(M, dtype=np.int64)
     for m in range(M):
@@ -364,16 +383,23 @@ def py_fallback(
     h3: np.ndarray,
     bounds: Bounds,
     cfg: Config,
+    hazard: bool,
 ) -> tuple[bool, np.ndarray, int]:
     """The kernel's fallbacks for Python callers: ``grid_search``, and when it finds nothing
-    ``least_bad`` (with the cones grid_search found holding the blocks), on one ``grid_of``:
-    (found on the grid, velocity, its plane's index or -1)."""
-    grid = grid_of(bounds, cfg)
+    ``least_bad`` (with the cones grid_search found holding the blocks), on one ``grid_of``
+    (``hazard``: see ``has_hazard``): (found on the grid, velocity, its plane's index or -1)."""
+    grid = grid_of(bounds, cfg, hazard)
     cover = np.empty((planes.phi.shape[0], grid.discs.shape[0]), dtype=np.int64)
     found, v, plane = grid_search(vos, planes, grid, G3, h3, bounds, cfg, cover)
     if found:
         return True, v, plane
     return False, least_bad(vos, planes, grid, cover, tried, p, v_now, G3, h3, bounds, cfg), -1
+
+
+@entry
+def py_has_hazard(vos: VOs, nbrs: np.ndarray) -> bool:
+    """``has_hazard`` for Python callers."""
+    return has_hazard(vos, nbrs)
 
 
 @entry
@@ -388,9 +414,9 @@ def py_least_bad(
     bounds: Bounds,
     cfg: Config,
 ) -> np.ndarray:
-    """``least_bad`` on ``grid_of`` for Python callers (compiled code calls ``least_bad``: no
-    Python wrapper)."""
-    grid = grid_of(bounds, cfg)
+    """``least_bad`` on ``cfg``'s own grid for Python callers (``sampled``, whose candidates
+    that grid is; compiled code calls ``least_bad``: no Python wrapper)."""
+    grid = grid_of(bounds, cfg, False)
     cover = np.full((planes.phi.shape[0], grid.discs.shape[0]), -2, dtype=np.int64)
     return least_bad(vos, planes, grid, cover, tried, p, v_now, G3, h3, bounds, cfg)
 
@@ -435,6 +461,7 @@ def fallback(
         h3,
         enc.bounds,
         enc.options.config,
+        py_has_hazard(enc.vos, enc.nbrs),
     )
     if found:
         return Outcome(

@@ -21,7 +21,8 @@ RVO2-3D's ``Agent.cc`` reads:
    rows to it and that QP is solved again (constraint generation, per QP, so an answer never
    depends on the order the QPs are solved in);
 5. no QP gives a safe answer: the sampled grid with the exact check and the margin, else the
-   least-bad velocity (latest first intrusion);
+   least-bad velocity (latest first intrusion); the grid at least the default one's with an
+   obstacle or a non-cooperative neighbour (``fine_fallback``);
 6. the status, and the last line of the contract (never above v_max, never leaving the
    altitude band within dt).
 
@@ -57,7 +58,7 @@ from .common import (
     vz_range,
     within_limits,
 )
-from .fallback import grid_of, grid_search, least_bad
+from .fallback import grid_of, grid_search, has_hazard, least_bad
 from .rows import ROUNDS, RowWork, plane_rows, row_work, vo_base
 
 #: How a decision's velocity was found (``KernelOut.round``): the preferred velocity, a QP round,
@@ -552,7 +553,7 @@ def decide_one(
         v = np.empty(3)
         lift(planes, qps.sol[r, plane], plane, v)
         return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], 1 + r, solved)
-    grid = grid_of(bounds, cfg)  # 5
+    grid = grid_of(bounds, cfg, has_hazard(vos, nbrs))  # 5 (finer with an obstacle: Options)
     cover = np.empty((P, grid.discs.shape[0]), dtype=np.int64)  # the cones holding its blocks
     found, v, plane = grid_search(vos, planes, grid, G3, h3, bounds, cfg, cover)
     if found:
