@@ -11,6 +11,9 @@ the one nearest the preferred velocity, not the one closing slowest on the zones
 inside. ``ours-fast`` is ours on every thread with ``vo3d_opt.FAST_OPTIONS`` (``--fast`` on the
 command line) added: planes every 45 degrees (5 planes, 15 QPs), tangent points among 12
 generator samples instead of 36, the fallbacks' grid 8 headings by 3 speeds per plane.
+``ours-fast-h`` adds to those RVO2-3D's own time horizon (``horizon``: the sensing range over
+twice the top speed, 6.875 s here; a velocity that would meet a zone only later is allowed, as
+RVO2-3D allows it): ours by default, like the paper's VO, has no horizon.
 
 Every method flies the same scenarios in the same loop (``vo3d_opt.sim.simulator.fly``: the same
 preferred velocities, dynamics and metrics), with the same dt (0.2 s), speeds (0-4 m/s),
@@ -33,7 +36,7 @@ process, so "peak MB" is that run's peak resident memory (the run, its record an
 (``--profile-steps K``: the first K, default 100; 0: the whole run).
 
     python benchmarks/bench_swarm.py [--sizes 100 1000 10000] [--cases swap crossing]
-        [--methods ours-1 ours-all ours-noguard ours-coarse ours-nearest ours-fast rvo2]
+        [--methods ours-1 ours-all ours-noguard ours-coarse ours-nearest ours-fast ours-fast-h rvo2]
         [--max-neighbors 10]
         [--max-steps N=K ...]
         [--profile [--profile-steps K]]
@@ -57,9 +60,11 @@ from typing import Any
 
 import numpy as np
 
-METHODS = ("ours-1", "ours-all", "ours-noguard", "ours-coarse", "ours-nearest", "ours-fast", "rvo2")
+METHODS = ("ours-1", "ours-all", "ours-noguard", "ours-coarse", "ours-nearest", "ours-fast", "ours-fast-h",
+           "rvo2")
 #: Options each ``ours-*`` method adds to the simulator's (ours-1 and ours-all add none;
-#: ours-fast adds ``vo3d_opt.FAST_OPTIONS``: ``extra_options``).
+#: ours-fast adds ``vo3d_opt.FAST_OPTIONS``, ours-fast-h those and RVO2-3D's time horizon:
+#: ``extra_options``).
 EXTRA_OPTIONS = {
     "ours-noguard": {"closing_guard": False},
     "ours-coarse": {"plane_step_deg": 30.0},
@@ -67,13 +72,17 @@ EXTRA_OPTIONS = {
 }
 
 
-def extra_options(method: str) -> dict[str, Any] | None:
-    """The options ``method`` adds to the simulator's (None: none). Imported here, not at the
-    top: the parent process of the runs loads no vo3d_opt."""
-    if method == "ours-fast":
+def extra_options(method: str, sc: Any) -> dict[str, Any] | None:
+    """The options ``method`` adds to the simulator's for scenario ``sc`` (None: none); for
+    ours-fast-h the ``horizon`` is RVO2-3D's ``timeHorizon`` on ``sc`` (the sensing range over
+    twice the top speed). Imported here, not at the top: the parent process of the runs loads
+    no vo3d_opt."""
+    if method in ("ours-fast", "ours-fast-h"):
         from vo3d_opt import FAST_OPTIONS
+        from vo3d_opt.baselines.rvo2 import default_time_horizon
 
-        return dict(FAST_OPTIONS)
+        horizon = {"horizon": default_time_horizon(sc)} if method == "ours-fast-h" else {}
+        return {**FAST_OPTIONS, **horizon}
     return EXTRA_OPTIONS.get(method)
 
 
@@ -103,7 +112,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
     else:
         threads = 1 if method == "ours-1" else numba.config.NUMBA_NUM_THREADS
         sel, formulation, solver = scenario_selector(sc)
-        extra = extra_options(method)
+        extra = extra_options(method, sc)
         if extra is not None:  # the simulator's options plus the method's
             sel, formulation, solver = make_selector(
                 formulation, solver, {**default_selector_options(sc), **sc.selector_options, **extra})
@@ -133,7 +142,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
         "status_counts": s["status_counts"],
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "load_start": load,
         "record": "spilled" if rec.spill is not None else "memory",
-        "options": extra_options(method),
+        "options": extra_options(method, sc),
         "load_end": os.getloadavg()[0],
     }
 
@@ -224,6 +233,8 @@ def table_row(r: dict[str, Any]) -> str:
             "ours-nearest": f"vo3d_opt select_many, least_bad_escape off, {r['threads']} threads",
             "ours-fast": f"vo3d_opt select_many, FAST_OPTIONS ({_options_text(r.get('options'))}), "
                          f"{r['threads']} threads",
+            "ours-fast-h": f"vo3d_opt select_many, FAST_OPTIONS and RVO2-3D's time horizon "
+                           f"({_options_text(r.get('options'))}), {r['threads']} threads",
             "rvo2": "RVO2-3D doStep, 1 thread"}[r["method"]]
     flown = "whole run" if r["steps"] < r["n_steps"] or r["all_reached"] else f"{r['steps']} steps (max_time)"
     if r.get("capped"):

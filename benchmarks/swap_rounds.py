@@ -1,11 +1,12 @@
 """Where the sphere swap's decision time goes, by how each decision was found (README, Swarms).
 
 Flies the sphere swap of ``bench_swarm.py`` with ``select_many`` (both cores), keeps the
-arguments of every ``--every``-th call, then replays each kept call one vehicle at a time
+arguments of every ``--every``-th call (shifted by one every other time, so that odd and even
+steps are both kept), then replays each kept call one vehicle at a time
 (``decide_range`` on one vehicle, one thread) and groups the decisions by their round: the
 preferred velocity, a QP round (near / left / right), the sampled grid, the least-bad fallback.
 
-    python benchmarks/swap_rounds.py [--n 1000] [--every 10] [--max-steps K]
+    python benchmarks/swap_rounds.py [--n 1000] [--every 10] [--max-steps K] [--fast]
                                      [--out benchmarks/results_swap_rounds.md]
 """
 from __future__ import annotations
@@ -25,10 +26,14 @@ sys.path.insert(0, str(Path(__file__).parent))
 from bench_swarm import scenario  # noqa: E402
 
 
-def record(n: int, every: int, max_steps: int | None) -> tuple[Any, list[tuple[tuple, dict]]]:
-    """Fly the swap; the selector and every ``every``-th select_many call's arguments."""
+def record(n: int, every: int, max_steps: int | None, fast: bool = False
+           ) -> tuple[Any, list[tuple[tuple, dict]]]:
+    """Fly the swap (``fast``: with ``FAST_OPTIONS``); the selector and every ``every``-th
+    select_many call's arguments."""
+    from vo3d_opt import FAST_OPTIONS
     from vo3d_opt.selector import VelocitySelector, warm_up_many
     from vo3d_opt.sim.deciders import SwarmSelect
+    from vo3d_opt.sim.scenario import scenario_variant
     from vo3d_opt.sim.simulator import fly, scenario_selector
 
     calls: list[tuple[tuple, dict]] = []
@@ -36,12 +41,18 @@ def record(n: int, every: int, max_steps: int | None) -> tuple[Any, list[tuple[t
     real = VelocitySelector.select_many
 
     def kept(self, *args, **kwargs):
-        if count[0] % every == 0:
+        # every ``every``-th call, one later every other time: odd and even steps alike (in the
+        # swap most decisions keep the preferred velocity on one step and almost none on the
+        # next, so a stride of 10 alone would see only one kind)
+        j, r = divmod(count[0], every)
+        if r == (j % 2 if every > 1 else 0):
             calls.append((args, dict(kwargs)))
         count[0] += 1
         return real(self, *args, **kwargs)
 
     sc = scenario("swap", n)
+    if fast:
+        sc = scenario_variant(sc, selector_options={**sc.selector_options, **FAST_OPTIONS})
     sel, formulation, solver = scenario_selector(sc)
     step = SwarmSelect(sc, sel, formulation=formulation, solver=solver, max_neighbors=10, threads=2)
     warm_up_many()
@@ -99,18 +110,20 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--n", type=int, default=1000)
     ap.add_argument("--every", type=int, default=10, help="keep every K-th select_many call")
     ap.add_argument("--max-steps", type=int, default=None)
+    ap.add_argument("--fast", action="store_true", help="fly it with vo3d_opt.FAST_OPTIONS")
     ap.add_argument("--out", type=Path, default=Path(__file__).with_name("results_swap_rounds.md"))
     args = ap.parse_args(argv)
     if args.n < 2 or args.every < 1:
         ap.error("--n must be at least 2 and --every at least 1")
-    sel, calls = record(args.n, args.every, args.max_steps)
+    sel, calls = record(args.n, args.every, args.max_steps, args.fast)
     stats = replay(sel, calls)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=Path(__file__).parent).stdout.strip() or "unknown"
     flown = "whole run" if args.max_steps is None else f"first {args.max_steps} steps"
     machine = platform.processor() or platform.machine()
-    lines = [f"## Sphere swap, N = {args.n}, {flown}, every {args.every}th select_many call "
-             "replayed", "", f"{platform.platform()}; {machine}; commit {commit}; "
+    options = ", FAST_OPTIONS" if args.fast else ""
+    lines = [f"## Sphere swap{options}, N = {args.n}, {flown}, every {args.every}th select_many "
+             "call (odd and even steps alike) replayed", "", f"{platform.platform()}; {machine}; commit {commit}; "
              f"{time.strftime('%Y-%m-%d')}; one vehicle per compiled call, one thread.", "",
              *table(stats)]
     text = "\n".join(lines) + "\n"
