@@ -75,12 +75,13 @@ class FastOptions(TypedDict):
 #: plane instead of 36 by 9. Every answer still passes the same exact 3D membership check and
 #: the same limits; what it gives up is choice: fewer velocities are tried, so a decision may
 #: deviate further from the preferred velocity, or end least-bad where the defaults find a safe
-#: velocity, and flights can be longer (README, Swarms). Near an obstacle or a
-#: non-cooperative neighbour the fallbacks still use the default grid (``fine_fallback``): with
-#: the coarse grid there too, 4 of 10,000 ``lagged`` sweep encounters let a vehicle into an
-#: obstacle's protected prism. For ``sampled``, heading_step_deg and speed_levels are its whole
-#: grid (5 planes of 17 velocities). A plain dict (typed, so that ``**FAST_OPTIONS`` type-checks): read-only by
-#: convention, copied wherever it is used.
+#: velocity, and flights can be longer (README, Swarms). With an obstacle in reach or a
+#: non-cooperative neighbour the fallbacks still use the default grid's speeds and headings
+#: (``fine_fallback``): with the coarse grid there too, 4 of 10,000 ``lagged`` sweep
+#: encounters let a vehicle into an obstacle's protected prism. For ``sampled``,
+#: heading_step_deg and speed_levels are its whole grid (5 planes of 17 velocities). A plain
+#: dict (typed, so that ``**FAST_OPTIONS`` type-checks): read-only by convention, copied
+#: wherever it is used.
 FAST_OPTIONS: Final[FastOptions] = {
     "plane_step_deg": 45.0,
     "qp_samples": 12,

@@ -82,7 +82,7 @@ class Config(NamedTuple):
     heading_step: float  # ... every this many rad on each plane
     closing_guard: bool  # see Options and limit_rows
     least_bad_escape: bool  # see Options and fallback.least_bad
-    fine_fallback: bool  # see Options and fallback.fallback_grid
+    fine_fallback: bool  # see Options and fallback.grid_of
 
 
 class Bounds(NamedTuple):
@@ -147,12 +147,13 @@ class Options(Model):
     # on the zones A is inside, not the one nearest the preferred velocity (fallback.least_bad;
     # on by default since the whole N = 10,000 swap: off, 550 pairs collided flying straight on)
     least_bad_escape: StrictBool = True
-    # the fallbacks' grid (when no QP answer is safe) at least as fine as the default one
-    # (FINE_GRID) in a decision with something that does not avoid: an obstacle's VO pyramid
-    # in reach or a non-cooperative neighbour (fallback.fallback_grid). Changes nothing with
-    # the default grid; with a coarse one (FAST_OPTIONS) it is what keeps obstacles' zones
-    # clear: under an acceleration limit few points of an 8 x 3 grid can be reached, and an
-    # obstacle does not take its share of the avoidance
+    # the fallbacks' grid (when no QP answer is safe) with at least the default one's speeds
+    # and headings (FINE_SPEED_LEVELS, FINE_HEADING_STEP: denser, though it need not hold every
+    # point of a coarser grid) in a decision with something that does not avoid: an obstacle's
+    # VO pyramid in reach or any non-cooperative neighbour (fallback.has_hazard, grid_of). A
+    # no-op with the default grid; with a coarse one (FAST_OPTIONS) it is what keeps
+    # obstacles' zones clear: under an acceleration limit few points of an 8 x 3 grid can be
+    # reached, and an obstacle does not take its share of the avoidance
     fine_fallback: StrictBool = True
 
     @cached_property
@@ -192,11 +193,17 @@ class Options(Model):
 FINE_SPEED_LEVELS: int = Options.model_fields["speed_levels"].default
 FINE_HEADING_STEP: float = math.radians(Options.model_fields["heading_step_deg"].default)
 
+
 @jit
 def config_of(values: np.ndarray, plane_tab: np.ndarray, gen_tab: np.ndarray) -> Config:
     """``Config`` from ``Options.packed``."""
-    corr = Corrections(
-        values[9] > 0, values[10] > 0, values[11] > 0, values[12] > 0, values[13] > 0, values[14] > 0
+    corr = Corrections(  # last in ``packed``
+        values[9] > 0,
+        values[10] > 0,
+        values[11] > 0,
+        values[12] > 0,
+        values[13] > 0,
+        values[14] > 0,
     )
     return Config(
         values[0] > 0,

@@ -94,8 +94,9 @@ def has_hazard(vos: VOs, nbrs: np.ndarray) -> bool:
 @jit
 def grid_of(bounds: Bounds, cfg: Config, hazard: bool) -> Grid:
     """The fallbacks' polar grid of one decision and its blocks: ``cfg``'s, but with
-    ``fine_fallback`` and a ``hazard`` (``has_hazard``) at least as fine as the default grid in
-    speeds and headings (``FINE_SPEED_LEVELS``, ``FINE_HEADING_STEP``: then nothing changes)."""
+    ``fine_fallback`` and a ``hazard`` (``has_hazard``) with at least the default grid's speeds
+    and headings (``FINE_SPEED_LEVELS``, ``FINE_HEADING_STEP``; a no-op with the default grid).
+    Denser, not a superset: 45° headings, for one, are not on a 10° grid."""
     L, step = cfg.speed_levels, cfg.heading_step
     if hazard and cfg.fine_fallback:
         L, step = max(L, FINE_SPEED_LEVELS), min(step, FINE_HEADING_STEP)

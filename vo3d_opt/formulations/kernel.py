@@ -553,7 +553,7 @@ def decide_one(
         v = np.empty(3)
         lift(planes, qps.sol[r, plane], plane, v)
         return KernelOut(enforce_limits(v, p, bounds), status, cfg.phi[plane], 1 + r, solved)
-    grid = grid_of(bounds, cfg, has_hazard(vos, nbrs))  # 5 (finer with an obstacle: Options)
+    grid = grid_of(bounds, cfg, has_hazard(vos, nbrs))  # 5 (fine_fallback: see Options)
     cover = np.empty((P, grid.discs.shape[0]), dtype=np.int64)  # the cones holding its blocks
     found, v, plane = grid_search(vos, planes, grid, G3, h3, bounds, cfg, cover)
     if found:
