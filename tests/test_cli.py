@@ -213,6 +213,26 @@ def test_fast_is_fast_options_in_its_place_among_the_o_flags(cli, small):
     assert row["selector_options"] == FAST_OPTIONS
 
 
+def test_swarm_is_fast_with_the_scenarios_sensing_horizon(cli, small, tmp_path):
+    """--swarm flies FAST_OPTIONS and horizon=sensing, resolved per scenario to its sensing
+    range over twice its top speed: the same flight as that number given by -o, which differs
+    from the flight without a horizon where the meeting is further ahead than it."""
+    swarm_options = {**FAST_OPTIONS, "horizon": "sensing"}
+    sc = load_scenario(small)
+    assert sc.sensing_horizon == pytest.approx(55.0 / (2 * 4.0))
+    as_number = vo3d("run", small, "--json", "--fast", "-o", f"horizon={sc.sensing_horizon!r}")
+    swarm = _behaviour(vo3d("run", small, "--json", "--swarm"), swarm_options)
+    assert swarm == _behaviour(as_number)
+    near = tmp_path / "near.yaml"  # sensing 10 m: a 1.25 s horizon, the meeting 5 s ahead
+    near.write_text(yaml.safe_dump({**SMALL, "sensing": {"vehicle_range": 10.0,
+                                                          "obstacle_range": 55.0}}))
+    near_swarm = _behaviour(vo3d("run", near, "--json", "--swarm"), swarm_options)
+    assert near_swarm == _behaviour(vo3d("run", near, "--json", "--fast", "-o", "horizon=1.25"))
+    assert near_swarm != _behaviour(vo3d("run", near, "--json", "--fast"))
+    args = cli.build_parser().parse_args(["sweep", "pair", "--n", "1", "--swarm", "-o", "margin=0.01"])
+    assert args.selector_options == [*swarm_options.items(), ("margin", 0.01)]
+
+
 @pytest.mark.parametrize(
     "command, option, fragment",
     [

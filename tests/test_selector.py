@@ -7,7 +7,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 from encounters import encounters
-from vo3d_opt import FAST_OPTIONS, AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
+from vo3d_opt import (
+    FAST_OPTIONS,
+    AgentState,
+    Box,
+    Cylinder,
+    Limits,
+    Neighbor,
+    VelocitySelector,
+    swarm_options,
+)
 from vo3d_opt.formulations.common import Options, prepare
 from vo3d_opt.solvers import Result
 from vo3d_opt.solvers import Backend, available_qp_solvers, register_backend, unregister_backend
@@ -89,6 +98,31 @@ def test_fast_options_try_fewer_velocities_never_an_unchecked_one(kw):
     if d.plane is not None:
         turns = np.degrees(d.plane) / 45.0
         assert abs(turns - round(turns)) < 1e-9
+
+
+@settings(max_examples=40, **SETTINGS)
+@given(encounters())
+def test_swarm_options_are_fast_options_with_the_sensing_horizon(kw):
+    """swarm_options(range, v_max): FAST_OPTIONS' answers with the VO truncated at range /
+    (2 v_max): optimal answers outside every VO within that horizon by the exact check."""
+    options = swarm_options(55.0, 5.0)
+    assert options == {**FAST_OPTIONS, "horizon": 5.5}
+    d = VelocitySelector(**options).select(**kw)
+    assert_within_limits(kw, d.velocity)
+    same = VelocitySelector(**FAST_OPTIONS, horizon=5.5).select(**kw)
+    assert d.velocity.tolist() == same.velocity.tolist()
+    if d.status == "optimal":
+        within = prepare(kw["own"], np.asarray(kw["preferred_velocity"], float), kw["neighbors"],
+                         kw["obstacles"], kw["limits"], kw["dt"], Options(horizon=5.5))
+        assert not within.unsafe(d.velocity)[0]
+
+
+@pytest.mark.parametrize("bad", [0, -1.0, float("inf"), float("nan"), True, "55"])
+def test_swarm_options_refuse_bad_arguments_naming_them(bad):
+    with pytest.raises(ValueError, match="sensing_range"):
+        swarm_options(bad, 5.0)
+    with pytest.raises(ValueError, match="v_max"):
+        swarm_options(55.0, bad)
 
 
 @settings(max_examples=25, **SETTINGS)

@@ -275,7 +275,7 @@ def test_bad_options_are_refused_before_any_cluster_starts():
         Method(selector_options=(("closing_guard", 3),))
     with pytest.raises(ValueError, match="selector_options.pz_bufer: .*'pz_buffer'"):
         Method(selector_options=(("pz_bufer", 1.0),))
-    with pytest.raises(SweepError, match="--selector-option/--fast: not used by --method rvo2"):
+    with pytest.raises(SweepError, match="--selector-option/--fast/--swarm: not used by --method rvo2"):
         run_sweep("pair", 2, method=Method(name="rvo2", selector_options=(("margin", 0.1),)))
 
 
@@ -420,6 +420,25 @@ def test_a_family_s_own_selector_options_stay_under_the_method_s():
         Method(selector_options=(("corrections", ["bogus"]),))
     kept = Method(selector_options=(("corrections", frozenset({"tg_range"})),))
     assert kept.selector_options == (("corrections", ["tg_range"]),)  # JSON: rows, files
+
+
+def test_horizon_sensing_is_each_encounter_s_own_sensing_horizon():
+    """horizon=sensing (``vo3d sweep --swarm``) resolves per encounter: each pair encounter
+    flies as its scenario with its own sensing range over twice its top speed given as a
+    number (the pair family's speeds differ, so the horizons do)."""
+    method = Method(selector_options=(("horizon", "sensing"),))
+    horizons = set()
+    for index in range(2):
+        sc = scenario_from_dict(make_encounter("pair", 0, index).scenario)
+        horizons.add(sc.sensing_horizon)
+        row = run_encounter("pair", 0, index, method)
+        assert row["error"] is None
+        assert json.loads(row["selector_options"]) == {"horizon": "sensing"}
+        as_number = Method(selector_options=(("horizon", sc.sensing_horizon),))
+        _, summary = fly(sc, as_number)
+        for key in ("min_vehicle_distance", "steps", "pz_intrusions", "time"):
+            assert summary[key] == row[key], (index, key)
+    assert len(horizons) == 2
 
 
 # ------------------------------------------------- group variants (contracts §5 keys)

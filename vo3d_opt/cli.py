@@ -15,7 +15,8 @@
 * ``--selector-option KEY=VALUE`` (``-o``, repeatable, the last of a repeated key wins; run,
   compare, sweep): merged over the scenario's ``selector_options`` and checked as they are;
   the summaries carry the scenario's ``selector_options`` so merged. ``--fast`` (same
-  commands) stands for ``-o`` of each of ``vo3d_opt.FAST_OPTIONS``, in its place.
+  commands) stands for ``-o`` of each of ``vo3d_opt.FAST_OPTIONS``, in its place; ``--swarm``
+  for those and ``-o horizon=sensing`` (the scenario's ``sensing_horizon``).
 
 SCENARIO is a path or the name of a bundled scenario. Progress and logs go to stderr through
 ``logging`` (``-q``: warnings and errors only, ``-v``: debugging detail too). Exit status: 0 when
@@ -38,13 +39,14 @@ import sys
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 from vo3d_opt import __version__
 from vo3d_opt.report import CSV_MAX_ROWS, rounded, write_outputs
 from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FAST_OPTIONS, FORMULATIONS
 from vo3d_opt.sim.metrics import CONTRACT_KEYS, summarize
 from vo3d_opt.sim.scenario import (
+    SENSING_HORIZON,
     Scenario,
     ScenarioError,
     bundled_files,
@@ -147,17 +149,32 @@ def _add_selector_option(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument(
         "--fast",
         dest="selector_options",
-        action=_FastOptions,
+        action=_PresetOptions,
         nargs=0,
         help="the selector options of vo3d_opt.FAST_OPTIONS ("
         + ", ".join(f"{k}={v}" for k, v in FAST_OPTIONS.items())
         + "): coarser choice, faster decisions, for swarms (README, Swarms; with sampled, its "
         "whole grid); a later -o overrides one",
     )
+    p.add_argument(
+        "--swarm",
+        dest="selector_options",
+        action=_PresetOptions,
+        nargs=0,
+        help="the swarm preset: --fast and -o horizon=sensing (the VO ignores meetings further "
+        "ahead than the vehicle sensing range over twice the top agent speed, RVO2-3D's time "
+        "horizon; README, Swarms); a later -o overrides one",
+    )
 
 
-class _FastOptions(argparse.Action):
-    """``--fast``: FAST_OPTIONS as if given by ``-o`` here (so the last of a key still wins)."""
+class _PresetOptions(argparse.Action):
+    """``--fast`` / ``--swarm``: their options as if given by ``-o`` here (so the last of a key
+    still wins)."""
+
+    PRESETS: ClassVar[dict[str, list[tuple[str, Any]]]] = {
+        "--fast": list(FAST_OPTIONS.items()),
+        "--swarm": [*FAST_OPTIONS.items(), ("horizon", SENSING_HORIZON)],
+    }
 
     def __call__(
         self,
@@ -167,7 +184,7 @@ class _FastOptions(argparse.Action):
         option_string: str | None = None,
     ) -> None:
         pairs = list(getattr(namespace, self.dest, None) or [])
-        setattr(namespace, self.dest, pairs + list(FAST_OPTIONS.items()))
+        setattr(namespace, self.dest, pairs + self.PRESETS[str(option_string)])
 
 
 def _with_options(sc: Scenario, pairs: list[tuple[str, Any]] | None) -> Scenario:

@@ -16,7 +16,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Final, TypedDict
+from typing import Any, Final, TypedDict
 
 import numpy as np
 
@@ -88,6 +88,22 @@ FAST_OPTIONS: Final[FastOptions] = {
     "heading_step_deg": 45.0,
     "speed_levels": 3,
 }
+
+
+def swarm_options(sensing_range: float, v_max: float) -> dict[str, Any]:
+    """``FAST_OPTIONS`` with RVO2-3D's time horizon, ``sensing_range / (2 v_max)`` s (two
+    vehicles closing head-on at ``v_max`` cross the sensing range in it): the swarm preset of
+    ``vo3d run --swarm`` (README, Swarms), for ``VelocitySelector(**swarm_options(55, 5))``.
+    The VO then ignores meetings further ahead than the horizon, as RVO2-3D's does and the
+    paper's unbounded one does not; ``ValueError`` naming the argument unless both are
+    positive and finite."""
+    for name, value in (("sensing_range", sensing_range), ("v_max", v_max)):
+        ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
+        if not (ok and math.isfinite(value) and value > 0):
+            raise ValueError(f"{name}: expected a positive finite number, got {value!r}")
+    return {**FAST_OPTIONS, "horizon": float(sensing_range) / (2.0 * float(v_max))}
+
+
 #: Seconds a first compilation may take before the user is told about it on stderr.
 _COMPILE_NOTICE_AFTER = 3.0
 _warm_lock = threading.Lock()

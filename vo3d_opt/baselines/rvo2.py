@@ -85,8 +85,8 @@ def version() -> str:
 
 
 def default_time_horizon(scenario: Scenario) -> float:
-    """``vehicle_range / (2 v_max)``, s (see the module docstring)."""
-    return float(scenario.sensing.vehicle_range / (2.0 * float(np.max(scenario.max_speed))))
+    """``vehicle_range / (2 v_max)``, s (see the module docstring): ``Scenario.sensing_horizon``."""
+    return scenario.sensing_horizon
 
 
 class RVO2Step:

@@ -59,7 +59,7 @@ from tqdm import tqdm
 
 from vo3d_opt.sim.dynamics import Dynamics, make_dynamics
 from vo3d_opt.sim.safety import derive_margins, within_reach
-from vo3d_opt.sim.scenario import Scenario, load_scenario
+from vo3d_opt.sim.scenario import Scenario, as_selector_options, load_scenario
 from vo3d_opt.sim.spill import (
     SPILL_BYTES,
     Spill,
@@ -679,11 +679,13 @@ def scenario_selector(
     sc: Scenario, formulation: str | None = None, solver: str | None = None
 ) -> tuple[Any, str, str]:
     """The selector a scenario runs with: the given or the scenario's formulation and solver,
-    and ``default_selector_options`` overridden by the scenario's ``selector_options``."""
+    and ``default_selector_options`` overridden by the scenario's ``selector_options``
+    (``horizon: sensing``: the scenario's ``sensing_horizon``)."""
+    options = {**default_selector_options(sc), **sc.selector_options}
     return make_selector(
         formulation or sc.formulation,
         solver or sc.solver,
-        {**default_selector_options(sc), **sc.selector_options},
+        as_selector_options(options, sc.sensing_horizon),
     )
 
 

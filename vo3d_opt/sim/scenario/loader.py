@@ -28,7 +28,12 @@ from typing import Annotated, Any, get_args, get_origin
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from vo3d_opt.sim.scenario.schema import OBSTACLE_TAGS, Scenario
+from vo3d_opt.sim.scenario.schema import (
+    OBSTACLE_TAGS,
+    SENSING_HORIZON,
+    Scenario,
+    as_selector_options,
+)
 from vo3d_opt.types import describe_error, field_path, one_line
 
 log = logging.getLogger(__name__)
@@ -270,13 +275,16 @@ def check_selector_options(options: dict[str, Any], source: str) -> dict[str, An
     from vo3d_opt.formulations.common import Options  # late: loading a file needs no solver
 
     try:
-        valid = Options.model_validate(options)
+        valid = Options.model_validate(as_selector_options(options, 1.0))
     except ValidationError as exc:
         raise _fail(
             source,
             [_describe({**e, "loc": ("selector_options", *e["loc"])}) for e in exc.errors()],
         ) from None
-    return dict(sorted(valid.model_dump(mode="json", include=set(options)).items()))
+    out = valid.model_dump(mode="json", include=set(options))
+    if options.get("horizon") == SENSING_HORIZON:  # resolved per scenario (scenario_selector)
+        out["horizon"] = SENSING_HORIZON
+    return dict(sorted(out.items()))
 
 
 def scenario_variant(sc: Scenario, **keys: Any) -> Scenario:

@@ -50,7 +50,10 @@ Extensions beyond the contract (all optional):
   (``acceleration``, ``pz_buffer``, ``altitude_margin``, ``obstacle_margin``;
   ``vo3d_opt.sim.safety``).
 * ``formulation``, ``solver``: defaults for ``vo3d run`` when the command line gives none.
-* ``selector_options``: a mapping passed as extra keyword arguments to ``VelocitySelector``.
+* ``selector_options``: a mapping passed as extra keyword arguments to ``VelocitySelector``;
+  ``horizon: sensing`` stands for :attr:`Scenario.sensing_horizon` (RVO2-3D's time horizon:
+  the vehicle sensing range over twice the top agent speed), resolved when the selector is
+  built, so every encounter of a sweep gets its own.
 
 One schema: the limits and the obstacles *are* the public types of ``vo3d_opt.types`` (the
 obstacle specs subclass them, adding only the scenario's keys), so the file and the Python API
@@ -94,6 +97,18 @@ from vo3d_opt.types import (
 BATCHED_ADVISED = 50
 
 Text = Annotated[str, Field(min_length=1)]
+
+
+#: ``selector_options: {horizon: sensing}``: the scenario's :attr:`Scenario.sensing_horizon`.
+SENSING_HORIZON = "sensing"
+
+
+def as_selector_options(options: dict[str, Any], sensing_horizon: float) -> dict[str, Any]:
+    """``options`` as ``VelocitySelector`` takes them: ``horizon: sensing`` replaced by
+    ``sensing_horizon`` (s); the rest as given."""
+    if options.get("horizon") == SENSING_HORIZON:
+        return {**options, "horizon": sensing_horizon}
+    return options
 
 
 class Spec(Model):
@@ -257,7 +272,8 @@ class Scenario(Spec):
     def _known_options(cls, options: dict[str, Any]) -> dict[str, Any]:
         from vo3d_opt.formulations.common import Options
 
-        Options.model_validate(options)  # its errors keep their key paths under this key
+        # its errors keep their key paths under this key
+        Options.model_validate(as_selector_options(options, 1.0))
         return options
 
     # ---------------------------------------------------------------------- cross-field checks
@@ -470,6 +486,14 @@ class Scenario(Spec):
     def max_speed(self) -> np.ndarray:
         """Speed bound per agent: min(limits.speed[1], the agent's max_speed), m/s."""
         return np.minimum(self._per_agent("max_speed"), self.limits.v_max)
+
+    @property
+    def sensing_horizon(self) -> float:
+        """``sensing.vehicle_range / (2 v_max)`` (s), v_max the top agent speed: the time two
+        vehicles closing head-on at full speed take to cross the sensing range, RVO2-3D's time
+        horizon in ``baselines.rvo2``, and what ``selector_options: {horizon: sensing}``
+        stands for."""
+        return float(self.sensing.vehicle_range / (2.0 * float(np.max(self.max_speed))))
 
     @property
     def avoids(self) -> np.ndarray:
