@@ -11,6 +11,10 @@ batch, fixed-step RK4 at 200 Hz), as does ``random-crossing-50`` beside its one-
 comparison; one period of the one-by-one model at N = 1000 is timed too (hours in all).
 
     .venv/bin/python benchmarks/bench_real_world.py [--quick]   # --quick: two scenarios only
+    .venv/bin/python benchmarks/bench_real_world.py --swarm  # the swarm preset (vo3d run --swarm)
+
+``--swarm``: every run with the swarm preset merged into its ``selector_options``
+(``FAST_OPTIONS`` and ``horizon: sensing``), into ``results_real_world_swarm.md``.
 """
 from __future__ import annotations
 
@@ -27,11 +31,21 @@ from typing import Any
 
 import numpy as np
 
+from vo3d_opt import FAST_OPTIONS
 from vo3d_opt.sim import run_scenario, summarize
 from vo3d_opt.sim.dynamics import make_dynamics
-from vo3d_opt.sim.scenario import Scenario, bundled_files, load_scenario, scenario_variant
+from vo3d_opt.sim.scenario import (
+    SENSING_HORIZON,
+    Scenario,
+    bundled_files,
+    load_scenario,
+    scenario_variant,
+)
 
 OUT = Path(__file__).with_name("results_real_world.md")
+SWARM_OUT = Path(__file__).with_name("results_real_world_swarm.md")
+#: ``vo3d run --swarm``'s selector options.
+SWARM = {**FAST_OPTIONS, "horizon": SENSING_HORIZON}
 BIG = "random-crossing-1000"
 PAPER = ["paper-case1-ten-uav-crossing", "paper-case2-two-uav-six-obstacles",
          "paper-case3-two-uav-two-cylinders", "paper-case3-three-spheres",
@@ -194,11 +208,16 @@ def condensed(path: Path) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="two small scenarios, to try the script")
-    ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--out", type=Path, default=None, help=f"default {OUT.name} ({SWARM_OUT.name} "
+                    "with --swarm)")
+    ap.add_argument("--swarm", action="store_true",
+                    help="every run with the swarm preset (vo3d run --swarm)")
     ap.add_argument("--jobs", type=int, default=2, help="runs at once (processes)")
     ap.add_argument("--readme", action="store_true",
                     help="print the README's condensed table of --out (runs nothing)")
     args = ap.parse_args()
+    if args.out is None:
+        args.out = SWARM_OUT if args.swarm else OUT
     if args.readme:
         print(condensed(args.out))
         return
@@ -206,9 +225,12 @@ def main() -> None:
     if args.quick:
         names = ["paper-case3-two-uav-two-cylinders", "intruder-crossing-four"]
     base = {n: load_scenario(n) for n in names}
+    if args.swarm:
+        base = {n: scenario_variant(sc, selector_options=SWARM) for n, sc in base.items()}
     head = [f"# Real-world conditions (issue 12)\n\n{platform.machine()}, CPython "
             f"{platform.python_version()}, {os.cpu_count()} cores shared with other jobs, "
-            f"{datetime.date.today().isoformat()}. `benchmarks/bench_real_world.py`.\n",
+            f"{datetime.date.today().isoformat()}. `benchmarks/bench_real_world.py"
+            f"{' --swarm' if args.swarm else ''}`.\n",
             "Cost columns: path length ratio and latest arrival against the same scenario under "
             "ideal kinematics (1.000 = no cost). Margins: what the simulator derived "
             "(`vo3d_opt/sim/safety.py`, `formulations/real_world.md`); \"margins off\": no "

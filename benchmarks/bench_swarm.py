@@ -11,9 +11,11 @@ the one nearest the preferred velocity, not the one closing slowest on the zones
 inside. ``ours-fast`` is ours on every thread with ``vo3d_opt.FAST_OPTIONS`` (``--fast`` on the
 command line) added: planes every 45 degrees (5 planes, 15 QPs), tangent points among 12
 generator samples instead of 36, the fallbacks' grid 8 headings by 3 speeds per plane.
-``ours-fast-h`` adds to those RVO2-3D's own time horizon (``horizon``: the sensing range over
-twice the top speed, 6.875 s here; a velocity that would meet a zone only later is allowed, as
-RVO2-3D allows it): ours by default, like the paper's VO, has no horizon.
+``ours-swarm`` is the swarm preset (``vo3d_opt.swarm_options``, ``--swarm`` on the command
+line; ``ours-fast-h`` before 2026-11-26, evening): those and RVO2-3D's own time horizon
+(``horizon``: the sensing range over twice the top speed, 6.875 s here; a velocity that would
+meet a zone only later is allowed, as RVO2-3D allows it): ours by default, like the paper's VO,
+has no horizon.
 
 Every method flies the same scenarios in the same loop (``vo3d_opt.sim.simulator.fly``: the same
 preferred velocities, dynamics and metrics), with the same dt (0.2 s), speeds (0-4 m/s),
@@ -36,7 +38,7 @@ process, so "peak MB" is that run's peak resident memory (the run, its record an
 (``--profile-steps K``: the first K, default 100; 0: the whole run).
 
     python benchmarks/bench_swarm.py [--sizes 100 1000 10000] [--cases swap crossing]
-        [--methods ours-1 ours-all ours-noguard ours-coarse ours-nearest ours-fast ours-fast-h rvo2]
+        [--methods ours-1 ours-all ours-noguard ours-coarse ours-nearest ours-fast ours-swarm rvo2]
         [--max-neighbors 10]
         [--max-steps N=K ...]
         [--profile [--profile-steps K]]
@@ -60,10 +62,10 @@ from typing import Any
 
 import numpy as np
 
-METHODS = ("ours-1", "ours-all", "ours-noguard", "ours-coarse", "ours-nearest", "ours-fast", "ours-fast-h",
+METHODS = ("ours-1", "ours-all", "ours-noguard", "ours-coarse", "ours-nearest", "ours-fast", "ours-swarm",
            "rvo2")
 #: Options each ``ours-*`` method adds to the simulator's (ours-1 and ours-all add none;
-#: ours-fast adds ``vo3d_opt.FAST_OPTIONS``, ours-fast-h those and RVO2-3D's time horizon:
+#: ours-fast adds ``vo3d_opt.FAST_OPTIONS``, ours-swarm ``vo3d_opt.swarm_options``:
 #: ``extra_options``).
 EXTRA_OPTIONS = {
     "ours-noguard": {"closing_guard": False},
@@ -74,15 +76,17 @@ EXTRA_OPTIONS = {
 
 def extra_options(method: str, sc: Any) -> dict[str, Any] | None:
     """The options ``method`` adds to the simulator's for scenario ``sc`` (None: none); for
-    ours-fast-h the ``horizon`` is RVO2-3D's ``timeHorizon`` on ``sc`` (the sensing range over
-    twice the top speed). Imported here, not at the top: the parent process of the runs loads
-    no vo3d_opt."""
-    if method in ("ours-fast", "ours-fast-h"):
+    ours-swarm ``swarm_options`` on ``sc``'s sensing range and top speed (its ``horizon`` is
+    RVO2-3D's ``timeHorizon`` on ``sc``). Imported here, not at the top: the parent process of
+    the runs loads no vo3d_opt."""
+    if method == "ours-fast":
         from vo3d_opt import FAST_OPTIONS
-        from vo3d_opt.baselines.rvo2 import default_time_horizon
 
-        horizon = {"horizon": default_time_horizon(sc)} if method == "ours-fast-h" else {}
-        return {**FAST_OPTIONS, **horizon}
+        return dict(FAST_OPTIONS)
+    if method == "ours-swarm":
+        from vo3d_opt import swarm_options
+
+        return swarm_options(sc.sensing.vehicle_range, float(np.max(sc.max_speed)))
     return EXTRA_OPTIONS.get(method)
 
 
@@ -233,8 +237,8 @@ def table_row(r: dict[str, Any]) -> str:
             "ours-nearest": f"vo3d_opt select_many, least_bad_escape off, {r['threads']} threads",
             "ours-fast": f"vo3d_opt select_many, FAST_OPTIONS ({_options_text(r.get('options'))}), "
                          f"{r['threads']} threads",
-            "ours-fast-h": f"vo3d_opt select_many, FAST_OPTIONS and RVO2-3D's time horizon "
-                           f"({_options_text(r.get('options'))}), {r['threads']} threads",
+            "ours-swarm": f"vo3d_opt select_many, the swarm preset: FAST_OPTIONS and RVO2-3D's "
+                          f"time horizon ({_options_text(r.get('options'))}), {r['threads']} threads",
             "rvo2": "RVO2-3D doStep, 1 thread"}[r["method"]]
     flown = "whole run" if r["steps"] < r["n_steps"] or r["all_reached"] else f"{r['steps']} steps (max_time)"
     if r.get("capped"):
