@@ -11,8 +11,8 @@ the one nearest the preferred velocity, not the one closing slowest on the zones
 inside. ``ours-fast`` is ours on every thread with ``vo3d_opt.FAST_OPTIONS`` (``--fast`` on the
 command line) added: planes every 45 degrees (5 planes, 15 QPs), tangent points among 12
 generator samples instead of 36, the fallbacks' grid 8 headings by 3 speeds per plane.
-``ours-swarm`` is the swarm preset (``vo3d_opt.swarm_options``, ``--swarm`` on the command
-line; ``ours-fast-h`` before 2026-11-26, evening): those and RVO2-3D's own time horizon
+``ours-swarm`` is the swarm preset (``--swarm`` on the command line, ``vo3d_opt.swarm_options``
+in Python; ``ours-fast-h`` before 2026-11-26, evening): those and RVO2-3D's own time horizon
 (``horizon``: the sensing range over twice the top speed, 6.875 s here; a velocity that would
 meet a zone only later is allowed, as RVO2-3D allows it): ours by default, like the paper's VO,
 has no horizon.
@@ -65,7 +65,7 @@ import numpy as np
 METHODS = ("ours-1", "ours-all", "ours-noguard", "ours-coarse", "ours-nearest", "ours-fast", "ours-swarm",
            "rvo2")
 #: Options each ``ours-*`` method adds to the simulator's (ours-1 and ours-all add none;
-#: ours-fast adds ``vo3d_opt.FAST_OPTIONS``, ours-swarm ``vo3d_opt.swarm_options``:
+#: ours-fast adds ``vo3d_opt.FAST_OPTIONS``, ours-swarm those and ``horizon: sensing``:
 #: ``extra_options``).
 EXTRA_OPTIONS = {
     "ours-noguard": {"closing_guard": False},
@@ -74,20 +74,26 @@ EXTRA_OPTIONS = {
 }
 
 
-def extra_options(method: str, sc: Any) -> dict[str, Any] | None:
-    """The options ``method`` adds to the simulator's for scenario ``sc`` (None: none); for
-    ours-swarm ``swarm_options`` on ``sc``'s sensing range and top speed (its ``horizon`` is
-    RVO2-3D's ``timeHorizon`` on ``sc``). Imported here, not at the top: the parent process of
-    the runs loads no vo3d_opt."""
-    if method == "ours-fast":
+def extra_options(method: str) -> dict[str, Any] | None:
+    """The selector options ``method`` adds to the simulator's (None: none), as ``-o`` would:
+    ours-swarm's ``horizon: sensing`` is each scenario's sensing range over twice its top speed
+    (RVO2-3D's ``timeHorizon`` on it), as ``vo3d run --swarm`` flies it. Imported here, not at
+    the top: the parent process of the runs loads no vo3d_opt."""
+    if method in ("ours-fast", "ours-swarm"):
         from vo3d_opt import FAST_OPTIONS
+        from vo3d_opt.sim.scenario import SENSING_HORIZON
 
-        return dict(FAST_OPTIONS)
-    if method == "ours-swarm":
-        from vo3d_opt import swarm_options
-
-        return swarm_options(sc.sensing.vehicle_range, float(np.max(sc.max_speed)))
+        horizon = {"horizon": SENSING_HORIZON} if method == "ours-swarm" else {}
+        return {**FAST_OPTIONS, **horizon}
     return EXTRA_OPTIONS.get(method)
+
+
+def resolved_options(method: str, sc: Any) -> dict[str, Any] | None:
+    """``extra_options`` with ``horizon: sensing`` as the seconds it stood for on ``sc``."""
+    extra = extra_options(method)
+    if extra is not None and extra.get("horizon") == "sensing":
+        extra["horizon"] = sc.sensing_horizon
+    return extra
 
 
 def scenario(case: str, n: int):
@@ -107,7 +113,8 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
     from vo3d_opt.baselines.rvo2 import RVO2Step, summarize_rvo2
     from vo3d_opt.sim.deciders import SwarmSelect
     from vo3d_opt.sim.metrics import decision_times_us, summarize
-    from vo3d_opt.sim.simulator import default_selector_options, fly, make_selector, scenario_selector
+    from vo3d_opt.sim.scenario import scenario_variant
+    from vo3d_opt.sim.simulator import fly, scenario_selector
 
     sc = scenario(case, n)
     if method == "rvo2":
@@ -115,11 +122,10 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
         threads = 1
     else:
         threads = 1 if method == "ours-1" else numba.config.NUMBA_NUM_THREADS
+        extra = extra_options(method)
+        if extra is not None:  # the simulator's options plus the method's, as -o adds them
+            sc = scenario_variant(sc, selector_options={**sc.selector_options, **extra})
         sel, formulation, solver = scenario_selector(sc)
-        extra = extra_options(method, sc)
-        if extra is not None:  # the simulator's options plus the method's
-            sel, formulation, solver = make_selector(
-                formulation, solver, {**default_selector_options(sc), **sc.selector_options, **extra})
         step = SwarmSelect(sc, sel, formulation=formulation, solver=solver, max_neighbors=max_neighbors,
                            threads=threads)
         from vo3d_opt.selector import warm_up_many
@@ -146,7 +152,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
         "status_counts": s["status_counts"],
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "load_start": load,
         "record": "spilled" if rec.spill is not None else "memory",
-        "options": extra_options(method, sc),
+        "options": resolved_options(method, sc),
         "load_end": os.getloadavg()[0],
     }
 

@@ -14,7 +14,8 @@ import yaml
 from vo3d_opt import FAST_OPTIONS
 from vo3d_opt.sim.metrics import CONTRACT_KEYS
 from vo3d_opt.sim.safety import derive_margins
-from vo3d_opt.sim.scenario import bundled_files, load_scenario
+from vo3d_opt.sim.scenario import bundled_files, load_scenario, scenario_variant
+from vo3d_opt.sim.simulator import scenario_selector
 
 SMALL = {
     "name": "cli-small",
@@ -215,20 +216,34 @@ def test_fast_is_fast_options_in_its_place_among_the_o_flags(cli, small):
 
 def test_swarm_is_fast_with_the_scenarios_sensing_horizon(cli, small, tmp_path):
     """--swarm flies FAST_OPTIONS and horizon=sensing, resolved per scenario to its sensing
-    range over twice its top speed: the same flight as that number given by -o, which differs
-    from the flight without a horizon where the meeting is further ahead than it."""
+    range over twice its top speed (the selector's horizon is that number); the same flight as
+    the number given by -o, in a file or on the command line; a later -o overrides it."""
     swarm_options = {**FAST_OPTIONS, "horizon": "sensing"}
-    sc = load_scenario(small)
-    assert sc.sensing_horizon == pytest.approx(55.0 / (2 * 4.0))
-    as_number = vo3d("run", small, "--json", "--fast", "-o", f"horizon={sc.sensing_horizon!r}")
-    swarm = _behaviour(vo3d("run", small, "--json", "--swarm"), swarm_options)
-    assert swarm == _behaviour(as_number)
-    near = tmp_path / "near.yaml"  # sensing 10 m: a 1.25 s horizon, the meeting 5 s ahead
+    near = tmp_path / "near.yaml"  # sensing 10 m, 4 m/s: a 1.25 s horizon (6.875 s in small)
     near.write_text(yaml.safe_dump({**SMALL, "sensing": {"vehicle_range": 10.0,
                                                           "obstacle_range": 55.0}}))
-    near_swarm = _behaviour(vo3d("run", near, "--json", "--swarm"), swarm_options)
-    assert near_swarm == _behaviour(vo3d("run", near, "--json", "--fast", "-o", "horizon=1.25"))
-    assert near_swarm != _behaviour(vo3d("run", near, "--json", "--fast"))
+    for path, horizon in ((small, 55.0 / 8.0), (near, 1.25)):
+        sc = load_scenario(path)
+        assert sc.sensing_horizon == horizon
+        resolved = scenario_selector(scenario_variant(sc, selector_options=swarm_options))[0]
+        assert resolved.options.horizon == horizon
+        swarm = _behaviour(vo3d("run", path, "--json", "--swarm"), swarm_options)
+        as_number = vo3d("run", path, "--json", "--fast", "-o", f"horizon={horizon!r}")
+        assert swarm == _behaviour(as_number)
+    in_file = tmp_path / "in_file.yaml"
+    in_file.write_text(yaml.safe_dump({**SMALL, "sensing": {"vehicle_range": 10.0,
+                                                             "obstacle_range": 55.0},
+                                       "selector_options": swarm_options}))
+    assert _behaviour(vo3d("run", in_file, "--json"), swarm_options) == swarm
+    # the 1.25 s horizon drops the cylinder's pyramid until it is 5 m off: another flight
+    assert swarm != _behaviour(vo3d("run", near, "--json", "--fast"))
+    later = vo3d("run", near, "--json", "--swarm", "-o", "horizon=3")
+    _behaviour(later, {**FAST_OPTIONS, "horizon": 3.0})
+    res = vo3d("compare", near, "--json", "--swarm")
+    assert res.returncode == 0, res.stderr
+    (row,) = json.loads(res.stdout)
+    assert row["selector_options"] == swarm_options
+    assert {k: v for k, v in row.items() if k not in TIMING_KEYS | {"selector_options"}} == swarm
     args = cli.build_parser().parse_args(["sweep", "pair", "--n", "1", "--swarm", "-o", "margin=0.01"])
     assert args.selector_options == [*swarm_options.items(), ("margin", 0.01)]
 
@@ -243,6 +258,8 @@ def test_swarm_is_fast_with_the_scenarios_sensing_horizon(cli, small, tmp_path):
         pytest.param("run", "corrections=[tg_range", "selector_options.corrections: line 1",
                      id="bad-yaml"),
         pytest.param("compare", "margin=-1", "selector_options.margin", id="compare"),
+        pytest.param("run", "horizon=Sensing", "selector_options.horizon: expected a positive "
+                     "number of seconds, null or 'sensing', got 'Sensing'", id="horizon-text"),
     ],
 )
 def test_bad_selector_options_exit_2_naming_the_key(small, command, option, fragment):

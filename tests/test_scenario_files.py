@@ -179,6 +179,8 @@ MISTAKES = [
                  "tg_range", id="unknown-correction"),
     pytest.param(_set("selector_options", {"colour": 1}), "selector_options.colour", "unknown key",
                  id="unknown-selector-option"),
+    pytest.param(_set("selector_options", {"horizon": "fast"}), "selector_options.horizon",
+                 "null or 'sensing', got 'fast'", id="horizon-text"),
     pytest.param(_set("solver", "nosuch"), "solver", "available", id="unknown-solver"),
     pytest.param(_set("formulation", "magic"), "formulation", "plane_qp", id="unknown-formulation"),
     pytest.param(_set("selector_options", {"formulation": "sampled"}), "selector_options.formulation",

@@ -19,7 +19,8 @@ import pytest
 from scipy.stats import binomtest
 
 from vo3d_opt.sim.metrics import CONTRACT_KEYS
-from vo3d_opt.sim.scenario import load_scenario, scenario_from_dict
+from vo3d_opt.sim.scenario import load_scenario, scenario_from_dict, scenario_variant
+from vo3d_opt.sim.simulator import scenario_selector
 from vo3d_opt.sweep import (
     FAMILIES,
     TIMING_COLUMNS,
@@ -434,11 +435,19 @@ def test_horizon_sensing_is_each_encounter_s_own_sensing_horizon():
         row = run_encounter("pair", 0, index, method)
         assert row["error"] is None
         assert json.loads(row["selector_options"]) == {"horizon": "sensing"}
+        resolved = scenario_selector(scenario_variant(sc, selector_options={"horizon": "sensing"}))
+        assert resolved[0].options.horizon == sc.sensing_horizon
         as_number = Method(selector_options=(("horizon", sc.sensing_horizon),))
         _, summary = fly(sc, as_number)
         for key in ("min_vehicle_distance", "steps", "pz_intrusions", "time"):
             assert summary[key] == row[key], (index, key)
     assert len(horizons) == 2
+    # a failure scenario carries horizon: sensing and replays with its own horizon
+    result = SweepResult(family=FAMILIES["pair"], seed=0, method=method, rows=pd.DataFrame())
+    data = failure_scenario(result, 1)
+    assert data["selector_options"] == {"horizon": "sensing"}
+    replay = scenario_from_dict(data)
+    assert scenario_selector(replay)[0].options.horizon == replay.sensing_horizon
 
 
 # ------------------------------------------------- group variants (contracts §5 keys)

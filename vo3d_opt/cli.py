@@ -39,7 +39,7 @@ import sys
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any
 
 from vo3d_opt import __version__
 from vo3d_opt.report import CSV_MAX_ROWS, rounded, write_outputs
@@ -150,6 +150,7 @@ def _add_selector_option(p: argparse.ArgumentParser, what: str) -> None:
         "--fast",
         dest="selector_options",
         action=_PresetOptions,
+        const=list(FAST_OPTIONS.items()),
         nargs=0,
         help="the selector options of vo3d_opt.FAST_OPTIONS ("
         + ", ".join(f"{k}={v}" for k, v in FAST_OPTIONS.items())
@@ -160,6 +161,7 @@ def _add_selector_option(p: argparse.ArgumentParser, what: str) -> None:
         "--swarm",
         dest="selector_options",
         action=_PresetOptions,
+        const=[*FAST_OPTIONS.items(), ("horizon", SENSING_HORIZON)],
         nargs=0,
         help="the swarm preset: --fast and -o horizon=sensing (the VO ignores meetings further "
         "ahead than the vehicle sensing range over twice the top agent speed, RVO2-3D's time "
@@ -168,13 +170,8 @@ def _add_selector_option(p: argparse.ArgumentParser, what: str) -> None:
 
 
 class _PresetOptions(argparse.Action):
-    """``--fast`` / ``--swarm``: their options as if given by ``-o`` here (so the last of a key
-    still wins)."""
-
-    PRESETS: ClassVar[dict[str, list[tuple[str, Any]]]] = {
-        "--fast": list(FAST_OPTIONS.items()),
-        "--swarm": [*FAST_OPTIONS.items(), ("horizon", SENSING_HORIZON)],
-    }
+    """``--fast`` / ``--swarm``: their options (``const``: (key, value) pairs) as if given by
+    ``-o`` here (so the last of a key still wins)."""
 
     def __call__(
         self,
@@ -184,7 +181,7 @@ class _PresetOptions(argparse.Action):
         option_string: str | None = None,
     ) -> None:
         pairs = list(getattr(namespace, self.dest, None) or [])
-        setattr(namespace, self.dest, pairs + self.PRESETS[str(option_string)])
+        setattr(namespace, self.dest, pairs + list(self.const))
 
 
 def _with_options(sc: Scenario, pairs: list[tuple[str, Any]] | None) -> Scenario:

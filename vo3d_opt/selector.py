@@ -101,7 +101,10 @@ def swarm_options(sensing_range: float, v_max: float) -> dict[str, Any]:
         ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
         if not (ok and math.isfinite(value) and value > 0):
             raise ValueError(f"{name}: expected a positive finite number, got {value!r}")
-    return {**FAST_OPTIONS, "horizon": float(sensing_range) / (2.0 * float(v_max))}
+    horizon = float(sensing_range) / (2.0 * float(v_max))
+    if not (math.isfinite(horizon) and horizon > 0):  # e.g. 1e300 / 1e-300
+        raise ValueError(f"sensing_range / (2 v_max) = {horizon!r} s: not a usable horizon")
+    return {**FAST_OPTIONS, "horizon": horizon}
 
 
 #: Seconds a first compilation may take before the user is told about it on stderr.

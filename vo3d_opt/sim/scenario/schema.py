@@ -75,7 +75,16 @@ import math
 from typing import Annotated, Any, ClassVar, Literal
 
 import numpy as np
-from pydantic import ConfigDict, Field, PrivateAttr, StrictBool, field_validator, model_validator
+from pydantic import (
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    StrictBool,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
 
 from vo3d_opt.sim.dynamics import DynamicsConfig, WindConfig
 from vo3d_opt.types import (
@@ -105,9 +114,17 @@ SENSING_HORIZON = "sensing"
 
 def as_selector_options(options: dict[str, Any], sensing_horizon: float) -> dict[str, Any]:
     """``options`` as ``VelocitySelector`` takes them: ``horizon: sensing`` replaced by
-    ``sensing_horizon`` (s); the rest as given."""
-    if options.get("horizon") == SENSING_HORIZON:
+    ``sensing_horizon`` (s); the rest as given. Another text for ``horizon``: a
+    ``ValidationError`` at ``horizon`` that says what it takes."""
+    horizon = options.get("horizon")
+    if horizon == SENSING_HORIZON:
         return {**options, "horizon": sensing_horizon}
+    if isinstance(horizon, str):
+        what = f"expected a positive number of seconds, null or {SENSING_HORIZON!r}, got {horizon!r}"
+        error = PydanticCustomError("horizon_value", what)
+        raise ValidationError.from_exception_data(
+            "Options", [{"type": error, "loc": ("horizon",), "input": horizon}]
+        )
     return options
 
 
