@@ -120,7 +120,9 @@ def as_selector_options(options: dict[str, Any], sensing_horizon: float) -> dict
     if horizon == SENSING_HORIZON:
         return {**options, "horizon": sensing_horizon}
     if isinstance(horizon, str):
-        what = f"expected a positive number of seconds, null or {SENSING_HORIZON!r}, got {horizon!r}"
+        what = (
+            f"expected a positive number of seconds, null or {SENSING_HORIZON!r}, got {horizon!r}"
+        )
         error = PydanticCustomError("horizon_value", what)
         raise ValidationError.from_exception_data(
             "Options", [{"type": error, "loc": ("horizon",), "input": horizon}]
