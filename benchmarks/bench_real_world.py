@@ -31,11 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from vo3d_opt import FAST_OPTIONS
 from vo3d_opt.sim import run_scenario, summarize
 from vo3d_opt.sim.dynamics import make_dynamics
 from vo3d_opt.sim.scenario import (
-    SENSING_HORIZON,
     Scenario,
     bundled_files,
     load_scenario,
@@ -45,7 +43,7 @@ from vo3d_opt.sim.scenario import (
 OUT = Path(__file__).with_name("results_real_world.md")
 SWARM_OUT = Path(__file__).with_name("results_real_world_swarm.md")
 #: ``vo3d run --swarm``'s selector options.
-SWARM = {**FAST_OPTIONS, "horizon": SENSING_HORIZON}
+SWARM = {"preset": "swarm"}
 BIG = "random-crossing-1000"
 PAPER = ["paper-case1-ten-uav-crossing", "paper-case2-two-uav-six-obstacles",
          "paper-case3-two-uav-two-cylinders", "paper-case3-three-spheres",

@@ -80,19 +80,15 @@ def extra_options(method: str) -> dict[str, Any] | None:
     (RVO2-3D's ``timeHorizon`` on it), as ``vo3d run --swarm`` flies it. Imported here, not at
     the top: the parent process of the runs loads no vo3d_opt."""
     if method in ("ours-fast", "ours-swarm"):
-        from vo3d_opt import FAST_OPTIONS
-        from vo3d_opt.sim.scenario import SENSING_HORIZON
-
-        horizon = {"horizon": SENSING_HORIZON} if method == "ours-swarm" else {}
-        return {**FAST_OPTIONS, **horizon}
+        return {"preset": method.removeprefix("ours-")}
     return EXTRA_OPTIONS.get(method)
 
 
 def resolved_options(method: str, sc: Any) -> dict[str, Any] | None:
     """``extra_options`` with ``horizon: sensing`` as the seconds it stood for on ``sc``."""
     extra = extra_options(method)
-    if extra is not None and extra.get("horizon") == "sensing":
-        extra["horizon"] = sc.sensing_horizon
+    if extra is not None and extra.get("preset") == "swarm":
+        extra["horizon"] = sc.sensing_horizon  # what "sensing" resolves to
     return extra
 
 

@@ -19,7 +19,8 @@ import warnings
 from vo3d_opt.sim.metrics import summarize
 from vo3d_opt.sim.scenario import bundled_files
 from vo3d_opt.sim.scenario import load_scenario
-from vo3d_opt.sim.simulator import default_selector_options, make_selector, run_scenario
+from vo3d_opt.sim.safety import derive_margins
+from vo3d_opt.sim.simulator import make_selector, run_scenario
 
 #: What the paper reports (section 5 and 6): closest vehicle and obstacle distances, m.
 PAPER = {
@@ -82,12 +83,13 @@ def safety() -> None:
     print("|---|---|---:|---|---|---:|---:|---:|---:|")
     for stem in ("paper-case1-ten-uav-crossing", "sphere-swap-16"):
         sc = load_scenario(next(p for p in bundled_files() if p.stem == stem))
-        buf = default_selector_options(sc)["pz_buffer"]
+        buf = derive_margins(sc).pz_buffer
         for rec, b, guard, escape in ((False, 0.0, False, True), (False, 0.0, False, False),
                                       (True, 0.0, False, True), (False, buf, False, True),
                                       (False, buf, False, False), (True, buf, False, True),
                                       (False, 0.0, True, True), (True, buf, True, True)):
-            opts = {"reciprocal": rec, "pz_buffer": b, "closing_guard": guard, "least_bad_escape": escape}
+            opts = {"preset": "paper", "reciprocal": rec, "pz_buffer": b, "closing_guard": guard,
+                    "least_bad_escape": escape}
             sel, _, _ = make_selector("plane_qp", None, opts)
             s = summarize(run_scenario(sc, sel, progress=False))
             print(f"| {stem} | {rec} | {b:g} | {guard} | {escape} | {fmt(s['min_vehicle_distance'])} "

@@ -30,7 +30,6 @@ def record(n: int, every: int, max_steps: int | None, fast: bool = False
            ) -> tuple[Any, list[tuple[tuple, dict]]]:
     """Fly the swap (``fast``: with ``FAST_OPTIONS``); the selector and every ``every``-th
     select_many call's arguments."""
-    from vo3d_opt import FAST_OPTIONS
     from vo3d_opt.selector import VelocitySelector, warm_up_many
     from vo3d_opt.sim.deciders import SwarmSelect
     from vo3d_opt.sim.scenario import scenario_variant
@@ -52,7 +51,7 @@ def record(n: int, every: int, max_steps: int | None, fast: bool = False
 
     sc = scenario("swap", n)
     if fast:
-        sc = scenario_variant(sc, selector_options={**sc.selector_options, **FAST_OPTIONS})
+        sc = scenario_variant(sc, selector_options={**sc.selector_options, "preset": "fast"})
     sel, formulation, solver = scenario_selector(sc)
     step = SwarmSelect(sc, sel, formulation=formulation, solver=solver, max_neighbors=10, threads=2)
     warm_up_many()

@@ -6,6 +6,9 @@ from hypothesis import strategies as st
 
 from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor
 
+#: The coarse planes, tangent samples and fallback grid of the ``fast`` preset.
+COARSE = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "speed_levels": 3}
+
 
 @st.composite
 def encounters(draw, max_neighbors: int = 12, max_obstacles: int = 6):

@@ -449,7 +449,7 @@ def test_select_runs_the_module_when_it_is_current(
     load = aot.load
     monkeypatch.setattr(aot, "load", lambda: load(built))
     kw = _crowd(11, n=15)
-    got = VelocitySelector().select(**kw)
+    got = VelocitySelector(preset="paper").select(**kw)
     assert selector.decision_kernel().startswith("ahead-of-time kernel")
     assert selector._decide_kernel is not kernel.decide
     assert selector._decide_unchecked is selector._decide_kernel.compiled  # type: ignore[attr-defined]
@@ -460,11 +460,11 @@ def test_select_runs_the_module_when_it_is_current(
     assert swarm._neighbor_lists is not swarm.neighbor_lists
     assert swarm._nearest_lists is not swarm.nearest_lists
     P, V, W, R = random_swarm(3, n=30)
-    many = VelocitySelector().select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0)
+    many = VelocitySelector(preset="paper").select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0)
     monkeypatch.setattr(selector, "_range_kernel", selector.decide_range)
     monkeypatch.setattr(swarm, "_neighbor_lists", swarm.neighbor_lists)
     monkeypatch.setattr(swarm, "_nearest_lists", swarm.nearest_lists)
-    jit = VelocitySelector().select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0)
+    jit = VelocitySelector(preset="paper").select_many(P, V, W, R, limits=LIMITS, sensing_range=55.0)
     assert np.array_equal(many.velocities, jit.velocities)
 
 

@@ -11,7 +11,6 @@ from pathlib import Path
 import pytest
 import yaml
 
-from vo3d_opt import FAST_OPTIONS
 from vo3d_opt.sim.metrics import CONTRACT_KEYS
 from vo3d_opt.sim.safety import derive_margins
 from vo3d_opt.sim.scenario import bundled_files, load_scenario, scenario_variant
@@ -174,59 +173,65 @@ def test_selector_options_fly_as_the_scenario_key_and_override_it(small, tmp_pat
     unbuffered = {"reciprocal": False, "pz_buffer": 0.0}
     path = tmp_path / "unbuffered.yaml"
     path.write_text(yaml.safe_dump({**SMALL, "selector_options": unbuffered}))
-    in_file = _behaviour(vo3d("run", path, "--json"), unbuffered)
+    in_file = _behaviour(vo3d("run", path, "--json"), {"preset": "safe", **unbuffered})
     flags = _behaviour(vo3d("run", small, "--json", "-o", "reciprocal=false",
-                            "--selector-option", "pz_buffer=0"), unbuffered)
+                            "--selector-option", "pz_buffer=0"), {"preset": "safe", **unbuffered})
     assert flags == in_file
-    assert in_file != _behaviour(run_json, {})  # the options change the flight
+    assert in_file != _behaviour(run_json, {"preset": "safe"})  # the options change the flight
     # -o merges into the file's options (not replacing them): one from each
     half = tmp_path / "half.yaml"
     half.write_text(yaml.safe_dump({**SMALL, "selector_options": {"reciprocal": False}}))
-    assert _behaviour(vo3d("run", half, "--json", "-o", "pz_buffer=0"), unbuffered) == in_file
-    # the command line's value wins over the file's: back to the defaults
+    both = vo3d("run", half, "--json", "-o", "pz_buffer=0")
+    assert _behaviour(both, {"preset": "safe", **unbuffered}) == in_file
+    # the command line's value wins over the file's: the preset's own values again
     buffer = derive_margins(load_scenario(small)).pz_buffer
     back = vo3d("run", path, "--json", "-o", "reciprocal=true", "-o", f"pz_buffer={buffer!r}")
-    back_options = {"reciprocal": True, "pz_buffer": buffer}
+    back_options = {"preset": "safe", "reciprocal": True, "pz_buffer": buffer}
     assert _behaviour(back, back_options) == _behaviour(run_json)
     res = vo3d("compare", small, "--json", "-o", "reciprocal=false", "-o", "pz_buffer=0")
     assert res.returncode == 0, res.stderr
     (row,) = json.loads(res.stdout)
-    assert row["selector_options"] == unbuffered
+    assert row["selector_options"] == {"preset": "safe", **unbuffered}
     assert {k: v for k, v in row.items() if k not in TIMING_KEYS | {"selector_options"}} == in_file
 
 
-def test_fast_is_fast_options_in_its_place_among_the_o_flags(cli, small):
-    """--fast flies FAST_OPTIONS as -o would (summary and behaviour); a later -o overrides one
-    of them, an earlier one is overridden; sweep takes it too (parsed only: its run is the
-    sweep's -o path)."""
-    fast = vo3d("run", small, "--json", "--fast")
-    as_o = [arg for k, v in FAST_OPTIONS.items() for arg in ("-o", f"{k}={v}")]
-    assert _behaviour(fast, dict(FAST_OPTIONS)) == _behaviour(vo3d("run", small, "--json", *as_o))
-    later = vo3d("run", small, "--json", "--fast", "-o", "qp_samples=36")
-    _behaviour(later, {**FAST_OPTIONS, "qp_samples": 36})
-    earlier = vo3d("run", small, "--json", "-o", "qp_samples=36", "--fast")
-    _behaviour(earlier, dict(FAST_OPTIONS))
+COARSE = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "speed_levels": 3}
+
+
+def test_fast_is_the_fast_preset_and_fields_override_it(cli, small):
+    """--fast is --preset fast is -o preset=fast: the safe preset's flight with the coarse
+    planes, samples and grid given field by field; a field given by -o overrides the preset's
+    wherever it stands; sweep takes them too (parsed only: its run is the sweep's -o path)."""
+    fast = _behaviour(vo3d("run", small, "--json", "--fast"), {"preset": "fast"})
+    assert fast == _behaviour(vo3d("run", small, "--json", "--preset", "fast"), {"preset": "fast"})
+    assert fast == _behaviour(vo3d("run", small, "--json", "-o", "preset=fast"))
+    as_o = [arg for k, v in COARSE.items() for arg in ("-o", f"{k}={v}")]
+    assert fast == _behaviour(vo3d("run", small, "--json", *as_o))
+    for order in (["--fast", "-o", "qp_samples=36"], ["-o", "qp_samples=36", "--fast"]):
+        _behaviour(vo3d("run", small, "--json", *order), {"preset": "fast", "qp_samples": 36})
     args = cli.build_parser().parse_args(["sweep", "pair", "--n", "1", "-o", "margin=0.01", "--fast"])
-    assert args.selector_options == [("margin", 0.01), *FAST_OPTIONS.items()]
+    assert args.selector_options == [("margin", 0.01), ("preset", "fast")]
     res = vo3d("compare", small, "--json", "--fast")
     assert res.returncode == 0, res.stderr
     (row,) = json.loads(res.stdout)
-    assert row["selector_options"] == FAST_OPTIONS
+    assert row["selector_options"] == {"preset": "fast"}
+    paper = _behaviour(vo3d("run", small, "--json", "--preset", "paper"), {"preset": "paper"})
+    assert paper != _behaviour(vo3d("run", small, "--json"))
 
 
 def test_swarm_is_fast_with_the_scenarios_sensing_horizon(cli, small, tmp_path):
-    """--swarm flies FAST_OPTIONS and horizon=sensing, resolved per scenario to its sensing
-    range over twice its top speed (the selector's horizon is that number); the same flight as
-    the number given by -o, in a file or on the command line; a later -o overrides it."""
-    swarm_options = {**FAST_OPTIONS, "horizon": "sensing"}
+    """--swarm is the swarm preset: fast with horizon "sensing", resolved for each decision to
+    the scenario's vehicle sensing range over twice the top speed; the same flight as the number
+    given by -o, in a file or on the command line; a later -o overrides it."""
     near = tmp_path / "near.yaml"  # sensing 10 m, 4 m/s: a 1.25 s horizon (6.875 s in small)
     near.write_text(yaml.safe_dump({**SMALL, "sensing": {"vehicle_range": 10.0,
                                                           "obstacle_range": 55.0}}))
+    swarm_options = {"preset": "swarm"}
     for path, horizon in ((small, 55.0 / 8.0), (near, 1.25)):
         sc = load_scenario(path)
         assert sc.sensing_horizon == horizon
         resolved = scenario_selector(scenario_variant(sc, selector_options=swarm_options))[0]
-        assert resolved.options.horizon == horizon
+        assert resolved.options_for(4.0, sc.dt).horizon == horizon
         swarm = _behaviour(vo3d("run", path, "--json", "--swarm"), swarm_options)
         as_number = vo3d("run", path, "--json", "--fast", "-o", f"horizon={horizon!r}")
         assert swarm == _behaviour(as_number)
@@ -238,14 +243,14 @@ def test_swarm_is_fast_with_the_scenarios_sensing_horizon(cli, small, tmp_path):
     # the 1.25 s horizon drops the cylinder's pyramid until it is 5 m off: another flight
     assert swarm != _behaviour(vo3d("run", near, "--json", "--fast"))
     later = vo3d("run", near, "--json", "--swarm", "-o", "horizon=3")
-    _behaviour(later, {**FAST_OPTIONS, "horizon": 3.0})
+    _behaviour(later, {"preset": "swarm", "horizon": 3.0})
     res = vo3d("compare", near, "--json", "--swarm")
     assert res.returncode == 0, res.stderr
     (row,) = json.loads(res.stdout)
     assert row["selector_options"] == swarm_options
     assert {k: v for k, v in row.items() if k not in TIMING_KEYS | {"selector_options"}} == swarm
     args = cli.build_parser().parse_args(["sweep", "pair", "--n", "1", "--swarm", "-o", "margin=0.01"])
-    assert args.selector_options == [*swarm_options.items(), ("margin", 0.01)]
+    assert args.selector_options == [("preset", "swarm"), ("margin", 0.01)]
 
 
 @pytest.mark.parametrize(
@@ -258,8 +263,8 @@ def test_swarm_is_fast_with_the_scenarios_sensing_horizon(cli, small, tmp_path):
         pytest.param("run", "corrections=[tg_range", "selector_options.corrections: line 1",
                      id="bad-yaml"),
         pytest.param("compare", "margin=-1", "selector_options.margin", id="compare"),
-        pytest.param("run", "horizon=Sensing", "selector_options.horizon: expected a positive "
-                     "number of seconds, null or 'sensing', got 'Sensing'", id="horizon-text"),
+        pytest.param("run", "horizon=Sensing", "selector_options.horizon: must be a number of "
+                     "seconds in (0, 1e6], null or 'sensing', got 'Sensing'", id="horizon-text"),
     ],
 )
 def test_bad_selector_options_exit_2_naming_the_key(small, command, option, fragment):
@@ -395,10 +400,12 @@ def test_run_hands_threads_neighbours_and_spill_to_the_simulator(cli, small, tmp
                                                                  monkeypatch, capsys, run_json):
     """--threads, --max-neighbors, --spill, --spill-dir reach the simulator and its run; with
     one thread and one neighbour of two vehicles, spilled, the summary is the default run's."""
+    from vo3d_opt.cli import flight
+    from vo3d_opt.cli import run as run_command
     from vo3d_opt.sim import simulator
 
     seen: dict = {}
-    real = cli.Simulator
+    real = flight.Simulator
 
     class Spy(real):
         def __init__(self, *args, **kwargs):
@@ -411,8 +418,8 @@ def test_run_hands_threads_neighbours_and_spill_to_the_simulator(cli, small, tmp
             seen["spilled"] = record.spill is not None
             return record
 
-    monkeypatch.setattr(cli, "Simulator", Spy)
-    for module in (cli, simulator):  # wherever the test's temporary directory is
+    monkeypatch.setattr(flight, "Simulator", Spy)
+    for module in (run_command, simulator):  # wherever the test's temporary directory is
         monkeypatch.setattr(module, "in_memory_fs", lambda *a, **k: False)
     status = cli.main(["run", str(small), "--json", "--threads", "1", "--max-neighbors", "1",
                        "--spill", "--spill-dir", str(tmp_path)])
@@ -453,13 +460,15 @@ def test_max_neighbors_needs_noiseless_immediate_sensing(tmp_path):
 
 def test_an_unwritable_spill_dir_is_refused_before_the_run(cli, small, tmp_path, monkeypatch,
                                                             capsys):
-    monkeypatch.setattr(cli, "in_memory_fs", lambda *a, **k: False)
+    from vo3d_opt.cli import run as run_command
+
+    monkeypatch.setattr(run_command, "in_memory_fs", lambda *a, **k: False)
     locked = tmp_path / "locked"
     locked.mkdir(mode=0o500)
     if os.access(locked, os.W_OK):  # root writes anywhere: make the probe fail instead
         def refuse(*args, **kwargs):
             raise PermissionError(13, "Permission denied")
-        monkeypatch.setattr(cli.tempfile, "TemporaryFile", refuse)
+        monkeypatch.setattr(run_command.tempfile, "TemporaryFile", refuse)
     assert cli.main(["run", str(small), "--json", "--spill-dir", str(locked)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("vo3d: --spill-dir: cannot write in "), err
@@ -467,7 +476,9 @@ def test_an_unwritable_spill_dir_is_refused_before_the_run(cli, small, tmp_path,
 
 @pytest.mark.parametrize("args", [["--spill"], ["--spill-dir", "."]])
 def test_spilling_into_memory_is_refused_before_the_run(cli, small, monkeypatch, capsys, args):
-    monkeypatch.setattr(cli, "in_memory_fs", lambda *a, **k: True)
+    from vo3d_opt.cli import run as run_command
+
+    monkeypatch.setattr(run_command, "in_memory_fs", lambda *a, **k: True)
     assert cli.main(["run", str(small), "--json", *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"vo3d: {args[0]}: ") and "held in memory" in err[0]
@@ -476,7 +487,9 @@ def test_spilling_into_memory_is_refused_before_the_run(cli, small, monkeypatch,
 
 
 def test_a_large_run_deciding_in_python_is_warned_about(cli, small, monkeypatch, capsys):
-    monkeypatch.setattr(cli, "SLOW_SWARM", 2)  # the small scenario's two agents count as many
+    from vo3d_opt.cli import flight
+
+    monkeypatch.setattr(flight, "SLOW_SWARM", 2)  # the small scenario's two agents count as many
     assert cli.main(["run", str(small), "--json", "--formulation", "sampled"]) == 0
     assert "warning: sampled / none decides in Python" in capsys.readouterr().err
     assert cli.main(["run", str(small), "--json"]) == 0  # compiled: no warning

@@ -66,8 +66,8 @@ def closest_after_one_step(sel: VelocitySelector, seed: int) -> float:
 
 @pytest.mark.parametrize("reciprocal", [True, False])
 def test_no_pair_enters_a_zone_within_the_step_and_without_the_guard_some_do(reciprocal):
-    guarded = VelocitySelector(reciprocal=reciprocal, closing_guard=True)
-    plain = VelocitySelector(reciprocal=reciprocal)
+    guarded = VelocitySelector(preset="paper", reciprocal=reciprocal, closing_guard=True)
+    plain = VelocitySelector(preset="paper", reciprocal=reciprocal)
     seeds = range(60)
     assert min(closest_after_one_step(guarded, s) for s in seeds) >= -SLACK
     assert sum(closest_after_one_step(plain, s) < -1e-3 for s in seeds) >= 1
@@ -78,7 +78,7 @@ def test_the_least_bad_fallback_keeps_the_guard_too(gap):
     """A vehicle boxed in by six others (an octahedron, each ``gap`` m from its zone), all
     flying at it: the centre has no safe velocity (least-bad fallback), and still no pair
     enters a zone within the step."""
-    sel = VelocitySelector(reciprocal=True, closing_guard=True)
+    sel = VelocitySelector(preset="paper", reciprocal=True, closing_guard=True)
     axes = np.vstack([np.eye(3), -np.eye(3)])
     P = np.vstack([[0.0, 0.0, 30.0], [0.0, 0.0, 30.0] + (R_PZ + gap) * axes])
     V = np.vstack([[0.0, 0.0, 0.0], -2.0 * axes])
@@ -91,7 +91,7 @@ def test_the_least_bad_fallback_keeps_the_guard_too(gap):
 
 
 def test_a_pair_inside_a_zone_does_not_close_in():
-    sel = VelocitySelector(reciprocal=True, closing_guard=True)
+    sel = VelocitySelector(preset="paper", reciprocal=True, closing_guard=True)
     for seed in range(20):
         _, _, before, after = one_step(sel, seed, inside=True)
         assert before[0, 1] < R_PZ and after[0, 1] >= before[0, 1] - SLACK
@@ -145,7 +145,7 @@ def test_the_option_reaches_a_scenario_run():
     data = yaml.safe_load(path.read_text())
     data["selector_options"] = {**data.get("selector_options", {}), "closing_guard": True}
     sc = scenario_from_dict(data)
-    assert scenario_selector(sc)[0].options.closing_guard
+    assert scenario_selector(sc)[0].config.safety.closing_guard
     s = summarize(run_scenario(sc, progress=False))
     assert s["pz_intrusions"] == 0 and s["collisions"] == 0 and s["all_reached"]
 

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from encounters import encounters
+from encounters import COARSE, encounters
 from vo3d_opt import AgentState, Limits, Neighbor
 from vo3d_opt.formulations.common import (
     NEVER,
@@ -429,16 +429,16 @@ def _hazard_decisions(n=120):
 
 @pytest.mark.parametrize("solver", ["exact2d", "daqp"])
 def test_fine_fallback_is_the_default_grid_where_something_does_not_avoid(solver):
-    """With FAST_OPTIONS' coarse grid, a decision with an obstacle in reach or a non-cooperative
-    neighbour falls back on the default grid (the same answer as FAST_OPTIONS' planes with the
+    """With the fast preset's coarse grid, a decision with an obstacle in reach or a non-cooperative
+    neighbour falls back on the default grid (the same answer as the coarse planes with the
     default grid); one with cooperative neighbours only keeps the coarse grid (the same answer
     as ``fine_fallback=False``). The compiled kernel and a Python formulation alike. Among the
     decisions of each kind, some fall back and the two grids answer differently, so that
     either rule applied to the wrong kind would fail."""
-    from vo3d_opt import FAST_OPTIONS, VelocitySelector
-    fast = VelocitySelector("plane_qp", solver, **FAST_OPTIONS)
-    coarse = VelocitySelector("plane_qp", solver, **FAST_OPTIONS, fine_fallback=False)
-    fine_grid = VelocitySelector("plane_qp", solver, **{**FAST_OPTIONS, "heading_step_deg": 10.0,
+    from vo3d_opt import VelocitySelector
+    fast = VelocitySelector("plane_qp", solver, preset="paper", **COARSE)
+    coarse = VelocitySelector("plane_qp", solver, preset="paper", **COARSE, fine_fallback=False)
+    fine_grid = VelocitySelector("plane_qp", solver, preset="paper", **{**COARSE, "heading_step_deg": 10.0,
                                                         "speed_levels": 9})
     fell_back = {"obstacle": 0, "noncoop": 0, "none": 0}
     grids_differ = dict(fell_back)
@@ -468,10 +468,9 @@ def test_fine_fallback_changes_nothing_with_the_default_grid():
 
 
 def test_fast_options_keep_an_obstacle_zone_clear_in_a_lagged_encounter():
-    """Encounter 5573 of the lagged sweep (seed 0): with FAST_OPTIONS' coarse grid everywhere a
+    """Encounter 5573 of the lagged sweep (seed 0): with the fast preset's coarse grid everywhere a
     vehicle pinned to the altitude floor drifted into a box's protected prism on least-bad
     velocities; with the default grid near obstacles (``fine_fallback``) it stays out."""
-    from vo3d_opt import FAST_OPTIONS
     from vo3d_opt.sim.scenario import scenario_variant
     from vo3d_opt.sim.simulator import run_scenario
     from vo3d_opt.sim.metrics import summarize
@@ -479,7 +478,7 @@ def test_fast_options_keep_an_obstacle_zone_clear_in_a_lagged_encounter():
     sc = make_encounter("lagged", 0, 5573).load()
     intrusions = {}
     for fine in (False, True):
-        fast = scenario_variant(sc, selector_options={**FAST_OPTIONS, "fine_fallback": fine})
+        fast = scenario_variant(sc, selector_options={"preset": "fast", "fine_fallback": fine})
         s = summarize(run_scenario(fast, progress=False))
         intrusions[fine] = s["obstacle_pz_intrusions"]
         assert s["collisions"] == 0

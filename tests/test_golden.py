@@ -17,6 +17,7 @@ from golden_cases import (
     GOLDEN,
     GOLDEN_RUNS,
     N_SWARMS,
+    OPTION_SETS,
     SWARM_LIMITS,
     SWARM_SETS,
     encounter,
@@ -32,9 +33,41 @@ from vo3d_opt import VelocitySelector
 DATA = np.load(GOLDEN)
 
 
-def selector(name: str, v_max: float, dt: float, formulation: str = "plane_qp", solver=None):
+#: How each recorded configuration is asked for today: a preset and overrides. (The recorded
+#: option values, ``golden_cases.option_set``, resolved per decision: the safe buffer is two
+#: steps at the decision's top speed, the swarm horizon the range over twice that speed.)
+PRESET_OF = {
+    "paper": ("paper", {}),
+    "safe": ("safe", {}),
+    "fast": ("fast", {}),
+    "swarm": ("swarm", {"sensing_range": 55.0}),
+    "safe_no_escape": ("safe", {"least_bad_escape": False}),
+    "fast_coarse": ("fast", {"fine_fallback": False}),
+    "paper_planes20": ("paper", {"plane_step_deg": 20.0, "qp_samples": 24, "margin": 1e-2}),
+    "paper_corr": ("paper", {"corrections": frozenset({"tg_range", "triangle", "base_chord"})}),
+    "safe_horizon": ("safe", {"horizon": 4.0}),
+}
+
+
+def selector(name: str, formulation: str = "plane_qp", solver=None) -> VelocitySelector:
     """The selector configuration ``name`` stands for."""
-    return VelocitySelector(formulation, solver, **option_set(name, v_max, dt))
+    preset, overrides = PRESET_OF[name]
+    return VelocitySelector(formulation, solver, preset=preset, **overrides)
+
+
+def test_every_recorded_configuration_is_asked_for() -> None:
+    assert set(PRESET_OF) == set(OPTION_SETS)
+
+
+@pytest.mark.parametrize("name", OPTION_SETS)
+def test_presets_resolve_to_the_recorded_options(name: str) -> None:
+    """Each configuration resolves, for a decision's top speed and period, to the option
+    values it was recorded with."""
+    for v_max, dt in ((4.0, 0.2), (2.7, 0.05), (5.9, 0.43)):
+        want = option_set(name, v_max, dt)
+        got = selector(name).options_for(v_max, dt)
+        for key, value in want.items():
+            assert getattr(got, key) == value, (name, key)
 
 
 def _rows(path: str) -> np.ndarray:
@@ -49,14 +82,13 @@ def test_recorded_decisions_are_decided_again(path: str) -> None:
     form, solver = path.split("/")
     rows = _rows(path)
     exact = solver == "exact2d"
-    selectors: dict[tuple, VelocitySelector] = {}
+    selectors: dict[str, VelocitySelector] = {}
     for k in rows:
         seed, name = int(DATA["dec_seed"][k]), str(DATA["dec_set"][k])
         e = encounter(seed)
-        v_max, dt = float(e["limits"][1]), float(e["dt"])
-        key = (name, v_max, dt)
-        if key not in selectors:
-            selectors[key] = selector(name, v_max, dt, form, solver or None)
+        if name not in selectors:
+            selectors[name] = selector(name, form, solver or None)
+        key = name
         d = selectors[key].select(**select_kwargs(e))
         where = f"{path} {name} encounter {seed}"
         assert str(d.status) == DATA["dec_status"][k], where
@@ -74,7 +106,7 @@ def test_recorded_swarms_are_decided_again(seed: int) -> None:
     s = swarm(seed)
     kw = many_kwargs(s, limits_of(SWARM_LIMITS))
     for name in SWARM_SETS:
-        res = selector(name, 4.0, 0.2).select_many(**kw)
+        res = selector(name).select_many(**kw)
         assert np.array_equal(res.velocities, DATA[f"swarm{seed}_{name}_velocities"]), name
         assert np.array_equal(
             np.asarray(res.statuses, dtype=str), DATA[f"swarm{seed}_{name}_statuses"]

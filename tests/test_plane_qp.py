@@ -80,7 +80,7 @@ def test_search_finds_what_exhaustive_search_finds(kw, solver):
     assert enc.unsafe(enc.v_pref)[0]
     backend = get_backend(solver)
     expected = _exhaustive(enc, backend.solve, backend.has_cones)
-    d = VelocitySelector(solver=solver).select(**kw)
+    d = VelocitySelector(solver=solver, preset="paper").select(**kw)
     if np.isfinite(expected):
         assert d.status == Status.OPTIMAL and d.info["round"] in ROUNDS
         assert np.linalg.norm(d.velocity - enc.v_pref) == pytest.approx(expected, abs=1e-6)
@@ -106,7 +106,7 @@ def test_an_answer_does_not_depend_on_other_planes():
     enc = prepare(own, v_pref, nbs, obs, limits, 0.5, Options(margin=0.5))
     for name in ("exact2d", "clarabel", "daqp"):
         backend = get_backend(name)
-        d = VelocitySelector(solver=name, margin=0.5).select(**kw)
+        d = VelocitySelector(solver=name, preset="paper", margin=0.5).select(**kw)
         expected = _exhaustive(enc, backend.solve, backend.has_cones)
         assert np.linalg.norm(d.velocity - enc.v_pref) == pytest.approx(expected, abs=1e-6)
 

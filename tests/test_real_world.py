@@ -149,7 +149,7 @@ def test_the_margins_can_be_overridden_and_the_altitude_margin_keeps_starts_plan
     mo = derive_margins(over)
     assert (mo.pz_buffer, mo.acceleration) == (0.3, 2.5)
     sel, _, _ = scenario_selector(over)
-    assert sel.options.pz_buffer == 0.3
+    assert sel.config.vo.pz_buffer == 0.3
     # a start 1 m above the floor caps the altitude margin below 1 m
     low = copy.deepcopy(SMALL)
     low["agents"][0]["start"] = [-20.0, 0.0, 1.0]

@@ -8,14 +8,12 @@ from hypothesis import HealthCheck, given, settings
 
 from encounters import encounters
 from vo3d_opt import (
-    FAST_OPTIONS,
     AgentState,
     Box,
     Cylinder,
     Limits,
     Neighbor,
     VelocitySelector,
-    swarm_options,
 )
 from vo3d_opt.formulations.common import Options, prepare
 from vo3d_opt.solvers import Result
@@ -35,10 +33,12 @@ CONTRACT = dict(
 )
 
 
-def exact(kw):
-    """The encounter as the exact checker sees it."""
+def exact(kw, sel=None):
+    """The encounter as the exact checker sees it with the options ``sel`` plans with (None:
+    the paper's): the VOs its answers must keep out of."""
+    options = Options() if sel is None else sel.options_for(kw["limits"].v_max, kw["dt"])
     return prepare(kw["own"], np.asarray(kw["preferred_velocity"], float), kw["neighbors"],
-                   kw["obstacles"], kw["limits"], kw["dt"], Options())
+                   kw["obstacles"], kw["limits"], kw["dt"], options)
 
 
 def assert_within_limits(kw, v):
@@ -49,32 +49,34 @@ def assert_within_limits(kw, v):
     assert lim.z_min - 1e-6 <= z <= lim.z_max + 1e-6
 
 
-def safe(kw, v) -> bool:
-    return not exact(kw).unsafe(v)[0]
+def safe(kw, v, sel=None) -> bool:
+    return not exact(kw, sel).unsafe(v)[0]
 
 
 @pytest.mark.parametrize("formulation,solver", [("sampled", None), ("nlp", "casadi")]
                          + [("plane_qp", s) for s in QP_SOLVERS]
                          + [("cone_qp", s) for s in QP_SOLVERS if s != "exact2d"])
 def test_contract_example(formulation, solver):
-    d = VelocitySelector(formulation=formulation, solver=solver).select(**CONTRACT)
+    sel = VelocitySelector(formulation=formulation, solver=solver)
+    d = sel.select(**CONTRACT)
     assert isinstance(d.velocity, np.ndarray) and d.velocity.shape == (3,)
     assert isinstance(d.status, str) and isinstance(d.solve_time, float) and d.solve_time > 0
     assert d.status == "optimal"
-    assert safe(CONTRACT, d.velocity)
+    assert safe(CONTRACT, d.velocity, sel)
     assert_within_limits(CONTRACT, d.velocity)
 
 
 @settings(max_examples=60, **SETTINGS)
 @given(encounters())
 def test_plane_qp_safe_whenever_sampled_is_and_no_worse(kw):
-    ref = VelocitySelector("sampled").select(**kw)
+    sel = VelocitySelector("sampled")
+    ref = sel.select(**kw)
     got = VelocitySelector("plane_qp").select(**kw)
     for d in (ref, got):
         assert_within_limits(kw, d.velocity)
     if ref.status == "optimal":
-        assert safe(kw, ref.velocity)
-        assert got.status == "optimal" and safe(kw, got.velocity)
+        assert safe(kw, ref.velocity, sel)
+        assert got.status == "optimal" and safe(kw, got.velocity, sel)
         o = Options()
         v_max = kw["limits"].v_max
         resolution = v_max / (o.speed_levels - 1) + v_max * np.deg2rad(o.heading_step_deg)
@@ -85,39 +87,19 @@ def test_plane_qp_safe_whenever_sampled_is_and_no_worse(kw):
 @settings(max_examples=60, **SETTINGS)
 @given(encounters())
 def test_fast_options_try_fewer_velocities_never_an_unchecked_one(kw):
-    """FAST_OPTIONS (fewer planes, tangent points and grid velocities): every answer within the
+    """The fast preset (fewer planes, tangent points and grid velocities): every answer within the
     limits, every optimal one outside every VO by the exact 3D check, as with the defaults; an
     answer on a plane is on one of its 5 planes (every 45 degrees), not the defaults' 19."""
-    sel = VelocitySelector(**FAST_OPTIONS)
-    assert sel.options.packed[1].shape[1] == 5
+    sel = VelocitySelector(preset="fast")
+    assert sel.options_for(4.0, 0.2).packed[1].shape[1] == 5
     d = sel.select(**kw)
     assert_within_limits(kw, d.velocity)
     assert d.status in ("optimal", "inside_protected_zone", "infeasible_min_violation")
     if d.status == "optimal":
-        assert safe(kw, d.velocity)
+        assert safe(kw, d.velocity, sel)
     if d.plane is not None:
         turns = np.degrees(d.plane) / 45.0
         assert abs(turns - round(turns)) < 1e-9
-
-
-def test_swarm_options_are_fast_options_with_the_sensing_horizon():
-    """swarm_options(range, v_max): a fresh dict of FAST_OPTIONS and horizon range / (2 v_max),
-    the horizon a scenario's ``horizon: sensing`` stands for."""
-    options = swarm_options(55.0, 5.0)
-    assert options == {**FAST_OPTIONS, "horizon": 5.5}
-    options["plane_step_deg"] = 1.0
-    assert FAST_OPTIONS["plane_step_deg"] == 45.0 and swarm_options(55.0, 5.0) != options
-    assert swarm_options(10, 4)["horizon"] == 1.25
-    with pytest.raises(ValueError, match="not a usable horizon"):
-        swarm_options(1e300, 1e-300)
-
-
-@pytest.mark.parametrize("bad", [0, -1.0, float("inf"), float("nan"), True, "55"])
-def test_swarm_options_refuse_bad_arguments_naming_them(bad):
-    with pytest.raises(ValueError, match="sensing_range"):
-        swarm_options(bad, 5.0)
-    with pytest.raises(ValueError, match="v_max"):
-        swarm_options(55.0, bad)
 
 
 @settings(max_examples=25, **SETTINGS)
@@ -125,10 +107,11 @@ def test_swarm_options_refuse_bad_arguments_naming_them(bad):
 def test_cone_qp_and_nlp(kw):
     start = VelocitySelector("plane_qp").select(**kw)
     for form in ("cone_qp", "nlp"):
-        d = VelocitySelector(form).select(**kw)
+        sel = VelocitySelector(form)
+        d = sel.select(**kw)
         assert_within_limits(kw, d.velocity)
         if d.status == "optimal":
-            assert safe(kw, d.velocity)
+            assert safe(kw, d.velocity, sel)
     d = VelocitySelector("nlp").select(**kw)
     if start.status == "optimal":  # the NLP starts from plane_qp's answer and never does worse
         dev = exact(kw).deviation
@@ -140,10 +123,11 @@ def test_cone_qp_and_nlp(kw):
 @settings(max_examples=8, **SETTINGS)
 @given(kw=encounters(max_neighbors=6, max_obstacles=3))
 def test_every_backend_keeps_limits_and_safety(solver, kw):
-    d = VelocitySelector("plane_qp", solver=solver).select(**kw)
+    sel = VelocitySelector("plane_qp", solver=solver)
+    d = sel.select(**kw)
     assert_within_limits(kw, d.velocity)
     if d.status == "optimal":
-        assert safe(kw, d.velocity)
+        assert safe(kw, d.velocity, sel)
 
 
 # --- hard cases never raise ------------------------------------------------------------------
@@ -176,7 +160,8 @@ def test_inside_protected_zone_escapes(formulation):
               limits=Limits(speed=(0, 4), altitude=(0, 40)), dt=0.2)
     d = VelocitySelector(formulation).select(**kw)
     assert d.status == "inside_protected_zone"
-    assert d.velocity @ (nb.position - own.position) <= 1e-9  # not closing in
+    # not closing in (IPOPT's answer within its tolerance of hovering)
+    assert d.velocity @ (nb.position - own.position) <= (1e-6 if formulation == "nlp" else 1e-9)
     assert_within_limits(kw, d.velocity)
 
 
@@ -198,11 +183,12 @@ class Garbage(Backend):
 def test_failing_backend_falls_back(backend):
     register_backend(backend.name, backend)
     try:
-        d = VelocitySelector("plane_qp", solver=backend.name).select(**CONTRACT)
+        sel = VelocitySelector("plane_qp", solver=backend.name)
+        d = sel.select(**CONTRACT)
     finally:
         unregister_backend(backend.name)
     assert d.status == "solver_failed_fallback"
-    assert safe(CONTRACT, d.velocity)
+    assert safe(CONTRACT, d.velocity, sel)
     assert_within_limits(CONTRACT, d.velocity)
 
 
@@ -223,15 +209,15 @@ def test_reciprocal_takes_half_the_avoidance():
     nb = Neighbor(position=(30.0, 1.0, 20.0), velocity=(-2.0, 0.0, 0.0), r_pz=10.0)
     kw = dict(own=own, preferred_velocity=(2.0, 0.0, 0.0), neighbors=[nb], obstacles=[],
               limits=Limits(speed=(0, 4), altitude=(0, 40)), dt=0.2)
-    full = VelocitySelector("plane_qp").select(**kw)
-    half = VelocitySelector("plane_qp", reciprocal=True).select(**kw)
+    full = VelocitySelector("plane_qp", preset="paper").select(**kw)
+    half = VelocitySelector("plane_qp", preset="paper", reciprocal=True).select(**kw)
     dev = exact(kw).deviation
     assert full.status == half.status == "optimal"
     assert dev(half.velocity)[0] < dev(full.velocity)[0]
     # A neighbour that does not avoid (hovering, static) gets no half share: the reciprocal
     # selector then keeps clear of its whole VO, like the non-reciprocal one.
     alone = dict(kw, neighbors=[nb.model_copy(update={"cooperative": False})])
-    own_all = VelocitySelector("plane_qp", reciprocal=True).select(**alone)
+    own_all = VelocitySelector("plane_qp", preset="paper", reciprocal=True).select(**alone)
     assert own_all.status == "optimal" and safe(kw, own_all.velocity)
     assert not safe(kw, half.velocity)  # the half share alone would not be safe
     assert dev(own_all.velocity)[0] == pytest.approx(dev(full.velocity)[0], abs=1e-3)
@@ -245,7 +231,7 @@ def test_answer_keeps_the_margin_off_the_cone(formulation):
     own = AgentState(position=(0.0, 0.0, 20.0), velocity=(4.0, 0.0, 0.0))
     kw = dict(own=own, preferred_velocity=(4.0, 0.0, 0.0), obstacles=[], limits=Limits(), dt=0.2,
               neighbors=[Neighbor(position=(20.0, 0.0, 20.0), velocity=(0.0, 0.0, 0.0), r_pz=10.0)])
-    d = VelocitySelector(formulation).select(**kw)
+    d = VelocitySelector(formulation, preset="paper").select(**kw)
     v = d.velocity
     off_axis = np.degrees(np.arctan2(np.hypot(v[1], v[2]), v[0]))
     distance = np.linalg.norm(v) * np.sin(np.radians(min(off_axis - 30.0, 90.0)))  # to the cone
@@ -290,7 +276,7 @@ def test_bad_input_names_the_field(change, field):
 def test_bad_option_is_one_line_naming_it(options, name):
     """A wrong or unknown option: a ValueError of one line that names it, without pydantic's
     multi-line report and its URLs."""
-    with pytest.raises(ValueError, match=rf"^Options: {name}\b") as err:
+    with pytest.raises(ValueError, match=rf"^{name}\b") as err:
         VelocitySelector(formulation="plane_qp", **options)
     assert "\n" not in str(err.value) and "http" not in str(err.value)
 

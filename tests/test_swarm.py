@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vo3d_opt import FAST_OPTIONS, AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
+from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
 
 TOL = 1e-9
 
@@ -85,7 +85,7 @@ CASES = {
     "max_speed": ({}, dict(max_speed=np.linspace(2.0, 5.0, 24))),
     "closing_guard": (dict(reciprocal=True, closing_guard=True), {}),
     "no_least_bad_escape": (dict(reciprocal=True, pz_buffer=3.0, least_bad_escape=False), {}),
-    "fast": (dict(FAST_OPTIONS, reciprocal=True, closing_guard=True), dict(obstacles=OBSTACLES)),
+    "fast": (dict(preset="fast", buffer_steps=0.0), dict(obstacles=OBSTACLES)),
     "everything": (dict(reciprocal=True, pz_buffer=1.0, horizon=8.0, closing_guard=True),
                    dict(obstacles=OBSTACLES, spheres=SPHERES, obstacle_range=20.0, max_neighbors=4,
                         limits=Limits(speed=(0.5, 4.0), altitude=(0.0, 50.0), acceleration=5.0), dt=0.1)),
@@ -105,13 +105,14 @@ def test_select_many_equals_a_loop_of_select(case):
 
 
 @pytest.mark.parametrize("options, baseline", [
-    pytest.param(dict(reciprocal=True, closing_guard=True), dict(reciprocal=True), id="closing_guard"),
-    pytest.param(dict(FAST_OPTIONS, reciprocal=True, closing_guard=True),
-                 dict(reciprocal=True, closing_guard=True), id="fast"),
+    pytest.param(dict(preset="paper", reciprocal=True, closing_guard=True),
+                 dict(preset="paper", reciprocal=True), id="closing_guard"),
+    pytest.param(dict(preset="fast", buffer_steps=0.0),
+                 dict(preset="paper", reciprocal=True, closing_guard=True), id="fast"),
 ])
 def test_options_in_a_tight_swarm_change_answers_and_match_select(options, baseline):
     """24 vehicles in a 30 m cube: many pairs within a step of each other's zones, so the
-    guard's rows bind, and FAST_OPTIONS' fewer velocities tried give other answers than the
+    guard's rows bind, and the fast preset's fewer velocities tried give other answers than the
     defaults'; select_many still equals select."""
     sel = VelocitySelector(**options)
     P, V, W, R = random_swarm(2, side=30.0)

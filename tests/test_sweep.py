@@ -276,7 +276,7 @@ def test_bad_options_are_refused_before_any_cluster_starts():
         Method(selector_options=(("closing_guard", 3),))
     with pytest.raises(ValueError, match="selector_options.pz_bufer: .*'pz_buffer'"):
         Method(selector_options=(("pz_bufer", 1.0),))
-    with pytest.raises(SweepError, match="--selector-option/--fast/--swarm: not used by --method rvo2"):
+    with pytest.raises(SweepError, match="--preset/--selector-option: not used by --method rvo2"):
         run_sweep("pair", 2, method=Method(name="rvo2", selector_options=(("margin", 0.1),)))
 
 
@@ -328,7 +328,7 @@ def test_sweep_json_prints_one_object_with_the_contract_keys(cluster, tmp_path):
     assert list(rows["index"]) == [0, 1] and (rows["family"] == "pair").all()
     assert {"param_miss_distance", "param_speed_0"} <= set(rows.columns)
     assert set(CONTRACT_KEYS) <= set(rows.columns)
-    assert (rows["selector_options"] == '{"closing_guard": true}').all()
+    assert (rows["selector_options"] == '{"closing_guard": true, "preset": "safe"}').all()
     table = vo3d("sweep", "pair", "--n", "1", "--scheduler", cluster, "-o", "closing_guard=true")
     assert re.search(r"^selector_options +closing_guard=true$", table.stdout, re.M), table.stdout
     assert (tmp_path / "min_distance.png").stat().st_size > 0
@@ -390,7 +390,8 @@ def test_selector_options_pass_through_to_the_runs_and_the_replays(tmp_path):
     changed = 0
     for index in range(3):
         row = run_encounter("pair", 0, index, method)
-        assert row["error"] is None and json.loads(row["selector_options"]) == options
+        assert row["error"] is None
+        assert json.loads(row["selector_options"]) == {"preset": "safe", **options}
         data = {**make_encounter("pair", 0, index).scenario, "selector_options": options}
         _, summary = fly(scenario_from_dict(data), DEFAULT_METHOD)
         for key, value in summary.items():
@@ -398,7 +399,7 @@ def test_selector_options_pass_through_to_the_runs_and_the_replays(tmp_path):
                 as_text = key in ("status_counts", "selector_options")
                 assert value == (json.loads(row[key]) if as_text else row[key]), (index, key)
         plain = run_encounter("pair", 0, index)
-        assert json.loads(plain["selector_options"]) == {}
+        assert json.loads(plain["selector_options"]) == {"preset": "safe"}
         changed += row["min_vehicle_distance"] != plain["min_vehicle_distance"]
     assert changed
     result = SweepResult(family=FAMILIES["pair"], seed=0, method=method, rows=pd.DataFrame())
@@ -408,7 +409,7 @@ def test_selector_options_pass_through_to_the_runs_and_the_replays(tmp_path):
     path.write_text(yaml.safe_dump(data))
     replay = vo3d("run", path, "--json")
     assert replay.returncode == 0, replay.stderr
-    assert json.loads(replay.stdout)["selector_options"] == options
+    assert json.loads(replay.stdout)["selector_options"] == {"preset": "safe", **options}
 
 
 def test_a_family_s_own_selector_options_stay_under_the_method_s():
@@ -416,7 +417,7 @@ def test_a_family_s_own_selector_options_stay_under_the_method_s():
     sc = scenario_from_dict({**enc.scenario, "selector_options": {"margin": 0.01,
                                                                   "reciprocal": True}})
     _, summary = fly(sc, Method(selector_options=(("reciprocal", False),)))
-    assert summary["selector_options"] == {"margin": 0.01, "reciprocal": False}
+    assert summary["selector_options"] == {"preset": "safe", "margin": 0.01, "reciprocal": False}
     with pytest.raises(ValueError, match="selector_options.corrections"):
         Method(selector_options=(("corrections", ["bogus"]),))
     kept = Method(selector_options=(("corrections", frozenset({"tg_range"})),))
@@ -424,30 +425,36 @@ def test_a_family_s_own_selector_options_stay_under_the_method_s():
 
 
 def test_horizon_sensing_is_each_encounter_s_own_sensing_horizon():
-    """horizon=sensing (``vo3d sweep --swarm``) resolves per encounter: each pair encounter
-    flies as its scenario with its own sensing range over twice its top speed given as a
-    number (the pair family's speeds differ, so the horizons do)."""
+    """horizon=sensing (``vo3d sweep --swarm``) resolves per encounter and per vehicle: the
+    encounter's sensing range over twice the vehicle's own top speed. A pair encounter whose
+    vehicles share one top speed flies as its scenario with that horizon given as a number
+    (the pair family's speeds differ between encounters, so the horizons do)."""
     method = Method(selector_options=(("horizon", "sensing"),))
     horizons = set()
     for index in range(2):
         sc = scenario_from_dict(make_encounter("pair", 0, index).scenario)
+        top = float(max(sc.max_speed))
+        sc = scenario_variant(sc, agents=[{**a, "max_speed": top} for a in
+                                          sc.model_dump(exclude_none=True)["agents"]])
         horizons.add(sc.sensing_horizon)
-        row = run_encounter("pair", 0, index, method)
-        assert row["error"] is None
-        assert json.loads(row["selector_options"]) == {"horizon": "sensing"}
         resolved = scenario_selector(scenario_variant(sc, selector_options={"horizon": "sensing"}))
-        assert resolved[0].options.horizon == sc.sensing_horizon
-        as_number = Method(selector_options=(("horizon", sc.sensing_horizon),))
-        _, summary = fly(sc, as_number)
+        for v in (top, 0.5 * top):
+            want = sc.sensing.vehicle_range / (2.0 * v)
+            assert resolved[0].options_for(v, sc.dt).horizon == want
+        _, by_sensing = fly(sc, method)
+        assert by_sensing["selector_options"] == {"preset": "safe", "horizon": "sensing"}
+        _, summary = fly(sc, Method(selector_options=(("horizon", sc.sensing_horizon),)))
         for key in ("min_vehicle_distance", "steps", "pz_intrusions", "time"):
-            assert summary[key] == row[key], (index, key)
+            assert summary[key] == by_sensing[key], (index, key)
     assert len(horizons) == 2
     # a failure scenario carries horizon: sensing and replays with its own horizon
     result = SweepResult(family=FAMILIES["pair"], seed=0, method=method, rows=pd.DataFrame())
     data = failure_scenario(result, 1)
     assert data["selector_options"] == {"horizon": "sensing"}
     replay = scenario_from_dict(data)
-    assert scenario_selector(replay)[0].options.horizon == replay.sensing_horizon
+    top = float(max(replay.max_speed))
+    assert scenario_selector(replay)[0].options_for(top, replay.dt).horizon == replay.sensing_horizon
+    assert run_encounter("pair", 0, 1, method)["error"] is None
 
 
 # ------------------------------------------------- group variants (contracts §5 keys)

@@ -1,13 +1,14 @@
 """vo3d-opt: safe velocities for multi-UAV systems by optimisation over the improved 3D velocity
 obstacle (VO cones, VO pyramids, avoidance planes)."""
 
-from .selector import FAST_OPTIONS, Decision, VelocitySelector, swarm_options
+from .config import PRESETS, SelectorConfig
+from .selector import Decision, VelocitySelector
 from .types import AgentState, Box, Cylinder, Limits, Neighbor
 
 __all__ = [
     "VelocitySelector",
-    "FAST_OPTIONS",
-    "swarm_options",
+    "PRESETS",
+    "SelectorConfig",
     "Decision",
     "AgentState",
     "Neighbor",

@@ -16,11 +16,12 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Final, TypedDict
+from typing import Any
 
 import numpy as np
 
 from . import swarm
+from .config import SelectorConfig
 from .formulations import aot, cone_qp, kernel, nlp, plane_qp, sampled
 from .formulations.common import (
     Bounds,
@@ -57,54 +58,6 @@ FORMULATIONS = ("sampled", "plane_qp", "cone_qp", "nlp")
 DEFAULT_SOLVERS = {"plane_qp": "exact2d", "cone_qp": "daqp", "nlp": "casadi"}
 DEFAULT_QP_SOLVER = DEFAULT_SOLVERS["plane_qp"]
 DEFAULT_NLP_SOLVER = DEFAULT_SOLVERS["nlp"]
-
-
-class FastOptions(TypedDict):
-    """The keys of ``FAST_OPTIONS`` (options of ``Options``)."""
-
-    plane_step_deg: float
-    qp_samples: int
-    heading_step_deg: float
-    speed_levels: int
-
-
-#: Coarser options for swarms where the decision's time matters more than the shortest detour
-#: (``VelocitySelector(**FAST_OPTIONS)``, ``vo3d run --fast``; README, Swarms): avoidance
-#: planes every 45 degrees (5 planes, 15 plane QPs instead of 19 and 57), tangent points among
-#: 12 generator samples instead of 36, and the fallbacks' grid 8 headings by 3 speeds per
-#: plane instead of 36 by 9. Every answer still passes the same exact 3D membership check and
-#: the same limits; what it gives up is choice: fewer velocities are tried, so a decision may
-#: deviate further from the preferred velocity, or end least-bad where the defaults find a safe
-#: velocity, and flights can be longer (README, Swarms). With an obstacle in reach or a
-#: non-cooperative neighbour the fallbacks still use the default grid's speeds and headings
-#: (``fine_fallback``): with the coarse grid there too, 4 of 10,000 ``lagged`` sweep
-#: encounters let a vehicle into an obstacle's protected prism. For ``sampled``,
-#: heading_step_deg and speed_levels are its whole grid (5 planes of 17 velocities). A plain
-#: dict (typed, so that ``**FAST_OPTIONS`` type-checks): read-only by convention, copied
-#: wherever it is used.
-FAST_OPTIONS: Final[FastOptions] = {
-    "plane_step_deg": 45.0,
-    "qp_samples": 12,
-    "heading_step_deg": 45.0,
-    "speed_levels": 3,
-}
-
-
-def swarm_options(sensing_range: float, v_max: float) -> dict[str, Any]:
-    """``FAST_OPTIONS`` with RVO2-3D's time horizon, ``sensing_range / (2 v_max)`` s (two
-    vehicles closing head-on at ``v_max`` cross the sensing range in it): the swarm preset of
-    ``vo3d run --swarm`` (README, Swarms), for ``VelocitySelector(**swarm_options(55, 5))``.
-    The VO then ignores meetings further ahead than the horizon, as RVO2-3D's does and the
-    paper's unbounded one does not; ``ValueError`` naming the argument unless both are
-    positive and finite."""
-    for name, value in (("sensing_range", sensing_range), ("v_max", v_max)):
-        ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
-        if not (ok and math.isfinite(value) and value > 0):
-            raise ValueError(f"{name}: expected a positive finite number, got {value!r}")
-    horizon = float(sensing_range) / (2.0 * float(v_max))
-    if not (math.isfinite(horizon) and horizon > 0):  # e.g. 1e300 / 1e-300
-        raise ValueError(f"sensing_range / (2 v_max) = {horizon!r} s: not a usable horizon")
-    return {**FAST_OPTIONS, "horizon": horizon}
 
 
 #: Seconds a first compilation may take before the user is told about it on stderr.
@@ -343,17 +296,31 @@ def warm_up_many() -> None:
         # with the ahead-of-time module nothing compiles here (scipy's k-d tree gets imported)
         _compiling(
             "the swarm kernel",
-            lambda: _select_many_compiled(Options(), inputs, 1, time.perf_counter()),
+            lambda: _select_many_compiled(
+                [(Options(), np.arange(2))], inputs, 1, time.perf_counter()
+            ),
         )
         _warm_many = True
 
 
 def _select_many_compiled(
-    options: Options, inputs: swarm.SwarmInputs, threads: int, t0: float
+    groups: list[tuple[Options, np.ndarray]], inputs: swarm.SwarmInputs, threads: int, t0: float
 ) -> SwarmDecision:
-    """``select_many`` compiled: every deciding vehicle, on ``threads`` threads."""
+    """``select_many`` compiled: every deciding vehicle, on ``threads`` threads; ``groups``:
+    the options and the deciding vehicles (rows of ``who``) that plan with them."""
     sw = inputs.arrays(threads)
-    out = swarm.decide_all(sw, options.packed, threads, _range_kernel)
+    if len(groups) == 1:
+        out = swarm.decide_all(sw, groups[0][0].packed, threads, _range_kernel)
+    else:
+        out = np.empty((sw.who.shape[0], swarm.MANY_OUT_SIZE))
+        for options, rows in groups:
+            part = sw._replace(
+                who=sw.who[rows],
+                nb_span=sw.nb_span[rows],
+                sp_span=sw.sp_span[rows],
+                ob_span=sw.ob_span[rows],
+            )
+            out[rows] = swarm.decide_all(part, options.packed, threads, _range_kernel)
     result = _swarm_decision(
         inputs.V,
         sw.who,
@@ -435,14 +402,17 @@ class VelocitySelector:
         formulation: str = "plane_qp",
         solver: str | None = None,
         *,
+        preset: str | None = None,
         start_solver: str | None = None,
-        **options,
+        **overrides: Any,
     ) -> None:
         if formulation not in FORMULATIONS:
             raise ValueError(
                 f"formulation: unknown {formulation!r}; available: {', '.join(FORMULATIONS)}"
             )
-        self.options = Options(**options)  # ValueError naming a wrong or unknown option
+        #: The resolved configuration: the preset's values, each keyword over one field.
+        self.config = SelectorConfig.of(preset, **overrides)
+        self._resolved: dict[tuple[float, float, float | None], Options] = {}
         self.formulation = formulation
         self._qp = self._nlp = None
         self.solver: str | None = None
@@ -469,6 +439,18 @@ class VelocitySelector:
         if not self.compiled:
             _warm_formulation(self)
 
+    def options_for(self, v_max: float, dt: float, sensing_range: float | None = None) -> Options:
+        """The numbers a decision with top speed ``v_max`` and period ``dt`` plans with
+        (``SelectorConfig.resolve``), kept for the next decision with the same."""
+        key = (v_max, dt, sensing_range) if self.config.per_decision else (0.0, 0.0, None)
+        options = self._resolved.get(key)
+        if options is None:
+            if len(self._resolved) >= 64:
+                self._resolved.clear()
+            options = Options(**self.config.resolve(v_max, dt, sensing_range))
+            self._resolved[key] = options
+        return options
+
     @staticmethod
     def _qp_backend(name: str, formulation: str) -> Backend:
         backend = get_backend(name)
@@ -494,8 +476,12 @@ class VelocitySelector:
         obstacles: Sequence[Cylinder | Box] = (),
         limits: Limits | None = None,
         dt: float = 0.2,
+        *,
+        sensing_range: float | None = None,
     ) -> Decision:
-        """The velocity nearest ``preferred_velocity`` outside every VO within the limits."""
+        """The velocity nearest ``preferred_velocity`` outside every VO within the limits.
+        ``sensing_range`` (m): the range the neighbours were sensed within, which a horizon
+        ``"sensing"`` (preset ``swarm``) is derived from when the configuration holds none."""
         t0 = time.perf_counter()
         if not isinstance(own, AgentState):
             raise ValueError(f"own: expected AgentState, got {type(own).__name__}")
@@ -510,21 +496,27 @@ class VelocitySelector:
         ):
             raise ValueError(f"dt: must be a positive finite number of seconds, got {dt!r}")
         prisms = prism_rows(obstacles)
+        options = self.options_for(limits.speed[1], dt, sensing_range)
         if self._compiled and self._nlp is None:
             return self._decide(
-                own.position, own.velocity, v_pref, nbrs, prisms, bounds_array(limits, dt), t0
+                own.position,
+                own.velocity,
+                v_pref,
+                nbrs,
+                prisms,
+                bounds_array(limits, dt),
+                options,
+                t0,
             )
         bounds = Bounds.of(limits, dt)
-        vos = py_build_vos(
-            own.position, own.velocity, v_pref, nbrs, prisms, bounds, self.options.config
-        )
+        vos = py_build_vos(own.position, own.velocity, v_pref, nbrs, prisms, bounds, options.config)
         enc = Encounter(
             position=own.position,
             v_now=own.velocity,
             vos=vos,
             limits=limits,
             dt=float(dt),
-            options=self.options,
+            options=options,
             nbrs=nbrs,
         )
         out = self._run(enc, nbrs, prisms, bounds)
@@ -551,12 +543,13 @@ class VelocitySelector:
         nbrs: np.ndarray,
         prisms: np.ndarray,
         limits: np.ndarray,
+        options: Options,
         t0: float,
     ) -> Decision:
         """The compiled decision and its ``Decision``."""
         out = np.empty(kernel.OUT_SIZE)
         decide = _decide_unchecked if _vec3_ok(p) and _vec3_ok(v_now) else _decide_kernel
-        decide(p, v_now, v_pref, nbrs, prisms, limits, *self.options.packed, out)
+        decide(p, v_now, v_pref, nbrs, prisms, limits, *options.packed, out)
         vx, vy, vz, status, phi, rnd, solved = out.tolist()
         return Decision(
             velocity=out[:3],
@@ -639,7 +632,18 @@ class VelocitySelector:
         n_threads = swarm.thread_count(threads)
         if not self.compiled:
             return self._select_many_loop(inputs, t0)
-        return _select_many_compiled(self.options, inputs, n_threads, t0)
+        return _select_many_compiled(self._options_by_vehicle(inputs), inputs, n_threads, t0)
+
+    def _options_by_vehicle(self, inputs: swarm.SwarmInputs) -> list[tuple[Options, np.ndarray]]:
+        """The deciding vehicles grouped by the options they plan with (their own top speed
+        may set the buffer and the horizon): (options, the rows of ``who`` that use them)."""
+        v_max = inputs.bounds[inputs.who, 1]
+        groups = np.unique(v_max) if self.config.per_decision else v_max[:0]
+        dt, rng = inputs.dt, inputs.sensing_range
+        if groups.size <= 1:
+            top = float(groups[0]) if groups.size else inputs.limits.v_max
+            return [(self.options_for(top, dt, rng), np.arange(inputs.who.shape[0]))]
+        return [(self.options_for(float(v), dt, rng), np.flatnonzero(v_max == v)) for v in groups]
 
     def _select_many_loop(self, inputs: swarm.SwarmInputs, t0: float) -> SwarmDecision:
         """``select`` for each deciding vehicle with the same neighbours (formulations and
@@ -678,6 +682,7 @@ class VelocitySelector:
                 obs,
                 inputs.vehicle_limits(i),
                 inputs.dt,
+                sensing_range=inputs.sensing_range,
             )
             vel[d], statuses[d], rounds[d] = (
                 dec.velocity,
@@ -717,7 +722,14 @@ class VelocitySelector:
             assert self._qp is not None  # plane_qp and nlp have a QP backend
             return plane_qp.select(enc, solve, self._qp.has_cones)
         d = self._decide(
-            enc.position, enc.v_now, enc.v_pref, nbrs, prisms, bounds_array(enc.limits, enc.dt), 0.0
+            enc.position,
+            enc.v_now,
+            enc.v_pref,
+            nbrs,
+            prisms,
+            bounds_array(enc.limits, enc.dt),
+            enc.options,
+            0.0,
         )
         status = Status.OPTIMAL if d.status == Status.INSIDE_PROTECTED_ZONE else d.status
         return Outcome(d.velocity, status, d.plane, d.info)

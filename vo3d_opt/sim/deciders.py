@@ -48,7 +48,9 @@ class _SelectorStep:
     ) -> None:
         self.scenario, self.selector = sc, selector
         self.formulation, self.solver = formulation, solver
-        self.margins = derive_margins(sc)
+        config = getattr(selector, "config", None)  # a VelocitySelector's: its buffer in steps
+        steps = config.vo.buffer_steps if config is not None else 2.0
+        self.margins = derive_margins(sc, steps)
         self.limits = planning_limits(sc.limits, self.margins)
         self.bodies = planning_bodies(sc, self.margins)
         self.landing = Landing.for_scenario(sc, self.limits, self.bodies, self.margins.pz_buffer)

@@ -19,7 +19,8 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
   off its altitude or over the speed limit;
 * ``tracking`` (m): how far a vehicle strays from the straight line the selector planned:
   the velocity gap times ``tau_eff``, the gap at most ``min(2 v_max, √3 a dt)``;
-* ``pz_buffer`` (m): ``2 v_max dt`` (both move before the next decision) + ``2 tracking``
+* ``pz_buffer`` (m): ``2 v_max dt`` (both move before the next decision: the selector's
+  ``buffer_steps``, two in its presets with a buffer) + ``2 tracking``
   (both stray) + ``k σ_p`` (the sensed position's error) + ``v_max latency`` (the other flew
   on since it was sensed) + ``k σ_v (dt + latency)`` (a wrong sensed velocity, extrapolated);
   ``k`` = :data:`NOISE_QUANTILE`;
@@ -158,15 +159,17 @@ def _altitude_cap(sc: Scenario) -> float:
     return max(0.0, room - ALTITUDE_CLEARANCE)
 
 
-def derive_margins(sc: Scenario) -> Margins:
-    """The margins of the module docstring for scenario ``sc`` (overrides applied)."""
+def derive_margins(sc: Scenario, buffer_steps: float = 2.0) -> Margins:
+    """The margins of the module docstring for scenario ``sc`` (overrides applied);
+    ``buffer_steps``: the selector's buffer in steps of flight at the top speed (the ``2 v_max
+    dt`` of ``pz_buffer``, two steps in every preset that has a buffer, none in ``paper``)."""
     dt, v_max, sens = float(sc.dt), float(np.max(sc.max_speed)), sc.sensing
     tau = response_time(sc.vehicle_dynamics, dt)
     accel, why_a = _acceleration(sc, tau, v_max)
     gap = 2.0 * v_max if accel is None else min(2.0 * v_max, math.sqrt(3.0) * accel * dt)
     tracking = gap * tau
     noise = NOISE_QUANTILE * (sens.position_noise + sens.velocity_noise * (dt + sens.latency))
-    derived_buffer = 2.0 * v_max * dt + 2.0 * tracking + noise + v_max * sens.latency
+    derived_buffer = buffer_steps * v_max * dt + 2.0 * tracking + noise + v_max * sens.latency
     pz_buffer = _pick(sc.selector_options.get("pz_buffer", sc.safety.pz_buffer), derived_buffer)
     obstacle = _pick(sc.safety.obstacle_margin, tracking + float(np.max(sc.radius)))
     rise = tracking if sc.safety.obstacle_margin is None else 0.0
@@ -189,7 +192,8 @@ def derive_margins(sc: Scenario) -> Margins:
         ),
         "tracking": f"velocity gap {gap:.3g} m/s x tau_eff {tau:.3g} s",
         "pz_buffer": (
-            f"2 v_max dt {2 * v_max * dt:.3g} + 2 tracking {2 * tracking:.3g} + noise "
+            f"{buffer_steps:g} v_max dt {buffer_steps * v_max * dt:.3g} + 2 tracking "
+            f"{2 * tracking:.3g} + noise "
             f"{noise:.3g} + latency {v_max * sens.latency:.3g}"
         ),
         "obstacle_margin": "tracking + vehicle radius",

@@ -57,9 +57,10 @@ from typing import Any, Protocol
 import numpy as np
 from tqdm import tqdm
 
+from vo3d_opt.config import DEFAULT_PRESET
 from vo3d_opt.sim.dynamics import Dynamics, make_dynamics
 from vo3d_opt.sim.safety import derive_margins, within_reach
-from vo3d_opt.sim.scenario import Scenario, as_selector_options, load_scenario
+from vo3d_opt.sim.scenario import Scenario, load_scenario
 from vo3d_opt.sim.spill import (
     SPILL_BYTES,
     Spill,
@@ -656,37 +657,42 @@ class Simulator:
         )
 
 
-def default_selector_options(sc: Scenario) -> dict[str, Any]:
-    """What every agent of a simulation runs with unless ``selector_options`` says otherwise.
-
-    All agents run the same selector, so each may assume the other takes half of a pairwise
-    avoidance (``reciprocal``); and since each decides from a snapshot that the others change
-    within the next step, every neighbour's sphere is planned ``pz_buffer`` larger: twice the
-    distance a vehicle covers in one step at full speed, plus what the scenario's dynamics
-    and sensing add (``vo3d_opt.sim.safety``: tracking error, noise, latency; the scenario's
-    ``safety.pz_buffer`` overrides it). Without these the paper's non-reciprocal selection
-    lets vehicles slide along each other's zones and dip into them (see README, "Safety in
-    simulation"). ``closing_guard``: two vehicles that change velocity in the same step,
-    each planning against the other's last one, can still slide a few centimetres into each
-    other's zones; the guard caps the speed towards a cooperative neighbour near its zone at
-    half the gap per step (``formulations/plane_qp.md``, item 5)."""
-    from vo3d_opt.sim.safety import derive_margins
-
-    return {"reciprocal": True, "pz_buffer": derive_margins(sc).pz_buffer, "closing_guard": True}
-
-
 def scenario_selector(
     sc: Scenario, formulation: str | None = None, solver: str | None = None
 ) -> tuple[Any, str, str]:
     """The selector a scenario runs with: the given or the scenario's formulation and solver,
-    and ``default_selector_options`` overridden by the scenario's ``selector_options``
-    (``horizon: sensing``: the scenario's ``sensing_horizon``)."""
-    options = {**default_selector_options(sc), **sc.selector_options}
-    return make_selector(
-        formulation or sc.formulation,
-        solver or sc.solver,
-        as_selector_options(options, sc.sensing_horizon),
-    )
+    configured by its ``selector_options`` (a preset, ``safe`` unless it names another, and
+    fields over it) with ``sensing_range`` its vehicle sensing range. The simulator adds one
+    thing of its own, from the scenario's physics: where the buffer ``vo3d_opt.sim.safety``
+    derives (dynamics, noise, latency, a ``safety.pz_buffer``, agents slower than the limits)
+    is not what the preset's ``buffer_steps`` gives each agent, it is passed in metres
+    (``scenario_buffer``)."""
+    options = {"sensing_range": float(sc.sensing.vehicle_range), **sc.selector_options}
+    buffer = scenario_buffer(sc, options)
+    if buffer is not None:
+        options["pz_buffer"] = buffer
+    return make_selector(formulation or sc.formulation, solver or sc.solver, options)
+
+
+def flown_options(sc: Scenario) -> dict[str, Any]:
+    """The selector options a run of ``sc`` flies with, as its summary reports them: the
+    preset (``safe`` unless the scenario names another) and the fields set over it."""
+    return {"preset": DEFAULT_PRESET, **sc.selector_options}
+
+
+def scenario_buffer(sc: Scenario, options: dict[str, Any]) -> float | None:
+    """The buffer (m) the scenario needs when the selector's own, ``buffer_steps`` steps of
+    flight at each agent's top speed, is not it; None when it is (or ``pz_buffer`` is given)."""
+    from vo3d_opt.config import SelectorConfig
+
+    config = SelectorConfig.of(**options)
+    if config.vo.pz_buffer is not None:
+        return None
+    steps = config.vo.buffer_steps
+    derived = derive_margins(sc, steps).pz_buffer
+    dt, top = float(sc.dt), np.minimum(sc.max_speed, sc.limits.v_max)
+    own = {steps * float(v) * dt for v in top[sc.avoids]} or {derived}
+    return None if own == {derived} else derived
 
 
 def run_scenario(

@@ -24,7 +24,7 @@ from vo3d_opt.sim.scenario import (
     scenario_from_dict,
     scenario_variant,
 )
-from vo3d_opt.sim.simulator import RunRecord, Simulator, scenario_selector
+from vo3d_opt.sim.simulator import RunRecord, Simulator, flown_options, scenario_selector
 from vo3d_opt.sweep.families import Family, get_family, make_encounter
 
 METHODS = ("vo3d", "rvo2")
@@ -86,7 +86,7 @@ def fly(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, Any]]:
         sc = scenario_variant(sc, selector_options=dict(method.selector_options))
     sel, formulation, solver = scenario_selector(sc, method.formulation, method.solver)
     record = Simulator(sc, sel, formulation=formulation, solver=solver).run(progress=False)
-    return record, {**summarize(record), "selector_options": dict(sc.selector_options)}
+    return record, {**summarize(record), "selector_options": flown_options(sc)}
 
 
 def normalised_min_distance(record: RunRecord) -> float | None:

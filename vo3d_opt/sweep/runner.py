@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from tqdm import tqdm
 
-from vo3d_opt.sim.scenario import as_selector_options
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.families import FAMILIES, Family, get_family
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, one_line
@@ -59,7 +58,7 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
 
         if method.formulation or method.solver or method.selector_options:
             raise SweepError(
-                "--formulation/--solver/--selector-option/--fast/--swarm: not used by --method rvo2"
+                "--formulation/--solver/--preset/--selector-option: not used by --method rvo2"
             )
         if not family.obstacle_free:
             ok = ", ".join(f.name for f in FAMILIES.values() if f.obstacle_free)
@@ -73,8 +72,7 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
             )
         return rvo2.FORMULATION, f"rvo23d {rvo2.version()}"
     try:  # the options are valid (Method checks them): whether the selector takes them
-        # horizon=sensing: each encounter's own number (scenario_selector); any one checks here
-        options = as_selector_options(dict(method.selector_options), 1.0)
+        options = {"sensing_range": 1.0, **dict(method.selector_options)}
         _, formulation, solver = make_selector(method.formulation, method.solver, options)
     except (ValueError, TypeError) as exc:
         form, solver = method.formulation or "default", method.solver or "default"

@@ -15,7 +15,6 @@ from vo3d_opt.sim.scenario.loader import (
     scenario_variant,
 )
 from vo3d_opt.sim.scenario.schema import (
-    SENSING_HORIZON,
     AgentSpec,
     BoxSpec,
     CylinderSpec,
@@ -23,7 +22,6 @@ from vo3d_opt.sim.scenario.schema import (
     Scenario,
     SensingSpec,
     SphereSpec,
-    as_selector_options,
     prism_contains,
     sphere_surface_distance,
 )
@@ -33,12 +31,10 @@ __all__ = [
     "BoxSpec",
     "CylinderSpec",
     "DefaultsSpec",
-    "SENSING_HORIZON",
     "Scenario",
     "ScenarioError",
     "SensingSpec",
     "SphereSpec",
-    "as_selector_options",
     "bundled_dir",
     "bundled_files",
     "check_selector_options",

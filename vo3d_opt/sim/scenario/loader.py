@@ -28,13 +28,12 @@ from typing import Annotated, Any, get_args, get_origin
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from vo3d_opt.config import OPTION_KEYS, check_options
 from vo3d_opt.sim.scenario.schema import (
     OBSTACLE_TAGS,
-    SENSING_HORIZON,
     Scenario,
-    as_selector_options,
 )
-from vo3d_opt.types import describe_error, field_path, one_line
+from vo3d_opt.types import InputError, describe_error, field_path, one_line
 
 log = logging.getLogger(__name__)
 
@@ -103,8 +102,6 @@ def _models_in(annotation: Any) -> list[type[BaseModel]]:
 @cache
 def _key_places() -> dict[str, tuple[str, ...]]:
     """Every key of the format and where it is valid ("" for the top level)."""
-    from vo3d_opt.formulations.common import Options
-
     places: dict[str, list[str]] = defaultdict(list)
 
     def walk(model: type[BaseModel], where: str) -> None:
@@ -117,7 +114,8 @@ def _key_places() -> dict[str, tuple[str, ...]]:
                 )
 
     walk(Scenario, "")
-    walk(Options, "selector_options")
+    for key in OPTION_KEYS:
+        places[key].append("selector_options")
     return {k: tuple(v) for k, v in places.items()}
 
 
@@ -270,21 +268,11 @@ def parse_option(text: str) -> tuple[str, Any]:
 def check_selector_options(options: dict[str, Any], source: str) -> dict[str, Any]:
     """``options`` checked as a scenario's ``selector_options`` would be (``ScenarioError``
     naming ``selector_options.KEY``, ``source`` first); returned validated, as a file would
-    hold them (JSON types: a set of corrections becomes a list, ``'5'`` for a number 5.0), in
-    key order."""
-    from vo3d_opt.formulations.common import Options  # late: loading a file needs no solver
-
+    hold them (JSON types: a set of corrections becomes a list), in key order."""
     try:
-        valid = Options.model_validate(as_selector_options(options, 1.0))
-    except ValidationError as exc:
-        raise _fail(
-            source,
-            [_describe({**e, "loc": ("selector_options", *e["loc"])}) for e in exc.errors()],
-        ) from None
-    out = valid.model_dump(mode="json", include=set(options))
-    if options.get("horizon") == SENSING_HORIZON:  # resolved per scenario (scenario_selector)
-        out["horizon"] = SENSING_HORIZON
-    return dict(sorted(out.items()))
+        return check_options(options)
+    except InputError as exc:
+        raise _fail(source, [(f"selector_options.{k}", m) for k, m in exc.problems]) from None
 
 
 def scenario_variant(sc: Scenario, **keys: Any) -> Scenario:

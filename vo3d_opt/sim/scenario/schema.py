@@ -50,10 +50,9 @@ Extensions beyond the contract (all optional):
   (``acceleration``, ``pz_buffer``, ``altitude_margin``, ``obstacle_margin``;
   ``vo3d_opt.sim.safety``).
 * ``formulation``, ``solver``: defaults for ``vo3d run`` when the command line gives none.
-* ``selector_options``: a mapping passed as extra keyword arguments to ``VelocitySelector``;
-  ``horizon: sensing`` stands for :attr:`Scenario.sensing_horizon` (RVO2-3D's time horizon:
-  the vehicle sensing range over twice the top agent speed), resolved when the selector is
-  built, so every encounter of a sweep gets its own.
+* ``selector_options``: the selector's configuration, ``preset`` (default ``safe``) and any
+  field over it, as ``VelocitySelector(preset=..., **fields)`` takes them
+  (``vo3d_opt.config``); ``horizon: sensing`` is resolved from ``sensing.vehicle_range``.
 
 One schema: the limits and the obstacles *are* the public types of ``vo3d_opt.types`` (the
 obstacle specs subclass them, adding only the scenario's keys), so the file and the Python API
@@ -86,11 +85,13 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from vo3d_opt.config import UNKNOWN_OPTION, check_options
 from vo3d_opt.sim.dynamics import DynamicsConfig, WindConfig
 from vo3d_opt.types import (
     PZ_MARGIN,
     Box,
     Cylinder,
+    InputError,
     Limits,
     Model,
     Neighbor,
@@ -106,28 +107,6 @@ from vo3d_opt.types import (
 BATCHED_ADVISED = 50
 
 Text = Annotated[str, Field(min_length=1)]
-
-
-#: ``selector_options: {horizon: sensing}``: the scenario's :attr:`Scenario.sensing_horizon`.
-SENSING_HORIZON = "sensing"
-
-
-def as_selector_options(options: dict[str, Any], sensing_horizon: float) -> dict[str, Any]:
-    """``options`` as ``VelocitySelector`` takes them: ``horizon: sensing`` replaced by
-    ``sensing_horizon`` (s); the rest as given. Another text for ``horizon``: a
-    ``ValidationError`` at ``horizon`` that says what it takes."""
-    horizon = options.get("horizon")
-    if horizon == SENSING_HORIZON:
-        return {**options, "horizon": sensing_horizon}
-    if isinstance(horizon, str):
-        what = (
-            f"expected a positive number of seconds, null or {SENSING_HORIZON!r}, got {horizon!r}"
-        )
-        error = PydanticCustomError("horizon_value", what)
-        raise ValidationError.from_exception_data(
-            "Options", [{"type": error, "loc": ("horizon",), "input": horizon}]
-        )
-    return options
 
 
 class Spec(Model):
@@ -289,10 +268,20 @@ class Scenario(Spec):
     @field_validator("selector_options")
     @classmethod
     def _known_options(cls, options: dict[str, Any]) -> dict[str, Any]:
-        from vo3d_opt.formulations.common import Options
-
-        # its errors keep their key paths under this key
-        Options.model_validate(as_selector_options(options, 1.0))
+        try:
+            check_options(options)
+        except InputError as exc:  # each problem at its own key, under this one
+            errors: list[Any] = [
+                {"type": "extra_forbidden", "loc": (k,), "input": options.get(k)}
+                if m.startswith(UNKNOWN_OPTION)
+                else {
+                    "type": PydanticCustomError("value_error", "{problem}", {"problem": m}),
+                    "loc": (k,),
+                    "input": options.get(k),
+                }
+                for k, m in exc.problems
+            ]
+            raise ValidationError.from_exception_data("selector_options", errors) from None
         return options
 
     # ---------------------------------------------------------------------- cross-field checks

@@ -1,35 +1,133 @@
-"""``vo3d sweep``: what the command does with its parsed options (the options themselves are
-declared in ``vo3d_opt.cli``).
+"""``vo3d sweep FAMILY --n N``: N random encounters of a family on a Dask cluster, with rates
+and Clopper-Pearson bounds (``vo3d_opt.sweep``; Dask and pandas load only here).
 
 Exit status: 0 when every encounter ran (whatever its safety figures), 1 when some raised or
 lost their worker (they are listed in the summary; the rest of the output is complete) or when
 writing ``--out`` failed after the sweep (the summary is still printed), 2 with a one-line
-message (:class:`~vo3d_opt.sweep.runner.SweepError`) for a bad option (a selector option names
-its key), an unknown family, formulation or solver, ``--method rvo2`` on a family with
-obstacles, or an unreachable scheduler.
+message for a bad option (a selector option names its key), an unknown family, formulation or
+solver, ``--method rvo2`` on a family with obstacles, or an unreachable scheduler.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import logging
-from collections.abc import Callable
+import os
 from pathlib import Path
 from typing import Any
 
+from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FORMULATIONS
 from vo3d_opt.sim.scenario import ScenarioError, check_selector_options
-from vo3d_opt.sweep.families import FAMILIES
-from vo3d_opt.sweep.runner import Method, SweepError, run_sweep, validate
+from vo3d_opt.sim.simulator import DEFAULT_FORMULATION
 
-EXIT_OK, EXIT_ERRORS = 0, 1
+from .common import (
+    EXIT_OK,
+    UsageError,
+    add_selector_options,
+    non_negative_int,
+    out_dir,
+    stdout_to_stderr,
+)
 
-log = logging.getLogger(__name__)
+EXIT_ERRORS = 1
+
+log = logging.getLogger("vo3d_opt.sweep")
+
+
+def _cpus() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def add_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
+    sw = sub.add_parser(
+        "sweep",
+        parents=common,
+        help="run N random encounters of a family on Dask (contract §6)",
+        description="Run N random encounters of a family on a Dask cluster and report rates with "
+        "95% Clopper-Pearson bounds. Exit status 0 when every encounter ran, 1 when "
+        "some raised or lost their worker (listed in the summary) or writing --out failed, "
+        "2 for bad options.",
+    )
+    sw.add_argument("family", nargs="?", help="encounter family (vo3d sweep --list names them)")
+    sw.add_argument("--list", action="store_true", help="list the families, one line each")
+    sw.add_argument("--n", type=non_negative_int, metavar="N", help="number of encounters (>= 1)")
+    sw.add_argument(
+        "--seed",
+        type=non_negative_int,
+        default=0,
+        metavar="S",
+        help="sweep seed (>= 0, default 0); encounter i is drawn from (S, i)",
+    )
+    where = sw.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=non_negative_int,
+        metavar="K",
+        default=_cpus(),
+        help="local Dask worker processes, one thread each (default: the CPUs)",
+    )
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="use the existing Dask scheduler at ADDRESS (tcp://host:8786)",
+    )
+    sw.add_argument(
+        "--method",
+        choices=("vo3d", "rvo2"),
+        default="vo3d",
+        help="vo3d (default) or rvo2: RVO2-3D, obstacle-free families only",
+    )
+    sw.add_argument(
+        "--formulation",
+        "-f",
+        metavar="F",
+        help=f"{' | '.join(FORMULATIONS)}; default: {DEFAULT_FORMULATION}",
+    )
+    sw.add_argument(
+        "--solver",
+        "-s",
+        metavar="S",
+        help="solver names as for `vo3d run --solver`; default: "
+        f"{DEFAULT_QP_SOLVER} (QP) / {DEFAULT_NLP_SOLVER} (nlp)",
+    )
+    add_selector_options(sw, "every encounter (--method vo3d)")
+    sw.add_argument(
+        "--out",
+        metavar="DIR",
+        help="also write encounters.parquet, summary.json, min_distance.png and "
+        "failures/*.yaml (replayable by vo3d run) to DIR (created; checked before the sweep)",
+    )
+    sw.add_argument(
+        "--json",
+        action="store_true",
+        help="print the summary as one JSON object on stdout (default: a table)",
+    )
+    sw.add_argument(
+        "--in-flight",
+        type=non_negative_int,
+        metavar="M",
+        help="encounters submitted at once (default 4 per worker, at least 8)",
+    )
+    sw.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    sw.set_defaults(func=cmd_sweep)
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from vo3d_opt.sweep.runner import SweepError
+
+    if args.out and not args.list:
+        out_dir(args.out)  # a bad --out fails before the sweep, not after it
+    try:
+        return _sweep(args)
+    except SweepError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def family_lines() -> list[str]:
     """One line per family: name, whether ``--method rvo2`` can fly it, summary."""
+    from vo3d_opt.sweep.families import FAMILIES
+
     width = max(len(name) for name in FAMILIES)
     return [
         f"{f.name:<{width}}  {'rvo2 ok  ' if f.obstacle_free else 'obstacles'}  {f.summary}"
@@ -39,6 +137,8 @@ def family_lines() -> list[str]:
 
 
 def _list(as_json: bool) -> int:
+    from vo3d_opt.sweep.families import FAMILIES
+
     if as_json:
         print(
             json.dumps(
@@ -108,14 +208,11 @@ def format_summary(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(
-    args: argparse.Namespace,
-    *,
-    protect_stdout: Callable[[], contextlib.AbstractContextManager[Any]],
-) -> int:
+def _sweep(args: argparse.Namespace) -> int:
     """Run ``vo3d sweep`` with its parsed ``args``; progress is logged (``vo3d_opt.sweep``
-    logger, shown by the CLI on stderr) and ``protect_stdout`` keeps anything native code prints
-    off stdout (the JSON's)."""
+    logger, shown on stderr) and native code's prints are kept off stdout (the JSON's)."""
+    from vo3d_opt.sweep.runner import Method, SweepError, run_sweep, validate
+
     if args.list:
         return _list(args.json)
     if not args.family:
@@ -149,7 +246,7 @@ def main(
         args.method,
         f"scheduler {args.scheduler}" if args.scheduler else f"{workers} local workers",
     )
-    with protect_stdout():  # worker processes inherit the redirected descriptor too
+    with stdout_to_stderr():  # worker processes inherit the redirected descriptor too
         result = run_sweep(
             args.family,
             args.n,

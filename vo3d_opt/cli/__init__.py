@@ -1,0 +1,62 @@
+"""The ``vo3d`` command line: one module per subcommand.
+
+* ``vo3d run SCENARIO`` (:mod:`.run`), ``vo3d compare`` (:mod:`.compare`), ``vo3d list``
+  (:mod:`.listing`), ``vo3d sweep FAMILY --n N`` (:mod:`.sweep`).
+* ``--preset NAME`` (``--fast``, ``--swarm`` its aliases) and ``-o KEY=VALUE`` (run, compare,
+  sweep): the selector's configuration, merged over the scenario's ``selector_options`` in the
+  order given (the last of a key wins) and checked as the file's are.
+
+SCENARIO is a path or the name of a bundled scenario. Progress and logs go to stderr through
+``logging`` (``-q``: warnings and errors only, ``-v``: debugging detail too). Exit status: 0
+when the runs completed (whatever their safety figures), 2 with a one-line message on stderr for
+bad input (an unreadable or invalid scenario, a bad option, an unknown formulation or solver,
+an ``--out`` directory that cannot be written: checked before the run), 1 when writing the
+outputs fails after the run (the summary is still printed), 130 when interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from vo3d_opt import __version__
+from vo3d_opt.types import one_line
+
+from . import compare, compile, listing, run, sweep
+from .common import EXIT_USAGE, Parser, UsageError, common_parser, configure_logging, log
+
+SUBCOMMANDS = (run, compare, listing, sweep, compile)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = Parser(prog="vo3d", description="Improved 3D velocity obstacle: multi-UAV simulations.")
+    p.add_argument(
+        "--version",
+        action="version",
+        version=f"vo3d {__version__}",
+        help="print the version and exit",
+    )
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
+    common = [common_parser()]
+    for module in SUBCOMMANDS:
+        module.add_parser(sub, common)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``vo3d``; returns (and, as a script, exits with) the status."""
+    args = build_parser().parse_args(argv)
+    configure_logging(args.verbosity)
+    try:
+        return int(args.func(args))
+    except UsageError as exc:
+        log.error("%s", one_line(exc))
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        log.error("interrupted")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
