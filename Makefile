@@ -38,12 +38,14 @@ demo: $(STAMP) $(NUMBA_STAMP) aot
 test: $(STAMP) $(NUMBA_STAMP) aot
 	$(PY) -m pytest -q -p no:cacheprovider -n 2
 
-# ruff (lint + format check) and mypy, configured in pyproject.toml. The notebooks' .py
+# ruff (lint + format check), mypy and the import layers (import-linter), configured in
+# pyproject.toml. The notebooks' .py
 # sources are linted too (their .ipynb twins are excluded in pyproject.toml).
 lint: $(STAMP)
 	$(VENV)/bin/ruff check vo3d_opt setup.py notebooks
 	$(VENV)/bin/ruff format --check vo3d_opt setup.py notebooks
 	$(VENV)/bin/mypy
+	$(VENV)/bin/lint-imports
 
 # Jupyter Lab on the notebooks. Each is a pair, NN_name.py (the source) and NN_name.ipynb;
 # jupytext first brings the older file of each pair up to date, and Jupyter saves both.

@@ -402,7 +402,7 @@ def test_run_hands_threads_neighbours_and_spill_to_the_simulator(cli, small, tmp
     one thread and one neighbour of two vehicles, spilled, the summary is the default run's."""
     from vo3d_opt.cli import flight
     from vo3d_opt.cli import run as run_command
-    from vo3d_opt.sim import simulator
+    from vo3d_opt.sim import record as record_module
 
     seen: dict = {}
     real = flight.Simulator
@@ -419,7 +419,7 @@ def test_run_hands_threads_neighbours_and_spill_to_the_simulator(cli, small, tmp
             return record
 
     monkeypatch.setattr(flight, "Simulator", Spy)
-    for module in (run_command, simulator):  # wherever the test's temporary directory is
+    for module in (run_command, record_module):  # wherever the test's temporary directory is
         monkeypatch.setattr(module, "in_memory_fs", lambda *a, **k: False)
     status = cli.main(["run", str(small), "--json", "--threads", "1", "--max-neighbors", "1",
                        "--spill", "--spill-dir", str(tmp_path)])

@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from vo3d_opt import report
-from vo3d_opt.sim import simulator, spill
+from vo3d_opt.sim import record, simulator, spill
 from vo3d_opt.sim.deciders import SwarmSelect
 from vo3d_opt.sim.metrics import summarize
 from vo3d_opt.sim.scenario import load_scenario
@@ -70,7 +70,7 @@ def test_large_allotments_spill_by_default(monkeypatch):
     sc = swap()
     assert flown(sc, max_steps=3).spill is None  # small: in memory
     assert simulator.run_scenario(sc, max_steps=3, spill=True).spill is not None
-    monkeypatch.setattr(simulator, "SPILL_BYTES", 0)
+    monkeypatch.setattr(record, "SPILL_BYTES", 0)
     assert flown(sc, max_steps=3).spill is not None
     assert simulator.run_scenario(sc, max_steps=3).spill is not None
     assert simulator.run_scenario(sc, max_steps=3, spill=False).spill is None
@@ -82,23 +82,23 @@ def test_without_a_file_the_run_stays_in_memory_or_says_why(monkeypatch, tmp_pat
     def full_disk(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(simulator, "SPILL_BYTES", 0)
-    monkeypatch.setattr(simulator, "Spill", full_disk)
+    monkeypatch.setattr(record, "SPILL_BYTES", 0)
+    monkeypatch.setattr(record, "Spill", full_disk)
     with pytest.warns(RuntimeWarning, match="spill: kept in memory"):
         rec = flown(sc, max_steps=3)
     assert rec.spill is None and rec.steps == 3
     with pytest.raises(OSError, match="No space"):
         flown(sc, max_steps=3, spill=True)
     monkeypatch.undo()
-    monkeypatch.setattr(simulator, "SPILL_BYTES", 0)
+    monkeypatch.setattr(record, "SPILL_BYTES", 0)
     for spill_flag in (None, True, False):  # a directory given must be one
         with pytest.raises(ValueError, match="spill_dir: .*missing is not a directory"):
             flown(sc, max_steps=3, spill=spill_flag, spill_dir=tmp_path / "missing")
     with pytest.raises(ValueError, match="held in memory .*choose one on disk"):
         with monkeypatch.context() as m:
-            m.setattr(simulator, "in_memory_fs", lambda where: True)
+            m.setattr(record, "in_memory_fs", lambda where: True)
             flown(sc, max_steps=3, spill_dir=tmp_path)
-    monkeypatch.setattr(simulator, "in_memory_fs", lambda where: True)  # e.g. /tmp on tmpfs
+    monkeypatch.setattr(record, "in_memory_fs", lambda where: True)  # e.g. /tmp on tmpfs
     with pytest.warns(RuntimeWarning, match="tmpfs"):
         assert flown(sc, max_steps=3).spill is None
     with pytest.raises(ValueError, match="spill_dir: .* held in memory.*set TMPDIR"):

@@ -37,7 +37,8 @@ from vo3d_opt.sweep import (
     upper_bound,
 )
 from vo3d_opt.sweep.families import TIME_FACTOR, TIME_SLACK, encounter_rng
-from vo3d_opt.sweep.flight import DEFAULT_METHOD, fly
+from vo3d_opt.sweep.flight import DEFAULT_METHOD
+from vo3d_opt.sweep.flight import fly_encounter as fly
 from vo3d_opt.sweep.output import failed_rows, failure_scenario, write_results
 from vo3d_opt.sweep.runner import rows_equal
 

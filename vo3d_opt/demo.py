@@ -14,7 +14,7 @@ from vo3d_opt.sim.simulator import Simulator, scenario_selector
 SCENARIO = "paper-case1-ten-uav-crossing.yaml"
 
 
-def main(out_dir: str | Path = Path("out") / "demo") -> int:
+def run_demo(out_dir: str | Path = Path("out") / "demo") -> int:
     """Run case 1, write ./out/demo/{summary.json, trajectories.parquet, trajectories.csv, *.png},
     print where."""
     out = Path(out_dir)
@@ -38,4 +38,4 @@ def main(out_dir: str | Path = Path("out") / "demo") -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_demo())

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from vo3d_opt.sim.simulator import RunRecord
+from vo3d_opt.sim.record import RunRecord
 
 log = logging.getLogger(__name__)
 

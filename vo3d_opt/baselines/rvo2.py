@@ -49,8 +49,9 @@ from typing import Any
 import numpy as np
 
 from vo3d_opt.sim import metrics
+from vo3d_opt.sim.record import RunRecord, Snapshot, StepDecision
 from vo3d_opt.sim.scenario import Scenario, load_scenario, scenario_from_dict
-from vo3d_opt.sim.simulator import RunRecord, Snapshot, StepDecision, fly
+from vo3d_opt.sim.simulator import fly
 
 FORMULATION = "rvo2-3d"
 STATUS = "rvo2"

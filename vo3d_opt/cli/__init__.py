@@ -23,10 +23,21 @@ from collections.abc import Sequence
 from vo3d_opt import __version__
 from vo3d_opt.types import one_line
 
-from . import compare, compile, listing, run, sweep
 from .common import EXIT_USAGE, Parser, UsageError, common_parser, configure_logging, log
+from .compare import add_compare_parser
+from .compile import add_compile_parser
+from .listing import add_list_parser
+from .run import add_run_parser
+from .sweep import add_sweep_parser
 
-SUBCOMMANDS = (run, compare, listing, sweep, compile)
+#: Each subcommand's parser, in the order ``vo3d --help`` lists them.
+SUBCOMMANDS = (
+    add_run_parser,
+    add_compare_parser,
+    add_list_parser,
+    add_sweep_parser,
+    add_compile_parser,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -38,9 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="print the version and exit",
     )
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
-    common = [common_parser()]
-    for module in SUBCOMMANDS:
-        module.add_parser(sub, common)
+    common: list[argparse.ArgumentParser] = [common_parser()]
+    for add_parser in SUBCOMMANDS:
+        add_parser(sub, common)
     return p
 
 

@@ -101,7 +101,8 @@ def to_json(value: Any) -> str:
     return json.dumps(rounded(value), allow_nan=False)
 
 
-def load(arg: str) -> Scenario:
+def load_or_exit(arg: str) -> Scenario:
+    """The scenario ``arg`` names; an unreadable or invalid one is a ``UsageError``."""
     try:
         return load_scenario(arg)
     except ScenarioError as exc:

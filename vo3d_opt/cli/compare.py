@@ -15,18 +15,18 @@ from .common import (
     SCENARIO_HELP,
     UsageError,
     add_selector_options,
-    load,
+    load_or_exit,
     log,
     selector,
     to_json,
     with_options,
 )
-from .flight import fly, print_table
+from .flight import fly_and_summarize, print_table
 
 TABLE_KEYS = [k for k in CONTRACT_KEYS if k != "scenario"]
 
 
-def add_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
+def add_compare_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     cmp_ = sub.add_parser(
         "compare",
         parents=common,
@@ -59,7 +59,7 @@ def add_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    sc = with_options(load(args.scenario), args.selector_options)
+    sc = with_options(load_or_exit(args.scenario), args.selector_options)
     formulations = args.formulations or [sc.formulation or "plane_qp"]
     solvers = args.solvers or [sc.solver]
     built: dict[tuple[str, str], Any] = {}
@@ -86,7 +86,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         log.warning("skipping %s", msg)
     rows = []
     for (formulation, solver), sel in built.items():
-        _, summary = fly(sc, sel, formulation, solver)
+        _, summary = fly_and_summarize(sc, sel, formulation, solver)
         rows.append(summary)
     if args.json:
         print(to_json(rows))

@@ -10,7 +10,7 @@ from vo3d_opt.types import one_line
 from .common import EXIT_FAIL, EXIT_OK, log
 
 
-def add_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
+def add_compile_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     comp = sub.add_parser(
         "compile",
         parents=common,

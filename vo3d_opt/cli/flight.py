@@ -20,7 +20,7 @@ SLOW_SWARM = 200
 log = logging.getLogger("vo3d_opt.cli")
 
 
-def fly(
+def fly_and_summarize(
     sc: Scenario, sel: Any, formulation: str, solver: str, args: argparse.Namespace | None = None
 ) -> tuple[Any, dict[str, Any]]:
     """Fly the scenario (``args``: ``vo3d run``'s --threads, --max-neighbors, --spill,

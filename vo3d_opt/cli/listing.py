@@ -13,7 +13,7 @@ from vo3d_opt.types import one_line
 from .common import EXIT_FAIL, EXIT_OK, log, to_json
 
 
-def add_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
+def add_list_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     lst = sub.add_parser(
         "list",
         parents=common,

@@ -22,7 +22,7 @@ from .common import (
     SCENARIO_HELP,
     UsageError,
     add_selector_options,
-    load,
+    load_or_exit,
     log,
     out_dir,
     positive_int,
@@ -30,7 +30,7 @@ from .common import (
     to_json,
     with_options,
 )
-from .flight import fly, print_summary
+from .flight import fly_and_summarize, print_summary
 
 SOLVER_HELP = (
     f"osqp | clarabel | daqp | cvxpy[:SOLVER] | qpsolvers:NAME | casadi[:PLUGIN]; "
@@ -39,7 +39,7 @@ SOLVER_HELP = (
 )
 
 
-def add_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
+def add_run_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     run = sub.add_parser(
         "run",
         parents=common,
@@ -75,11 +75,11 @@ def add_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
 
 def cmd_run(args: argparse.Namespace) -> int:
     plot_options = _figure_options(args)
-    sc = with_options(load(args.scenario), args.selector_options)
+    sc = with_options(load_or_exit(args.scenario), args.selector_options)
     _swarm_checked(args, sc)
     out = out_dir(args.out) if args.out else None
     sel, formulation, solver = selector(sc, args.formulation, args.solver)
-    record, summary = fly(sc, sel, formulation, solver, args)
+    record, summary = fly_and_summarize(sc, sel, formulation, solver, args)
     status = EXIT_OK
     if out is not None:
         try:

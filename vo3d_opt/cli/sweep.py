@@ -39,7 +39,7 @@ def _cpus() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
-def add_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
+def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     sw = sub.add_parser(
         "sweep",
         parents=common,

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from vo3d_opt.sim.landing import Landing
+from vo3d_opt.sim.record import SelectorLike, Snapshot, StepDecision
 from vo3d_opt.sim.safety import (
     derive_margins,
     planning_bodies,
@@ -25,7 +26,6 @@ from vo3d_opt.sim.safety import (
 )
 from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
 from vo3d_opt.sim.sensing import Sensor
-from vo3d_opt.sim.simulator import SelectorLike, Snapshot, StepDecision
 from vo3d_opt.types import AgentState, Limits, Neighbor
 
 

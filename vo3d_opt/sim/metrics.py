@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from vo3d_opt.sim.record import RunRecord
 from vo3d_opt.sim.scenario import prism_contains, sphere_surface_distance
-from vo3d_opt.sim.simulator import RunRecord
 
 TOL = 1e-6
 #: Interior points per segment at which obstacle distances are also evaluated.

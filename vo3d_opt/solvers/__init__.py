@@ -19,12 +19,12 @@ from vo3d_opt.solvers.base import (
     screen,
     standardise,
 )
+from vo3d_opt.solvers.certify import certified_infeasible
 from vo3d_opt.solvers.problem import NLP, QP, ConeConstraint, Result
 from vo3d_opt.solvers.registry import (
     CASADI_PLUGINS,
     available_qp_solvers,
     available_solvers,
-    certified_infeasible,
     get_backend,
     register_backend,
     unregister_backend,

@@ -13,8 +13,8 @@ import cvxpy as cp
 import numpy as np
 
 from vo3d_opt.solvers.base import Backend, Standard, make_result
+from vo3d_opt.solvers.certify import certified_infeasible
 from vo3d_opt.solvers.problem import QP, Result
-from vo3d_opt.solvers.registry import certified_infeasible
 from vo3d_opt.status import Status
 
 #: Extra options per cvxpy solver, for answers as tight as the direct backends'. OSQP is left

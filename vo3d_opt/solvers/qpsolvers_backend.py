@@ -15,8 +15,8 @@ import qpsolvers
 import scipy.sparse as sp
 
 from vo3d_opt.solvers.base import Backend, Standard, make_result
+from vo3d_opt.solvers.certify import certified_infeasible
 from vo3d_opt.solvers.problem import QP, Result
-from vo3d_opt.solvers.registry import certified_infeasible
 from vo3d_opt.status import Status
 
 #: Extra options per solver, for answers as tight as the direct backends'. OSQP is left

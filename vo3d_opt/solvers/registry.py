@@ -19,8 +19,6 @@ import functools
 import importlib.util
 
 from vo3d_opt.solvers.base import Backend
-from vo3d_opt.solvers.problem import QP
-from vo3d_opt.status import Status
 
 #: Plugins of ``casadi.nlpsol`` this package knows how to run quietly (see casadi_backend).
 CASADI_PLUGINS = ("ipopt", "sqpmethod")
@@ -157,13 +155,6 @@ def get_backend(name: str) -> Backend:
     if key not in _CACHE:
         _CACHE[key] = _construct(key)
     return _CACHE[key]
-
-
-def certified_infeasible(qp: QP) -> bool:
-    """Whether Clarabel proves ``qp`` infeasible: the second opinion for backends whose solver
-    reports only "no solution" (qpsolvers) or calls feasible problems infeasible (ProxQP).
-    Costs one Clarabel solve (tens of microseconds), on failures only."""
-    return _installed("clarabel") and get_backend("clarabel").solve(qp).status == Status.INFEASIBLE
 
 
 def register_backend(name: str, backend: Backend) -> None:

@@ -15,8 +15,8 @@ simulator), the metrics and the RVO2-3D baseline; nothing but the CLI imports it
 from vo3d_opt.sweep.families import (
     FAMILIES,
     Draw,
-    Encounter,
     Family,
+    SweepEncounter,
     encounter_problems,
     get_family,
     make_encounter,
@@ -29,7 +29,7 @@ from vo3d_opt.sweep.stats import clopper_pearson, event_rate, upper_bound
 __all__ = [
     "FAMILIES",
     "Draw",
-    "Encounter",
+    "SweepEncounter",
     "Family",
     "Method",
     "SweepError",

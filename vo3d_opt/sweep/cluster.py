@@ -21,7 +21,7 @@ from distributed import Client, LocalCluster, WorkerPlugin, as_completed
 from tqdm import tqdm
 
 from vo3d_opt.sweep.families import Family
-from vo3d_opt.sweep.flight import Method, one_line, run_encounter, warm
+from vo3d_opt.sweep.flight import Method, error_line, run_encounter, warm
 
 CONNECT_TIMEOUT = 20.0  # s, to reach a --scheduler and to see its first worker
 
@@ -55,7 +55,7 @@ def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> It
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT)
         except (OSError, TimeoutError, ValueError) as exc:
-            raise ConnectError(f"cannot connect to {scheduler}: {one_line(exc)}") from None
+            raise ConnectError(f"cannot connect to {scheduler}: {error_line(exc)}") from None
         try:
             try:
                 client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
@@ -89,7 +89,7 @@ def _error_row(
         "seed": seed,
         "index": index,
         "method": method.name,
-        "error": one_line(exc),
+        "error": error_line(exc),
         "worker": None,
     }
 

@@ -79,7 +79,7 @@ class Family:
 
 
 @dataclass(frozen=True)
-class Encounter:
+class SweepEncounter:
     """Encounter ``index`` of ``family`` with ``seed``: its parameters, the scenario dict (with
     name and description) and the draws it took (rejected ones included)."""
 
@@ -166,7 +166,7 @@ def encounter_name(family: str, seed: int, index: int) -> str:
     return f"{family}-s{seed}-i{index}"
 
 
-def make_encounter(family: str | Family, seed: int, index: int) -> Encounter:
+def make_encounter(family: str | Family, seed: int, index: int) -> SweepEncounter:
     """Draw encounter ``index`` of ``family`` with ``seed``, retrying until it is valid.
 
     ``RuntimeError`` if ``max_attempts`` draws were all invalid (a family that cannot be met).
@@ -191,7 +191,7 @@ def make_encounter(family: str | Family, seed: int, index: int) -> Encounter:
         }
         last = encounter_problems(data, name)
         if not last:
-            return Encounter(
+            return SweepEncounter(
                 family=fam.name,
                 seed=int(seed),
                 index=int(index),

@@ -18,13 +18,14 @@ from typing import Any
 import numpy as np
 
 from vo3d_opt.sim.metrics import pair_min_distances, summarize
+from vo3d_opt.sim.record import RunRecord
 from vo3d_opt.sim.scenario import (
     Scenario,
     check_selector_options,
     scenario_from_dict,
     scenario_variant,
 )
-from vo3d_opt.sim.simulator import RunRecord, Simulator, flown_options, scenario_selector
+from vo3d_opt.sim.simulator import Simulator, flown_options, scenario_selector
 from vo3d_opt.sweep.families import Family, get_family, make_encounter
 
 METHODS = ("vo3d", "rvo2")
@@ -65,7 +66,7 @@ class Method:
 DEFAULT_METHOD = Method()
 
 
-def fly(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, Any]]:
+def fly_encounter(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, Any]]:
     """Fly one scenario with the method; its record and its §3 summary, with
     ``selector_options``: the scenario's, the method's merged in (None for RVO2-3D).
 
@@ -98,7 +99,7 @@ def normalised_min_distance(record: RunRecord) -> float | None:
     return float(np.min(dmin / np.maximum(r_pz[ii], r_pz[jj])))
 
 
-def one_line(exc: BaseException) -> str:
+def error_line(exc: BaseException) -> str:
     return " ".join(f"{type(exc).__name__}: {exc}".split())
 
 
@@ -131,13 +132,13 @@ def run_encounter(
         enc = make_encounter(fam, seed, index)
         row["attempts"] = enc.attempts
         row.update({f"param_{k}": v for k, v in enc.params.items()})
-        record, summary = fly(enc.load(), method)
+        record, summary = fly_encounter(enc.load(), method)
         for key in ("status_counts", "selector_options"):
             summary[key] = json.dumps(summary[key], sort_keys=True)
         row.update(summary)
         row["min_normalised_distance"] = normalised_min_distance(record)
     except Exception as exc:  # noqa: BLE001 - one bad encounter must not stop the sweep
-        row["error"] = one_line(exc)
+        row["error"] = error_line(exc)
     row["run_time"] = time.perf_counter() - t0
     row["worker"] = _worker_name()
     return row
@@ -163,5 +164,5 @@ def warm(method: Method, extra: dict[str, Any] | None = None) -> float:
     t0 = time.perf_counter()
     data = dict(_WARM) if method.name == "rvo2" else {**_WARM, "obstacles": [_WARM_OBSTACLE]}
     data.update(extra or {})
-    fly(scenario_from_dict(data, source="<warm-up>"), method)
+    fly_encounter(scenario_from_dict(data, source="<warm-up>"), method)
     return time.perf_counter() - t0

@@ -18,7 +18,7 @@ from tqdm import tqdm
 
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.families import FAMILIES, Family, get_family
-from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, one_line
+from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, error_line
 from vo3d_opt.sweep.stats import aggregate
 
 if TYPE_CHECKING:
@@ -149,7 +149,7 @@ def run_sweep(
             try:
                 client.register_plugin(cluster.WarmUp(method, fam.warm_keys))
             except Exception as exc:  # noqa: BLE001 - e.g. workers without vo3d_opt
-                raise SweepError(f"warm-up failed on the workers: {one_line(exc)}") from None
+                raise SweepError(f"warm-up failed on the workers: {error_line(exc)}") from None
             threads = int(sum(client.nthreads().values()))
             setup_time = time.perf_counter() - t_setup
             t0 = time.perf_counter()

@@ -429,7 +429,7 @@ class Scenario(Spec):
         out: list[Problem] = []
         radius = self.radius
         for key, pts in (("start", self.starts), ("goal", self.goals)):
-            for i, j, d in close_pairs(pts, radius, radius.max()):
+            for i, j, d in nearby_pairs(pts, radius, radius.max()):
                 if d < radius[i] + radius[j]:
                     out.append(
                         (
@@ -568,7 +568,7 @@ class Scenario(Spec):
         """Starts inside a protected zone (allowed, but worth saying): one line each."""
         out: list[str] = []
         p, r_pz, ids = self.starts, self.r_pz, self.ids
-        pairs = sorted((j, i, d) for i, j, d in close_pairs(p, r_pz, 0.5 * r_pz.max()))
+        pairs = sorted((j, i, d) for i, j, d in nearby_pairs(p, r_pz, 0.5 * r_pz.max()))
         for i, j, d in pairs:
             if d < max(r_pz[i], r_pz[j]):
                 out.append(
@@ -592,7 +592,9 @@ class Scenario(Spec):
 # ------------------------------------------------------------------------------ geometry
 
 
-def close_pairs(points: np.ndarray, reach: np.ndarray, most: float) -> list[tuple[int, int, float]]:
+def nearby_pairs(
+    points: np.ndarray, reach: np.ndarray, most: float
+) -> list[tuple[int, int, float]]:
     """Point pairs (i, j, distance), i > j, in order of i then j, closer than ``reach[i] +
     reach[j]`` or so (a k-d tree proposes those within 2 × ``most`` ≥ any reach sum; the
     caller applies its own test): no loop over every pair, for scenarios of thousands of
