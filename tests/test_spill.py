@@ -103,7 +103,7 @@ def test_without_a_file_the_run_stays_in_memory_or_says_why(monkeypatch, tmp_pat
         assert flown(sc, max_steps=3).spill is None
     with pytest.raises(ValueError, match="spill_dir: .* held in memory.*set TMPDIR"):
         flown(sc, max_steps=3, spill=True)
-    monkeypatch.setattr(simulator, "spill_supported", lambda: False)
+    monkeypatch.setattr(record, "spill_supported", lambda: False)
     with pytest.raises(ValueError, match="spill: .*Linux"):
         flown(sc, max_steps=3, spill=True)
     assert flown(sc, max_steps=3).spill is None
