@@ -94,10 +94,10 @@ def resolved_options(method: str, sc: Any) -> dict[str, Any] | None:
 
 def scenario(case: str, n: int):
     if case == "swap":
-        from vo3d_opt.baselines.rvo2 import sphere_swap_scenario
+        from vo3d_opt.generators import sphere_swap_scenario
 
         return sphere_swap_scenario(n)
-    from vo3d_opt.sim.scenario.swarms import random_crossing_scenario
+    from vo3d_opt.generators import random_crossing_scenario
 
     return random_crossing_scenario(n, seed=n)
 

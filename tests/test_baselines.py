@@ -9,12 +9,11 @@ import pytest
 
 from vo3d_opt.baselines.rvo2 import (
     default_time_horizon,
-    fibonacci_sphere,
     run_rvo2,
-    sphere_swap_scenario,
     summarize_record,
     summarize_rvo2,
 )
+from vo3d_opt.generators import fibonacci_sphere, sphere_swap_scenario
 from vo3d_opt.sim.metrics import CONTRACT_KEYS
 from vo3d_opt.sim.scenario import bundled_dir, scenario_from_dict
 from vo3d_opt.sim.traffic import goal_velocity

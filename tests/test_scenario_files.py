@@ -20,7 +20,7 @@ from vo3d_opt.sim.scenario import (
     scenario_from_dict,
     scenario_variant,
 )
-from vo3d_opt.sim.scenario.swarms import random_crossing_scenario
+from vo3d_opt.generators import random_crossing_scenario
 from vo3d_opt.sim.simulator import run_scenario
 from vo3d_opt.types import Box, Cylinder
 

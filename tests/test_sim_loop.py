@@ -14,7 +14,7 @@ from vo3d_opt.sim import simulator
 from vo3d_opt.sim.deciders import PerAgentSelect, SwarmSelect
 from vo3d_opt.sim.metrics import close_pairs, nearest_vehicle_distance, pair_min_distances, summarize
 from vo3d_opt.sim.scenario import bundled_dir, bundled_files, load_scenario, scenario_from_dict
-from vo3d_opt.sim.scenario.swarms import random_crossing_scenario
+from vo3d_opt.generators import random_crossing_scenario
 from vo3d_opt.sim.simulator import fly, scenario_selector
 
 SWARMS = {"random-crossing-1000"}

@@ -36,7 +36,7 @@ from vo3d_opt.sweep import (
     run_sweep,
     upper_bound,
 )
-from vo3d_opt.sweep.families import TIME_FACTOR, TIME_SLACK, encounter_rng
+from vo3d_opt.generators import TIME_FACTOR, TIME_SLACK, encounter_rng
 from vo3d_opt.sweep.flight import DEFAULT_METHOD
 from vo3d_opt.sweep.flight import fly_encounter as fly
 from vo3d_opt.sweep.output import failed_rows, failure_scenario, write_results
@@ -502,7 +502,7 @@ def test_lagged_draws_tau_in_its_range_and_runs():
 
 
 def test_intruder_adds_one_non_avoiding_uav_clear_of_the_obstacles():
-    from vo3d_opt.sweep.families import PRISM_CLEARANCE, _prism_half_side
+    from vo3d_opt.generators.families import PRISM_CLEARANCE, _prism_half_side
 
     for index in range(30):
         draw = first_draw("intruder", 2, index)

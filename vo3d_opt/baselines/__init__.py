@@ -6,12 +6,11 @@ package does not import ``rvo23d``; :func:`rvo2.available` says whether it is in
 """
 
 from .rvo2 import available as rvo2_available
-from .rvo2 import run_rvo2, sphere_swap_scenario, summarize_record, summarize_rvo2
+from .rvo2 import run_rvo2, summarize_record, summarize_rvo2
 
 __all__ = [
     "rvo2_available",
     "run_rvo2",
-    "sphere_swap_scenario",
     "summarize_record",
     "summarize_rvo2",
 ]

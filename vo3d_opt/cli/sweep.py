@@ -126,7 +126,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 def family_lines() -> list[str]:
     """One line per family: name, whether ``--method rvo2`` can fly it, summary."""
-    from vo3d_opt.sweep.families import FAMILIES
+    from vo3d_opt.generators import FAMILIES
 
     width = max(len(name) for name in FAMILIES)
     return [
@@ -137,7 +137,7 @@ def family_lines() -> list[str]:
 
 
 def _list(as_json: bool) -> int:
-    from vo3d_opt.sweep.families import FAMILIES
+    from vo3d_opt.generators import FAMILIES
 
     if as_json:
         print(

@@ -125,7 +125,7 @@ def random_crossing_scenario(
             f"{z_lo:g}-{z_hi:g} m high (one UAV per {volume_per_agent:,.0f} m3, at least "
             f"{spacing:g} m apart), and each flies {distance:g} m in a random direction "
             f"to a goal at least {spacing:g} m from the others, all at once. Generated "
-            f"by vo3d_opt.sim.scenario.swarms.random_crossing_scenario({n}, seed={seed})."
+            f"by vo3d_opt.generators.random_crossing_scenario({n}, seed={seed})."
         ),
         "dt": float(dt),
         "max_time": float(math.ceil(2.0 * distance / v_max + 30.0)),

@@ -12,7 +12,7 @@ simulator), the metrics and the RVO2-3D baseline; nothing but the CLI imports it
 * :mod:`.output`: ``encounters.parquet``, ``summary.json``, plots and replayable failures.
 """
 
-from vo3d_opt.sweep.families import (
+from vo3d_opt.generators import (
     FAMILIES,
     Draw,
     Family,

@@ -20,7 +20,7 @@ from typing import Any
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed
 from tqdm import tqdm
 
-from vo3d_opt.sweep.families import Family
+from vo3d_opt.generators import Family
 from vo3d_opt.sweep.flight import Method, error_line, run_encounter, warm
 
 CONNECT_TIMEOUT = 20.0  # s, to reach a --scheduler and to see its first worker

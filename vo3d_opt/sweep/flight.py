@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from vo3d_opt.generators import Family, get_family, make_encounter
 from vo3d_opt.sim.metrics import pair_min_distances, summarize
 from vo3d_opt.sim.record import RunRecord
 from vo3d_opt.sim.scenario import (
@@ -26,7 +27,6 @@ from vo3d_opt.sim.scenario import (
     scenario_variant,
 )
 from vo3d_opt.sim.simulator import Simulator, flown_options, scenario_selector
-from vo3d_opt.sweep.families import Family, get_family, make_encounter
 
 METHODS = ("vo3d", "rvo2")
 #: Columns that measure time or place, not behaviour: the only ones allowed to differ between

@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from vo3d_opt.sweep.families import make_encounter
+from vo3d_opt.generators import make_encounter
 from vo3d_opt.sweep.runner import SweepResult
 
 _DPI = 110

@@ -19,16 +19,15 @@ from __future__ import annotations
 import difflib
 import importlib.resources
 import logging
-import re
 from collections import defaultdict
 from functools import cache
 from pathlib import Path
 from typing import Annotated, Any, get_args, get_origin
 
-import yaml
 from pydantic import BaseModel, ValidationError
 
 from vo3d_opt.config import OPTION_KEYS, check_options
+from vo3d_opt.sim.scenario import reading
 from vo3d_opt.sim.scenario.schema import (
     OBSTACLE_TAGS,
     Scenario,
@@ -45,43 +44,11 @@ class ScenarioError(ValueError):
 # ------------------------------------------------------------------------------------- YAML
 
 
-class _Loader(yaml.SafeLoader):
-    """A SafeLoader that rejects duplicate mapping keys (PyYAML keeps the last silently) and
-    reads YAML 1.2 floats without a dot (``1e9``)."""
-
-
-def _construct_mapping(loader: _Loader, node: yaml.MappingNode, deep: bool = False) -> Any:
-    seen: list[Any] = []
-    for key_node, _ in node.value:
-        key = loader.construct_object(key_node, deep=deep)
-        if key in seen:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"duplicate key {key!r}", key_node.start_mark
-            )
-        seen.append(key)
-    return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
-
-
-_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
-# A copy of the resolver table (add_implicit_resolver would append to SafeLoader's own lists).
-_Loader.yaml_implicit_resolvers = {
-    k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()
-}
-_Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
-    list("-+0123456789"),
-)
-
-
 def _parse(text: str, source: str) -> Any:
     try:
-        return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        problem = getattr(exc, "problem", None) or str(exc)
-        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-        raise ScenarioError(one_line(f"{source}: {where}invalid YAML: {problem}")) from None
+        return reading.parse(text)
+    except reading.YAMLProblem as exc:
+        raise ScenarioError(one_line(f"{source}: {exc}")) from None
 
 
 # ----------------------------------------------------------------------------------- errors
@@ -191,10 +158,11 @@ def load_scenario(path: str | Path) -> Scenario:
     if _is_name(path):
         raise ScenarioError(f"{source}: no such file or bundled scenario{_suggestion(source)}")
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise ScenarioError(f"{source}: cannot read: {reason}") from None
+        text = reading.read_text(path)
+    except reading.YAMLProblem as exc:
+        raise ScenarioError(f"{source}: {exc}") from None
+    except OSError as exc:
+        raise ScenarioError(f"{source}: cannot read: {exc.strerror or exc}") from None
     sc = scenario_from_dict(_parse(text, source), source)
     for warning in sc.warnings():
         log.warning("%s: %s", sc.name, warning)
@@ -234,9 +202,9 @@ def resolve(arg: str | Path) -> Path:
             return f
     for f in bundled_files():
         try:
-            if scenario_from_dict(_parse(f.read_text(encoding="utf-8"), str(f))).name == str(arg):
+            if scenario_from_dict(_parse(reading.read_text(f), str(f))).name == str(arg):
                 return f
-        except (OSError, ScenarioError):
+        except (OSError, ScenarioError, reading.YAMLProblem):
             continue
     return p
 

@@ -150,7 +150,7 @@ def _check_events(text: str) -> None:
             if event.anchor is not None:
                 sizes[event.anchor] = 1
         elif isinstance(event, yaml.AliasEvent):
-            grown = sizes.get(event.anchor, 1)
+            grown = sizes.get(event.anchor or "", 1)
         else:
             continue
         if open_counts:
