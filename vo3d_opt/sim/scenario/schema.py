@@ -71,14 +71,12 @@ than an agent's protected-zone radius is allowed but reported by :meth:`Scenario
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, ClassVar, Literal
+from typing import Annotated, Any
 
 import numpy as np
 from pydantic import (
-    ConfigDict,
     Field,
     PrivateAttr,
-    StrictBool,
     ValidationError,
     field_validator,
     model_validator,
@@ -87,17 +85,28 @@ from pydantic_core import PydanticCustomError
 
 from vo3d_opt.config import UNKNOWN_OPTION, check_options
 from vo3d_opt.sim.dynamics import DynamicsConfig, WindConfig
+from vo3d_opt.sim.scenario.geometry import nearby_pairs, prism_contains, sphere_surface_distance
+from vo3d_opt.sim.scenario.specs import (
+    OBSTACLE_TAGS,
+    AgentSpec,
+    BoxSpec,
+    CylinderSpec,
+    DefaultsSpec,
+    ObstacleSpec,
+    Problem,
+    SafetySpec,
+    SensingSpec,
+    Spec,
+    SphereSpec,
+    Text,
+)
 from vo3d_opt.types import (
-    PZ_MARGIN,
     Box,
     Cylinder,
     InputError,
     Limits,
-    Model,
     Neighbor,
-    NonNegative,
     Positive,
-    Vec3,
     raise_problems,
 )
 
@@ -105,115 +114,6 @@ from vo3d_opt.types import (
 #: random-crossing-50 took 237 s batched against 1313 s one by one (at its default 100 Hz) in
 #: benchmarks/results_real_world.md.
 BATCHED_ADVISED = 50
-
-Text = Annotated[str, Field(min_length=1)]
-
-
-class Spec(Model):
-    """Base of the scenario-only groups of keys (frozen, unknown keys refused)."""
-
-    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True)
-
-
-class SensingSpec(Spec):
-    """Sensing ranges of Table 1 (vehicles by centre distance, obstacles by nearest point) and
-    what a vehicle senses of the others (contract §5): Gaussian noise per axis (1-sigma, m and
-    m/s), latency (s, a multiple of ``dt``: checked by the scenario) and the noise's seed."""
-
-    vehicle_range: Positive = 55.0
-    obstacle_range: Positive = 55.0
-    position_noise: NonNegative = 0.0
-    velocity_noise: NonNegative = 0.0
-    latency: NonNegative = 0.0
-    seed: Annotated[int, Field(ge=0, strict=True)] = 0
-
-    @property
-    def perfect(self) -> bool:
-        """No noise and no latency: every vehicle senses the same true snapshot."""
-        return self.position_noise == 0 and self.velocity_noise == 0 and self.latency == 0
-
-
-class SafetySpec(Spec):
-    """Overrides of what the simulator derives from the scenario to stay safe under its
-    dynamics and sensing (``vo3d_opt.sim.safety``, ``formulations/real_world.md``); each None
-    (the default) is derived, 0 switches that inflation off. ``acceleration``: m/s² per axis
-    (the selector's ``Limits.acceleration``; None derived, 0 none); ``pz_buffer``: m (the
-    selector's option); ``altitude_margin``: m kept from each altitude bound while planning;
-    ``obstacle_margin``: m added to every obstacle's protected prism while planning (given,
-    it alone sizes them: the prism tops are not raised by the tracking error either)."""
-
-    acceleration: NonNegative | None = None
-    pz_buffer: NonNegative | None = None
-    altitude_margin: NonNegative | None = None
-    obstacle_margin: NonNegative | None = None
-
-
-class DefaultsSpec(Spec):
-    """Per-agent parameters unless an agent overrides them (section 5: r_pz = 10 m)."""
-
-    r_pz: Positive = 10.0
-    radius: Positive = 0.5
-    max_speed: Positive = 4.0
-
-
-class AgentSpec(Spec):
-    """One UAV: identifier, start and goal positions (m) and optional parameter overrides."""
-
-    id: Text
-    start: Vec3
-    goal: Vec3
-    r_pz: Positive | None = None
-    radius: Positive | None = None
-    max_speed: Positive | None = None
-    avoids: StrictBool = True  # false: flies straight to its goal, never avoids (contract §5)
-
-
-class _Placed:
-    """What a scenario adds to a public obstacle type: its ``type`` tag and ``sensed``."""
-
-    public: ClassVar[type[Cylinder] | type[Box]]
-
-    def body(self) -> Cylinder | Box:
-        """The obstacle as its public type (what the selector and the metrics take)."""
-        cls = self.public
-        return cls.model_construct(**{k: getattr(self, k) for k in cls.model_fields})
-
-
-class CylinderSpec(_Placed, Cylinder):
-    """A vertical cylinder standing on the ground (section 4.1): ``types.Cylinder``'s keys."""
-
-    public: ClassVar[type[Cylinder]] = Cylinder
-    type: Literal["cylinder"]
-    sensed: StrictBool = True
-
-
-class BoxSpec(_Placed, Box):
-    """A (possibly yawed) box standing on the ground (section 4.3): ``types.Box``'s keys."""
-
-    public: ClassVar[type[Box]] = Box
-    type: Literal["box"]
-    sensed: StrictBool = True
-
-
-#: The ``type`` tags of the obstacle union (pydantic puts them in error locations).
-OBSTACLE_TAGS = frozenset({"cylinder", "box"})
-ObstacleSpec = Annotated[CylinderSpec | BoxSpec, Field(discriminator="type")]
-
-
-class SphereSpec(Spec):
-    """A static sphere, seen by the agents as a zero-velocity Neighbor (original 3D VO)."""
-
-    center: Vec3
-    radius: Positive
-    margin: NonNegative = PZ_MARGIN
-    physical: StrictBool = True
-
-    @property
-    def r_pz(self) -> float:
-        return self.radius + self.margin
-
-
-Problem = tuple[tuple[Any, ...], str, Any]
 
 
 class Scenario(Spec):
@@ -587,48 +487,6 @@ class Scenario(Spec):
                 for a in np.flatnonzero(d < s.r_pz)
             ]
         return out
-
-
-# ------------------------------------------------------------------------------ geometry
-
-
-def nearby_pairs(
-    points: np.ndarray, reach: np.ndarray, most: float
-) -> list[tuple[int, int, float]]:
-    """Point pairs (i, j, distance), i > j, in order of i then j, closer than ``reach[i] +
-    reach[j]`` or so (a k-d tree proposes those within 2 × ``most`` ≥ any reach sum; the
-    caller applies its own test): no loop over every pair, for scenarios of thousands of
-    agents."""
-    from scipy.spatial import cKDTree
-
-    if len(points) < 2:
-        return []
-    within = 2.0 * float(most) * (1 + 1e-9) + 1e-9
-    found = cKDTree(points).query_pairs(within, output_type="ndarray")
-    i, j = found.max(axis=1), found.min(axis=1)
-    order = np.lexsort((j, i))
-    i, j = i[order], j[order]
-    d = np.linalg.norm(points[i] - points[j], axis=-1)
-    keep = d < reach[i] + reach[j]
-    return [(int(a), int(b), float(c)) for a, b, c in zip(i[keep], j[keep], d[keep], strict=True)]
-
-
-def prism_contains(body: Cylinder | Box, points: np.ndarray) -> np.ndarray:
-    """Whether points (..., 3) lie inside the obstacle's protected prism C_pz.
-
-    Section 4.1: the square prism turns so that a side faces the vehicle, so in the horizontal
-    plane the vehicle is inside exactly when its distance to the obstacle's axis is below
-    L_pz / 2; vertically the prism spans [0, h_pz].
-    """
-    p = np.asarray(points, dtype=float)
-    horizontal = np.linalg.norm(p[..., :2] - np.asarray(body.center), axis=-1)
-    return (horizontal < body.side / 2.0) & (p[..., 2] < body.prism_height) & (p[..., 2] >= 0.0)
-
-
-def sphere_surface_distance(center: np.ndarray, radius: float, points: np.ndarray) -> np.ndarray:
-    """Distance (m) from points (..., 3) to a sphere's surface (0 inside)."""
-    p = np.asarray(points, dtype=float)
-    return np.maximum(np.linalg.norm(p - np.asarray(center, dtype=float), axis=-1) - radius, 0.0)
 
 
 def _fmt(v: Any) -> str:
