@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import logging
 import math
-import numbers
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -47,7 +46,7 @@ from .solvers import (
 )
 from .status import DECISION_STATUSES, Status
 from .swarm import SwarmDecision
-from .types import AgentState, Box, Cylinder, Limits, Neighbor, check_vector
+from .types import AgentState, Box, Cylinder, Limits, Neighbor, check_vector, positive_seconds
 
 log = logging.getLogger(__name__)
 
@@ -491,10 +490,7 @@ class VelocitySelector:
         limits = Limits() if limits is None else limits
         if not isinstance(limits, Limits):
             raise ValueError(f"limits: expected Limits, got {type(limits).__name__}")
-        if isinstance(dt, bool) or not (
-            isinstance(dt, numbers.Real) and math.isfinite(dt) and dt > 0
-        ):
-            raise ValueError(f"dt: must be a positive finite number of seconds, got {dt!r}")
+        dt = positive_seconds(dt, "dt")
         prisms = prism_rows(obstacles)
         options = self.options_for(limits.speed[1], dt, sensing_range)
         if self._compiled and self._nlp is None:

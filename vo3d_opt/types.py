@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import reprlib
 from collections.abc import Container, Iterable, Mapping
 from functools import cached_property
 from typing import Annotated, Any
@@ -36,6 +37,9 @@ from pydantic_core import PydanticCustomError
 
 #: Margin (m) added around a static obstacle when L_pz or h_pz is not given (section 4).
 PZ_MARGIN = 2.0
+#: Every number of the inputs is at most this in magnitude (SI units: 10,000 km, 10,000 km/s,
+#: 115 days): beyond it the geometry's squares and products lose every digit that matters.
+MAX_MAGNITUDE = 1e7
 
 # ------------------------------------------------------------------------------------ errors
 
@@ -60,9 +64,15 @@ def one_line(text: Any) -> str:
     return " ".join(str(text).split())
 
 
+_SHORT = reprlib.Repr()
+_SHORT.maxlevel, _SHORT.maxlist, _SHORT.maxtuple, _SHORT.maxdict = 2, 4, 4, 4
+_SHORT.maxstring, _SHORT.maxother, _SHORT.maxlong = 40, 40, 40
+
+
 def short_repr(value: Any, limit: int = 40) -> str:
-    """``repr(value)``, cut to ``limit`` characters."""
-    text = repr(value)
+    """``repr(value)``, cut to ``limit`` characters, never built whole: a nested value (a YAML
+    alias bomb, a huge array) is walked only a few items and levels deep."""
+    text = _SHORT.repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
@@ -127,9 +137,32 @@ def check_number(value: Any) -> Any:
         raise ValueError(f"must be a number, got {short_repr(value)}")
     if isinstance(value, np.generic):
         value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        raise ValueError(f"must be finite (no NaN or inf), got {value}")
+    if isinstance(value, complex):
+        raise ValueError(f"must be a real number, got {short_repr(value)}")
+    if isinstance(value, (int, float)):
+        try:
+            x = float(value)
+        except OverflowError:  # an int beyond a float's range
+            raise ValueError(f"must be at most {MAX_MAGNITUDE:g} in magnitude") from None
+        if not math.isfinite(x):
+            raise ValueError(f"must be finite (no NaN or inf), got {value}")
+        if abs(x) > MAX_MAGNITUDE:
+            raise ValueError(f"must be at most {MAX_MAGNITUDE:g} in magnitude, got {x:g}")
     return value
+
+
+def positive_seconds(value: Any, name: str) -> float:
+    """``value`` as a positive number of seconds (at most ``MAX_MAGNITUDE``); ``ValueError``
+    naming ``name`` otherwise."""
+    try:
+        seconds = float(check_number(value)) if _is_real(value) else math.nan
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+    if math.isnan(seconds):
+        raise ValueError(f"{name}: must be a number, got {short_repr(value)}")
+    if not seconds > 0:
+        raise ValueError(f"{name}: must be a positive number of seconds, got {short_repr(value)}")
+    return seconds
 
 
 def check_vector(value: Any, n: int) -> np.ndarray:
@@ -138,11 +171,14 @@ def check_vector(value: Any, n: int) -> np.ndarray:
     arrays of the right shape come back as they are (every public type stores its vectors so: the
     compiled kernels take them without a copy or a new compilation)."""
     if isinstance(value, (list, tuple)):
-        if not all(_is_real(x) for x in value):
-            raise ValueError(f"must be {n} numbers, got {short_repr(value)}")
         if len(value) != n:
             raise ValueError(f"must be {n} numbers, got {len(value)}")
-        arr = np.array(value, dtype=float)
+        if not all(_is_real(x) for x in value):
+            raise ValueError(f"must be {n} numbers, got {short_repr(value)}")
+        try:
+            arr = np.array(value, dtype=float)
+        except OverflowError:  # an int beyond a float's range
+            raise ValueError(f"must be at most {MAX_MAGNITUDE:g} in magnitude") from None
     else:
         raw = np.asarray(value)
         if raw.dtype.kind not in "iuf":
@@ -154,12 +190,14 @@ def check_vector(value: Any, n: int) -> np.ndarray:
             and not raw.flags.writeable
             and raw.flags.c_contiguous
             and raw.flags.aligned  # the compiled kernels assume aligned arrays
-            and all(math.isfinite(x) for x in raw.tolist())
+            and all(math.isfinite(x) and abs(x) <= MAX_MAGNITUDE for x in raw.tolist())
         ):
             return raw
         arr = raw.astype(float)  # a copy: the caller's array stays theirs
     if not all(math.isfinite(x) for x in arr.tolist()):
         raise ValueError("must be finite (no NaN or inf)")
+    if not all(abs(x) <= MAX_MAGNITUDE for x in arr.tolist()):
+        raise ValueError(f"must be at most {MAX_MAGNITUDE:g} in magnitude")
     arr.setflags(write=False)
     return arr
 

@@ -12,6 +12,7 @@ from typing import Any
 
 from vo3d_opt.report import CSV_MAX_ROWS, write_outputs
 from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FORMULATIONS
+from vo3d_opt.sim.record import check_allotment
 from vo3d_opt.sim.scenario import Scenario
 from vo3d_opt.sim.simulator import DEFAULT_FORMULATION
 from vo3d_opt.sim.spill import in_memory_fs, spill_directory, spill_supported
@@ -77,6 +78,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     plot_options = _figure_options(args)
     sc = with_options(load_or_exit(args.scenario), args.selector_options)
     _swarm_checked(args, sc)
+    try:
+        check_allotment(sc.n_steps, sc.n_agents, spill_dir=args.spill_dir)
+    except ValueError as exc:
+        raise UsageError(f"{sc.source}: {exc}") from None
     out = out_dir(args.out) if args.out else None
     sel, formulation, solver = selector(sc, args.formulation, args.solver)
     record, summary = fly_and_summarize(sc, sel, formulation, solver, args)

@@ -34,6 +34,11 @@ class _Config(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, arbitrary_types_allowed=True)
 
 
+#: The strongest wind (m/s) a scenario may ask for: RotorPy's vehicles are blown away far
+#: below it, and far above it its integration overflows.
+MAX_WIND = 100.0
+
+
 class WindConfig(_Config):
     """The ``wind`` mapping of contract §5 (``rotorpy`` only). ``sigma`` (turbulence intensity
     per axis, m/s) and ``altitude`` (m, sets the Dryden length scales) are extensions that
@@ -50,6 +55,10 @@ class WindConfig(_Config):
             raise_problems("wind", [(("sigma",), "only for type dryden", self.sigma)])
         if self.sigma is not None and np.any(self.sigma < 0):
             raise_problems("wind", [(("sigma",), "must be >= 0", self.sigma)])
+        for key, value in (("velocity", self.velocity), ("sigma", self.sigma)):
+            if value is not None and np.linalg.norm(value) > MAX_WIND:
+                what = f"at most {MAX_WIND:g} m/s (a hurricane is 70)"
+                raise_problems("wind", [((key,), what, value)])
         return self
 
 

@@ -6,6 +6,7 @@ temporary file: :mod:`vo3d_opt.sim.spill`)."""
 from __future__ import annotations
 
 import os
+import shutil
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -214,6 +215,57 @@ class RunRecord:
         return np.array_equal(mine[self.status_codes], theirs[other.status_codes])
 
 
+def record_specs(
+    total: int, n: int, same_commands: bool = False
+) -> dict[str, tuple[tuple[int, ...], Any]]:
+    """(shape, dtype) of each array a run of ``total`` steps of ``n`` agents fills."""
+    f8, per_step = np.float64, (total, n)
+    specs: dict[str, tuple[tuple[int, ...], Any]] = {
+        "pos": ((total + 1, n, 3), f8),
+        "vel": ((total, n, 3), f8),
+        "pref": ((total, n, 3), f8),
+        "decided": (per_step, np.bool_),
+        "status_codes": (per_step, np.uint16),
+        "dtimes": (per_step, f8),
+        "stimes": (per_step, f8),
+        "arrived": ((total + 1, n), np.bool_),
+    }
+    if not same_commands:
+        specs["cmd"] = ((total, n, 3), f8)
+    return specs
+
+
+def machine_capacity(spill_dir: str | Path | None = None) -> int:
+    """Bytes this machine can hold a record in: its memory and the free disk where a record
+    would spill (a best guess: 0 for what cannot be read)."""
+    try:
+        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        memory = 0
+    try:
+        disk = shutil.disk_usage(spill_directory(spill_dir)).free
+    except (OSError, ValueError):
+        disk = 0
+    return int(memory + disk)
+
+
+def check_allotment(
+    total: int, n: int, same_commands: bool = False, spill_dir: str | Path | None = None
+) -> None:
+    """``ValueError`` naming ``max_time`` when a run of ``total`` steps of ``n`` agents could
+    fill more than :func:`machine_capacity`: refused before anything is reserved."""
+    need = sum(
+        array_bytes(shape, dtype) for shape, dtype in record_specs(total, n, same_commands).values()
+    )
+    have = machine_capacity(spill_dir)
+    if need > have:
+        raise ValueError(
+            f"max_time: the run may take {total:,} steps of {n:,} agents, a record of "
+            f"{need / 2**30:,.1f} GiB, more than this machine can hold ({have / 2**30:,.1f} GiB "
+            "of memory and free disk); shorten max_time or lengthen dt"
+        )
+
+
 class RunBuffers:
     """The arrays a run fills step by step, [step, agent, ...] as in :class:`RunRecord`, for at
     most ``total`` steps of ``n`` agents. Memory is taken as the steps are filled (untouched
@@ -240,19 +292,7 @@ class RunBuffers:
         spill: bool | None = False,
         spill_dir: str | Path | None = None,
     ) -> None:
-        f8, per_step = np.float64, (total, n)
-        specs: dict[str, tuple[tuple[int, ...], Any]] = {
-            "pos": ((total + 1, n, 3), f8),
-            "vel": ((total, n, 3), f8),
-            "pref": ((total, n, 3), f8),
-            "decided": (per_step, np.bool_),
-            "status_codes": (per_step, np.uint16),
-            "dtimes": (per_step, f8),
-            "stimes": (per_step, f8),
-            "arrived": ((total + 1, n), np.bool_),
-        }
-        if not same_commands:
-            specs["cmd"] = ((total, n, 3), f8)
+        specs = record_specs(total, n, same_commands)
         self.spill = _open_spill(specs, spill, spill_dir)
         a = self.spill.arrays if self.spill is not None else _in_memory(specs)
         self.pos, self.vel, self.pref = a["pos"], a["vel"], a["pref"]

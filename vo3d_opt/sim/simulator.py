@@ -64,6 +64,7 @@ from vo3d_opt.sim.record import (
     SelectorLike,
     Snapshot,
     StepDecision,
+    check_allotment,
 )
 from vo3d_opt.sim.safety import derive_margins, within_reach
 from vo3d_opt.sim.scenario import Scenario, load_scenario
@@ -144,6 +145,7 @@ def fly(
     total = sc.n_steps if max_steps is None else min(max_steps, sc.n_steps)
     prefer = preferred_velocity or scenario_goal_velocity(sc)
     dyn = dynamics or scenario_dynamics(sc)
+    check_allotment(total, n, dyn.model == "kinematic", spill_dir)
     dyn.reset(sc.starts)
     buf = RunBuffers(
         total, n, same_commands=dyn.model == "kinematic", spill=spill, spill_dir=spill_dir

@@ -110,6 +110,12 @@ from vo3d_opt.types import (
     raise_problems,
 )
 
+#: The most control steps a run may take (``max_time / dt``): ten million steps of 0.2 s are
+#: 23 days of flight; a run of one agent then holds about 1.5 GB of record.
+MAX_STEPS = 10_000_000
+#: The most RotorPy sub-steps per control period (``dynamics.substep_rate`` × ``dt``).
+MAX_SUBSTEPS = 10_000
+
 #: From this many vehicles a run under RotorPy one by one suggests ``batched: true``: at 50,
 #: random-crossing-50 took 237 s batched against 1313 s one by one (at its default 100 Hz) in
 #: benchmarks/results_real_world.md.
@@ -203,6 +209,14 @@ class Scenario(Spec):
 
     def _timing_problems(self) -> list[Problem]:
         out: list[Problem] = []
+        if self.max_time > MAX_STEPS * self.dt:
+            out.append(
+                (
+                    ("max_time",),
+                    f"{self.max_time:g} s is more than {MAX_STEPS:,} steps of dt {self.dt:g} s",
+                    self.max_time,
+                )
+            )
         if self.max_time < self.dt:
             out.append(
                 (
@@ -235,6 +249,16 @@ class Scenario(Spec):
                     self.velocity_response_tau,
                 )
             )
+        rate = self.dynamics.substep_rate if self.dynamics is not None else None
+        if rate is not None and rate * self.dt > MAX_SUBSTEPS:
+            out.append(
+                (
+                    ("dynamics", "substep_rate"),
+                    f"{rate:g} Hz gives more than {MAX_SUBSTEPS:,} sub-steps per step of "
+                    f"{self.dt:g} s",
+                    rate,
+                )
+            )
         if self.wind is not None and self.vehicle_dynamics.model != "rotorpy":
             out.append(
                 (
@@ -244,7 +268,16 @@ class Scenario(Spec):
                 )
             )
         steps = self.sensing.latency / self.dt
-        if abs(steps - round(steps)) > 1e-6:
+        if self.sensing.latency > self.max_time:
+            out.append(
+                (
+                    ("sensing", "latency"),
+                    f"{self.sensing.latency:g} s is longer than the run (max_time "
+                    f"{self.max_time:g} s)",
+                    self.sensing.latency,
+                )
+            )
+        elif abs(steps - round(steps)) > 1e-6:
             out.append(
                 (
                     ("sensing", "latency"),
