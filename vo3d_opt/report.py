@@ -10,14 +10,25 @@ summary and the figures. One module for the CLI and the demo.
 * ``summary.json``: the summary (contract §3 and the extras), floats to :data:`JSON_DIGITS`
   significant digits;
 * the figures of ``vo3d_opt.plots`` and, when asked, ``animation.gif``.
+
+Every file is written under a temporary name in the same directory and renamed into place once
+complete (a rename replaces a symbolic link planted there, never the file it points to), and
+``summary.json`` comes last: before anything else, the files of an earlier run in the
+directory (this module's names, in every figure format) are removed, so a directory holding
+``summary.json`` holds this run's complete output, and one interrupted while writing (Ctrl-C, a
+full disk) has no ``summary.json`` and no half-written file under a final name.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import logging
 import math
+import os
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -66,18 +77,39 @@ def rounded(value: Any) -> Any:
     return value
 
 
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
+
+
+@contextlib.contextmanager
+def atomic(path: str | Path) -> Iterator[Path]:
+    """A temporary path beside ``path`` to write; renamed to ``path`` when the block ends
+    normally, removed when it raises (an interrupt included)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
+    os.close(fd)
+    tmp = Path(name)
+    os.chmod(tmp, 0o666 & ~_UMASK)  # what open() would give the file, not mkstemp's 0600
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 def write_summary(summary: dict[str, Any], path: str | Path) -> Path:
     path = Path(path)
-    path.write_text(json.dumps(rounded(summary), indent=2, allow_nan=False) + "\n")
+    with atomic(path) as tmp:
+        tmp.write_text(json.dumps(rounded(summary), indent=2, allow_nan=False) + "\n")
     return path
 
 
 def write_csv(record: RunRecord, path: str | Path) -> Path:
     """Trajectories as CSV, one row per (sample, agent), the columns of :data:`COLUMNS`."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     ids, steps, names = record.ids, record.steps, record.status_names
-    with path.open("w", newline="") as fh:
+    with atomic(path) as tmp, tmp.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(COLUMNS)
         for k in range(steps + 1):
@@ -134,19 +166,19 @@ def write_parquet(record: RunRecord, path: str | Path) -> Path:
     import pyarrow.parquet as pq
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     samples = record.steps + 1
-    writer = None
-    try:
-        for lo in range(0, samples, _PARQUET_STEPS):
-            table = _table(record, lo, min(samples, lo + _PARQUET_STEPS))
-            if writer is None:
-                writer = pq.ParquetWriter(path, table.schema)
-            writer.write_table(table)
-            record.drop_resident()
-    finally:
-        if writer is not None:
-            writer.close()
+    with atomic(path) as tmp:
+        writer = None
+        try:
+            for lo in range(0, samples, _PARQUET_STEPS):
+                table = _table(record, lo, min(samples, lo + _PARQUET_STEPS))
+                if writer is None:
+                    writer = pq.ParquetWriter(tmp, table.schema)
+                writer.write_table(table)
+                record.drop_resident()
+        finally:
+            if writer is not None:
+                writer.close()
     return path
 
 
@@ -164,6 +196,7 @@ def write_outputs(
     from vo3d_opt.plots import skipped_plots, write_plots  # matplotlib only when asked for
 
     out.mkdir(parents=True, exist_ok=True)
+    _remove_earlier(out)
     written = [write_parquet(record, out / "trajectories.parquet")]
     rows = record.n_agents * (record.steps + 1)
     if rows <= CSV_MAX_ROWS:
@@ -174,15 +207,44 @@ def write_outputs(
             rows,
             CSV_MAX_ROWS,
         )
-    written.append(write_summary(summary, out / "summary.json"))
-    written += write_plots(record, out, **(plot_options or {}))
+    with tempfile.TemporaryDirectory(prefix=".figures.", dir=out) as scratch:
+        drawn = write_plots(record, Path(scratch), **(plot_options or {}))
+        if animate:
+            from vo3d_opt.animation import write_animation
+
+            drawn.append(write_animation(record, Path(scratch) / "animation.gif"))
+        for path in drawn:
+            os.replace(path, out / path.name)
+            written.append(out / path.name)
     for name, why in skipped_plots(record).items():
         log.info("not drawn: %s (%s)", name, why)
-    if animate:
-        from vo3d_opt.animation import write_animation
-
-        written.append(write_animation(record, out / "animation.gif"))
+    written.append(write_summary(summary, out / "summary.json"))  # last: the run is complete
     return written
+
+
+#: The figures ``write_plots`` may draw (their file stems).
+FIGURE_STEMS = ("trajectories_3d", "top_view", "vehicle_distance", "obstacle_distance")
+#: The names a run's output takes (figures in every format): removed before a new run's.
+OUTPUT_GLOBS = (
+    "summary.json",
+    "trajectories.parquet",
+    "trajectories.csv",
+    "animation.gif",
+    "*.png",
+    "*.pdf",
+    "*.svg",
+)
+
+
+def _remove_earlier(out: Path) -> None:
+    """Remove an earlier run's files from ``out`` (``summary.json`` first, so the directory
+    reads as incomplete until this run's is written); only this module's own names, and only
+    figures this module draws."""
+    for pattern in OUTPUT_GLOBS:
+        for path in sorted(out.glob(pattern)):
+            figure = pattern.startswith("*")
+            if not figure or path.stem in FIGURE_STEMS:
+                path.unlink(missing_ok=True)
 
 
 __all__ = [

@@ -44,7 +44,7 @@ from .formulations.swarm import (
     neighbor_lists,
 )
 from .geometry.pyramid import prism_rows
-from .types import Box, Cylinder, Limits
+from .types import Box, Cylinder, Limits, short_repr
 
 #: The compiled ``neighbor_lists`` and ``nearest_lists`` that ``vehicle_links`` calls: numba's
 #: JIT ones, or the ahead-of-time module's once the selector has loaded it
@@ -165,13 +165,17 @@ def distance(value: Any, name: str, *, allow_inf: bool = False) -> float:
     return float(value)
 
 
+#: A count beyond this is as good as "all" (no swarm has more vehicles).
+COUNT_MAX = 10**9
+
+
 def count(value: Any, name: str) -> int | None:
-    """None or an integer >= 0."""
+    """None or an integer >= 0 (beyond ``COUNT_MAX``: ``COUNT_MAX``, which means all)."""
     if value is None:
         return None
-    if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < 0:
-        raise ValueError(f"{name}: must be None or an integer >= 0, got {value!r}")
-    return int(value)
+    if not isinstance(value, numbers.Integral) or isinstance(value, (bool, np.bool_)) or value < 0:
+        raise ValueError(f"{name}: must be None or an integer >= 0, got {short_repr(value)}")
+    return min(int(value), COUNT_MAX)
 
 
 def vehicle_limits(limits: Limits, dt: float, n: int, max_speed: Any) -> np.ndarray:

@@ -17,13 +17,14 @@ outputs fails after the run (the summary is still printed), 130 when interrupted
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
 from vo3d_opt import __version__
 from vo3d_opt.types import one_line
 
-from .common import EXIT_USAGE, Parser, UsageError, common_parser, configure_logging, log
+from .common import EXIT_FAIL, EXIT_USAGE, Parser, UsageError, common_parser, configure_logging, log
 from .compare import add_compare_parser
 from .compile import add_compile_parser
 from .listing import add_list_parser
@@ -67,6 +68,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         log.error("interrupted")
         return 130
+    except BrokenPipeError:  # stdout's reader went away (| head): no traceback, no more output
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_FAIL
 
 
 if __name__ == "__main__":

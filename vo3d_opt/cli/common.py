@@ -111,6 +111,8 @@ def load_or_exit(arg: str) -> Scenario:
 
 def out_dir(arg: str) -> Path:
     """The ``--out`` directory, created and tried now: a bad path fails before the run."""
+    if not arg.strip():
+        raise UsageError("--out: an empty path; give a directory")
     path = Path(arg)
     if path.exists() and not path.is_dir():
         raise UsageError(f"--out {arg}: exists and is not a directory")

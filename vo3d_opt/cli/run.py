@@ -82,7 +82,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         check_allotment(sc.n_steps, sc.n_agents, spill_dir=args.spill_dir)
     except ValueError as exc:
         raise UsageError(f"{sc.source}: {exc}") from None
-    out = out_dir(args.out) if args.out else None
+    out = out_dir(args.out) if args.out is not None else None
     sel, formulation, solver = selector(sc, args.formulation, args.solver)
     record, summary = fly_and_summarize(sc, sel, formulation, solver, args)
     status = EXIT_OK
@@ -135,7 +135,7 @@ def _figure_options(args: argparse.Namespace) -> dict[str, Any]:
         for k, v in (("fmt", args.format), ("dpi", args.dpi), ("zones", args.zones))
         if v is not None
     }
-    if not args.out and (given or args.animate):
+    if args.out is None and (given or args.animate):
         flag = {"fmt": "--format", "dpi": "--dpi", "zones": "--zones"}
         names = [flag[k] for k in given] + (["--animate"] if args.animate else [])
         raise UsageError(f"{', '.join(names)}: figures are written only with --out DIR")

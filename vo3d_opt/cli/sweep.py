@@ -116,7 +116,7 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
 def cmd_sweep(args: argparse.Namespace) -> int:
     from vo3d_opt.sweep.runner import SweepError
 
-    if args.out and not args.list:
+    if args.out is not None and not args.list:
         out_dir(args.out)  # a bad --out fails before the sweep, not after it
     try:
         return _sweep(args)
@@ -259,7 +259,7 @@ def _sweep(args: argparse.Namespace) -> int:
         )
     s = result.summary
     status = EXIT_ERRORS if s["errors"] else EXIT_OK
-    if args.out:
+    if args.out is not None:
         from vo3d_opt.sweep.output import write_results  # matplotlib only when asked for
 
         try:

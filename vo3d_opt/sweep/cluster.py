@@ -13,6 +13,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import re
+import signal
 from collections.abc import Iterator
 from itertools import islice
 from typing import Any
@@ -45,6 +47,10 @@ class WarmUp(WorkerPlugin):
         await asyncio.get_running_loop().run_in_executor(None, warm, self.method, self.extra)
 
 
+#: The addresses ``--scheduler`` takes: Dask's TCP and TLS transports.
+SCHEDULER_ADDRESS = re.compile(r"^(tcp|tls)://[^/\s:]+:[0-9]{1,5}$")
+
+
 @contextlib.contextmanager
 def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> Iterator[Client]:
     """A client of the scheduler at ``scheduler``, or of a new local cluster of ``workers``
@@ -52,9 +58,13 @@ def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> It
     import dask
 
     if scheduler:
+        if not SCHEDULER_ADDRESS.match(scheduler):
+            raise ConnectError(
+                f"{scheduler!r} is not a scheduler address (tcp://HOST:PORT or tls://HOST:PORT)"
+            )
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT)
-        except (OSError, TimeoutError, ValueError) as exc:
+        except Exception as exc:  # noqa: BLE001 - any failure to connect is one line
             raise ConnectError(f"cannot connect to {scheduler}: {error_line(exc)}") from None
         try:
             try:
@@ -76,9 +86,23 @@ def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> It
         )
     try:
         with Client(cluster) as client:
+            client.register_plugin(_LocalWorker())
             yield client
+    except KeyboardInterrupt:
+        # the cluster is torn down mid-task: distributed's own logs of it are no news
+        logging.getLogger("distributed").setLevel(logging.CRITICAL)
+        raise
     finally:
         cluster.close()
+
+
+class _LocalWorker(WorkerPlugin):
+    """A worker of the local cluster leaves Ctrl-C to the client, which stops the cluster: the
+    terminal sends SIGINT to every process of the command, and a worker interrupted inside a
+    task prints a traceback of it."""
+
+    async def setup(self, worker: Any) -> None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _error_row(
