@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from vo3d_opt import __version__
+from vo3d_opt.link.command import add_parsers as add_link_parsers
 from vo3d_opt.report import CSV_MAX_ROWS, rounded, write_outputs
 from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FAST_OPTIONS, FORMULATIONS
 from vo3d_opt.sim.metrics import CONTRACT_KEYS, summarize
@@ -785,6 +786,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     lst.set_defaults(func=cmd_list)
     _add_sweep(sub, common)
+    add_link_parsers(sub, common)
 
     comp = sub.add_parser(
         "compile",
