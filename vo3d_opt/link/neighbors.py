@@ -51,6 +51,7 @@ class Track:
     cooperative: bool = False
     heartbeat_t: float = -np.inf
     dropped: bool = False
+    peer: bool = True  # False: ADS-B traffic
 
     def age(self, now: float) -> float:
         return now - self.t
@@ -82,9 +83,11 @@ class Tracks:
     traffic: dict[int, Track] = field(default_factory=dict)
     traffic_r_pz: float = 0.0
     traffic_speed: float = 0.0
-    #: per neighbour name: ticks planned with late data, drops, fresh starts
+    #: per neighbour name: ticks planned with late data, and drops
     late: Counter[str] = field(default_factory=Counter)
     drops: Counter[str] = field(default_factory=Counter)
+    #: per peer: ticks it was planned as non-cooperative (its autopilot not under its link)
+    passive: Counter[str] = field(default_factory=Counter)
 
     def add_peer(self, system_id: int, name: str, r_pz: float, top_speed: float) -> None:
         self.peers[system_id] = Track(name, r_pz, top_speed)
@@ -94,7 +97,9 @@ class Tracks:
         if icao is None:
             return self.peers[system_id]
         if icao not in self.traffic:
-            self.traffic[icao] = Track(f"adsb:{icao:06X}", self.traffic_r_pz, self.traffic_speed)
+            self.traffic[icao] = Track(
+                f"adsb:{icao:06X}", self.traffic_r_pz, self.traffic_speed, peer=False
+            )
         return self.traffic[icao]
 
     def update(self, track: Track, p: np.ndarray, v: np.ndarray, now: float) -> str | None:
@@ -128,12 +133,15 @@ class Tracks:
             if age > self.late_after:
                 self.late[track.name] += 1
             recent = now - track.heartbeat_t <= HEARTBEAT_TIMEOUT
+            cooperative = bool(track.cooperative and recent)
+            if not cooperative and track.peer:
+                self.passive[track.name] += 1
             out.append(
                 Neighbor(
                     position=track.position,
                     velocity=track.velocity,
                     r_pz=max(self.own_r_pz, track.r_pz) + age * track.top_speed,
-                    cooperative=bool(track.cooperative and recent),
+                    cooperative=cooperative,
                 )
             )
         return out

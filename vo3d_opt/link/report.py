@@ -16,6 +16,7 @@ Summary keys (``vo3d link`` prints them as one JSON object on stdout when it sto
 | ``decision_time_median_us``, ``decision_time_p99_us`` | time per ``select()`` call |
 | ``rejected``, ``rejected_total`` | packets and reports refused, by reason (below) |
 | ``neighbors_late``, ``neighbors_dropped`` | per neighbour: ticks planned with its data late (older than ``--state-timeout``), and times it was dropped (older than ``--neighbor-timeout``) |
+| ``neighbors_passive`` | per peer: ticks it was planned as non-cooperative (its autopilot not in offboard / guided, or its heartbeat old) |
 | ``formulation``, ``solver``, ``rate``, ``time_scale`` | how it decided |
 
 Rejection reasons: ``foreign_system`` (a system id outside the configured set),
@@ -140,6 +141,7 @@ def link_summary(link: Link) -> dict[str, Any]:
         "rejected_total": int(sum(rejected.values())),
         "neighbors_late": dict(sorted(link.tracks.late.items())),
         "neighbors_dropped": dict(sorted(link.tracks.drops.items())),
+        "neighbors_passive": dict(sorted(link.tracks.passive.items())),
         "formulation": link.built.formulation,
         "solver": link.built.solver,
         "rate": o.rate,

@@ -37,7 +37,7 @@ from vo3d_opt.sim.scenario import Scenario
 log = logging.getLogger("vo3d_opt.link.sitl")
 
 #: Wall seconds given to the processes to start (import, bind) before the run's clock starts.
-STARTUP = 2.0
+STARTUP = 0.5
 #: Wall seconds the links get to engage (a first run may compile the selector's kernel).
 ENGAGE_WALL = 180.0
 #: Wall seconds a stopped process gets to write its log and summary before SIGKILL.
@@ -91,6 +91,9 @@ def check(opts: SitlOptions) -> None:
         raise ValueError(f"{sc.source}: dynamics.model {model}: vo3d sitl flies {MODELS}")
     if sc.n_agents > 250:
         raise ValueError(f"{sc.source}: agents: vo3d sitl gives system ids 1-250 (one per agent)")
+    cuts = [f.agent for f in opts.faults if f.kind == "cut"]
+    if len(cuts) != len(set(cuts)):
+        raise ValueError("--fault cut: one cut per agent")
     for f in opts.faults:
         if f.agent is not None and f.agent not in sc.ids:
             raise ValueError(f"--fault {f}: {f.agent} is not an agent of {sc.name}")
@@ -146,7 +149,8 @@ class Sitl:
         return proc
 
     def _router(self) -> dict[str, int]:
-        proc = self._start("router", ["-m", "vo3d_opt.link.router"])
+        # run as a file: it needs only the standard library, not the package's imports
+        proc = self._start("router", [str(Path(__file__).with_name("router.py"))])
         assert proc.popen.stdout is not None
         ready, _, _ = select.select([proc.popen.stdout], [], [], 30.0)
         line = proc.popen.stdout.readline() if ready else ""
@@ -173,7 +177,7 @@ class Sitl:
             setpoint_timeout=o.setpoint_timeout,
             signing_key=o.signing_key,
             icao=0xA00000 + self.ids[name],
-            cut=None if cut is None else (cut.at, cut.amount),
+            cut=None if cut is None else cut.amount,
         )
         self.vehicles[name] = self._start(
             f"vehicle {name}", ["-m", "vo3d_opt.link.vehicle", config_json(cfg)]
@@ -221,7 +225,7 @@ class Sitl:
         """Poll the processes, start the mission once every link engaged, fire the faults,
         until the end; the end's time."""
         sc = self.o.scenario
-        pending = sorted((f for f in self.o.faults if f.kind != "cut"), key=lambda f: f.at)
+        pending = sorted(self.o.faults, key=lambda f: f.at)
         straight = {name for k, name in enumerate(sc.ids) if not sc.avoids[k]}
         wall_limit = time.monotonic() + ENGAGE_WALL
         while True:
@@ -259,11 +263,12 @@ class Sitl:
 
     def _fire(self, fault: Fault, injector: Injector) -> None:
         log.info("t = %.2f s: fault %s", self.clock(), fault)
-        if fault.kind == "kill":
+        if fault.kind in ("kill", "cut"):
             assert fault.agent is not None
-            proc = self.links[fault.agent]
-            if proc.alive():
-                os.killpg(proc.popen.pid, signal.SIGKILL)
+            if fault.kind == "kill":
+                _signal(self.links[fault.agent], signal.SIGKILL)
+            else:
+                _signal(self.vehicles[fault.agent], signal.SIGUSR2)
             self.injected[str(fault)] = 1
             return
         self.injected[str(fault)] = injector.send(fault)

@@ -23,7 +23,7 @@ not an autopilot.
 Run as ``python -m vo3d_opt.link.vehicle CONFIG_JSON`` (:class:`VehicleConfig`'s fields); it
 prints one JSON line per event (``arrived``, ``mode``) on stdout and stops on SIGTERM. A
 non-cooperative agent hovers at its start until SIGUSR1 (``vo3d sitl`` sends it when every
-link has engaged: the mission's start).
+link has engaged: the mission's start); SIGUSR2 starts a telemetry cut of ``cut`` seconds.
 """
 
 from __future__ import annotations
@@ -66,7 +66,8 @@ HEARTBEAT_PERIOD = 1.0
 class VehicleConfig:
     """One simulated vehicle: agent ``agent`` of ``scenario`` (a path), system ``system_id``,
     talking to ``connect``; clock: wall time since ``epoch`` (time.monotonic) times
-    ``time_scale``; ``cut``: (from, seconds) of link time with no telemetry sent."""
+    ``time_scale``; ``cut``: seconds without sending anything from a SIGUSR2 on (a telemetry
+    cut the run's orchestrator starts)."""
 
     scenario: str
     agent: str
@@ -82,7 +83,7 @@ class VehicleConfig:
     setpoint_timeout: float = 0.5
     signing_key: str | None = None
     icao: int = 0
-    cut: tuple[float, float] | None = None
+    cut: float | None = None
 
 
 class Vehicle:
@@ -112,6 +113,7 @@ class Vehicle:
         self.last_setpoint = -np.inf
         self.arrived = False
         self.go = not self.straight  # a straight flyer waits for SIGUSR1 (the mission's start)
+        self.cut_from = np.inf  # SIGUSR2: a telemetry cut starts
         self.stop = False
         self.rows: list[np.ndarray] = []
 
@@ -175,11 +177,16 @@ class Vehicle:
         )
 
     def enter(self, external: bool, why: str) -> None:
-        if external != self.external:
-            self.event(mode="offboard" if external else "hold", why=why)
+        """Switch mode; a change is announced by a heartbeat at once (not at the next second:
+        the peers learn sooner that this vehicle no longer avoids)."""
+        changed = external != self.external
         self.external = external
         if not external:
             self.command = np.zeros(3)
+        if changed:
+            self.event(mode="offboard" if external else "hold", why=why)
+            if not self.silent(self.clock()):
+                self.heartbeat()
 
     # --- outgoing --------------------------------------------------------------------------
 
@@ -208,7 +215,7 @@ class Vehicle:
 
     def silent(self, now: float) -> bool:
         cut = self.cfg.cut
-        return cut is not None and cut[0] <= now < cut[0] + cut[1]
+        return cut is not None and self.cut_from <= now < self.cut_from + cut
 
     # --- the loop --------------------------------------------------------------------------
 
@@ -217,6 +224,7 @@ class Vehicle:
         signal.signal(signal.SIGTERM, self._on_signal)
         signal.signal(signal.SIGINT, self._on_signal)
         signal.signal(signal.SIGUSR1, self._on_go)
+        signal.signal(signal.SIGUSR2, self._on_cut)
         wall_step = 1.0 / (cfg.physics_rate * cfg.time_scale)
         every = max(1, round(cfg.physics_rate / cfg.telemetry_rate))
         next_wall, ticks = time.monotonic(), 0
@@ -248,6 +256,9 @@ class Vehicle:
 
     def _on_go(self, signum: int, frame: Any) -> None:
         self.go = True
+
+    def _on_cut(self, signum: int, frame: Any) -> None:
+        self.cut_from = self.clock()
 
     def fly(self, now: float, h: float) -> None:
         """Step the dynamics by ``h`` s with the command in force, after the failsafe."""
@@ -295,9 +306,7 @@ def config_json(cfg: VehicleConfig) -> str:
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     data = json.loads(args[0])
-    for key in ("origin", "cut"):
-        if data.get(key) is not None:
-            data[key] = tuple(data[key])
+    data["origin"] = tuple(data["origin"])
     Vehicle(VehicleConfig(**data)).run()
     return 0
 
