@@ -12,7 +12,7 @@ import json
 import logging
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -59,24 +59,23 @@ def _positive(text: str) -> float:
     return value
 
 
-def _system_id(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if not 1 <= value <= 255:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a system id (1 to 255)")
-    return value
+def _int_in(low: int, high: int, what: str) -> Callable[[str], int]:
+    """An ``argparse`` type: an integer from ``low`` to ``high``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = low - 1
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {what} ({low} to {high})")
+        return value
+
+    return parse
 
 
-def _component(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if not 0 <= value <= 255:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a component id (0 to 255)")
-    return value
+_system_id = _int_in(1, 255, "a system id")
+_component = _int_in(0, 255, "a component id")
 
 
 def _origin(text: str) -> tuple[float, float, float]:
@@ -93,7 +92,7 @@ def _triple(text: str) -> tuple[float, float, float]:
         values = ()
     if len(values) != 3 or not all(math.isfinite(v) for v in values):
         raise argparse.ArgumentTypeError(f"{text!r}: expected X,Y,Z in metres")
-    return values  # type: ignore[return-value]
+    return values
 
 
 def _system_ids(text: str) -> dict[str, int]:
@@ -112,10 +111,10 @@ def _add(p: argparse.ArgumentParser, *flags: str, **kw: Any) -> None:
     p.add_argument(*flags, **kw)
 
 
-def _add_link(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
+def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "link",
-        parents=parents,
+        parents=list(parents),
         help="fly one vehicle of a scenario through its autopilot (MAVLink)",
         description=LINK_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -309,16 +308,17 @@ def _add_timeouts(p: argparse.ArgumentParser) -> None:
         "--max-time",
         type=_positive,
         metavar="S",
-        help="stop (brake and hold) after this long (default: the scenario's max_time)",
+        help="stop (brake and hold) this long after entering offboard/guided (default: the "
+        "scenario's max_time)",
     )
 
 
-def _add_sitl(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
+def _add_sitl(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     from vo3d_opt.link.faults import FAULT_HELP, parse_fault
 
     p = sub.add_parser(
         "sitl",
-        parents=parents,
+        parents=list(parents),
         help="fly a scenario as separate processes over MAVLink (test harness)",
         description=SITL_DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -393,7 +393,7 @@ def _add_sitl(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.set_defaults(func=cmd_sitl)
 
 
-def add_parsers(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
+def add_parsers(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     """Add ``link`` and ``sitl`` to ``vo3d``'s subparsers (``parents``: the common options)."""
     _add_link(sub, parents)
     _add_sitl(sub, parents)

@@ -326,7 +326,8 @@ class Link:
 
     def _fly(self, now: float) -> None:
         o = self.o
-        if o.max_time is not None and now >= o.max_time:
+        assert self.engaged_at is not None
+        if o.max_time is not None and now - self.engaged_at >= o.max_time:
             self.stop_reason = "max_time"
             return
         if not self.pilot.external:

@@ -2,22 +2,23 @@
 
 Summary keys (``vo3d link`` prints them as one JSON object on stdout when it stops):
 
-| key | meaning |
-| --- | --- |
-| ``agent``, ``system_id``, ``autopilot`` | who flew, and the autopilot's flavour |
-| ``end`` | why it stopped: ``arrived``, ``max_time``, ``signal``, ``mode refused``, ... |
-| ``arrived`` | whether the own state was within the goal tolerance at the end |
-| ``engaged_at``, ``time`` | link time (s) when offboard / guided began, and at the end |
-| ``decisions`` | ``select()`` calls |
-| ``status_counts`` | ticks by status: the selector's, or ``hover: own state stale`` / ``hover: link lost`` |
-| ``fallbacks`` | decisions whose status was not ``optimal`` |
-| ``setpoints`` | set-points sent while flying (one per tick) |
-| ``setpoint_latency_median_ms``, ``setpoint_latency_p99_ms`` | wall time from the arrival of the newest own state message to the set-point sent |
-| ``decision_time_median_us``, ``decision_time_p99_us`` | time per ``select()`` call |
-| ``rejected``, ``rejected_total`` | packets and reports refused, by reason (below) |
-| ``neighbors_late``, ``neighbors_dropped`` | per neighbour: ticks planned with its data late (older than ``--state-timeout``), and times it was dropped (older than ``--neighbor-timeout``) |
-| ``neighbors_passive`` | per peer: ticks it was planned as non-cooperative (its autopilot not in offboard / guided, or its heartbeat old) |
-| ``formulation``, ``solver``, ``rate``, ``time_scale`` | how it decided |
+* ``agent``, ``system_id``, ``autopilot``: who flew, and the autopilot's flavour;
+* ``end``: why it stopped (``arrived``, ``max_time``, ``signal``, ``mode refused``, ...);
+* ``arrived``: whether the own state was within the goal tolerance at the end;
+* ``engaged_at``, ``time``: link time (s) when offboard / guided began, and at the end;
+* ``decisions``: ``select()`` calls; ``status_counts``: ticks by status (the selector's, or
+  ``hover: own state stale`` / ``hover: link lost``); ``fallbacks``: decisions whose status
+  was not ``optimal``; ``setpoints``: set-points sent while flying (one per tick);
+* ``setpoint_latency_median_ms``, ``setpoint_latency_p99_ms``: wall time from the arrival of
+  the newest own state message to the set-point sent;
+* ``decision_time_median_us``, ``decision_time_p99_us``: time per ``select()`` call;
+* ``rejected``, ``rejected_total``: packets and reports refused, by reason (below);
+* ``neighbors_late``, ``neighbors_dropped``, ``neighbors_passive``: per neighbour, ticks
+  planned with its data late (older than ``--state-timeout``), times it was dropped (older
+  than ``--neighbor-timeout``), ticks it was planned as non-cooperative (its autopilot not in
+  offboard / guided, or its heartbeat old);
+* ``formulation``, ``solver``, ``rate``, ``time_scale``, ``acks`` (``COMMAND_ACK`` received,
+  by ``command:result``).
 
 Rejection reasons: ``foreign_system`` (a system id outside the configured set),
 ``unsigned`` / ``bad_signature`` (signing on), ``bad_prefix`` (bytes that start no packet),

@@ -44,7 +44,6 @@ ENGAGE_WALL = 180.0
 GRACE = 10.0
 #: Models the simulated vehicles fly (RotorPy's multirotors need the simulator's sub-steps).
 MODELS = ("kinematic", "first_order")
-SUPPORTED_KEYS = ("latency", "position_noise", "velocity_noise")
 
 
 @dataclass

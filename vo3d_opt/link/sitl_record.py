@@ -180,7 +180,9 @@ def build_result(sitl: Sitl, span: tuple[float, float], wall: float) -> SitlResu
     record = build_record(sitl, span, wall, _names(sitl, summaries), links)
     summary = summarize(record)
     ticks = decision_stats(merge_logs(list(links.values())))
-    times = np.concatenate([np.asarray(lg.select_time, float) for lg in links.values()] or [[]])
+    times = np.concatenate(
+        [np.zeros(0)] + [np.asarray(lg.select_time, float) for lg in links.values()]
+    )
     times = times[np.isfinite(times)]
     rejected: Counter[str] = Counter()
     for s in summaries.values():
