@@ -113,3 +113,31 @@ def test_with_signing_unsigned_and_wrongly_signed_packets_are_refused(tmp_path):
     for link in s["links"].values():
         assert link["autopilot"] == "ardupilot" and link["end"] == "arrived"
         assert link["rejected"] == {"bad_signature": 10, "unsigned": 10}, link["rejected"]
+
+
+def test_ctrl_c_stops_every_process_and_still_prints_the_summary():
+    import signal
+    import time
+
+    cmd = [sys.executable, "-m", "vo3d_opt.cli", "sitl", str(THREE), "--json", "--time-scale",
+           SCALE]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    try:
+        for line in proc.stderr:  # the orchestrator says when the mission starts
+            if "the mission starts" in line:
+                break
+        time.sleep(0.5)
+        children = subprocess.run(["ps", "-o", "pid=", "--ppid", str(proc.pid)],
+                                  capture_output=True, text=True).stdout.split()
+        assert len(children) == 1 + 3 + 3  # the router, the vehicles, the links
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["agents"] == 3 and summary["pz_intrusions"] == 0
+    for pid in map(int, children):
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)

@@ -310,6 +310,7 @@ def _vo3d(capsys, *args: str) -> tuple[int, str, str]:
     (["--system-ids", "a0=1,a1=1"], "--system-ids"),
     (["--signing-key", "/no/such/key"], "--signing-key"),
     (["--scenario", "/no/such.yaml"], "--scenario"),
+    (["--connect", "/dev/no-such-serial-port"], "--connect"),
 ])
 def test_link_bad_arguments_exit_2_with_one_line_naming_them(capsys, args, named):
     base = {"--connect": "udpin:127.0.0.1:0", "--scenario": str(DATA / "link-three.yaml"),

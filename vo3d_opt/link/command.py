@@ -248,7 +248,14 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
         metavar="K",
         help="the link's clock runs K times real time (vo3d sitl only; 1 on a real vehicle)",
     )
-    _add(p, "--epoch", type=float, help=argparse.SUPPRESS)
+    _add(
+        p,
+        "--epoch",
+        type=float,
+        metavar="T",
+        help="the link's clock starts at this time.monotonic() reading (vo3d sitl only: one "
+        "clock for every process; default: when the link starts)",
+    )
     _add(p, "--log", metavar="FILE", help="write every tick to FILE (.npz), as vo3d sitl does")
     p.set_defaults(func=cmd_link)
 
@@ -494,7 +501,7 @@ def cmd_link(args: argparse.Namespace) -> int:
     opts = link_options(args)
     try:
         link = Link(opts)
-    except (OSError, ValueError) as exc:  # a connection string that cannot be opened
+    except (OSError, ValueError, ImportError) as exc:  # a connection that cannot be opened
         raise _Usage(f"--connect {args.connect}: {exc}") from None
     summary = link.run()
     print(json.dumps(summary, allow_nan=False, default=_plain))

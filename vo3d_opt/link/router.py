@@ -14,6 +14,7 @@ on stdout once bound, then forwards until SIGTERM or SIGINT.
 from __future__ import annotations
 
 import json
+import os
 import select
 import signal
 import socket
@@ -48,7 +49,8 @@ class Router:
     def run(self) -> None:
         signal.signal(signal.SIGTERM, self._on_signal)
         signal.signal(signal.SIGINT, self._on_signal)
-        while not self.stop:
+        parent = os.getppid()
+        while not self.stop and os.getppid() == parent:  # vo3d sitl killed: do not outlive it
             ready, _, _ = select.select([self.vehicles, self.links], [], [], 0.2)
             for side in ready:
                 self._drain(side)

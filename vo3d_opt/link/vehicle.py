@@ -29,6 +29,7 @@ link has engaged: the mission's start); SIGUSR2 starts a telemetry cut of ``cut`
 from __future__ import annotations
 
 import json
+import os
 import signal
 import sys
 import time
@@ -230,7 +231,10 @@ class Vehicle:
         next_wall, ticks = time.monotonic(), 0
         last_t, last_beat = max(self.clock(), 0.0), -np.inf
         self.log(last_t, np.zeros(3))
+        parent = os.getppid()
         while not self.stop:
+            if os.getppid() != parent:  # vo3d sitl is gone (killed): do not outlive it
+                break
             while not self.stop and (left := next_wall - time.monotonic()) > 0:
                 self.port.wait(left)
                 for msg in self.port.receive():
