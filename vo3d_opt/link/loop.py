@@ -339,7 +339,8 @@ class Link:
             status = LOST if lost else STALE
             self._say(f"{status}: braking to a hover")
             self._send_setpoint(np.zeros(3))
-            self.record.tick(now, status, np.zeros(3), self._latency(), np.nan)
+            # no latency: this set-point does not come from a state
+            self.record.tick(now, status, np.zeros(3), np.nan, np.nan)
             return
         assert self.own.position is not None and self.own.velocity is not None
         p = self.own.position

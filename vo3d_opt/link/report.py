@@ -10,7 +10,8 @@ Summary keys (``vo3d link`` prints them as one JSON object on stdout when it sto
   ``hover: own state stale`` / ``hover: link lost``); ``fallbacks``: decisions whose status
   was not ``optimal``; ``setpoints``: set-points sent while flying (one per tick);
 * ``setpoint_latency_median_ms``, ``setpoint_latency_p99_ms``: wall time from the arrival of
-  the newest own state message to the set-point sent;
+  the newest own state message to the set-point sent, over the ticks that decided (a hover on
+  stale state comes from no state);
 * ``decision_time_median_us``, ``decision_time_p99_us``: time per ``select()`` call;
 * ``rejected``, ``rejected_total``: packets and reports refused, by reason (below);
 * ``neighbors_late``, ``neighbors_dropped``, ``neighbors_passive``: per neighbour, ticks
@@ -44,7 +45,7 @@ if TYPE_CHECKING:
 @dataclass
 class LinkLog:
     """One row per tick flown: link time, status, the velocity sent (ENU), the set-point
-    latency (s) and the ``select()`` time (s; NaN when the link did not call it)."""
+    latency (s) and the ``select()`` time (s); both NaN when the link did not decide."""
 
     t: list[float] = field(default_factory=list)
     status: list[str] = field(default_factory=list)

@@ -2,8 +2,10 @@
 
 One router (:mod:`vo3d_opt.link.router`), one simulated vehicle per agent
 (:mod:`vo3d_opt.link.vehicle`, system id k + 1 for the k-th agent) and one ``vo3d link`` per
-agent that avoids, all on 127.0.0.1 and all on one clock: wall time since a shared epoch
-(``time.monotonic`` is the same clock in every process) times ``time_scale``. The run ends
+agent that avoids, each a process of its own (:mod:`vo3d_opt.link.procs`: the vehicles and the
+links forked once the package is imported), all on 127.0.0.1 and all on one clock: wall
+time since a shared epoch (``time.monotonic`` is the same clock in every process) times
+``time_scale``. The run ends
 when every link has stopped and every non-cooperative agent has arrived, or after the
 scenario's ``max_time`` (plus the start-up); every process is then stopped (SIGTERM, SIGKILL
 for one that does not go), also on an error or Ctrl-C. The record and the summary are built
@@ -20,9 +22,10 @@ import signal
 import subprocess
 import sys
 import tempfile
-import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +34,9 @@ import yaml
 from vo3d_opt.link.faults import Fault, Injector
 from vo3d_opt.link.frames import GeodeticFrame
 from vo3d_opt.link.messages import load_signing_key
+from vo3d_opt.link.procs import Forked, Proc
 from vo3d_opt.link.vehicle import VehicleConfig, config_json
+from vo3d_opt.link.vehicle import main as vehicle_main
 from vo3d_opt.sim.scenario import Scenario
 
 log = logging.getLogger("vo3d_opt.link.sitl")
@@ -60,26 +65,20 @@ class SitlOptions:
     faults: list[Fault] = field(default_factory=list)
 
 
-@dataclass
-class _Proc:
-    """A started process; a thread keeps its stdout's lines in ``lines`` as they come."""
+def _link_main(argv: list[str]) -> int:
+    """``vo3d ARGV`` (a forked link runs the command line itself)."""
+    from vo3d_opt.cli import main
 
-    name: str
-    popen: subprocess.Popen[str]
-    lines: list[str] = field(default_factory=list)
-    reader: threading.Thread | None = None
+    return main(argv)
 
-    def alive(self) -> bool:
-        return self.popen.poll() is None
 
-    def read_on(self) -> None:
-        def pump() -> None:
-            assert self.popen.stdout is not None
-            for line in self.popen.stdout:
-                self.lines.append(line)
+def _preload() -> None:
+    """Import here, once, what every forked vehicle and link imports."""
+    import vo3d_opt.cli  # noqa: F401
+    import vo3d_opt.link.loop  # noqa: F401
+    from vo3d_opt.link.messages import mavlink
 
-        self.reader = threading.Thread(target=pump, name=self.name, daemon=True)
-        self.reader.start()
+    mavlink()
 
 
 def check(opts: SitlOptions) -> None:
@@ -110,9 +109,9 @@ class Sitl:
         sc = opts.scenario
         self.ids = {name: k + 1 for k, name in enumerate(sc.ids)}
         self.scenario_file = self._scenario_file()
-        self.procs: list[_Proc] = []
-        self.links: dict[str, _Proc] = {}
-        self.vehicles: dict[str, _Proc] = {}
+        self.procs: list[Proc] = []
+        self.links: dict[str, Proc] = {}
+        self.vehicles: dict[str, Proc] = {}
         self.arrived: set[str] = set()
         self.events: list[dict[str, Any]] = []
         self.injected: dict[str, int] = {}
@@ -132,7 +131,7 @@ class Sitl:
     def clock(self) -> float:
         return (time.monotonic() - self.epoch) * self.o.time_scale
 
-    def _start(self, name: str, argv: list[str]) -> _Proc:
+    def _exec(self, name: str, argv: list[str]) -> Proc:
         popen = subprocess.Popen(
             [sys.executable, *argv],
             stdin=subprocess.DEVNULL,
@@ -141,21 +140,22 @@ class Sitl:
             text=True,
             start_new_session=True,  # Ctrl-C reaches us only: we stop them in order
         )
-        proc = _Proc(name, popen)
+        return self._keep(Proc(name, popen))
+
+    def _fork(self, name: str, target: Callable[[], int]) -> Proc:
+        return self._keep(Proc(name, Forked(target)))
+
+    def _keep(self, proc: Proc) -> Proc:
         self.procs.append(proc)
-        if name != "router":  # the router's first line is read here, the rest by a thread
-            proc.read_on()
         return proc
 
     def _router(self) -> dict[str, int]:
         # run as a file: it needs only the standard library, not the package's imports
-        proc = self._start("router", [str(Path(__file__).with_name("router.py"))])
-        assert proc.popen.stdout is not None
-        ready, _, _ = select.select([proc.popen.stdout], [], [], 30.0)
-        line = proc.popen.stdout.readline() if ready else ""
+        proc = self._exec("router", [str(Path(__file__).with_name("router.py"))])
+        ready, _, _ = select.select([proc.stdout], [], [], 30.0)
+        line = proc.stdout.readline() if ready else ""
         if not line:
             raise RuntimeError("the router did not start")
-        proc.read_on()
         return dict(json.loads(line))
 
     def _vehicle(self, name: str, port: int) -> None:
@@ -178,14 +178,14 @@ class Sitl:
             icao=0xA00000 + self.ids[name],
             cut=None if cut is None else cut.amount,
         )
-        self.vehicles[name] = self._start(
-            f"vehicle {name}", ["-m", "vo3d_opt.link.vehicle", config_json(cfg)]
+        self.vehicles[name] = self._fork(
+            f"vehicle {name}", partial(vehicle_main, [config_json(cfg)])
         )
 
     def _link(self, name: str, port: int) -> None:
         o = self.o
         argv = [
-            "-m", "vo3d_opt.cli", "link", "-q",
+            "link", "-q",
             "--connect", f"udpout:127.0.0.1:{port}",
             "--scenario", self.scenario_file,
             "--agent", name,
@@ -200,13 +200,14 @@ class Sitl:
         ]  # fmt: skip
         if o.signing_key:
             argv += ["--signing-key", o.signing_key]
-        self.links[name] = self._start(f"link {name}", argv)
+        self.links[name] = self._fork(f"link {name}", partial(_link_main, argv))
 
     def run(self) -> float:
         """Start everything, fly until the end, stop everything; the run's end (s of the
         clock; the mission started at ``self.start``)."""
         sc, o = self.o.scenario, self.o
         try:
+            _preload()
             ports = self._router()
             self.epoch = time.monotonic() + STARTUP
             for name in sc.ids:
@@ -214,6 +215,8 @@ class Sitl:
             for k, name in enumerate(sc.ids):
                 if sc.avoids[k]:
                     self._link(name, ports["links"])
+            for proc in self.procs:  # threads only now: every fork is done
+                proc.read_on()
             key = load_signing_key(o.signing_key) if o.signing_key else None
             injector = Injector(ports["vehicles"], self.ids, GeodeticFrame(*o.origin), key)
             return self._watch(injector)
@@ -258,16 +261,16 @@ class Sitl:
         self.start = self.clock()
         log.info("t = %.2f s: every link engaged: the mission starts", self.start)
         for name in straight:
-            _signal(self.vehicles[name], signal.SIGUSR1)
+            self.vehicles[name].signal(signal.SIGUSR1)
 
     def _fire(self, fault: Fault, injector: Injector) -> None:
         log.info("t = %.2f s: fault %s", self.clock(), fault)
         if fault.kind in ("kill", "cut"):
             assert fault.agent is not None
             if fault.kind == "kill":
-                _signal(self.links[fault.agent], signal.SIGKILL)
+                self.links[fault.agent].signal(signal.SIGKILL)
             else:
-                _signal(self.vehicles[fault.agent], signal.SIGUSR2)
+                self.vehicles[fault.agent].signal(signal.SIGUSR2)
             self.injected[str(fault)] = 1
             return
         self.injected[str(fault)] = injector.send(fault)
@@ -298,10 +301,10 @@ class Sitl:
         groups.append([p for p in self.procs if p.name == "router"])
         for group in groups:
             for proc in group:
-                _signal(proc, signal.SIGTERM)
+                proc.signal(signal.SIGTERM)
             deadline = time.monotonic() + GRACE
             for proc in group:
-                _collect(proc, deadline)
+                proc.collect(deadline)
 
     def link_summaries(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -309,24 +312,6 @@ class Sitl:
             text = "".join(proc.lines).strip().splitlines()
             out[name] = json.loads(text[-1]) if text else {"end": "killed", "agent": name}
         return out
-
-
-def _signal(proc: _Proc, sig: int) -> None:
-    if proc.alive():
-        try:
-            os.killpg(proc.popen.pid, sig)
-        except ProcessLookupError:
-            pass
-
-
-def _collect(proc: _Proc, deadline: float) -> None:
-    try:
-        proc.popen.wait(timeout=max(deadline - time.monotonic(), 0.1))
-    except subprocess.TimeoutExpired:
-        _signal(proc, signal.SIGKILL)
-        proc.popen.wait()
-    if proc.reader is not None:
-        proc.reader.join(timeout=5.0)
 
 
 def _interrupt(signum: int, frame: Any) -> None:
