@@ -57,7 +57,8 @@ def main() -> None:
         links.append((name, sitl))
     print("\n## The links (vo3d sitl)\n")
     keys = ["processes", "decisions", "setpoint_latency_median_ms", "setpoint_latency_p99_ms",
-            "decision_time_median_us", "decision_time_p99_us", "rejected_total", "wall_time"]
+            "decision_time_median_us", "decision_time_p99_us", "rejected_total", "wall_time",
+            "status_counts"]
     print("| scenario | " + " | ".join(keys) + " |")
     print("|---|" + "---|" * len(keys))
     for name, s in links:

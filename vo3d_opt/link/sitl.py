@@ -5,11 +5,11 @@ One router (:mod:`vo3d_opt.link.router`), one simulated vehicle per agent
 agent that avoids, each a process of its own (:mod:`vo3d_opt.link.procs`: the vehicles and the
 links forked once the package is imported), all on 127.0.0.1 and all on one clock: wall
 time since a shared epoch (``time.monotonic`` is the same clock in every process) times
-``time_scale``. The run ends
-when every link has stopped and every non-cooperative agent has arrived, or after the
-scenario's ``max_time`` (plus the start-up); every process is then stopped (SIGTERM, SIGKILL
-for one that does not go), also on an error or Ctrl-C. The record and the summary are built
-from the vehicles' logs (:mod:`vo3d_opt.link.sitl_record`).
+``time_scale``. The mission starts once every link has its vehicle in offboard / guided
+(the straight flyers get SIGUSR1 then) and ends when every link has stopped and every
+non-cooperative agent has arrived, or after the scenario's ``max_time``; every process is then
+stopped (SIGTERM, SIGKILL for one that does not go), also on an error or Ctrl-C. The record
+and the summary are built from the vehicles' logs (:mod:`vo3d_opt.link.sitl_record`).
 """
 
 from __future__ import annotations
