@@ -9,8 +9,8 @@ origin (its ``lat, lon, alt`` given with ``vo3d link --origin``), computed by PR
 pyproj (``+proj=topocentric`` on WGS 84): no hand-written ellipsoid formulas.
 
 Velocities in the geodetic messages are north/east/down components in the vehicle's own
-tangent plane; they are used as world components as they are (over a scenario's few hundred
-metres the two planes differ by a few micro-radians).
+tangent plane; they are used as world components as they are (the tangent planes at the
+origin and at a vehicle 300 m off differ by 300 / 6.4e6 = 47 micro-radians: 0.2 mm/s at 4 m/s).
 """
 
 from __future__ import annotations
