@@ -13,7 +13,7 @@ $(PY):
 
 $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev,baselines,batched]'
+	$(PY) -m pip install --quiet -e '.[dev,baselines,batched,link]'
 	@touch $(STAMP)
 
 # The decision kernels of select() and select_many() compiled ahead of time (`vo3d compile`,

@@ -1,7 +1,8 @@
 """The ``vo3d`` command line: one module per subcommand.
 
 * ``vo3d run SCENARIO`` (:mod:`.run`), ``vo3d compare`` (:mod:`.compare`), ``vo3d list``
-  (:mod:`.listing`), ``vo3d sweep FAMILY --n N`` (:mod:`.sweep`).
+  (:mod:`.listing`), ``vo3d sweep FAMILY --n N`` (:mod:`.sweep`), ``vo3d link`` and
+  ``vo3d sitl`` (``vo3d_opt.link.command``).
 * ``--preset NAME`` (``--fast``, ``--swarm`` its aliases) and ``-o KEY=VALUE`` (run, compare,
   sweep): the selector's configuration, merged over the scenario's ``selector_options`` in the
   order given (the last of a key wins) and checked as the file's are.
@@ -22,9 +23,11 @@ import sys
 from collections.abc import Sequence
 
 from vo3d_opt import __version__
+from vo3d_opt.console import configure_logging
+from vo3d_opt.link.command import add_parsers as add_link_parsers
 from vo3d_opt.types import one_line
 
-from .common import EXIT_FAIL, EXIT_USAGE, Parser, UsageError, common_parser, configure_logging, log
+from .common import EXIT_FAIL, EXIT_USAGE, Parser, UsageError, common_parser, log
 from .compare import add_compare_parser
 from .compile import add_compile_parser
 from .listing import add_list_parser
@@ -37,6 +40,7 @@ SUBCOMMANDS = (
     add_compare_parser,
     add_list_parser,
     add_sweep_parser,
+    add_link_parsers,
     add_compile_parser,
 )
 

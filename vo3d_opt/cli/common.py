@@ -45,33 +45,6 @@ class Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {one_line(message)}\n")
 
 
-class _Formatter(logging.Formatter):
-    """Info lines as they are; the others prefixed with their level (errors with ``vo3d:``)."""
-
-    def format(self, record: logging.LogRecord) -> str:
-        msg = record.getMessage()
-        if record.levelno >= logging.ERROR:
-            return f"vo3d: {msg}"
-        if record.levelno == logging.INFO:
-            return msg
-        return f"{record.levelname.lower()}: {msg}"
-
-
-def configure_logging(verbosity: int = 0) -> None:
-    """Send the package's log records to stderr: warnings and errors with ``verbosity`` < 0
-    (``-q``), progress too at 0, debugging detail at > 0 (``-v``)."""
-    level = logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG
-    root = logging.getLogger("vo3d_opt")
-    for handler in [h for h in root.handlers if getattr(h, "_vo3d_cli", False)]:
-        root.removeHandler(handler)
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(_Formatter())
-    handler._vo3d_cli = True  # type: ignore[attr-defined]
-    root.addHandler(handler)
-    root.setLevel(level)
-    root.propagate = False
-
-
 def common_parser() -> Parser:
     """The options every subcommand takes (-v / -q)."""
     p = Parser(add_help=False)
