@@ -44,7 +44,7 @@ from .formulations.swarm import (
     neighbor_lists,
 )
 from .geometry.pyramid import prism_rows
-from .types import Box, Cylinder, Limits, short_repr
+from .types import MAX_MAGNITUDE, Box, Cylinder, Limits, positive_seconds, short_repr
 
 #: The compiled ``neighbor_lists`` and ``nearest_lists`` that ``vehicle_links`` calls: numba's
 #: JIT ones, or the ahead-of-time module's once the selector has loaded it
@@ -105,22 +105,45 @@ class SwarmDecision:
 
 
 def _real(value: Any) -> bool:
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
 def _array(value: Any, name: str, shape: tuple[int, ...]) -> np.ndarray:
-    """A finite float array of exactly ``shape`` (C-contiguous, a copy), or ValueError."""
+    """A finite float array of exactly ``shape`` (C-contiguous, a copy), or ValueError: real
+    numbers only (as ``select`` takes them: no booleans, strings or complex numbers), each at
+    most ``MAX_MAGNITUDE``."""
     try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"{name}: expected numbers of shape {shape}, got {type(value).__name__}"
-        ) from None
-    if arr.shape != shape:
-        raise ValueError(f"{name}: expected shape {shape}, got {arr.shape}")
+        raw = np.asarray(value)
+    except (TypeError, ValueError, OverflowError):
+        raw = np.asarray(None)
+    if raw.dtype.kind not in "iuf":
+        if raw.dtype.kind == "O" and raw.size and all(_real(x) for x in raw.ravel().tolist()):
+            raw = _objects_as_floats(raw, name)
+        else:
+            raise ValueError(
+                f"{name}: expected real numbers of shape {shape}, got {_kind_of(value, raw)}"
+            )
+    if raw.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape}, got {raw.shape}")
+    arr = np.array(raw, dtype=float)
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name}: must be finite (no NaN or inf)")
+    if np.any(np.abs(arr) > MAX_MAGNITUDE):
+        raise ValueError(f"{name}: must be at most {MAX_MAGNITUDE:g} in magnitude")
     return np.ascontiguousarray(arr)
+
+
+def _objects_as_floats(raw: np.ndarray, name: str) -> np.ndarray:
+    """An object array of Python numbers (ints beyond int64 among them) as floats."""
+    try:
+        return raw.astype(float)
+    except OverflowError:
+        raise ValueError(f"{name}: must be at most {MAX_MAGNITUDE:g} in magnitude") from None
+
+
+def _kind_of(value: Any, raw: np.ndarray) -> str:
+    kinds = {"b": "booleans", "c": "complex numbers", "U": "text", "S": "bytes", "O": "objects"}
+    return kinds.get(raw.dtype.kind, type(value).__name__)
 
 
 def points(value: Any, name: str, n: int | None = None) -> np.ndarray:
@@ -158,11 +181,21 @@ def mask(value: Any, name: str, n: int) -> np.ndarray:
 
 
 def distance(value: Any, name: str, *, allow_inf: bool = False) -> float:
-    """A positive distance in m (inf allowed when ``allow_inf``)."""
-    if not _real(value) or math.isnan(value) or value <= 0 or (math.isinf(value) and not allow_inf):
+    """A positive distance in m (inf allowed when ``allow_inf``; a finite one at most
+    ``MAX_MAGNITUDE``)."""
+    try:
+        metres = float(value) if _real(value) else math.nan
+    except OverflowError:  # an int beyond a float's range: as far as any
+        metres = math.inf
+    if math.isinf(metres) and allow_inf and metres > 0:
+        return metres
+    if not (math.isfinite(metres) and 0 < metres <= MAX_MAGNITUDE):
         what = "positive" if allow_inf else "positive finite"
-        raise ValueError(f"{name}: must be a {what} number of metres, got {value!r}")
-    return float(value)
+        raise ValueError(
+            f"{name}: must be a {what} number of metres (at most {MAX_MAGNITUDE:g} when "
+            f"finite), got {short_repr(value)}"
+        )
+    return metres
 
 
 #: A count beyond this is as good as "all" (no swarm has more vehicles).
@@ -508,8 +541,7 @@ class SwarmInputs:
         limits = Limits() if limits is None else limits
         if not isinstance(limits, Limits):
             raise ValueError(f"limits: expected Limits, got {type(limits).__name__}")
-        if not (_real(dt) and math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt: must be a positive finite number of seconds, got {dt!r}")
+        dt = positive_seconds(dt, "dt")
         return cls(
             P=P,
             V=points(velocities, "velocities", n),

@@ -51,6 +51,14 @@ class WarmUp(WorkerPlugin):
 SCHEDULER_ADDRESS = re.compile(r"^(tcp|tls)://[^/\s:]+:[0-9]{1,5}$")
 
 
+def check_address(scheduler: str) -> None:
+    """``ConnectError`` unless ``scheduler`` is an address ``--scheduler`` takes."""
+    if not SCHEDULER_ADDRESS.match(scheduler):
+        raise ConnectError(
+            f"{scheduler!r} is not a scheduler address (tcp://HOST:PORT or tls://HOST:PORT)"
+        )
+
+
 @contextlib.contextmanager
 def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> Iterator[Client]:
     """A client of the scheduler at ``scheduler``, or of a new local cluster of ``workers``
@@ -58,10 +66,7 @@ def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> It
     import dask
 
     if scheduler:
-        if not SCHEDULER_ADDRESS.match(scheduler):
-            raise ConnectError(
-                f"{scheduler!r} is not a scheduler address (tcp://HOST:PORT or tls://HOST:PORT)"
-            )
+        check_address(scheduler)
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT)
         except Exception as exc:  # noqa: BLE001 - any failure to connect is one line
