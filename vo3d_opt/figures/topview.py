@@ -1,0 +1,202 @@
+"""The top view (the paper's Figs. 13a, 15a, 19a): paths over the obstacles, each obstacle named
+as the summary names it, its protected prism drawn as the square the planner turns to face the
+vehicle, and the vehicles' protected spheres at chosen moments."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle, Polygon
+
+from vo3d_opt.sim.simulator import RunRecord
+from vo3d_opt.types import Cylinder
+
+from .keys import agent_key, key_handles, zone_dash
+from .labels import place_label
+from .scene import (
+    DEFAULT_ZONES,
+    Zones,
+    ZoneSnapshot,
+    box_corners,
+    nearest_passes,
+    prism_square,
+    scene_bounds,
+    xy,
+    zone_snapshots,
+)
+from .style import (
+    LEGEND_MAX_AGENTS,
+    OBSTACLE_GREY,
+    PRISM_GREY,
+    UNSENSED_GREY,
+    agent_styles,
+    new_figure,
+    settle,
+    styled,
+)
+
+#: Font size (points) of the obstacles' names.
+NAME_SIZE = 8.0
+
+
+def draw_obstacles_2d(ax: Axes, record: RunRecord, *, prisms: bool = True) -> None:
+    """Obstacles filled (lighter when not sensed); the protected prism C_pz of each sensed one
+    dashed, as the square (side L_pz) the planner turned to face the vehicle that passed
+    nearest, a dotted line to where that vehicle was (``prisms``); spheres as circles (dotted:
+    not physical)."""
+    sc = record.scenario
+    passes = nearest_passes(record) if prisms else [None] * len(sc.bodies)
+    for body, sensed, toward in zip(sc.bodies, sc.sensed, passes, strict=True):
+        fc = OBSTACLE_GREY if sensed else UNSENSED_GREY
+        if isinstance(body, Cylinder):
+            ax.add_patch(Circle(xy(body.center), body.radius, facecolor=fc, edgecolor="0.3"))
+        else:
+            ax.add_patch(Polygon(box_corners(body), closed=True, facecolor=fc, edgecolor="0.3"))
+        if sensed and toward is not None:
+            square = prism_square(body, toward)
+            ax.add_patch(
+                Polygon(square, closed=True, fill=False, linestyle="--", edgecolor=PRISM_GREY)
+            )
+            ax.patches[-1].set_gid("prism")
+            ax.plot(*np.array([body.center, toward[:2]]).T, ":", color=PRISM_GREY, linewidth=0.9)
+    for s in sc.spheres:
+        ax.add_patch(
+            Circle(
+                xy(s.center),
+                s.radius,
+                fill=False,
+                edgecolor="0.35",
+                linestyle="-" if s.physical else ":",
+            )
+        )
+
+
+def points_per_metre(ax: Axes) -> float:
+    """How many points (1/72 in) one metre of the (equal-aspect) data spans, as drawn."""
+    a, b = ax.transData.transform([(0.0, 0.0), (1.0, 0.0)])
+    return float(abs(b[0] - a[0]) * 72.0 / ax.figure.dpi)
+
+
+def obstacle_places(record: RunRecord) -> list[tuple[tuple[float, float], float, str]]:
+    """(centre (x, y), reach (m), name) of each place the top view names: obstacles stacked
+    over one point (a cylinder and the spheres standing for it) share one name of a line per
+    kind, e.g. "obstacles[0]" above "spheres[0, 1, 2]"."""
+    sc = record.scenario
+    shapes = [
+        (xy(b.center), b.footprint_extent() / 2.0, "obstacles", k) for k, b in enumerate(sc.bodies)
+    ]
+    shapes += [(xy(s.center), float(s.radius), "spheres", k) for k, s in enumerate(sc.spheres)]
+    groups: dict[tuple[float, float], list[tuple[float, str, int]]] = {}
+    for centre, reach, kind, k in shapes:
+        groups.setdefault((round(centre[0], 6), round(centre[1], 6)), []).append((reach, kind, k))
+    out = []
+    for centre, members in groups.items():
+        lines = []
+        for kind in ("obstacles", "spheres"):
+            ks = [str(k) for _, what, k in members if what == kind]
+            if ks:
+                lines.append(f"{kind}[{', '.join(ks)}]")
+        out.append((centre, max(r for r, _, _ in members), "\n".join(lines)))
+    return out
+
+
+def label_obstacles(ax: Axes, record: RunRecord) -> list[Any]:
+    """Every obstacle's name (:func:`obstacle_places`) beside it, clear of paths, shapes and
+    the other names; the figure's layout must be settled. Returns the labels."""
+    scale = points_per_metre(ax)
+    places = obstacle_places(record)
+    centres = [c for c, _, _ in places]
+    out = []
+    for k, (centre, reach, name) in enumerate(places):
+        rivals = centres[:k] + centres[k + 1 :]
+        out.append(
+            place_label(
+                ax,
+                name,
+                centre,
+                base=reach * scale,
+                prefer=math.pi / 2,
+                rivals=rivals,
+                fontsize=NAME_SIZE,
+                color="0.15",
+                linespacing=1.1,
+            )
+        )
+    return out
+
+
+def draw_zones_2d(ax: Axes, record: RunRecord, snaps: list[ZoneSnapshot], colors: list) -> None:
+    """The protected spheres (radius r_pz) of each snapshot's vehicles, seen from above."""
+    for k, snap in enumerate(snaps):
+        for i, c in zip(snap.agents, snap.positions, strict=True):
+            ax.add_patch(
+                Circle(
+                    xy(c),
+                    float(record.scenario.r_pz[i]),
+                    fill=False,
+                    edgecolor=colors[i],
+                    linewidth=1.0,
+                    linestyle=zone_dash(k),
+                )
+            )
+            ax.plot(*c[:2], "o", color=colors[i], markeredgecolor="k", markersize=6)
+
+
+def map_size(
+    record: RunRecord, snaps: list[ZoneSnapshot], *, width: float, extra: tuple[float, float]
+) -> tuple[float, float]:
+    """A figure size (in) whose map, ``width`` wide at the scene's aspect (its height kept
+    between 2.4 and 6 in), leaves no empty band: ``extra`` (w, h) in for keys and titles."""
+    lo, hi = scene_bounds(record, snaps)
+    height = width * max(hi[1] - lo[1], 1e-3) / max(hi[0] - lo[0], 1e-3)
+    if height > 6.0:
+        width, height = width * 6.0 / height, 6.0
+    return width + extra[0], max(height, 2.4) + extra[1]
+
+
+def frame_top_view(ax: Axes, record: RunRecord, snaps: list[ZoneSnapshot]) -> None:
+    """Limits hugging the scene at equal scale, axis labels with units, a light grid."""
+    lo, hi = scene_bounds(record, snaps)
+    pad = 0.03 * max(hi[0] - lo[0], hi[1] - lo[1], 1e-3)
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(True)
+
+
+@styled
+def figure_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figure:
+    """Top view (Figs. 13a, 15a, 19a): every path, start and goal in its agent's colour and
+    pattern over the named obstacles and their protected prisms; beyond LEGEND_MAX_AGENTS
+    vehicles, the swarm's view (``vo3d_opt.figures.swarm``)."""
+    if record.n_agents > LEGEND_MAX_AGENTS:
+        from .swarm import figure_swarm_top_view
+
+        return figure_swarm_top_view(record, zones=zones)
+    sc = record.scenario
+    snaps = zone_snapshots(record, zones)
+    handles, labels = key_handles(record, snaps, prisms=True)
+    lines = sum(label.count("\n") + 1 for label in labels)
+    fig = new_figure(map_size(record, snaps, width=5.2, extra=(1.6, 0.9 + 0.11 * lines)))
+    ax = fig.add_subplot()
+    styles = agent_styles(record.n_agents)
+    colors = [c for c, _ in styles]
+    draw_obstacles_2d(ax, record)
+    p = record.positions
+    for i, (color, dash) in enumerate(styles):
+        ax.plot(p[:, i, 0], p[:, i, 1], color=color, linestyle=dash)
+        ax.plot(*p[0, i, :2], "o", color=color, markersize=4.5)
+        ax.plot(*sc.goals[i, :2], "x", color=color, markersize=7, markeredgewidth=1.5)
+    draw_zones_2d(ax, record, snaps, colors)
+    frame_top_view(ax, record, snaps)
+    ax.set_title(f"{sc.name}: top view")
+    agent_key(fig, ax, record, handles=handles, labels=labels)
+    settle(fig)
+    label_obstacles(ax, record)
+    return fig
