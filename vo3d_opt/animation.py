@@ -47,7 +47,7 @@ from vo3d_opt.figures.style import (
     check_dpi,
     styled,
 )
-from vo3d_opt.figures.topview import draw_obstacles_2d
+from vo3d_opt.figures.topview import draw_obstacles_2d, label_obstacles
 from vo3d_opt.sim.metrics import closest_obstacle_approach, closest_vehicle_approach
 from vo3d_opt.sim.simulator import RunRecord
 
@@ -142,11 +142,20 @@ def _cut_patches(ax: Any, record: RunRecord) -> dict[tuple[str, str], Patch]:
     return out
 
 
-def _layout(
-    record: RunRecord,
-) -> tuple[Figure, Any, Any, np.ndarray, np.ndarray, tuple[float, float]]:
-    """The figure, its plan and side axes to scale, the view's corners and where the legend's
-    upper left corner goes (figure fraction)."""
+@dataclass(frozen=True)
+class _Layout:
+    """The replay's figure: plan above side view, to scale; the view's corners (m) and where
+    the legend's upper left corner goes (figure fraction)."""
+
+    fig: Figure
+    plan: Any
+    side: Any
+    lo: np.ndarray
+    hi: np.ndarray
+    corner: tuple[float, float]
+
+
+def _layout(record: RunRecord) -> _Layout:
     sc = record.scenario
     lo, hi = scene_bounds(record)
     r = float(sc.r_pz.max())
@@ -159,7 +168,7 @@ def _layout(
     w, h = left + width + right, bottom + width * (y_span + z_span) / x_span + gap + top_
     fig = Figure(figsize=(w, h))
     FigureCanvasAgg(fig)
-    top, side = fig.subplots(2, 1, sharex=True, height_ratios=[y_span, z_span])
+    plan, side = fig.subplots(2, 1, sharex=True, height_ratios=[y_span, z_span])
     fig.subplots_adjust(
         left=left / w,
         right=(left + width) / w,
@@ -167,7 +176,7 @@ def _layout(
         top=1 - top_ / h,
         hspace=2 * gap / (h - bottom - top_ - gap),
     )
-    return fig, top, side, lo, hi, ((left + width + 0.1) / w, 1 - top_ / h)
+    return _Layout(fig, plan, side, lo, hi, ((left + width + 0.1) / w, 1 - top_ / h))
 
 
 def _legend(replay: Replay, record: RunRecord, corner: tuple[float, float]) -> None:
@@ -207,24 +216,13 @@ def _legend(replay: Replay, record: RunRecord, corner: tuple[float, float]) -> N
     )
 
 
-@styled
-def build_replay(record: RunRecord) -> Replay:
-    """The figure with everything static drawn, and the artists each frame moves."""
+def _prism_squares(plan: Any, record: RunRecord) -> dict[int, Polygon]:
+    """A dashed square per sensed body's protected prism, turned by each frame."""
     sc = record.scenario
-    fig, top, side, lo, hi, corner = _layout(record)
-    styles = agent_styles(record.n_agents)
-    colors = [c for c, _ in styles]
-    draw_obstacles_2d(top, record, prisms=False)
-    p = record.positions
-    top.scatter(p[0, :, 0], p[0, :, 1], c=colors, marker="o", s=9)
-    top.scatter(sc.goals[:, 0], sc.goals[:, 1], c=colors, marker="x", s=16)
-    # the longest title, so that the layout leaves room for every frame's
-    title = fig.suptitle(_title(record, len(record.times) - 1), fontsize=11)
-    replay = Replay(fig, title, view_top=float(hi[2]))
-    replay.cuts = _cut_patches(side, record)
+    out = {}
     for k, (body, sensed) in enumerate(zip(sc.bodies, sc.sensed, strict=True)):
         if sensed:
-            replay.prisms[k] = Polygon(
+            out[k] = Polygon(
                 prism_square(body, body.center),
                 closed=True,
                 fill=False,
@@ -232,10 +230,19 @@ def build_replay(record: RunRecord) -> Replay:
                 edgecolor=PRISM_GREY,
                 linewidth=0.9,
             )
-            top.add_patch(replay.prisms[k])
+            plan.add_patch(out[k])
+    return out
+
+
+def _vehicles(replay: Replay, layout: _Layout, record: RunRecord) -> None:
+    """In each panel: the paths ahead (faint, up to LEGEND_MAX_AGENTS vehicles), and the
+    trails, protected spheres and dots each frame moves."""
+    styles = agent_styles(record.n_agents)
+    colors = [c for c, _ in styles]
+    p = record.positions
     few = record.n_agents <= LEGEND_MAX_AGENTS
-    for ax, (a, b) in ((top, (0, 1)), (side, (0, 2))):
-        for i in range(record.n_agents if few else 0):  # the paths ahead, faint
+    for ax, (a, b) in ((layout.plan, (0, 1)), (layout.side, (0, 2))):
+        for i in range(record.n_agents if few else 0):
             ax.plot(p[:, i, a], p[:, i, b], color=colors[i], linewidth=0.6, alpha=0.3)
         replay.trails.append(
             [ax.plot([], [], color=c, linestyle=ls, linewidth=1.2)[0] for c, ls in styles]
@@ -244,9 +251,29 @@ def build_replay(record: RunRecord) -> Replay:
         replay.dots.append(ax.scatter(p[0, :, a], p[0, :, b], c=colors, s=14, zorder=5))
         ax.set_aspect("equal", adjustable="box")
         ax.grid(True)
-    top.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), ylabel="y (m)")
-    side.set(ylim=(lo[2], hi[2]), xlabel="x (m)", ylabel="z (m)")
-    _legend(replay, record, corner)
+
+
+@styled
+def build_replay(record: RunRecord) -> Replay:
+    """The figure with everything static drawn, and the artists each frame moves."""
+    sc = record.scenario
+    layout = _layout(record)
+    plan, lo, hi = layout.plan, layout.lo, layout.hi
+    colors = agent_styles(record.n_agents)
+    draw_obstacles_2d(plan, record, prisms=False)
+    plan.scatter(sc.starts[:, 0], sc.starts[:, 1], c=[c for c, _ in colors], marker="o", s=9)
+    plan.scatter(sc.goals[:, 0], sc.goals[:, 1], c=[c for c, _ in colors], marker="x", s=16)
+    # the longest title, so that the layout leaves room for every frame's
+    title = layout.fig.suptitle(_title(record, len(record.times) - 1), fontsize=11)
+    replay = Replay(layout.fig, title, view_top=float(hi[2]))
+    replay.cuts = _cut_patches(layout.side, record)
+    replay.prisms = _prism_squares(plan, record)
+    _vehicles(replay, layout, record)
+    plan.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), ylabel="y (m)")
+    layout.side.set(ylim=(lo[2], hi[2]), xlabel="x (m)", ylabel="z (m)")
+    _legend(replay, record, layout.corner)
+    layout.fig.draw_without_rendering()  # the names are placed from the drawn layout
+    label_obstacles(plan, record, turning=True)
     return replay
 
 

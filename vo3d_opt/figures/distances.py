@@ -52,6 +52,8 @@ from .style import (
 
 #: Pairs drawn in colour and named (the closest ones); the others are grey.
 PAIR_CURVES = 5
+#: The palette's darker colours: the pairs are drawn over the grey of the others.
+PAIR_COLORS = tuple(PALETTE[k] for k in (0, 1, 2, 5, 6))
 #: Two curves closer than this fraction of the plot's height everywhere lie on each other.
 COINCIDE = 0.01
 #: A dash pattern whose gaps show the curve underneath.
@@ -141,7 +143,9 @@ def pair_curves(ax: Axes, record: RunRecord) -> tuple[list[Any], list[str]]:
         handles.append(Line2D([], [], color="0.7", linewidth=0.7))
         labels.append(f"the other {rest.size} pairs")
     d = np.linalg.norm(p[:, ii[shown]] - p[:, jj[shown]], axis=-1)
-    styles = [(PALETTE[k % len(PALETTE)], DASHES[k % len(DASHES)]) for k in range(shown.size)]
+    styles = [
+        (PAIR_COLORS[k % len(PAIR_COLORS)], DASHES[k % len(DASHES)]) for k in range(shown.size)
+    ]
     names = [f"{ids[ii[k]]}–{ids[jj[k]]}" for k in shown]
     curves, names = draw_curves(ax, times, d, styles, names)
     return curves + handles, names + labels

@@ -14,6 +14,7 @@ thousand paths would be spaghetti.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -41,7 +42,13 @@ from .scene import (
     zone_snapshots,
 )
 from .style import DENSITY_CMAP, PALETTE, new_figure, settle, styled
-from .topview import draw_obstacles_2d, draw_zones_2d, frame_top_view, label_obstacles
+from .topview import (
+    draw_obstacles_2d,
+    draw_zones_2d,
+    frame_map,
+    frame_top_view,
+    label_obstacles,
+)
 
 #: Paths drawn and named.
 SAMPLE_PATHS = 6
@@ -67,10 +74,28 @@ def sample_agents(record: RunRecord, pairs: list[Approach], count: int = SAMPLE_
     return chosen[:count]
 
 
-def occupancy(record: RunRecord, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(values (ny, nx) in vehicle-seconds per m², x edges, y edges): the time flying vehicles
-    (not yet arrived) spent over each cell of [lo, hi] (x, y), from the drawn samples, each
-    standing for the time to the next drawn one; read a chunk at a time."""
+@dataclass(frozen=True)
+class Occupancy:
+    """Time spent over each cell of a map: ``values`` (ny, nx) in vehicle-seconds per m²,
+    between the cell edges ``x_edges`` (nx + 1) and ``y_edges`` (ny + 1), m."""
+
+    values: np.ndarray
+    x_edges: np.ndarray
+    y_edges: np.ndarray
+
+
+@dataclass(frozen=True)
+class Window:
+    """A square of the map: its centre (x, y) and half side (m)."""
+
+    centre: np.ndarray
+    half: float
+
+
+def occupancy(record: RunRecord, lo: np.ndarray, hi: np.ndarray) -> Occupancy:
+    """The time flying vehicles (not yet arrived) spent over each cell of [lo, hi] (x, y), from
+    the drawn samples, each standing for the time to the next drawn one; read a chunk at a
+    time."""
     cell = max(hi[0] - lo[0], hi[1] - lo[1]) / DENSITY_CELLS
     xe = np.arange(lo[0], hi[0] + cell, cell)
     ye = np.arange(lo[1], hi[1] + cell, cell)
@@ -88,20 +113,20 @@ def occupancy(record: RunRecord, lo: np.ndarray, hi: np.ndarray) -> tuple[np.nda
         h, _, _ = np.histogram2d(p[..., 0][flying], p[..., 1][flying], bins=(xe, ye), weights=w)
         total += h
         record.drop_resident()
-    return total.T / cell**2, xe, ye
+    return Occupancy(total.T / cell**2, xe, ye)
 
 
 def draw_density(fig: Figure, ax: Axes, record: RunRecord) -> Any:
     """The occupancy map under everything, empty cells left white, and its colour bar below."""
     (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
-    values, xe, ye = occupancy(record, np.array([x0, y0]), np.array([x1, y1]))
-    shown = np.ma.masked_less_equal(values, 0.0)
+    occ = occupancy(record, np.array([x0, y0]), np.array([x1, y1]))
+    shown = np.ma.masked_less_equal(occ.values, 0.0)
     # a few cells where vehicles waited would wash the rest out: the scale ends at the 99th
     # percentile of the cells flown over, the bar's arrow standing for the cells beyond
     top = float(np.percentile(shown.compressed(), 99.0)) if shown.count() else 1.0
     image = ax.pcolormesh(
-        xe,
-        ye,
+        occ.x_edges,
+        occ.y_edges,
         shown,
         shading="flat",
         zorder=0,
@@ -158,18 +183,18 @@ def mark_pairs_2d(ax: Axes, record: RunRecord, pairs: list[Approach]) -> list[An
     ]
 
 
-def zoom_window(record: RunRecord, pair: Approach) -> tuple[np.ndarray, float]:
-    """Centre (x, y) and half side of the enlarged window around the closest approach."""
+def zoom_window(record: RunRecord, pair: Approach) -> Window:
+    """The enlarged window around the closest approach."""
     p = positions_at(record, pair.time)
     a, b = p[pair.agent, :2], p[pair.other, :2]
     r = float(max(record.scenario.r_pz[pair.agent], record.scenario.r_pz[pair.other]))
     half = max(ZOOM_RADII * r, 0.5 * float(np.hypot(*(a - b))) + 1.5 * r)
-    return 0.5 * (a + b), half
+    return Window(0.5 * (a + b), half)
 
 
 def _worth_enlarging(record: RunRecord, pair: Approach, lo: np.ndarray, hi: np.ndarray) -> bool:
     """Whether the closest approach is small on the map: its window under a quarter of it."""
-    return 2.0 * zoom_window(record, pair)[1] < 0.25 * max(hi[0] - lo[0], hi[1] - lo[1])
+    return 2.0 * zoom_window(record, pair).half < 0.25 * max(hi[0] - lo[0], hi[1] - lo[1])
 
 
 def draw_zoom(
@@ -177,7 +202,8 @@ def draw_zoom(
 ) -> None:
     """The closest approach enlarged: paths through the window thin and grey, the pair's in
     their colours, every vehicle there at that moment, and the pair's protected spheres."""
-    centre, half = zoom_window(record, pair)
+    window = zoom_window(record, pair)
+    centre, half = window.centre, window.half
     p = record.positions[drawn_indices(record)]
     near = np.any(np.all(np.abs(p[..., :2] - centre) < 2 * half, axis=-1), axis=0)
     others = [i for i in np.flatnonzero(near) if i not in (pair.agent, pair.other)]
@@ -192,14 +218,8 @@ def draw_zoom(
     draw_obstacles_2d(ax, record, prisms=False)
     for i in (pair.agent, pair.other):
         ax.plot(p[:, i, 0], p[:, i, 1], color=colors[i], linewidth=1.6, zorder=2)
-    full = np.array([colors.get(i, "0.45") for i in range(record.n_agents)], dtype=object)
-    draw_zones_2d(ax, record, [snap], list(full))
-    ax.set_xlim(centre[0] - half, centre[0] + half)
-    ax.set_ylim(centre[1] - half, centre[1] + half)
-    ax.set_aspect("equal", adjustable="box")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.grid(True)
+    draw_zones_2d(ax, record, [snap], [colors.get(i, "0.45") for i in range(record.n_agents)])
+    frame_map(ax, centre - half, centre + half)
     ids = record.ids
     ax.set_title(
         f"1: {ids[pair.agent]}–{ids[pair.other]}, {pair.distance:.2f} m\n"
@@ -231,78 +251,96 @@ def _closest_snapshot(record: RunRecord, pair: Approach) -> ZoneSnapshot:
     )
 
 
-@styled
-def figure_swarm_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figure:
-    """A swarm's top view (module docstring): occupancy, a named sample of paths, the numbered
-    closest pairs, the named obstacles and the closest approach enlarged."""
-    sc = record.scenario
-    snaps = zone_snapshots(record, zones)
-    pairs = closest_pairs(record)
+def _zoom_key() -> tuple[list, list[str]]:
+    """Key entries of the enlarged window and what it alone draws."""
+    handles = [
+        Patch(fill=False, edgecolor="k"),
+        marker_handle("o", 4, color="0.45"),
+        Line2D([], [], color="0.6", linewidth=0.8),
+    ]
+    labels = [
+        "window enlarged at the right",
+        "(enlarged) other vehicles then",
+        "(enlarged) other paths there",
+    ]
+    return handles, labels
+
+
+def _enlarge(
+    ax: Axes, zoom: Axes, record: RunRecord, pair: Approach, colors: dict[int, str]
+) -> None:
+    """The closest approach enlarged in ``zoom``, its window outlined on the map ``ax``."""
+    draw_zoom(zoom, record, pair, _closest_snapshot(record, pair), colors)
+    window = zoom_window(record, pair)
+    side = 2.0 * window.half
+    corner = (float(window.centre[0] - window.half), float(window.centre[1] - window.half))
+    ax.add_patch(Rectangle(corner, side, side, fill=False, edgecolor="k", linewidth=0.9, zorder=5))
+
+
+def _sample_key(record: RunRecord, agents: list[int], lines: list) -> tuple[list, list[str]]:
+    """The sample's paths named, the first saying what they are."""
+    labels = [record.ids[i] for i in agents]
+    labels[0] += f" (a sample of {len(agents)} paths)"
+    return list(lines), labels
+
+
+@dataclass(frozen=True)
+class _Panels:
+    """A swarm's top-view figure: the map, the enlarged window (None when the closest approach
+    is large enough on the map) and the axes holding the key."""
+
+    fig: Figure
+    map: Axes
+    zoom: Axes | None
+    key: Axes
+
+
+def _panels(record: RunRecord, snaps: list[ZoneSnapshot], pairs: list[Approach]) -> _Panels:
+    """The map sized to the scene's aspect, the window and the key in a column at its right."""
     lo, hi = scene_bounds(record, snaps)
     aspect = max(hi[1] - lo[1], 1e-3) / max(hi[0] - lo[0], 1e-3)
     map_h = 4.8 if aspect >= 0.5 else 2.4
     map_w = min(map_h / aspect, 8.0)
     fig = new_figure((map_w + SIDE_WIDTH + 1.0, map_h + 1.9))
     grid = fig.add_gridspec(2, 2, width_ratios=[map_w, SIDE_WIDTH], height_ratios=[1.0, 1.25])
-    ax = fig.add_subplot(grid[:, 0])
-    zoom = (
-        fig.add_subplot(grid[0, 1])
-        if pairs and _worth_enlarging(record, pairs[0], lo, hi)
-        else None
-    )
+    enlarged = bool(pairs) and _worth_enlarging(record, pairs[0], lo, hi)
+    map_ax = fig.add_subplot(grid[:, 0])  # first: fig.axes[0] is the map, as in a small run's
+    zoom = fig.add_subplot(grid[0, 1]) if enlarged else None
+    key = fig.add_subplot(grid[1, 1] if enlarged else grid[:, 1])
+    key.axis("off")
+    return _Panels(fig, map_ax, zoom, key)
+
+
+@styled
+def figure_swarm_top_view(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -> Figure:
+    """A swarm's top view (module docstring): occupancy, a named sample of paths, the numbered
+    closest pairs, the named obstacles and the closest approach enlarged."""
+    snaps = zone_snapshots(record, zones)
+    pairs = closest_pairs(record)
+    panels = _panels(record, snaps, pairs)
+    ax = panels.map
     agents = sample_agents(record, pairs)
     colors = {i: PALETTE[k % len(PALETTE)] for k, i in enumerate(agents)}
     draw_obstacles_2d(ax, record)
-    lines = draw_sample_paths(ax, record, agents)
-    full = [colors.get(i, "0.3") for i in range(record.n_agents)]
-    draw_zones_2d(ax, record, snaps, full)
+    handles, labels = _sample_key(record, agents, draw_sample_paths(ax, record, agents))
+    draw_zones_2d(ax, record, snaps, [colors.get(i, "0.3") for i in range(record.n_agents)])
     frame_top_view(ax, record, snaps)
-    draw_density(fig, ax, record)
-    ax.set_title(f"{sc.name}: top view of {record.n_agents} vehicles")
-    handles: list = [*lines]
-    labels = [
-        f"{record.ids[i]} (a sample of {len(agents)} paths)" if k == 0 else record.ids[i]
-        for k, i in enumerate(agents)
-    ]
-    key, names = key_handles(record, snaps, prisms=True)
-    handles += key
-    labels += names
-    if zoom is not None:
-        draw_zoom(zoom, record, pairs[0], _closest_snapshot(record, pairs[0]), colors)
-        centre, half = zoom_window(record, pairs[0])
-        ax.add_patch(
-            Rectangle(
-                tuple(centre - half),
-                2 * half,
-                2 * half,
-                fill=False,
-                edgecolor="k",
-                linewidth=0.9,
-                zorder=5,
-            )
-        )
-        handles += [
-            Patch(fill=False, edgecolor="k"),
-            marker_handle("o", 4, color="0.45"),
-            Line2D([], [], color="0.6", linewidth=0.8),
-        ]
-        labels += [
-            "window enlarged at the right",
-            "(enlarged) other vehicles then",
-            "(enlarged) other paths there",
-        ]
+    draw_density(panels.fig, ax, record)
+    ax.set_title(f"{record.scenario.name}: top view of {record.n_agents} vehicles")
+    parts = [key_handles(record, snaps, prisms=True)]
+    if panels.zoom is not None:
+        _enlarge(ax, panels.zoom, record, pairs[0], colors)
+        parts.append(_zoom_key())
     if pairs:
-        rows, texts = _pair_rows(record, pairs)
-        handles += rows
-        labels += texts
-    where = grid[1, 1] if zoom is not None else grid[:, 1]
-    legend_ax = fig.add_subplot(where)
-    legend_ax.axis("off")
-    legend_ax.legend(
+        parts.append(_pair_rows(record, pairs))
+    for more, names in parts:
+        handles += more
+        labels += names
+    panels.key.legend(
         handles, labels, loc="upper left", frameon=False, borderaxespad=0.0, fontsize=8.5
     )
-    settle(fig)
+    settle(panels.fig)
     label_obstacles(ax, record)
     if pairs:
         mark_pairs_2d(ax, record, pairs)
-    return fig
+    return panels.fig

@@ -5,6 +5,7 @@ vehicle, and the vehicles' protected spheres at chosen moments."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -81,44 +82,69 @@ def points_per_metre(ax: Axes) -> float:
     return float(abs(b[0] - a[0]) * 72.0 / ax.figure.dpi)
 
 
-def obstacle_places(record: RunRecord) -> list[tuple[tuple[float, float], float, str]]:
-    """(centre (x, y), reach (m), name) of each place the top view names: obstacles stacked
-    over one point (a cylinder and the spheres standing for it) share one name of a line per
-    kind, e.g. "obstacles[0]" above "spheres[0, 1, 2]"."""
+@dataclass(frozen=True)
+class Place:
+    """Where the top view names obstacles: the ``centre`` (x, y) of the ones standing there,
+    how far they ``reach`` from it (m), and their ``name``."""
+
+    centre: tuple[float, float]
+    reach: float
+    name: str
+
+
+@dataclass(frozen=True)
+class _Shape:
+    centre: tuple[float, float]
+    reach: float
+    kind: str  # "obstacles" or "spheres"
+    index: int
+
+
+def _shapes(record: RunRecord, turning: bool) -> list[_Shape]:
     sc = record.scenario
-    shapes = [
-        (xy(b.center), b.footprint_extent() / 2.0, "obstacles", k) for k, b in enumerate(sc.bodies)
-    ]
-    shapes += [(xy(s.center), float(s.radius), "spheres", k) for k, s in enumerate(sc.spheres)]
-    groups: dict[tuple[float, float], list[tuple[float, str, int]]] = {}
-    for centre, reach, kind, k in shapes:
-        groups.setdefault((round(centre[0], 6), round(centre[1], 6)), []).append((reach, kind, k))
     out = []
-    for centre, members in groups.items():
-        lines = []
-        for kind in ("obstacles", "spheres"):
-            ks = [str(k) for _, what, k in members if what == kind]
-            if ks:
-                lines.append(f"{kind}[{', '.join(ks)}]")
-        out.append((centre, max(r for r, _, _ in members), "\n".join(lines)))
+    for k, (b, sensed) in enumerate(zip(sc.bodies, sc.sensed, strict=True)):
+        reach = b.side / math.sqrt(2.0) if turning and sensed else b.footprint_extent() / 2.0
+        out.append(_Shape(xy(b.center), reach, "obstacles", k))
+    out += [_Shape(xy(s.center), float(s.radius), "spheres", k) for k, s in enumerate(sc.spheres)]
     return out
 
 
-def label_obstacles(ax: Axes, record: RunRecord) -> list[Any]:
-    """Every obstacle's name (:func:`obstacle_places`) beside it, clear of paths, shapes and
-    the other names; the figure's layout must be settled. Returns the labels."""
-    scale = points_per_metre(ax)
-    places = obstacle_places(record)
-    centres = [c for c, _, _ in places]
+def obstacle_places(record: RunRecord, *, turning: bool = False) -> list[Place]:
+    """Each place the top view names: obstacles stacked over one point (a cylinder and the
+    spheres standing for it) share one name of a line per kind, e.g. "obstacles[0]" above
+    "spheres[0, 1, 2]". ``turning``: a sensed body reaches as far as its prism's corners
+    turned any way (a replay turns them frame by frame)."""
+    groups: dict[tuple[float, float], list[_Shape]] = {}
+    for shape in _shapes(record, turning):
+        groups.setdefault((round(shape.centre[0], 6), round(shape.centre[1], 6)), []).append(shape)
     out = []
-    for k, (centre, reach, name) in enumerate(places):
+    for members in groups.values():
+        lines = []
+        for kind in ("obstacles", "spheres"):
+            ks = [str(m.index) for m in members if m.kind == kind]
+            if ks:
+                lines.append(f"{kind}[{', '.join(ks)}]")
+        reach = max(m.reach for m in members)
+        out.append(Place(members[0].centre, reach, "\n".join(lines)))
+    return out
+
+
+def label_obstacles(ax: Axes, record: RunRecord, *, turning: bool = False) -> list[Any]:
+    """Every obstacle's name (:func:`obstacle_places`, ``turning``) beside it, clear of paths,
+    shapes and the other names; the figure's layout must be settled. Returns the labels."""
+    scale = points_per_metre(ax)
+    places = obstacle_places(record, turning=turning)
+    centres = [p.centre for p in places]
+    out = []
+    for k, place in enumerate(places):
         rivals = centres[:k] + centres[k + 1 :]
         out.append(
             place_label(
                 ax,
-                name,
-                centre,
-                base=reach * scale,
+                place.name,
+                place.centre,
+                base=place.reach * scale,
                 prefer=math.pi / 2,
                 rivals=rivals,
                 fontsize=NAME_SIZE,
@@ -158,16 +184,21 @@ def map_size(
     return width + extra[0], max(height, 2.4) + extra[1]
 
 
-def frame_top_view(ax: Axes, record: RunRecord, snaps: list[ZoneSnapshot]) -> None:
-    """Limits hugging the scene at equal scale, axis labels with units, a light grid."""
-    lo, hi = scene_bounds(record, snaps)
-    pad = 0.03 * max(hi[0] - lo[0], hi[1] - lo[1], 1e-3)
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+def frame_map(ax: Axes, lo: np.ndarray, hi: np.ndarray) -> None:
+    """A map of [lo, hi] (x, y) at equal scale, axis labels with units, a light grid."""
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.grid(True)
+
+
+def frame_top_view(ax: Axes, record: RunRecord, snaps: list[ZoneSnapshot]) -> None:
+    """:func:`frame_map` of the scene with a small pad."""
+    lo, hi = scene_bounds(record, snaps)
+    pad = 0.03 * max(hi[0] - lo[0], hi[1] - lo[1], 1e-3)
+    frame_map(ax, lo[:2] - pad, hi[:2] + pad)
 
 
 @styled

@@ -99,7 +99,10 @@ def _equal_limits(
     horiz = max(hi[0] - lo[0], hi[1] - lo[1])
     need = min_z_ratio * horiz - (hi[2] - lo[2])
     if need > 0:
+        ground = lo[2] >= 0.0
         lo[2], hi[2] = lo[2] - need / 2, hi[2] + need / 2
+        if ground and lo[2] < 0.0:  # widened upwards only: nothing flies below the ground
+            lo[2], hi[2] = 0.0, hi[2] - lo[2]
     return lo, hi
 
 
@@ -231,7 +234,7 @@ def _swarm_paths_3d(ax: Any, record: RunRecord) -> tuple[list, tuple[list, list[
     colour of every agent (grey but the sample's) and the key's entries."""
     p = record.positions[drawn_indices(record)]
     agents = sample_agents(record, closest_pairs(record))
-    ax.scatter(p[0, :, 0], p[0, :, 1], p[0, :, 2], color="0.55", s=3, depthshade=False)
+    ax.scatter(p[0, :, 0], p[0, :, 1], p[0, :, 2], color="0.7", s=1.5, depthshade=False)
     colors: list = ["0.35"] * record.n_agents
     handles: list = []
     for k, i in enumerate(agents):
@@ -240,7 +243,7 @@ def _swarm_paths_3d(ax: Any, record: RunRecord) -> tuple[list, tuple[list, list[
         handles.append(Line2D([], [], color=colors[i], linewidth=1.8))
     names = [record.ids[i] for i in agents]
     names[0] += f"\n(a sample of {len(agents)} paths)"
-    handles.append(marker_handle("o", 3, color="0.55"))
+    handles.append(marker_handle("o", 2.5, color="0.7"))
     names.append(f"start of each of\nthe {record.n_agents} vehicles")
     return colors, (handles, names)
 
