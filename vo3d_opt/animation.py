@@ -196,6 +196,12 @@ def _legend(replay: Replay, record: RunRecord, corner: tuple[float, float]) -> N
         )
     )
     labels.append("protected zone r_pz")
+    handles.append(Line2D([], [], color="0.3", linewidth=1.2))
+    if record.n_agents <= LEGEND_MAX_AGENTS:
+        handles.append(Line2D([], [], color="0.3", linewidth=0.6, alpha=0.3))
+        labels += ["path flown", "path ahead"]
+    else:
+        labels.append(f"path of the last {TRAIL_SECONDS:g} s")
     if record.scenario.bodies or record.scenario.spheres:
         handles.append(Line2D([], [], linestyle="none"))
         labels.append(SIDE_CUT)
@@ -237,10 +243,12 @@ def _prism_squares(plan: Any, record: RunRecord) -> dict[int, Polygon]:
 def _vehicles(replay: Replay, layout: _Layout, record: RunRecord) -> None:
     """In each panel: the paths ahead (faint, up to LEGEND_MAX_AGENTS vehicles), and the
     trails, protected spheres and dots each frame moves."""
-    styles = agent_styles(record.n_agents)
-    colors = [c for c, _ in styles]
     p = record.positions
     few = record.n_agents <= LEGEND_MAX_AGENTS
+    styles = agent_styles(record.n_agents)
+    if not few:  # no vehicle is named: solid trails, cheaper to draw by the thousand
+        styles = [(c, "-") for c, _ in styles]
+    colors = [c for c, _ in styles]
     for ax, (a, b) in ((layout.plan, (0, 1)), (layout.side, (0, 2))):
         for i in range(record.n_agents if few else 0):
             ax.plot(p[:, i, a], p[:, i, b], color=colors[i], linewidth=0.6, alpha=0.3)

@@ -261,7 +261,11 @@ def figure_vehicle_distance(record: RunRecord) -> Figure | None:
             )
         )
         labels.append("closest pairs, numbered\nas on the top view")
-    _frame(ax, record, what="vehicle-vehicle distance", ylabel="distance between vehicles (m)")
+    # a pair's curve is the distance between its two; a band, each vehicle's to its nearest
+    ylabel = (
+        "distance between the pair (m)" if samples is None else "distance to nearest vehicle (m)"
+    )
+    _frame(ax, record, what="vehicle-vehicle distance", ylabel=ylabel)
     side_legend(ax, handles, labels)
     settle(fig)
     min_label(ax, closest)

@@ -57,10 +57,12 @@ def key_handles(
     *,
     prisms: bool,
     ends: bool = True,
+    named: str = "named as in the summary",
 ) -> tuple[list, list[str]]:
     """Legend entries explaining the markers and outlines (not the agents): start and goal
-    (``ends``), obstacles, their protected prisms (``prisms``: drawn as the planner turns
-    them), spheres and the protected spheres of ``snaps``."""
+    (``ends``), obstacles (``named``: how the figure names them), their protected prisms
+    (``prisms``: drawn as the planner turns them), spheres and the protected spheres of
+    ``snaps``."""
     sc = record.scenario
     handles: list = []
     labels: list[str] = []
@@ -69,7 +71,7 @@ def key_handles(
         labels += ["start", "goal"]
     if sc.sensed.any():
         handles.append(Patch(facecolor=OBSTACLE_GREY, edgecolor="0.3"))
-        labels.append("obstacle, named as in the summary")
+        labels.append(f"obstacle, {named}")
     if sc.bodies:
         if prisms and sc.sensed.any():
             handles.append(Line2D([], [], color=PRISM_GREY, linestyle="--", linewidth=1.0))

@@ -85,16 +85,21 @@ def _collection_clutter(coll: Any, out: Clutter, dpi: float) -> None:
         sizes = coll.get_sizes()
         size = math.sqrt(float(np.max(sizes))) * dpi / 72.0 if len(sizes) else 0.0
         out.boxes += _marker_boxes(pts, size)
-    elif isinstance(coll, PolyCollection) and coll.get_gid() == "avoid":
+    elif isinstance(coll, PolyCollection) and str(coll.get_gid()).startswith("avoid"):
         t = coll.get_transform()
         out.filled += [t.transform_path(p) for p in coll.get_paths()]
 
 
-def clutter(ax: Axes, renderer: Any, *, skip: Iterable[Any] = ()) -> Clutter:
+def clutter(
+    ax: Axes, renderer: Any, *, skip: Iterable[Any] = (), owner: str | None = None
+) -> Clutter:
     """Everything in ``ax`` a label must not cross (as last drawn), but the artists ``skip``:
     lines, line collections, markers and scatter points, patches (filled ones as areas, others
-    by their outline), collections with gid "avoid" as areas, and every text."""
+    by their outline), collections with gid "avoid" or "avoid <name>" as areas (but those of
+    the label's ``owner``, the name it is), and every text."""
     skipped = {id(a) for a in skip}
+    if owner is not None:
+        skipped |= {id(c) for c in ax.collections if c.get_gid() == f"avoid {owner}"}
     out = Clutter()
     dpi = ax.figure.dpi
     for line in ax.lines:
@@ -210,7 +215,7 @@ def place_label(
     (None) rather than one that crosses something. The figure's layout must be settled
     (``style.settle``) so that the boxes are the drawn ones."""
     renderer = ax.figure.canvas.get_renderer()  # type: ignore[attr-defined]
-    around = clutter(ax, renderer, skip=skip)
+    around = clutter(ax, renderer, skip=skip, owner=label)
     frame = ax.get_window_extent(renderer)
     own = ax.transData.transform(np.asarray(anchor, dtype=float).reshape(1, 2))[0]
     others = ax.transData.transform(np.asarray(rivals, dtype=float).reshape(-1, 2))
@@ -252,4 +257,5 @@ def place_label(
 def crossings(ax: Axes, text: Text) -> int:
     """How many things of ``ax`` the drawn ``text`` crosses (its own leader line aside)."""
     renderer = ax.figure.canvas.get_renderer()  # type: ignore[attr-defined]
-    return clutter(ax, renderer, skip=[text]).hits(text_box(text, renderer))
+    around = clutter(ax, renderer, skip=[text], owner=text.get_text())
+    return around.hits(text_box(text, renderer))

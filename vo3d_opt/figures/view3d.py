@@ -50,11 +50,11 @@ NAME_REACH = 12.0
 NAMED_3D = 12
 
 
-def _cylinder_3d(ax: Any, body: Cylinder, h: float, alpha: float) -> None:
+def _cylinder_3d(ax: Any, body: Cylinder, h: float, alpha: float) -> list[Any]:
     th = np.linspace(0, 2 * np.pi, 40)
     x, y = body.center[0] + body.radius * np.cos(th), body.center[1] + body.radius * np.sin(th)
     tt, zz = np.meshgrid(th, np.array([0.0, h]))
-    ax.plot_surface(
+    side = ax.plot_surface(
         body.center[0] + body.radius * np.cos(tt),
         body.center[1] + body.radius * np.sin(tt),
         zz,
@@ -66,9 +66,10 @@ def _cylinder_3d(ax: Any, body: Cylinder, h: float, alpha: float) -> None:
     top = Poly3DCollection([np.column_stack([x, y, np.full_like(x, h)])], linewidth=0)
     top.set(facecolor=OBSTACLE_GREY, alpha=alpha)
     ax.add_collection3d(top)
+    return [side, top]
 
 
-def _box_3d(ax: Any, body: Box, h: float, alpha: float) -> None:
+def _box_3d(ax: Any, body: Box, h: float, alpha: float) -> list[Any]:
     c = box_corners(body)
     faces = [np.column_stack([c, np.full(4, h)])]
     for a in range(4):
@@ -77,6 +78,7 @@ def _box_3d(ax: Any, body: Box, h: float, alpha: float) -> None:
     poly = Poly3DCollection(faces, edgecolor="0.35", linewidth=0.3)
     poly.set(facecolor=OBSTACLE_GREY, alpha=alpha)
     ax.add_collection3d(poly)
+    return [poly]
 
 
 def _sphere_3d(ax: Any, center: np.ndarray, radius: float, **kw: Any) -> None:
@@ -107,15 +109,19 @@ def _equal_limits(
 
 
 def _obstacles_3d(ax: Any, record: RunRecord) -> None:
+    """The bodies (up to the ceiling) and spheres. A body's surfaces carry the gid "avoid
+    <its name>": no other obstacle's name may lie on them (``labels.clutter``)."""
     sc = record.scenario
     z_top = sc.limits.altitude[1]
-    for body, sensed in zip(sc.bodies, sc.sensed, strict=True):
+    for body, sensed, name in zip(sc.bodies, sc.sensed, obstacle_names(record)[0], strict=True):
         h = min(body.height, z_top)
         alpha = 0.35 if sensed else 0.15
         if isinstance(body, Cylinder):
-            _cylinder_3d(ax, body, h, alpha)
+            drawn = _cylinder_3d(ax, body, h, alpha)
         else:
-            _box_3d(ax, body, h, alpha)
+            drawn = _box_3d(ax, body, h, alpha)
+        for artist in drawn:
+            artist.set_gid(f"avoid {name}")
     for s in sc.spheres:
         _sphere_3d(
             ax,
@@ -150,8 +156,8 @@ def _zones_3d(ax: Any, record: RunRecord, snaps: list[ZoneSnapshot], colors: lis
 
 
 def _label_obstacles_3d(ax: Any, record: RunRecord) -> None:
-    """Each obstacle's name by its top, clear of the other names and the paths (projected as
-    last drawn; the figure's layout settled)."""
+    """Each obstacle's name by its top, clear of the paths, the other names and the other
+    bodies (projected as last drawn; the figure's layout settled)."""
     sc = record.scenario
     if not 0 < len(sc.bodies) + len(sc.spheres) <= NAMED_3D:
         return
@@ -163,8 +169,8 @@ def _label_obstacles_3d(ax: Any, record: RunRecord) -> None:
     anchors = list(zip(xs, ys, strict=True))
     for k, name in enumerate(bodies + spheres):
         rivals = anchors[:k] + anchors[k + 1 :]
-        # by the top, clear of paths and names, over the translucent obstacles on a light
-        # ground; left to the top view when it has no such place
+        # by the top, clear of paths, names and other obstacles, on a light ground where it
+        # lies over its own; left to the top view when it has no such place
         place_label(
             ax,
             name,
@@ -269,7 +275,8 @@ def figure_trajectories_3d(record: RunRecord, *, zones: Zones = DEFAULT_ZONES) -
         agents = agent_handles(record)
     _zones_3d(ax, record, snaps, colors)
     _set_box(ax, lo, hi)
-    key = key_handles(record, snaps, prisms=False)
+    named = "named as in the summary\nwhere the name fits"
+    key = key_handles(record, snaps, prisms=False, named=named)
     title = f"{sc.name} ({record.formulation} / {record.solver})"
     _keys_around_box(fig, ax, agents, key, title=title)
     settle(fig)
