@@ -36,7 +36,7 @@ from vo3d_opt.sim.metrics import (
 )
 from vo3d_opt.sim.simulator import RunRecord
 
-from .keys import side_legend
+from .keys import marker_handle, side_legend
 from .labels import place_label
 from .scene import BAND_SAMPLES, chunk_samples, closest_pairs, drawn_samples, prism_margin
 from .style import (
@@ -209,9 +209,8 @@ def reference_lines(ax: Axes, lines: dict[float, str]) -> tuple[list[Any], list[
 
 def closest_marker(ax: Axes, closest: Approach) -> Any:
     """The closest approach as a black dot."""
-    return ax.plot(closest.time, closest.distance, "o", color=REFERENCE, markersize=6.5, zorder=7)[
-        0
-    ]
+    (dot,) = ax.plot(closest.time, closest.distance, "o", color=REFERENCE, markersize=6.5, zorder=7)
+    return dot
 
 
 def min_label(ax: Axes, closest: Approach) -> Any:
@@ -249,17 +248,7 @@ def figure_vehicle_distance(record: RunRecord) -> Figure | None:
     names_of = record.ids
     labels += [*names, f"closest approach ({names_of[closest.agent]}, {names_of[closest.other]})"]
     if pairs:
-        handles.append(
-            Line2D(
-                [],
-                [],
-                marker="o",
-                color="k",
-                markerfacecolor="white",
-                linestyle="none",
-                markersize=7,
-            )
-        )
+        handles.append(marker_handle("o", 7, color="k", markerfacecolor="white"))
         labels.append("closest pairs, numbered\nas on the top view")
     # a pair's curve is the distance between its two; a band, each vehicle's to its nearest
     ylabel = (
