@@ -9,6 +9,7 @@ so that tests can check a figure's labels.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -45,13 +46,19 @@ class Clutter:
     filled: list[MplPath] = field(default_factory=list)
     boxes: list[Bbox] = field(default_factory=list)
 
-    def hits(self, box: Bbox) -> int:
-        """How many things ``box`` crosses."""
-        return (
-            sum(p.intersects_bbox(box, filled=False) for p in self.lines)
-            + sum(p.intersects_bbox(box, filled=True) for p in self.filled)
-            + sum(box.overlaps(b) for b in self.boxes)
+    def hits(self, box: Bbox, cap: float = math.inf) -> int:
+        """How many things ``box`` crosses (counting stops at ``cap``)."""
+        tests = itertools.chain(
+            (box.overlaps(b) for b in self.boxes),
+            (p.intersects_bbox(box, filled=True) for p in self.filled),
+            (p.intersects_bbox(box, filled=False) for p in self.lines),
         )
+        count = 0
+        for hit in tests:
+            count += bool(hit)
+            if count >= cap:
+                break
+        return count
 
     def crossed(self, box: Bbox) -> bool:
         """Whether ``box`` crosses anything (stops at the first)."""
@@ -155,11 +162,11 @@ def candidates(
     return out
 
 
-def _gap(box: Bbox, point: np.ndarray) -> float:
-    """Distance (display units) from a point to the nearest point of a box."""
-    dx = max(box.x0 - point[0], 0.0, point[0] - box.x1)
-    dy = max(box.y0 - point[1], 0.0, point[1] - box.y1)
-    return math.hypot(dx, dy)
+def _gaps(box: Bbox, points: np.ndarray) -> np.ndarray:
+    """Distances (display units) from points (k, 2) to the nearest point of a box."""
+    dx = np.maximum.reduce([box.x0 - points[:, 0], np.zeros(len(points)), points[:, 0] - box.x1])
+    dy = np.maximum.reduce([box.y0 - points[:, 1], np.zeros(len(points)), points[:, 1] - box.y1])
+    return np.hypot(dx, dy)
 
 
 @dataclass(frozen=True)
@@ -189,8 +196,25 @@ def _tries(
 def _penalty(box: Bbox, frame: Bbox, own: np.ndarray, others: np.ndarray) -> int:
     """1000 for a box out of the axes, 100 for each rival anchor it is not far enough from."""
     inside = frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
-    mine = _gap(box, own)
-    return (0 if inside else 1000) + 100 * sum(_gap(box, o) < CLAIM * mine for o in others)
+    mine = float(_gaps(box, own.reshape(1, 2))[0])
+    return (0 if inside else 1000) + 100 * int(np.sum(_gaps(box, others) < CLAIM * mine))
+
+
+def _least_crossing(tries: list[_Try], penalties: list[int], around: Clutter) -> _Try:
+    """Failing a free place: never out of the axes, then as few crossings as can be, then as
+    clear of the rivals as can be."""
+    inside = [(p, t) for p, t in zip(penalties, tries, strict=True) if p < 1000]
+    pool = sorted(inside or list(zip(penalties, tries, strict=True)), key=lambda pt: pt[0])
+    free = next((t for _, t in pool if not around.crossed(t.box)), None)
+    if free is not None:  # the clearest of the places that cross nothing
+        return free
+    best: tuple[int, int, _Try] | None = None
+    for penalty, t in pool:
+        hits = around.hits(t.box, cap=best[0] + 1 if best else math.inf)
+        if best is None or (hits, penalty) < best[:2]:
+            best = (hits, penalty, t)
+    assert best is not None
+    return best[2]
 
 
 def place_label(
@@ -204,6 +228,7 @@ def place_label(
     rivals: Sequence[Sequence[float]] = (),
     reach: float = math.inf,
     optional: bool = False,
+    around: Clutter | None = None,
     **text_kw: Any,
 ) -> Annotation | None:
     """Put ``label`` near ``anchor`` (data coordinates) where it crosses nothing (module
@@ -212,10 +237,12 @@ def place_label(
     radians; ``skip``: artists it may cross; ``rivals``: other anchors (data coordinates) the
     label must be farther from than from its own (CLAIM times), so that it is not read as
     theirs; ``reach``: the farthest ring tried (points past ``base``); ``optional``: no label
-    (None) rather than one that crosses something. The figure's layout must be settled
-    (``style.settle``) so that the boxes are the drawn ones."""
+    (None) rather than one that crosses something; ``around``: the axes' :func:`clutter`
+    when already gathered (labelling many things), to which the label is added. The figure's
+    layout must be settled (``style.settle``) so that the boxes are the drawn ones."""
     renderer = ax.figure.canvas.get_renderer()  # type: ignore[attr-defined]
-    around = clutter(ax, renderer, skip=skip, owner=label)
+    if around is None:
+        around = clutter(ax, renderer, skip=skip, owner=label)
     frame = ax.get_window_extent(renderer)
     own = ax.transData.transform(np.asarray(anchor, dtype=float).reshape(1, 2))[0]
     others = ax.transData.transform(np.asarray(rivals, dtype=float).reshape(-1, 2))
@@ -226,24 +253,18 @@ def place_label(
     size = text_box(text, renderer)  # the box at the anchor; each try is a shift of it
     text.remove()
     tries = _tries(own, size, base, prefer, ax.figure.dpi / 72.0, reach)
-    fair = [t for t in tries if _penalty(t.box, frame, own, others) == 0]
+    penalties = [_penalty(t.box, frame, own, others) for t in tries]
+    fair = (t for t, p in zip(tries, penalties, strict=True) if p == 0)
     chosen = next((t for t in fair if not around.crossed(t.box)), None)
     if chosen is None and optional:
         return None
-    if chosen is None:  # never out of the axes, then as few crossings as can be, then clear
-        chosen = min(
-            tries,
-            key=lambda t: (
-                _penalty(t.box, frame, own, others) >= 1000,
-                around.hits(t.box),
-                _penalty(t.box, frame, own, others),
-            ),
-        )
+    if chosen is None:
+        chosen = _least_crossing(tries, penalties, around)
     ha, va = _alignment(math.atan2(chosen.dy, chosen.dx))
     if chosen.r > base + LEADER:
         leader = {"arrowstyle": "-", "lw": 0.6, "color": "0.3", "shrinkA": 1.0, "shrinkB": base}
         text_kw = {**text_kw, "arrowprops": leader}
-    return ax.annotate(
+    placed = ax.annotate(
         label,
         at,
         xytext=(chosen.dx, chosen.dy),
@@ -252,6 +273,12 @@ def place_label(
         va=va,
         **text_kw,
     )
+    around.boxes.append(chosen.box)
+    arrow = placed.arrow_patch
+    if arrow is not None:
+        placed.update_positions(renderer)
+        around.lines.append(arrow.get_transform().transform_path(arrow.get_path()))
+    return placed
 
 
 def crossings(ax: Axes, text: Text) -> int:

@@ -17,7 +17,7 @@ from vo3d_opt.sim.simulator import RunRecord
 from vo3d_opt.types import Cylinder
 
 from .keys import agent_key, key_handles, zone_dash
-from .labels import place_label
+from .labels import clutter, place_label
 from .scene import (
     DEFAULT_ZONES,
     Zones,
@@ -135,6 +135,7 @@ def label_obstacles(ax: Axes, record: RunRecord, *, turning: bool = False) -> li
     shapes and the other names; the figure's layout must be settled. Returns the labels."""
     scale = points_per_metre(ax)
     places = obstacle_places(record, turning=turning)
+    around = clutter(ax, ax.figure.canvas.get_renderer())  # type: ignore[attr-defined]
     centres = [p.centre for p in places]
     out = []
     for k, place in enumerate(places):
@@ -147,6 +148,7 @@ def label_obstacles(ax: Axes, record: RunRecord, *, turning: bool = False) -> li
                 base=place.reach * scale,
                 prefer=math.pi / 2,
                 rivals=rivals,
+                around=around,
                 fontsize=NAME_SIZE,
                 color="0.15",
                 linespacing=1.1,
