@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test install bench lint clean notebooks notebooks-sync aot
+.PHONY: demo test install bench lint clean notebooks notebooks-sync aot figures
 
 $(PY):
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) on PATH (or run: make PYTHON=python3 ...)"; exit 2; }
@@ -61,6 +61,10 @@ notebooks-sync: $(STAMP)
 
 bench: $(STAMP) $(NUMBA_STAMP) aot
 	$(PY) benchmarks/bench_select.py
+
+# The PNGs of docs/figures.md (cases 1, 2, 4, random-crossing-1000 and a replay frame).
+figures: $(STAMP) $(NUMBA_STAMP) aot
+	$(PY) benchmarks/figures.py
 
 clean:
 	rm -rf $(VENV) out vo3d_opt/formulations/_kernel_aot*

@@ -153,7 +153,7 @@ def _dpi(text: str) -> int:
 
 
 def _zones(text: str) -> Any:
-    from vo3d_opt.plots import parse_zones
+    from vo3d_opt.figures import parse_zones
 
     try:
         return parse_zones(text)
