@@ -6,7 +6,7 @@
   ``--out DIR`` writes ``trajectories.parquet`` (and ``trajectories.csv`` up to
   ``report.CSV_MAX_ROWS`` rows), ``summary.json`` and the figures (``--format png|pdf|svg``,
   ``--dpi``, ``--zones``), and with ``--animate`` ``animation.gif`` (``vo3d_opt.report``). The
-  decisions use every core; set the ``NUMBA_NUM_THREADS`` environment variable to use fewer.
+  decisions use every core; ``--threads K`` uses fewer.
 * ``vo3d compare SCENARIO --formulations A B --solvers X Y [--json]`` runs every combination and
   prints one row per combination with the summary's columns (a JSON list with ``--json``).
 * ``vo3d list`` lists the bundled scenarios: name, agents, obstacles, first sentence.
@@ -417,28 +417,6 @@ def _first_sentence(text: str) -> str:
     return text[: match.start() + 1] if match else text
 
 
-def cmd_compile(args: argparse.Namespace) -> int:
-    """Build the ahead-of-time decision kernel (formulations/aot.py) next to the package."""
-    from .formulations import aot
-
-    if args.check:
-        compiled, note = aot.load()
-        print(note)
-        return EXIT_OK if compiled is not None else EXIT_FAIL
-    log.info("compiling the decision kernels ahead of time (about 40 s)...")
-    try:
-        path, seconds = aot.build()
-    except (RuntimeError, OSError) as exc:
-        log.error("%s", one_line(exc))
-        return EXIT_FAIL
-    compiled, note = aot.load()
-    if compiled is None:
-        log.error("built %s, but it does not load: %s", path, note)
-        return EXIT_FAIL
-    print(f"built {path} in {seconds:.0f} s: select() and select_many() run it from now on")
-    return EXIT_OK
-
-
 def cmd_list(args: argparse.Namespace) -> int:
     rows, bad = [], 0
     for path in bundled_files():
@@ -625,8 +603,8 @@ def _add_swarm_flags(run: argparse.ArgumentParser) -> None:
         "--threads",
         type=_positive_int,
         metavar="K",
-        help="threads of the compiled decisions (select_many; default: every core, at most "
-        "NUMBA_NUM_THREADS); the answers do not depend on it. No effect where the agents "
+        help="threads of the compiled decisions (select_many; default: every core this process "
+        "may use, at most that); the answers do not depend on it. No effect where the agents "
         "decide one at a time (noisy or late sensing, formulations run in Python)",
     )
     run.add_argument(
@@ -652,8 +630,8 @@ def _add_swarm_flags(run: argparse.ArgumentParser) -> None:
 
 
 def _swarm_checked(args: argparse.Namespace, sc: Scenario) -> None:
-    """Refuse before the run what the run would refuse at its start: --threads above numba's
-    limit, --max-neighbors under noisy or late sensing, a spill that cannot happen."""
+    """Refuse before the run what the run would refuse at its start: --threads above the cores,
+    --max-neighbors under noisy or late sensing, a spill that cannot happen."""
     if args.threads is not None:
         from vo3d_opt.swarm import thread_count
 
@@ -786,22 +764,6 @@ def build_parser() -> argparse.ArgumentParser:
     lst.set_defaults(func=cmd_list)
     _add_sweep(sub, common)
 
-    comp = sub.add_parser(
-        "compile",
-        parents=common,
-        help="compile the decision kernels of select() and select_many() ahead of time",
-        description="Compile the decision kernels of select() and select_many() ahead of time "
-        "(numba.pycc) into the installed package, so that a first select() in a new process "
-        "does not wait for numba's JIT compiler (about 30 s). A module built from other "
-        "sources, Python, numba, numpy or another CPU is ignored: run it again after an edit "
-        "or an upgrade (make does). The package's folder must be writable.",
-    )
-    comp.add_argument(
-        "--check",
-        action="store_true",
-        help="only say whether select() would run an ahead-of-time kernel, and why (exit 1 if not)",
-    )
-    comp.set_defaults(func=cmd_compile)
     return p
 
 
