@@ -31,7 +31,7 @@ def record(n: int, every: int, max_steps: int | None, fast: bool = False
     """Fly the swap (``fast``: with ``FAST_OPTIONS``); the selector and every ``every``-th
     select_many call's arguments."""
     from vo3d_opt import FAST_OPTIONS
-    from vo3d_opt.selector import VelocitySelector, warm_up_many
+    from vo3d_opt.selector import VelocitySelector
     from vo3d_opt.sim.deciders import SwarmSelect
     from vo3d_opt.sim.scenario import scenario_variant
     from vo3d_opt.sim.simulator import fly, scenario_selector
@@ -55,7 +55,6 @@ def record(n: int, every: int, max_steps: int | None, fast: bool = False
         sc = scenario_variant(sc, selector_options={**sc.selector_options, **FAST_OPTIONS})
     sel, formulation, solver = scenario_selector(sc)
     step = SwarmSelect(sc, sel, formulation=formulation, solver=solver, max_neighbors=10, threads=2)
-    warm_up_many()
     VelocitySelector.select_many = kept
     try:
         fly(sc, step, progress=False, max_steps=max_steps)
@@ -70,16 +69,16 @@ def replay(sel: Any, calls: list[tuple[tuple, dict]]) -> dict[str, dict[str, flo
     from vo3d_opt.formulations.kernel import ROUND_NAMES
     from vo3d_opt.formulations.swarm import MANY_OUT_SIZE, decide_range
 
-    packed = sel.options.packed
+    cfg = sel.options.config
     out_stats: dict[str, dict[str, float]] = defaultdict(lambda: {"n": 0, "ns": 0, "solved": 0})
     for args, kwargs in calls:
         kwargs = {k: v for k, v in kwargs.items() if k != "threads"}
         sw = swarm.SwarmInputs.checked(*args, **kwargs).arrays()
         out = np.empty((sw.who.shape[0], MANY_OUT_SIZE))
-        decide_range(sw, 0, 1, *packed, out)  # loaded once before timing
+        decide_range(sw, 0, 1, cfg, out)  # once before timing
         for d in range(sw.who.shape[0]):
             t0 = time.perf_counter_ns()
-            decide_range(sw, d, d + 1, *packed, out)
+            decide_range(sw, d, d + 1, cfg, out)
             elapsed = time.perf_counter_ns() - t0
             st = out_stats[ROUND_NAMES[int(out[d, 5])]]
             st["n"] += 1

@@ -28,10 +28,9 @@ import threading
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .formulations.common import bounds_array
 from .formulations.swarm import (
@@ -42,6 +41,9 @@ from .formulations.swarm import (
 )
 from .geometry.pyramid import prism_rows
 from .types import Box, Cylinder, Limits
+
+if TYPE_CHECKING:  # scipy.spatial is imported by the functions that use it: it takes 0.3 s
+    from scipy.spatial import cKDTree
 
 
 #: The k-d trees propose candidates within range·(1 + _REACH) + _REACH, m: a hair more than the
@@ -219,6 +221,8 @@ def vehicle_links(
     n, D = P.shape[0], who.shape[0]
     if D == 0 or n < 2 or max_neighbors == 0:
         return np.zeros((D, 2), dtype=np.int64), _EMPTY
+    from scipy.spatial import cKDTree
+
     tree = cKDTree(P)
     if max_neighbors is not None and _crowded(tree, P, who, sensing_range, max_neighbors):
         links = _nearest_links(tree, P, who, sensing_range, int(max_neighbors), threads)
@@ -370,6 +374,8 @@ def _near(
     ``surface(m, pts)`` decides."""
     rows, cols = [], []
     if tree is None:
+        from scipy.spatial import cKDTree
+
         tree = cKDTree(points)
     for m, near in enumerate(tree.query_ball_point(centres, _reach(rng + bound))):
         if near:
@@ -398,6 +404,8 @@ def obstacle_links(
         [o.radius if isinstance(o, Cylinder) else 0.5 * math.hypot(*o.size) for o in obstacles],
         dtype=float,
     )
+    from scipy.spatial import cKDTree
+
     rows, cols = _near(
         cKDTree(Pd[:, :2]),
         Pd,

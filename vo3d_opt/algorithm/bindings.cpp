@@ -73,9 +73,11 @@ Out<T> out_arr(nb::handle h, const char* name, std::initializer_list<int64_t> sh
     return a;
 }
 
-// Whether a is C-contiguous (the strides of dimensions of size 1 do not matter).
+// Whether a is C-contiguous (the strides of dimensions of size 1 do not matter, nor those of
+// an empty array).
 template <class A>
 bool c_contig(const A& a) {
+    if (a.size() == 0) return true;
     int64_t expect = 1;
     for (size_t i = a.ndim(); i-- > 0;) {
         if (a.shape(i) > 1 && a.stride(i) != expect) return false;

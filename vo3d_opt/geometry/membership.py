@@ -48,12 +48,19 @@ def _no_pyramids() -> VOPyramids:
 
 
 def _no_cones() -> VOCones:
+    none = np.zeros(0)
     return VOCones(
         np.zeros((0, 3)),
         np.zeros((0, 3)),
-        *(np.zeros(0) for _ in range(4)),
+        none,
+        none,
+        none,
+        none,
         np.zeros((0, 3, 3)),
-        *(np.zeros(0) for _ in range(4)),
+        none,
+        none,
+        none,
+        none,
         np.zeros(0, dtype=bool),
     )
 

@@ -167,7 +167,7 @@ def cone_sections(
     """The conic sections of ``cones`` on ``planes`` (section 3.1), classified into KINDS."""
     corr = Corrections.of(corrections)
     t = generator_angles(n_samples)
-    return Sections(*_core.cone_sections(cones, planes, t, tuple(corr)), t=t, corrections=corr)
+    return Sections(*_core.cone_sections(cones, planes, t, tuple(corr)), t, corr)
 
 
 def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
@@ -175,9 +175,7 @@ def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
     velocity origin, eq. 19), so a section is a triangle (apex and the two extreme points where
     C_pz's edges meet the plane; with the VO lines, the whole wedge), a line, or the apex point.
     Inside C_pz the VO is every velocity with a horizontal component towards its centre."""
-    return Sections(
-        *_core.pyramid_sections(pyramids, planes), t=np.zeros(0), corrections=Corrections()
-    )
+    return Sections(*_core.pyramid_sections(pyramids, planes), np.zeros(0), Corrections())
 
 
 def _in_polygon(poly: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -50,9 +50,7 @@ def py_nearest_in_disc(
     that it fills with the rows' random order (Fisher–Yates with an xorshift: fixed, so that
     answers are reproducible to the last bit). ``r_max`` may be inf (no disc); ``r_min`` <= 0
     means no inner bound."""
-    return bool(
-        _core.nearest_in_disc(G, h, int(m), w0, float(r_max), float(r_min), order, out)
-    )
+    return bool(_core.nearest_in_disc(G, h, int(m), w0, float(r_max), float(r_min), order, out))
 
 
 class Exact2DBackend(Backend):
