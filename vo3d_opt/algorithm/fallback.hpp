@@ -136,7 +136,7 @@ inline double zone_time(const VOs& vos, int64_t k, const double* v) {
         return entry_time(py, v);
     }
     const Cone& c = vos.cones[k];
-    double pu = approach(c.apex, c.rel, v, NO_HORIZON).pu;
+    double pu = closing_speed(c.apex, c.rel, v);
     if (c.inside) return pu > 0 ? 0.0 : kInf;
     double u0 = v[0] - c.apex[0], u1 = v[1] - c.apex[1], u2 = v[2] - c.apex[2];
     double uu = u0 * u0 + u1 * u1 + u2 * u2;
@@ -190,7 +190,7 @@ inline double closing_rate(const VOs& vos, const double* v) {
     double worst = 0.0;
     for (const Cone& c : vos.cones)
         if (c.inside)
-            worst = std::max(worst, approach(c.apex, c.rel, v, NO_HORIZON).pu / std::max(c.d_oi, 1e-12));
+            worst = std::max(worst, closing_speed(c.apex, c.rel, v) / std::max(c.d_oi, 1e-12));
     for (const Pyramid& py : vos.pyramids) {
         if (py.inside) {
             const double* h = py.frame[0];

@@ -129,19 +129,27 @@ inline int64_t cone_section(const Cone& cone, const Base& base, const double (&f
     sec.apex[0] = xA, sec.apex[1] = yA;
     double scale = 1.0 + std::sqrt(sq(apex[0]) + sq(apex[1]) + sq(apex[2])) + d_vo;
     bool on_apex = std::abs(zA) <= 1e-9 * scale;  // 3.1.3: A_vo lies on the plane
-    // Eqs (11)-(12): generator k meets the plane at parameter t_g.
-    bool any_valid = false;
+    // Eqs (11)-(12): generator k meets the plane at parameter t_g. Without branches, on
+    // pointers that alias nothing, so that the compiler vectorises the loop.
+    const double* __restrict bx = &base.xyz[0];
+    const double* __restrict by = bx + base.cols;
+    const double* __restrict bz = by + base.cols;
+    double* __restrict cx = sec.curve_x.data();
+    double* __restrict cy = sec.curve_y.data();
+    bool tg_range = corr.tg_range;
+    int any_valid = 0;
     for (int64_t k = 0; k < K; ++k) {
-        double yB = c * base(1, k) + s * base(2, k), zB = c * base(2, k) - s * base(1, k);
+        double yB = c * by[k] + s * bz[k], zB = c * bz[k] - s * by[k];
         double dz = zB - zA;
         double t_g = -zA / dz;
-        bool valid = corr.tg_range ? (t_g >= 0.0) & (t_g <= 1.0)  // 3.1.1
-                                   // the original condition z_Bvo != z_A: both nappes, any length
-                                   : std::isfinite(t_g) & (std::abs(dz) > 1e-12);
+        int valid = tg_range ? (t_g >= 0.0) & (t_g <= 1.0)  // 3.1.1
+                             // the original condition z_Bvo != z_A: both nappes, any length
+                             : (std::abs(t_g) <= std::numeric_limits<double>::max()) &
+                                   (std::abs(dz) > 1e-12);
         any_valid |= valid;
-        bool keep = valid & !on_apex;
-        sec.curve_x[k] = keep ? (base(0, k) - xA) * t_g + xA : kNaN;
-        sec.curve_y[k] = keep ? (yB - yA) * t_g + yA : kNaN;
+        int keep = valid & !on_apex;
+        cx[k] = keep ? (bx[k] - xA) * t_g + xA : kNaN;
+        cy[k] = keep ? (yB - yA) * t_g + yA : kNaN;
     }
     // Eqs (14)-(17): where the base circle meets the plane.
     double nx = c * frame[2][0] - s * frame[1][0], ny = c * frame[2][1] - s * frame[1][1],

@@ -263,6 +263,12 @@ struct Approach {
     double pu;       // the closing rate rel.u
 };
 
+// The closing rate rel.u alone, as approach() computes it.
+inline double closing_speed(const double* a, const double* rel, const double* v) {
+    double u0 = v[0] - a[0], u1 = v[1] - a[1], u2 = v[2] - a[2];
+    return rel[0] * u0 + rel[1] * u1 + rel[2] * u2;
+}
+
 inline Approach approach(const double* a, const double* rel, const double* v, double horizon) {
     double u0 = v[0] - a[0], u1 = v[1] - a[1], u2 = v[2] - a[2];
     double uu = u0 * u0 + u1 * u1 + u2 * u2;
@@ -283,7 +289,7 @@ inline bool heads_into(const double* a, const double* rel, double r_pz, const do
 // Whether v lies in the VO cone (inside the zone: whether it still closes in). ``tol`` (m)
 // widens (> 0) or shrinks (< 0) the protected sphere.
 inline bool in_cone(const Cone& c, const double* v, double horizon, double tol) {
-    if (c.inside) return approach(c.apex, c.rel, v, horizon).pu > 0.0;
+    if (c.inside) return closing_speed(c.apex, c.rel, v) > 0.0;
     return heads_into(c.apex, c.rel, c.r_pz, v, horizon, tol);
 }
 
