@@ -10,9 +10,18 @@
 #pragma once
 
 #include <atomic>
+#include <condition_variable>
 #include <exception>
+#include <functional>
 #include <mutex>
 #include <thread>
+#ifdef _WIN32
+#include <process.h>
+#define VO3D_GETPID _getpid
+#else
+#include <unistd.h>
+#define VO3D_GETPID getpid
+#endif
 
 #include "decide.hpp"
 
@@ -82,6 +91,56 @@ inline void decide_vehicle(const Swarm& sw, int64_t d, const Config& cfg, double
     out[6] = double(res.solved), out[7] = double(n_nb), out[8] = double(n_sp + n_ob);
 }
 
+// Helper threads kept from one call to the next: a thread started per call would begin each
+// time with a cold memory arena (the decisions allocate their VOs and rows) and cold caches.
+// Calls from several Python threads at once take turns. In a child process after a fork the
+// helpers are gone: a new pool starts there.
+class Helpers {
+  public:
+    static Helpers& of_this_process() {
+        static std::mutex guard;
+        static Helpers* pool = nullptr;  // never destroyed: the helpers wait until the exit
+        std::lock_guard<std::mutex> hold(guard);
+        if (!pool || pool->pid_ != VO3D_GETPID()) pool = new Helpers();
+        return *pool;
+    }
+    // work() on n helper threads and on the calling one; returns when all have finished.
+    void run(int64_t n, const std::function<void()>& work) {
+        std::lock_guard<std::mutex> turn(call_);
+        {
+            std::lock_guard<std::mutex> hold(mutex_);
+            while (int64_t(started_) < n) std::thread([this, id = started_++] { loop(id); }).detach();
+            job_ = &work, wanted_ = n, pending_ = n, ++generation_;
+        }
+        wake_.notify_all();
+        work();
+        std::unique_lock<std::mutex> hold(mutex_);
+        done_.wait(hold, [this] { return pending_ == 0; });
+    }
+
+  private:
+    void loop(int64_t id) {
+        uint64_t seen = 0;
+        std::unique_lock<std::mutex> hold(mutex_);
+        for (;;) {
+            wake_.wait(hold, [&] { return generation_ != seen; });
+            seen = generation_;
+            if (id >= wanted_) continue;
+            const std::function<void()>* job = job_;
+            hold.unlock();
+            (*job)();
+            hold.lock();
+            if (--pending_ == 0) done_.notify_all();
+        }
+    }
+    long pid_ = long(VO3D_GETPID());
+    std::mutex call_, mutex_;
+    std::condition_variable wake_, done_;
+    const std::function<void()>* job_ = nullptr;
+    int64_t started_ = 0, wanted_ = 0, pending_ = 0;
+    uint64_t generation_ = 0;
+};
+
 // Deciding vehicles lo <= d < hi, row d of out (D, MANY_OUT_SIZE) for each, on ``threads``
 // threads (the caller's among them): each claims the next CHUNK vehicles until none are left.
 inline void decide_many(const Swarm& sw, const Config& cfg, int64_t lo, int64_t hi,
@@ -89,7 +148,7 @@ inline void decide_many(const Swarm& sw, const Config& cfg, int64_t lo, int64_t 
     std::atomic<int64_t> next{lo};
     std::exception_ptr failed;
     std::mutex failed_lock;
-    auto work = [&]() {
+    std::function<void()> work = [&]() {
         try {
             for (int64_t start; (start = next.fetch_add(CHUNK)) < hi;)
                 for (int64_t d = start; d < std::min(hi, start + CHUNK); ++d)
@@ -100,10 +159,8 @@ inline void decide_many(const Swarm& sw, const Config& cfg, int64_t lo, int64_t 
         }
     };
     int64_t helpers = std::min(threads, (hi - lo + CHUNK - 1) / CHUNK) - 1;
-    std::vector<std::thread> pool;
-    for (int64_t t = 0; t < helpers; ++t) pool.emplace_back(work);
-    work();
-    for (auto& t : pool) t.join();
+    if (helpers > 0) Helpers::of_this_process().run(helpers, work);
+    else work();
     if (failed) std::rethrow_exception(failed);
 }
 
