@@ -17,7 +17,7 @@ from vo3d_opt.sim.scenario import bundled_dir, bundled_files, load_scenario, sce
 from vo3d_opt.generators import random_crossing_scenario
 from vo3d_opt.sim.simulator import fly, scenario_selector
 
-SWARMS = {"random-crossing-1000"}
+SWARMS = {"random-crossing-1000", "rvo2-sphere-812"}
 SMALL = [p for p in bundled_files() if p.stem not in SWARMS]
 
 

@@ -21,46 +21,29 @@ Sensing, for deciding vehicle i (the same rules as a loop of ``select`` calls wo
 
 from __future__ import annotations
 
-import itertools
 import math
 import numbers
+import os
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numba
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .formulations.common import bounds_array
 from .formulations.swarm import (
     AGENT_COLUMNS,
-    MANY_OUT_SIZE,
     Swarm,
-    decide_range,
     nearest_lists,
     neighbor_lists,
 )
 from .geometry.pyramid import prism_rows
 from .types import MAX_MAGNITUDE, Box, Cylinder, Limits, positive_seconds, short_repr
 
-#: The compiled ``neighbor_lists`` and ``nearest_lists`` that ``vehicle_links`` calls: numba's
-#: JIT ones, or the ahead-of-time module's once the selector has loaded it
-#: (``use_neighbor_lists``).
-_neighbor_lists: Callable[..., np.ndarray] = neighbor_lists
-_nearest_lists: Callable[..., np.ndarray] = nearest_lists
-
-
-def use_neighbor_lists(
-    lists: Callable[..., np.ndarray], nearest: Callable[..., np.ndarray]
-) -> None:
-    """Make ``vehicle_links`` call ``lists`` and ``nearest`` (``formulations.swarm``'s
-    ``neighbor_lists`` and ``nearest_lists`` compiled ahead of time: formulations/aot.py)
-    instead of numba's JIT ones."""
-    global _neighbor_lists, _nearest_lists
-    _neighbor_lists, _nearest_lists = lists, nearest
+if TYPE_CHECKING:  # scipy.spatial is imported by the functions that use it: it takes 0.3 s
+    from scipy.spatial import cKDTree
 
 
 #: The k-d trees propose candidates within range·(1 + _REACH) + _REACH, m: a hair more than the
@@ -84,7 +67,7 @@ class SwarmDecision:
     (N,) s: each vehicle's share of the time (its own ``select`` call when looping, the call's
     time shared equally among the deciding vehicles when compiled; NaN when not deciding);
     ``compiled``: whether the one compiled call ran (else a loop of ``select``); ``threads``:
-    numba threads used."""
+    threads used."""
 
     velocities: np.ndarray
     statuses: np.ndarray
@@ -275,6 +258,8 @@ def vehicle_links(
     n, D = P.shape[0], who.shape[0]
     if D == 0 or n < 2 or max_neighbors == 0:
         return np.zeros((D, 2), dtype=np.int64), _EMPTY
+    from scipy.spatial import cKDTree
+
     tree = cKDTree(P)
     if max_neighbors is not None and _crowded(tree, P, who, sensing_range, max_neighbors):
         links = _nearest_links(tree, P, who, sensing_range, int(max_neighbors), threads)
@@ -287,7 +272,7 @@ def vehicle_links(
     place[who] = np.arange(D)
     span = np.empty((D, 2), dtype=np.int64)
     k = -1 if max_neighbors is None else int(max_neighbors)
-    idx = _neighbor_lists(a, b, dist, float(sensing_range), place, k, span)
+    idx = neighbor_lists(a, b, dist, float(sensing_range), place, k, span)
     return span, idx
 
 
@@ -380,7 +365,7 @@ def _nearest_links(
         far, near = tree.query(
             P[who[lo:hi]], k=_proposed(k), distance_upper_bound=_reach(sensing_range)
         )
-        settled[lo:hi] = _nearest_lists(
+        settled[lo:hi] = nearest_lists(
             P, who[lo:hi], near, far, float(sensing_range), chosen[lo:hi]
         )
 
@@ -406,16 +391,6 @@ def _nearest_links(
     return span, np.ascontiguousarray(chosen[chosen < n], dtype=np.int64)
 
 
-def warm_lists() -> None:
-    """Compile (or load from numba's cache) both ways of listing neighbours: every pair within
-    range and each vehicle's nearest."""
-    P = np.arange(24.0).reshape(8, 3)
-    who = np.arange(8, dtype=np.int64)
-    vehicle_links(P, who, 1.0, None)
-    if _NEAREST_OK:
-        _nearest_links(cKDTree(P), P, who, 100.0, 1)
-
-
 def _all(D: int, m: int) -> tuple[np.ndarray, np.ndarray]:
     """Every one of m items for each of D vehicles, as (span, idx)."""
     span = np.zeros((D, 2), dtype=np.int64)
@@ -436,6 +411,8 @@ def _near(
     ``surface(m, pts)`` decides."""
     rows, cols = [], []
     if tree is None:
+        from scipy.spatial import cKDTree
+
         tree = cKDTree(points)
     for m, near in enumerate(tree.query_ball_point(centres, _reach(rng + bound))):
         if near:
@@ -464,6 +441,8 @@ def obstacle_links(
         [o.radius if isinstance(o, Cylinder) else 0.5 * math.hypot(*o.size) for o in obstacles],
         dtype=float,
     )
+    from scipy.spatial import cKDTree
+
     rows, cols = _near(
         cKDTree(Pd[:, :2]),
         Pd,
@@ -602,10 +581,6 @@ class SwarmInputs:
 
 # ------------------------------------------------------------------------------ threads
 
-#: Vehicles per compiled call when several threads share the work: small enough that the
-#: threads finish together (a crowded vehicle costs many times a lone one), large enough that
-#: the call overhead (about 20 µs) stays negligible.
-CHUNK = 64
 _pool_lock = threading.Lock()
 _pool: ThreadPoolExecutor | None = None
 
@@ -618,54 +593,28 @@ def _workers(n: int) -> ThreadPoolExecutor:
         return _pool
 
 
+def cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system tells it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
+
+
 def thread_count(threads: Any) -> int:
-    """``threads`` checked (an integer in [1, NUMBA_NUM_THREADS]); None: numba's current setting
-    (``numba.set_num_threads``, else the ``NUMBA_NUM_THREADS`` environment variable, else every
-    core)."""
-    limit = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+    """``threads`` checked (an integer in [1, ``cores()``]); None: every core."""
+    limit = cores()
     if threads is None:
-        return int(numba.get_num_threads())
+        return limit
     if (
         not isinstance(threads, numbers.Integral)
         or isinstance(threads, bool)
         or not 1 <= int(threads) <= limit
     ):
         raise ValueError(
-            f"threads: must be an integer in [1, {limit}] (NUMBA_NUM_THREADS), got {threads!r}"
+            f"threads: must be an integer in [1, {limit}] (the cores this process may use), "
+            f"got {threads!r}"
         )
     return int(threads)
-
-
-def decide_all(
-    sw: Swarm,
-    packed: tuple[np.ndarray, np.ndarray, np.ndarray],
-    threads: int,
-    kernel: Callable[..., None] = decide_range,
-) -> np.ndarray:
-    """Every deciding vehicle of ``sw`` by the compiled ``kernel`` (``decide_range``, numba's
-    JIT or the ahead-of-time module's): (D, MANY_OUT_SIZE). With several threads, each takes
-    the next CHUNK vehicles until none are left (the compiled code releases the GIL); the rows
-    do not depend on who computed them."""
-    D = sw.who.shape[0]
-    out = np.empty((D, MANY_OUT_SIZE))
-    chunks = -(-D // CHUNK)
-    if threads <= 1 or chunks <= 1:
-        kernel(sw, 0, D, *packed, out)
-        return out
-    claim = itertools.count()  # next() on it is atomic under the GIL
-
-    def work() -> None:
-        while (c := next(claim)) < chunks:
-            kernel(sw, c * CHUNK, min(D, (c + 1) * CHUNK), *packed, out)
-
-    helpers = [_workers(threads - 1).submit(work) for _ in range(min(threads, chunks) - 1)]
-    try:
-        work()
-    finally:  # no helper left writing into ``out``, whatever raised
-        wait(helpers)
-    for h in helpers:
-        h.result()
-    return out
 
 
 __all__ = ["SwarmDecision", "SwarmInputs", "vehicle_links", "obstacle_links", "sphere_links"]

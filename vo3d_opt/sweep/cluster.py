@@ -35,7 +35,7 @@ class ConnectError(OSError):
 class WarmUp(WorkerPlugin):
     """Runs :func:`~vo3d_opt.sweep.flight.warm` on every worker when registered and on every
     worker that joins later (e.g. restarted after a death), in a thread so that the worker
-    keeps answering the scheduler while numba loads its cache."""
+    keeps answering the scheduler while it imports and loads the selector's backends."""
 
     name = "vo3d-sweep-warm-up"
 
