@@ -92,8 +92,12 @@ class SweepEncounter:
     attempts: int
     params: dict[str, float | int | str]
     scenario: dict[str, Any] = field(repr=False)
+    #: The scenario as the validity check loaded it (``load`` returns it: loading is pure).
+    loaded: Scenario | None = field(default=None, repr=False, compare=False)
 
     def load(self) -> Scenario:
+        if self.loaded is not None:
+            return self.loaded
         return scenario_from_dict(self.scenario, source=self.scenario["name"])
 
 
@@ -192,7 +196,7 @@ def make_encounter(family: str | Family, seed: int, index: int) -> SweepEncounte
             f"'{fam.name}', {seed}, {index})).",
             **draw.scenario,
         }
-        last = encounter_problems(data, name)
+        sc, last = _checked(data, name)
         if not last:
             return SweepEncounter(
                 family=fam.name,
@@ -201,6 +205,7 @@ def make_encounter(family: str | Family, seed: int, index: int) -> SweepEncounte
                 attempts=attempt,
                 params=dict(draw.params),
                 scenario=data,
+                loaded=sc,
             )
     raise RuntimeError(
         f"{name}: no valid encounter in {fam.max_attempts} draws (last problem: {last[0]})"
@@ -209,10 +214,16 @@ def make_encounter(family: str | Family, seed: int, index: int) -> SweepEncounte
 
 def encounter_problems(data: dict[str, Any], source: str = "<encounter>") -> list[str]:
     """Why ``data`` is not a valid sweep encounter (empty list: it is); see the module doc."""
+    return _checked(data, source)[1]
+
+
+def _checked(data: dict[str, Any], source: str) -> tuple[Scenario | None, list[str]]:
+    """The scenario ``data`` loads to (None when the loader refuses it) and why it is not a
+    valid sweep encounter (empty: it is)."""
     try:
         sc = scenario_from_dict(data, source=source)
     except ScenarioError as exc:
-        return [str(exc)]
+        return None, [str(exc)]
     problems = sc.start_warnings()
     points = np.concatenate([sc.starts, sc.goals])
     owner = np.tile(np.arange(sc.n_agents), 2)
@@ -233,7 +244,7 @@ def encounter_problems(data: dict[str, Any], source: str = "<encounter>") -> lis
                 f"a start or goal is within {PRISM_CLEARANCE:g} m of the protected "
                 f"prism of obstacles[{k}]"
             )
-    return problems
+    return sc, problems
 
 
 # ----------------------------------------------------------------------------- helpers
