@@ -74,9 +74,10 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     )
     sw.add_argument(
         "--method",
-        choices=("vo3d", "rvo2"),
+        choices=("vo3d", "rvo2", "none"),
         default="vo3d",
-        help="vo3d (default) or rvo2: RVO2-3D, obstacle-free families only",
+        help="vo3d (default); rvo2: RVO2-3D, obstacle-free families only; none: no avoidance, "
+        "every agent straight to its goal (the unmitigated rates, for risk ratios)",
     )
     sw.add_argument(
         "--formulation",
@@ -95,8 +96,15 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     sw.add_argument(
         "--out",
         metavar="DIR",
-        help="also write encounters.parquet, summary.json, min_distance.png and "
-        "failures/*.yaml (replayable by vo3d run) to DIR (created; checked before the sweep)",
+        help="keep the rows in DIR as they come (resumable), and write encounters.parquet, "
+        "min_distance.png, failures/*.yaml (replayable by vo3d run) and summary.json there "
+        "at the end (created; checked before the sweep)",
+    )
+    sw.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the sweep in --out DIR (the same arguments): fly only the encounters "
+        "missing there",
     )
     sw.add_argument(
         "--json",
@@ -108,6 +116,12 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
         type=non_negative_int,
         metavar="M",
         help="encounters submitted at once (default 4 per worker, at least 8)",
+    )
+    sw.add_argument(
+        "--batch",
+        type=non_negative_int,
+        metavar="B",
+        help="encounters per Dask task (default: up to 64 for families flown side by side, else 1)",
     )
     sw.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     sw.set_defaults(func=cmd_sweep)
@@ -219,6 +233,8 @@ def _sweep(args: argparse.Namespace) -> int:
         raise SweepError("family: required (vo3d sweep --list names them)")
     if args.n is None:
         raise SweepError("--n: required (the number of encounters)")
+    if args.resume and args.out is None:
+        raise SweepError("--resume: needs --out DIR (the directory of the sweep to continue)")
     try:
         options = check_selector_options(dict(args.selector_options or ()), "--selector-option")
     except ScenarioError as exc:
@@ -237,6 +253,7 @@ def _sweep(args: argparse.Namespace) -> int:
         workers=workers,
         method=method,
         in_flight=args.in_flight,
+        batch=args.batch,
     )
     log.info(
         "sweep %s: %d encounters, seed %d, method %s, %s",
@@ -256,6 +273,9 @@ def _sweep(args: argparse.Namespace) -> int:
             method=method,
             in_flight=args.in_flight,
             progress=not args.no_progress and log.isEnabledFor(logging.INFO),
+            out=args.out,
+            resume=args.resume,
+            batch=args.batch,
         )
     s = result.summary
     status = EXIT_ERRORS if s["errors"] else EXIT_OK

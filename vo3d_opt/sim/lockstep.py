@@ -34,13 +34,17 @@ from vo3d_opt.sim.simulator import INVALID
 from vo3d_opt.sim.traffic import GoalWithDetours
 
 
-def fits(sc: Scenario, step: DecisionStep) -> bool:
-    """Whether :func:`fly_together` flies ``sc`` with ``step`` as ``fly`` would."""
+def fits_scenario(sc: Scenario) -> bool:
+    """Whether :func:`fly_together` can fly ``sc`` (with a step that :func:`fits`): kinematic
+    or first-order vehicles that sense the same true snapshot, commands never rate-limited."""
     if sc.vehicle_dynamics.model not in ("kinematic", "first_order") or not sc.sensing.perfect:
         return False
-    if derive_margins(sc).command_rate is not None:  # rate-limited commands: fly's own loop
-        return False
-    return bool(not sc.avoids.any()) or batch_fits(step)
+    return derive_margins(sc).command_rate is None
+
+
+def fits(sc: Scenario, step: DecisionStep) -> bool:
+    """Whether :func:`fly_together` flies ``sc`` with ``step`` as ``fly`` would."""
+    return fits_scenario(sc) and (bool(not sc.avoids.any()) or batch_fits(step))
 
 
 @dataclass
