@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from typing import Any
 from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FORMULATIONS
 from vo3d_opt.sim.scenario import ScenarioError, check_selector_options
 from vo3d_opt.sim.simulator import DEFAULT_FORMULATION
+from vo3d_opt.sweep.store import FLUSH_SECONDS
 
 from .common import (
     EXIT_OK,
@@ -33,6 +35,17 @@ from .common import (
 EXIT_ERRORS = 1
 
 log = logging.getLogger("vo3d_opt.sweep")
+
+
+def positive_float(text: str) -> float:
+    """An argparse ``type``: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
 
 
 def _cpus() -> int:
@@ -122,6 +135,14 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
         type=non_negative_int,
         metavar="B",
         help="encounters per Dask task (default: up to 64 for families flown side by side, else 1)",
+    )
+    sw.add_argument(
+        "--flush-every",
+        type=positive_float,
+        metavar="SECONDS",
+        default=FLUSH_SECONDS,
+        help=f"with --out: write the rows flown to DIR at least this often (default "
+        f"{FLUSH_SECONDS:g} s; what a killed sweep may have to fly again)",
     )
     sw.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     sw.set_defaults(func=cmd_sweep)
@@ -276,6 +297,7 @@ def _sweep(args: argparse.Namespace) -> int:
             out=args.out,
             resume=args.resume,
             batch=args.batch,
+            flush_seconds=args.flush_every,
         )
     s = result.summary
     status = EXIT_ERRORS if s["errors"] else EXIT_OK

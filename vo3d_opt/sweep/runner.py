@@ -24,7 +24,7 @@ from vo3d_opt.sim import lockstep
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, error_line
 from vo3d_opt.sweep.stats import aggregate
-from vo3d_opt.sweep.store import PartStore, ResumeError, rows_frame
+from vo3d_opt.sweep.store import FLUSH_SECONDS, PartStore, ResumeError, rows_frame
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -181,6 +181,7 @@ def run_sweep(
     out: str | Path | None = None,
     resume: bool = False,
     batch: int | None = None,
+    flush_seconds: float = FLUSH_SECONDS,
 ) -> SweepResult:
     """Fly encounters 0..n-1 of ``family`` with ``seed`` on a Dask cluster: a local one of
     ``workers`` processes (one thread each), or the existing one at ``scheduler``.
@@ -188,7 +189,8 @@ def run_sweep(
     ``in_flight``: tasks submitted at once (default 4 per worker thread, at least 8); ``batch``:
     encounters per task (default :func:`default_batch`); ``allowed_failures``: Dask's retries of
     a task whose worker died (local cluster only). ``out``: keep the rows in this directory as
-    they come (``vo3d_opt.sweep.store``); ``resume``: fly only the encounters missing there.
+    they come (``vo3d_opt.sweep.store``: a part at least every ``flush_seconds``); ``resume``:
+    fly only the encounters missing there.
     ``SweepError`` for bad options, before any cluster starts, or an unreachable scheduler.
     """
     fam, formulation, solver = validate(
@@ -197,7 +199,8 @@ def run_sweep(
     store = None
     if out is not None:
         try:
-            store = PartStore(out, manifest(fam, n, seed, method, formulation, solver), resume)
+            key = manifest(fam, n, seed, method, formulation, solver)
+            store = PartStore(out, key, resume, flush_seconds)
         except (ResumeError, OSError) as exc:
             raise SweepError(str(exc)) from None
     known = dict(store.rows) if store is not None else {}

@@ -24,11 +24,12 @@ import json
 import shutil
 import time
 from pathlib import Path
-from typing import Any
-
-import pandas as pd
+from typing import TYPE_CHECKING, Any
 
 from vo3d_opt.report import atomic
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 MANIFEST = "sweep.json"
 PARTS = "parts"
@@ -46,6 +47,8 @@ class ResumeError(ValueError):
 def rows_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
     """One row per encounter, sorted by index, its columns the keys of the rows in the order
     they first appear (a key a row lacks is None there)."""
+    import pandas as pd
+
     ordered = sorted(rows, key=lambda r: int(r["index"]))
     keys: dict[str, None] = {}
     for row in ordered:
@@ -86,8 +89,15 @@ class PartStore:
     ``resume``: continue the sweep already there (refused if it is another), else start afresh
     (refused if an unfinished one is there). ``rows``: those flown before, by index."""
 
-    def __init__(self, out: str | Path, manifest: dict[str, Any], resume: bool) -> None:
+    def __init__(
+        self,
+        out: str | Path,
+        manifest: dict[str, Any],
+        resume: bool,
+        flush_seconds: float = FLUSH_SECONDS,
+    ) -> None:
         self.out = Path(out)
+        self.flush_seconds = float(flush_seconds)
         self.parts = self.out / PARTS
         self.manifest = manifest
         self.pending: list[dict[str, Any]] = []
@@ -151,7 +161,7 @@ class PartStore:
             self.rows.setdefault(int(row["index"]), row)
         self.pending += rows
         waited = time.monotonic() - self.last_flush
-        if len(self.pending) >= FLUSH_ROWS or (self.pending and waited >= FLUSH_SECONDS):
+        if len(self.pending) >= FLUSH_ROWS or (self.pending and waited >= self.flush_seconds):
             self.flush()
 
     def flush(self) -> None:
