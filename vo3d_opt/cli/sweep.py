@@ -114,6 +114,12 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
         "at the end (created; checked before the sweep)",
     )
     sw.add_argument(
+        "--against",
+        metavar="DIR",
+        help="the --out DIR of the same sweep flown with --method none: the summary then "
+        "gives the risk ratios of collisions and intrusions against it",
+    )
+    sw.add_argument(
         "--resume",
         action="store_true",
         help="continue the sweep in --out DIR (the same arguments): fly only the encounters "
@@ -238,15 +244,45 @@ def format_summary(summary: dict[str, Any]) -> str:
                 f"  {event:<16} {r['events']}/{r['encounters']}  {r['rate']:.4g}  "
                 f"[{lo:.4g}, {hi:.4g}]  {r['upper95']:.4g}"
             )
+    for event, r in (summary.get("risk_ratios") or {}).items():
+        if r["ratio"] is None:
+            lines.append(f"  risk ratio {event}: - (no {event} without avoidance)")
+        else:
+            lo, hi = r["ci95"]
+            lines.append(
+                f"  risk ratio {event}: {r['ratio']:.4g} [{lo:.4g}, {hi:.4g}] upper95 "
+                f"{r['upper95']:.4g} ({r['events']}/{r['encounters']} against "
+                f"{r['events_without_avoidance']}/{r['encounters_without_avoidance']} "
+                "without avoidance; Koopman score interval)"
+            )
     for err in summary["errors"]:
         lines.append(f"error in encounter {err['index']}: {err['error']}")
     return "\n".join(lines)
+
+
+def _without_avoidance(folder: str, family: str, n: int, seed: int) -> dict[str, Any]:
+    """The summary of the finished ``--method none`` sweep of ``family``, ``n`` and ``seed``
+    in ``folder`` (for ``--against``), checked before anything flies."""
+    from vo3d_opt.sweep.runner import SweepError
+
+    path = Path(folder) / "summary.json"
+    try:
+        summary = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise SweepError(f"--against {folder}: no finished sweep there ({exc})") from None
+    if not isinstance(summary, dict) or summary.get("method") != "none":
+        raise SweepError(f"--against {folder}: not a --method none sweep")
+    for key, value in (("family", family), ("encounters", n), ("seed", seed)):
+        if summary.get(key) != value:
+            raise SweepError(f"--against {folder}: {key} {summary.get(key)!r}, not {value!r}")
+    return summary
 
 
 def _sweep(args: argparse.Namespace) -> int:
     """Run ``vo3d sweep`` with its parsed ``args``; progress is logged (``vo3d_opt.sweep``
     logger, shown on stderr) and native code's prints are kept off stdout (the JSON's)."""
     from vo3d_opt.sweep.runner import Method, SweepError, run_sweep, validate
+    from vo3d_opt.sweep.stats import risk_ratios
 
     if args.list:
         return _list(args.json)
@@ -256,6 +292,9 @@ def _sweep(args: argparse.Namespace) -> int:
         raise SweepError("--n: required (the number of encounters)")
     if args.resume and args.out is None:
         raise SweepError("--resume: needs --out DIR (the directory of the sweep to continue)")
+    without = None
+    if args.against is not None:
+        without = _without_avoidance(args.against, args.family, args.n, args.seed)
     try:
         options = check_selector_options(dict(args.selector_options or ()), "--selector-option")
     except ScenarioError as exc:
@@ -300,6 +339,11 @@ def _sweep(args: argparse.Namespace) -> int:
             flush_seconds=args.flush_every,
         )
     s = result.summary
+    if without is not None:
+        try:
+            s["risk_ratios"] = risk_ratios(s, without)
+        except ValueError as exc:
+            raise SweepError(f"--against {args.against}: {exc}") from None
     status = EXIT_ERRORS if s["errors"] else EXIT_OK
     if args.out is not None:
         from vo3d_opt.sweep.output import write_results  # matplotlib only when asked for

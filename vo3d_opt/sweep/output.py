@@ -163,3 +163,62 @@ def write_results(result: SweepResult, out: str | Path) -> list[Path]:
     if result.store is not None and Path(result.store.out).resolve() == out.resolve():
         result.store.finish()
     return [*written, summary]
+
+
+#: Okabe–Ito colours (distinct under the common colour-vision deficiencies), with line styles
+#: so that the curves also differ in grey.
+_STYLES = {
+    "vo3d": ("#0072B2", "-"),
+    "rvo2": ("#E69F00", "--"),
+    "none": ("#000000", ":"),
+}
+_LABELS = {"vo3d": "vo3d (ours)", "rvo2": "RVO2-3D", "none": "no avoidance"}
+
+
+def plot_closest_approach(family: str, runs: dict[str, pd.DataFrame], path: Path) -> Path:
+    """One family's closest approach per encounter, d / max(r_pz_i, r_pz_j), per method
+    (``runs``: the rows of each method's sweep of the same encounters): its distribution
+    (ECDF) and, on a log scale, the share of encounters closer than each multiple of r_pz
+    (the tail, where intrusions and collisions are)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10.0, 4.2), dpi=_DPI)
+    FigureCanvasAgg(fig)
+    ax_cdf, ax_tail = fig.subplots(1, 2)
+    for method, rows in runs.items():
+        ok = rows[rows["error"].isna()] if "error" in rows else rows
+        d = np.sort(ok["min_normalised_distance"].dropna().to_numpy(dtype=float))
+        if not d.size:
+            continue
+        colour, style = _STYLES.get(method, ("#009E73", "-."))
+        label = f"{_LABELS.get(method, method)} (n={d.size:,})"
+        share = np.arange(1, d.size + 1) / d.size
+        ax_cdf.step(d, share, where="post", color=colour, ls=style, lw=1.6, label=label)
+        below = d[d <= 1.5]
+        if below.size:
+            ax_tail.step(
+                below,
+                share[: below.size],
+                where="post",
+                color=colour,
+                ls=style,
+                lw=1.6,
+                label=label,
+            )
+    for ax in (ax_cdf, ax_tail):
+        ax.axvline(1.0, color="#D55E00", ls="-.", lw=1.0, label="d = r_pz (intrusion below)")
+        ax.set_xlabel("closest approach d / max(r_pz_i, r_pz_j)")
+        ax.grid(alpha=0.3)
+    ax_cdf.set_ylabel("share of encounters closer (ECDF)")
+    ax_cdf.set_xlim(left=0.0)
+    ax_tail.set_yscale("log")
+    ax_tail.set_xlim(0.0, 1.5)
+    ax_tail.set_ylabel("share of encounters closer (log)")
+    ax_tail.set_title("the tail: d <= 1.5 r_pz", fontsize=9)
+    ax_cdf.legend(fontsize=8, loc="upper left")
+    fig.suptitle(f"'{family}': closest approach per encounter, in protected-zone radii")
+    fig.tight_layout()
+    with atomic(path) as tmp:
+        fig.savefig(tmp, format="png")
+    return path
