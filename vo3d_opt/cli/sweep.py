@@ -355,11 +355,14 @@ def _sweep(args: argparse.Namespace) -> int:
             log.error("--out %s: writing failed: %s", args.out, exc.strerror or exc)
             status = EXIT_ERRORS
     log.info(
-        "done: %d/%d encounters in %.1f s (+%.1f s cluster and warm-up), %d errors",
-        s["completed"],
-        s["encounters"],
+        "done: %d encounters flown in %.1f s (+%.1f s cluster and warm-up), %d found in --out; "
+        "%d/%d completed, %d errors",
+        result.flown,
         s["wall_time"],
         s["setup_time"],
+        s["encounters"] - result.flown,
+        s["completed"],
+        s["encounters"],
         len(s["errors"]),
     )
     print(json.dumps(s, allow_nan=False) if args.json else format_summary(s))

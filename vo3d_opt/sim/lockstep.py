@@ -12,9 +12,10 @@ operations. Each run is :func:`~vo3d_opt.sim.simulator.fly`'s run of its scenari
 differ), which tests/test_lockstep.py checks: no vehicle sees another run's, and every
 operation is the same arithmetic on each vehicle's numbers.
 
-What it flies (:func:`fits`): kinematic or first-order dynamics, noiseless immediate sensing,
-and a step that is a compiled ``SwarmSelect`` (``BatchSelect.fits``) or one that nobody calls
-(every agent ``avoids: false``: a run without avoidance). Anything else goes through ``fly``.
+What it flies (:func:`fits`): kinematic or first-order dynamics, and either noiseless immediate
+sensing with a step that is a compiled ``SwarmSelect`` (``BatchSelect.fits``), or a step that
+nobody calls (every agent ``avoids: false``: a run without avoidance). Anything else goes
+through ``fly``.
 """
 
 from __future__ import annotations
@@ -34,17 +35,23 @@ from vo3d_opt.sim.simulator import INVALID
 from vo3d_opt.sim.traffic import GoalWithDetours
 
 
-def fits_scenario(sc: Scenario) -> bool:
-    """Whether :func:`fly_together` can fly ``sc`` (with a step that :func:`fits`): kinematic
-    or first-order vehicles that sense the same true snapshot, commands never rate-limited."""
-    if sc.vehicle_dynamics.model not in ("kinematic", "first_order") or not sc.sensing.perfect:
+def fits_scenario(sc: Scenario, deciding: bool = True) -> bool:
+    """Whether :func:`fly_together` can fly ``sc``: kinematic or first-order vehicles whose
+    commands are never rate-limited and, when some of them decide (``deciding``), that sense
+    the same true snapshot."""
+    if sc.vehicle_dynamics.model not in ("kinematic", "first_order"):
+        return False
+    if deciding and not sc.sensing.perfect:
         return False
     return derive_margins(sc).command_rate is None
 
 
 def fits(sc: Scenario, step: DecisionStep) -> bool:
-    """Whether :func:`fly_together` flies ``sc`` with ``step`` as ``fly`` would."""
-    return fits_scenario(sc) and (bool(not sc.avoids.any()) or batch_fits(step))
+    """Whether :func:`fly_together` flies ``sc`` with ``step`` as ``fly`` would (with nobody
+    avoiding, nobody senses: the sensing does not matter)."""
+    if not sc.avoids.any():
+        return fits_scenario(sc, deciding=False)
+    return fits_scenario(sc) and batch_fits(step)
 
 
 @dataclass

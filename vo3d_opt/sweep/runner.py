@@ -51,6 +51,8 @@ class SweepResult:
     summary: dict[str, Any] = field(default_factory=dict)
     #: Where its rows were kept as they came (``out``), to be tidied once the outputs are written.
     store: PartStore | None = field(default=None, repr=False, compare=False)
+    #: Encounters flown by this call (the others were found in ``out``).
+    flown: int = 0
 
 
 def check_method(family: Family, method: Method) -> tuple[str, str]:
@@ -146,7 +148,7 @@ def default_batch(fam: Family, method: Method, count: int, threads: int) -> int:
         sc = make_encounter(fam, 0, 0).load()
     except Exception:  # noqa: BLE001 - a family that cannot draw fails in its tasks, one by one
         return 1
-    if not lockstep.fits_scenario(sc):
+    if not lockstep.fits_scenario(sc, deciding=method.name != "none"):
         return 1
     return max(1, min(MAX_BATCH, math.ceil(count / (4 * threads))))
 
@@ -249,7 +251,13 @@ def run_sweep(
         }
     )
     return SweepResult(
-        family=fam, seed=int(seed), method=method, rows=df, summary=summary, store=store
+        family=fam,
+        seed=int(seed),
+        method=method,
+        rows=df,
+        summary=summary,
+        store=store,
+        flown=len(missing),
     )
 
 
