@@ -65,7 +65,10 @@ class Family:
     can fly it (``--method rvo2``). ``warm_keys``: scenario keys added to the workers' warm-up
     encounter, so that it runs the same code as the family's (e.g. its ``dynamics``).
     ``needs``: the scenario keys (dotted paths) its draws use that not every build's schema
-    defines (contracts §5); the sweep refuses the family while one is missing."""
+    defines (contracts §5); the sweep refuses the family while one is missing. ``batched``:
+    its encounters can fly side by side (``vo3d_opt.sim.lockstep``: kinematic or first-order
+    dynamics, noiseless sensing), so a sweep hands a task many of them; else one each (an
+    encounter of seconds or minutes is a task of its own)."""
 
     name: str
     summary: str
@@ -74,6 +77,7 @@ class Family:
     max_attempts: int = 1000
     warm_keys: dict[str, Any] = field(default_factory=dict)
     needs: tuple[str, ...] = ()
+    batched: bool = True
 
     def missing_keys(self) -> list[str]:
         """The scenario keys of ``needs`` (dotted paths, e.g. ``sensing.latency``) that this
@@ -133,6 +137,7 @@ def register(
     obstacle_free: bool,
     warm_keys: dict[str, Any] | None = None,
     needs: tuple[str, ...] = (),
+    batched: bool = True,
 ) -> Callable[[Generator], Generator]:
     """Decorator: register ``rng -> Draw`` as family ``name`` (``summary``: one line for
     ``vo3d sweep --list``; the rest as in :class:`Family`)."""
@@ -145,6 +150,7 @@ def register(
             obstacle_free=obstacle_free,
             warm_keys=dict(warm_keys or {}),
             needs=tuple(needs),
+            batched=batched,
         )
         return fn
 

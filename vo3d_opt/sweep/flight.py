@@ -1,10 +1,12 @@
-"""One encounter, flown where it is called (a Dask worker, or this process).
+"""Encounters flown where they are called (a Dask worker, or this process).
 
 :func:`run_encounter` regenerates encounter ``index`` of a family from (family, seed, index),
 flies it with the :class:`Method` and returns one row: its parameters and its contract §3
-summary, or the error it raised. It is a pure function of its arguments but for the timing
-columns (:data:`TIMING_COLUMNS`), which is why a sweep's results do not depend on how many
-workers ran it.
+summary, or the error it raised. :func:`run_encounters` does the same for several, flying
+those it can side by side (``vo3d_opt.sim.lockstep``), with the same rows. A row is a pure
+function of (family, seed, index, method) but for the timing columns
+(:data:`TIMING_COLUMNS`), which is why a sweep's results depend neither on how many workers
+ran it nor on how its encounters were batched.
 """
 
 from __future__ import annotations

@@ -19,8 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 from vo3d_opt.config import DEFAULT_PRESET
-from vo3d_opt.generators import FAMILIES, Family, get_family, make_encounter
-from vo3d_opt.sim import lockstep
+from vo3d_opt.generators import FAMILIES, Family, get_family
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, error_line
 from vo3d_opt.sweep.stats import aggregate
@@ -140,15 +139,10 @@ MAX_BATCH = 64
 
 def default_batch(fam: Family, method: Method, count: int, threads: int) -> int:
     """Encounters per task: up to MAX_BATCH (about four tasks per worker thread) when the
-    family's encounters fly side by side with ``method``, else one (an encounter of seconds
-    or minutes is its own task: its row comes as soon as it lands)."""
-    if method.name == "rvo2":
-        return 1
-    try:
-        sc = make_encounter(fam, 0, 0).load()
-    except Exception:  # noqa: BLE001 - a family that cannot draw fails in its tasks, one by one
-        return 1
-    if not lockstep.fits_scenario(sc, deciding=method.name != "none"):
+    family's encounters fly side by side (``Family.batched``; RVO2-3D flies one at a time),
+    else one (an encounter of seconds or minutes is its own task: its row comes as soon as it
+    lands)."""
+    if method.name == "rvo2" or not fam.batched:
         return 1
     return max(1, min(MAX_BATCH, math.ceil(count / (4 * threads))))
 
