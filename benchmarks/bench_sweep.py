@@ -34,6 +34,7 @@ import tempfile
 from pathlib import Path
 
 import pandas as pd
+from run_sweeps import cpu_model  # this folder's: the same machine line
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -95,16 +96,6 @@ def compare(old: pd.DataFrame, new: pd.DataFrame) -> tuple[int, int, list[str]]:
     missing = sorted(set(cols) ^ {c for c in new.columns if c not in TIMING_COLUMNS})
     differ = [c for c in cols if c in new and not old[c].equals(new[c])]
     return n, len(cols), missing + differ
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def header(args: argparse.Namespace) -> list[str]:

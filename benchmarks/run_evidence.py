@@ -33,6 +33,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from run_sweeps import commit, cpu_model, vo3d_cmd  # this folder's: the same machine line
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 FAMILIES = ("pair", "group", "dense", "lagged", "noisy", "intruder", "rotorpy")
@@ -40,11 +42,6 @@ RVO2 = ("pair", "dense")  # the obstacle-free families: RVO2-3D flies them
 #: The order of the runs of a family: none first (the others' risk ratios need it).
 METHODS = ("none", "vo3d", "rvo2")
 NAMES = {"vo3d": "vo3d (ours, preset safe)", "rvo2": "RVO2-3D", "none": "no avoidance"}
-
-
-def vo3d_cmd() -> list[str]:
-    script = Path(sys.executable).with_name("vo3d")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "vo3d_opt.cli"]
 
 
 def methods_of(family: str) -> list[str]:
@@ -72,24 +69,6 @@ def run_one(family: str, method: str, n: int, out_root: Path, where: list[str]) 
 
 
 # ------------------------------------------------------------------------------ the pages
-
-
-def commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, check=True,
-                              capture_output=True, text=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "?"
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def _pct(x: float | None) -> str:
