@@ -11,7 +11,8 @@ git into a temporary directory and its decision kernel compiled ahead of time th
   ``--old-n`` with the old one, on 1 and 2 workers; encounters per second, and per second
   per worker;
 * rows (``--rows FAMILY=N ...``): the same N encounters of each family flown by both, compared
-  column by column (all but the timing columns); ``--old-rows DIR`` reuses the old code's rows
+  column by column (all but the timing columns; ``FAMILY:METHOD=N`` for another method than
+  vo3d, e.g. ``pair:rvo2=2000``); ``--old-rows DIR`` reuses the old code's rows
   saved by an earlier run (``--save-old DIR``), which takes the old code long to fly.
 
     python benchmarks/bench_sweep.py [--family pair] [--n 2000] [--old-n 300]
@@ -46,7 +47,8 @@ from vo3d_opt.sweep import Method, run_sweep
 
 def main():
     family, n, workers, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
-    r = run_sweep(family, n, seed=0, workers=workers, method=Method(), progress=False)
+    method = Method(name=sys.argv[5])
+    r = run_sweep(family, n, seed=0, workers=workers, method=method, progress=False)
     r.rows.to_parquet(out, index=False)
     print(json.dumps(r.summary))
 
@@ -74,7 +76,9 @@ def old_tree(rev: str, where: Path) -> Path:
     return tree
 
 
-def fly(tree: Path | None, family: str, n: int, workers: int, rows: Path) -> dict:
+def fly(
+    tree: Path | None, family: str, n: int, workers: int, rows: Path, method: str = "vo3d"
+) -> dict:
     """One sweep in a fresh process, with the package of ``tree`` (None: this checkout)."""
     env = dict(os.environ)
     if tree is not None:
@@ -82,7 +86,8 @@ def fly(tree: Path | None, family: str, n: int, workers: int, rows: Path) -> dic
     script = rows.with_suffix(".py")
     script.write_text(DRIVER)
     proc = subprocess.run([sys.executable, str(script), family, str(n), str(workers),
-                           str(rows)], env=env, capture_output=True, text=True, check=True)
+                           str(rows), method], env=env, capture_output=True, text=True,
+                          check=True)
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
@@ -138,30 +143,31 @@ def throughput(args: argparse.Namespace, tree: Path, tmp: Path) -> tuple[list[st
 
 def rows_check(args: argparse.Namespace, tree: Path, tmp: Path) -> list[str]:
     lines = [
-        "## Rows before and now, family by family (2 workers, seed 0, default method)",
+        "## Rows before and now, family by family (2 workers, seed 0)",
         "",
-        "| family | encounters | columns compared | differing columns | wall s before | "
-        "wall s now |",
-        "|---|---:|---:|---|---:|---:|",
+        "| family | method | encounters | columns compared | differing columns | wall s before "
+        "| wall s now |",
+        "|---|---|---:|---:|---|---:|---:|",
     ]
     for item in args.rows:
-        family, _, count = item.partition("=")
-        n = int(count)
-        saved = (args.old_rows / f"{family}-vo3d.parquet") if args.old_rows else None
+        name, _, count = item.partition("=")
+        family, _, method = name.partition(":")
+        method, n = method or "vo3d", int(count)
+        saved = (args.old_rows / f"{family}-{method}.parquet") if args.old_rows else None
         if saved is not None and saved.exists():
             old, wall_old = pd.read_parquet(saved), "(saved)"
         else:
-            path = tmp / f"rows-before-{family}.parquet"
-            s = fly(tree, family, n, 2, path)
+            path = tmp / f"rows-before-{family}-{method}.parquet"
+            s = fly(tree, family, n, 2, path, method)
             old, wall_old = pd.read_parquet(path), f"{s['wall_time']:.0f}"
             if args.save_old:
                 args.save_old.mkdir(parents=True, exist_ok=True)
-                shutil.copy(path, args.save_old / f"{family}-vo3d.parquet")
-        path = tmp / f"rows-now-{family}.parquet"
-        s = fly(None, family, min(n, len(old)), 2, path)
+                shutil.copy(path, args.save_old / f"{family}-{method}.parquet")
+        path = tmp / f"rows-now-{family}-{method}.parquet"
+        s = fly(None, family, min(n, len(old)), 2, path, method)
         got, cols, bad = compare(old, pd.read_parquet(path))
-        lines.append(f"| {family} | {got} | {cols} | {', '.join(bad) or 'none'} | {wall_old} | "
-                     f"{s['wall_time']:.0f} |")
+        lines.append(f"| {family} | {method} | {got} | {cols} | {', '.join(bad) or 'none'} | "
+                     f"{wall_old} | {s['wall_time']:.0f} |")
         print(lines[-1], file=sys.stderr, flush=True)
     return [*lines, ""]
 
