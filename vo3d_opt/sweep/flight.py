@@ -43,6 +43,7 @@ TIMING_COLUMNS = (
     "wall_time",
     "run_time",
     "worker",
+    "compute_time_per_agent_step_us",  # RVO2-3D's own timing (baselines.summarize_rvo2)
 )
 #: Vehicles flown side by side at most (``vo3d_opt.sim.lockstep``): enough that the per-step
 #: overhead is shared by dozens of encounters, few enough that the arrays stay small.
