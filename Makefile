@@ -5,45 +5,45 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test install bench lint clean notebooks notebooks-sync aot
+.PHONY: demo test install bench lint clean notebooks notebooks-sync figures
 
 $(PY):
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) on PATH (or run: make PYTHON=python3 ...)"; exit 2; }
 	$(PYTHON) -m venv $(VENV)
 
+# The build requirements first (pyproject.toml's build-system.requires; cmake and ninja from
+# PyPI only where the machine has none), then the package, editable and built without
+# isolation, so that its persistent build directory (build/) stays valid between rebuilds.
+BUILD_REQS := 'scikit-build-core>=0.10' 'nanobind>=2.4'
 $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev,baselines,batched,link]'
-	@touch $(STAMP)
+	$(PY) -m pip install --quiet $(BUILD_REQS)
+	@command -v cmake >/dev/null 2>&1 || $(PY) -m pip install --quiet 'cmake>=3.18'
+	@command -v ninja >/dev/null 2>&1 || $(PY) -m pip install --quiet ninja
+	$(PY) -m pip install --quiet --no-build-isolation -e '.[dev,baselines,batched,link]'
+	@touch $(STAMP) $(CORE_STAMP)
 
-# The decision kernels of select() and select_many() compiled ahead of time (`vo3d compile`,
-# vo3d_opt/formulations/aot.py), so that a first select() does not wait ~30 s for numba's JIT.
-# Checked on every make (a second): rebuilt when the sources, numba, numpy or the machine
-# changed (a module built from other sources is never used: select() would JIT-compile).
-aot: $(STAMP)
-	@$(VENV)/bin/vo3d compile --check >/dev/null 2>&1 || $(VENV)/bin/vo3d compile || echo "(not built: select() compiles its kernel with numba's JIT on first use)"
-
-install: $(STAMP) aot
-
-# numba's on-disk cache is keyed on each function's own file, not on the files of the functions
-# it inlines: after an edit of vo3d_opt/, drop every cached kernel so nothing stale is loaded.
-NUMBA_STAMP := $(VENV)/.numba-sources
-$(NUMBA_STAMP): $(shell find vo3d_opt -name '*.py') | $(PY)
-	@find vo3d_opt -name '*.nb[ic]' -delete
+# The compiled core (vo3d_opt/algorithm/, CMakeLists.txt), rebuilt when a source changes:
+# incremental, in the same build directory.
+CORE_STAMP := $(VENV)/.core
+$(CORE_STAMP): $(wildcard vo3d_opt/algorithm/*.hpp vo3d_opt/algorithm/*.cpp) CMakeLists.txt | $(STAMP)
+	$(PY) -m pip install --quiet --no-build-isolation --no-deps -e .
 	@touch $@
 
-demo: $(STAMP) $(NUMBA_STAMP) aot
+install: $(STAMP) $(CORE_STAMP)
+
+demo: $(STAMP) $(CORE_STAMP)
 	$(PY) -m vo3d_opt.demo
 
-test: $(STAMP) $(NUMBA_STAMP) aot
+test: $(STAMP) $(CORE_STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider -n 2
 
 # ruff (lint + format check), mypy and the import layers (import-linter), configured in
 # pyproject.toml. The notebooks' .py
 # sources are linted too (their .ipynb twins are excluded in pyproject.toml).
 lint: $(STAMP)
-	$(VENV)/bin/ruff check vo3d_opt setup.py notebooks
-	$(VENV)/bin/ruff format --check vo3d_opt setup.py notebooks
+	$(VENV)/bin/ruff check vo3d_opt notebooks
+	$(VENV)/bin/ruff format --check vo3d_opt notebooks
 	$(VENV)/bin/mypy
 	$(VENV)/bin/lint-imports
 
@@ -59,9 +59,12 @@ notebooks-sync: $(STAMP)
 	$(VENV)/bin/jupytext --update --to ipynb notebooks/[0-9]*.py
 	$(VENV)/bin/jupyter nbconvert --log-level WARN --clear-output --inplace notebooks/[0-9]*.ipynb
 
-bench: $(STAMP) $(NUMBA_STAMP) aot
+bench: $(STAMP) $(CORE_STAMP)
 	$(PY) benchmarks/bench_select.py
 
+# The PNGs of docs/figures.md (cases 1, 2, 4, random-crossing-1000 and a replay frame).
+figures: $(STAMP) $(CORE_STAMP)
+	$(PY) benchmarks/figures.py
+
 clean:
-	rm -rf $(VENV) out vo3d_opt/formulations/_kernel_aot*
-	find vo3d_opt -name '*.nb[ic]' -delete
+	rm -rf $(VENV) out build

@@ -22,10 +22,9 @@ import warnings
 import numpy as np
 
 from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
-from vo3d_opt.formulations import aot, kernel
+from vo3d_opt.formulations import kernel
 from vo3d_opt.formulations.common import bounds_array, neighbor_rows
 from vo3d_opt.geometry.pyramid import prism_rows
-from vo3d_opt.selector import decision_kernel
 from vo3d_opt.solvers import available_qp_solvers
 
 
@@ -71,12 +70,9 @@ def time_calls(selector: VelocitySelector, cases: list[dict], repeat: int) -> tu
 
 
 def kernel_times(selector: VelocitySelector, cases: list[dict], repeat: int) -> np.ndarray:
-    """µs per call of the compiled decision ``select`` runs (the ahead-of-time module of
-    ``vo3d compile`` when it is current, else numba's JIT ``kernel.decide``) alone, on the
-    arrays ``select`` builds for each case."""
-    packed, out = selector.options.packed, np.empty(kernel.OUT_SIZE)
-    compiled, _ = aot.load()
-    decide = kernel.decide if compiled is None else compiled.decide.compiled
+    """µs per call of the compiled decision ``select`` runs (``kernel.decide``, the compiled
+    core) alone, on the arrays ``select`` builds for each case."""
+    cfg, out, decide = selector.options.config, np.empty(kernel.OUT_SIZE), kernel.decide
     args = [(kw["own"].position, kw["own"].velocity, np.asarray(kw["preferred_velocity"], dtype=float),
              neighbor_rows(kw["neighbors"]), prism_rows(kw["obstacles"]), bounds_array(kw["limits"], kw["dt"]))
             for kw in cases]
@@ -84,14 +80,13 @@ def kernel_times(selector: VelocitySelector, cases: list[dict], repeat: int) -> 
     for _ in range(repeat):
         for a in args:
             t0 = time.perf_counter()
-            decide(*a, *packed, out)
+            decide(*a, cfg, out)
             times.append(time.perf_counter() - t0)
     return np.array(times) * 1e6
 
 
 def breakdown(rng: np.random.Generator, grid: list[tuple[int, int]], args: argparse.Namespace) -> None:
     """Median µs of the default decision, the kernel alone and the Python around it, and sampled."""
-    print(f"# select() runs the {decision_kernel()}")
     print("| neighbours | obstacles | select() median µs | p99 µs | kernel alone median µs | "
           "Python around µs | sampled median µs | speed-up over sampled |")
     print("|---:|---:|---:|---:|---:|---:|---:|---:|")

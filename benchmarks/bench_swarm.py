@@ -104,8 +104,6 @@ def scenario(case: str, n: int):
 
 def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int | None) -> dict[str, Any]:
     """One (case, N, method) run in this process: its figures as a dict."""
-    import numba
-
     from vo3d_opt.baselines.rvo2 import RVO2Step, summarize_rvo2
     from vo3d_opt.sim.deciders import SwarmSelect
     from vo3d_opt.sim.metrics import decision_times_us, summarize
@@ -117,16 +115,15 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
         step: Any = RVO2Step(sc, max_neighbors=max_neighbors)
         threads = 1
     else:
-        threads = 1 if method == "ours-1" else numba.config.NUMBA_NUM_THREADS
+        from vo3d_opt.swarm import cores
+
+        threads = 1 if method == "ours-1" else cores()
         extra = extra_options(method)
         if extra is not None:  # the simulator's options plus the method's, as -o adds them
             sc = scenario_variant(sc, selector_options={**sc.selector_options, **extra})
         sel, formulation, solver = scenario_selector(sc)
         step = SwarmSelect(sc, sel, formulation=formulation, solver=solver, max_neighbors=max_neighbors,
                            threads=threads)
-        from vo3d_opt.selector import warm_up_many
-
-        warm_up_many()  # compiled (or loaded) outside every time below
     load = os.getloadavg()[0]
     t0 = time.perf_counter()
     rec = fly(sc, step, progress=False, max_steps=max_steps)
@@ -155,27 +152,14 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
 
 def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dict[str, Any]:
     """Where ours (1 thread) spends the first ``steps`` steps (None: the whole run): the input
-    checks, the k-d tree and neighbour lists, the compiled decisions (of which building each
-    vehicle's rows, timed apart by a compiled loop that only builds them), the rest of the loop,
-    the metrics."""
-    import numba
-
-    from vo3d_opt import swarm
-    from vo3d_opt.formulations.swarm import vehicle_rows
-    from vo3d_opt.selector import warm_up_many
+    checks, the k-d tree and neighbour lists, the compiled decisions (building each vehicle's
+    rows among them: they are no longer timed apart), the rest of the loop, the metrics."""
+    from vo3d_opt import selector, swarm
     from vo3d_opt.sim.deciders import SwarmSelect
     from vo3d_opt.sim.metrics import decision_times_us, summarize
     from vo3d_opt.sim.simulator import fly, scenario_selector
 
-    @numba.njit(nogil=True)
-    def rows_only(sw):  # the row building of decide_range, without the decisions
-        total = 0.0
-        for d in range(sw.who.shape[0]):
-            nbrs, prisms = vehicle_rows(sw, d)
-            total += nbrs.shape[0] + prisms.shape[0]
-        return total
-
-    spent = {"checks": 0.0, "tree": 0.0, "kernel": 0.0, "rows": 0.0}
+    spent = {"checks": 0.0, "tree": 0.0, "kernel": 0.0}
 
     def timed(key, fn):
         def wrapper(*args, **kwargs):
@@ -185,26 +169,11 @@ def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dic
             return out
         return wrapper
 
-    real_decide, real_arrays = swarm.decide_all, swarm.SwarmInputs.arrays
-
-    def arrays(self, threads=1):
-        t0 = time.perf_counter()
-        sw = real_arrays(self, threads)
-        spent["tree"] += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        rows_only(sw)
-        spent["rows"] += time.perf_counter() - t0
-        return sw
-
     swarm.SwarmInputs.checked = classmethod(timed("checks", swarm.SwarmInputs.checked.__func__))
-    swarm.SwarmInputs.arrays = arrays
-    swarm.decide_all = timed("kernel", real_decide)
+    swarm.SwarmInputs.arrays = timed("tree", swarm.SwarmInputs.arrays)
+    selector.decide_many = timed("kernel", selector.decide_many)
     sc = scenario(case, n)
     sel, formulation, solver = scenario_selector(sc)
-    warm_up_many()
-    rows_only(swarm.SwarmInputs.checked(sc.starts[:2], np.zeros((2, 3)), np.zeros((2, 3)), 1.0, [], None, 0.2,
-                                        55.0, None, None).arrays())
-    spent.update(checks=0.0, tree=0.0, kernel=0.0, rows=0.0)
     step = SwarmSelect(sc, sel, max_neighbors=max_neighbors, threads=1)
     t0 = time.perf_counter()
     rec = fly(sc, step, progress=False, max_steps=steps)
@@ -213,12 +182,12 @@ def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dic
     summarize(rec)
     metrics = time.perf_counter() - t0
     agent_steps = int(rec.decided.sum())
-    decide = float(decision_times_us(rec).sum()) / 1e6 - spent["rows"]  # rows_only ran inside
+    decide = float(decision_times_us(rec).sum()) / 1e6
     us = {k: v / agent_steps * 1e6 for k, v in spent.items()}
     return {"case": case, "n": n, "steps": rec.steps, "agent_steps": agent_steps,
-            "checks_us": us["checks"], "tree_us": us["tree"], "kernel_us": us["kernel"], "rows_us": us["rows"],
+            "checks_us": us["checks"], "tree_us": us["tree"], "kernel_us": us["kernel"], "rows_us": None,
             "select_many_us": decide / agent_steps * 1e6,
-            "loop_rest_us": (loop - decide - spent["rows"]) / agent_steps * 1e6,
+            "loop_rest_us": (loop - decide) / agent_steps * 1e6,
             "metrics_us": metrics / agent_steps * 1e6, "load": os.getloadavg()[0]}
 
 
@@ -264,12 +233,10 @@ def _machine() -> str:
                                 cwd=Path(__file__).parent).stdout.strip()
     except OSError:
         commit = "?"
-    import numba
-
     from vo3d_opt.baselines.rvo2 import version
 
-    return (f"{platform.platform()}; {os.cpu_count()} CPUs; Python {platform.python_version()}; numba "
-            f"{numba.__version__}; rvo23d {version()}; commit {commit}; {time.strftime('%Y-%m-%d %H:%M')}")
+    return (f"{platform.platform()}; {os.cpu_count()} CPUs; Python {platform.python_version()}; compiled core "
+            f"(C++, nanobind); rvo23d {version()}; commit {commit}; {time.strftime('%Y-%m-%d %H:%M')}")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -340,7 +307,7 @@ def main(argv: list[str] | None = None) -> None:
                 continue
             p = json.loads(res.stdout.strip().splitlines()[-1])
             lines.append(f"| {case} | {p['checks_us']:.2f} | {p['tree_us']:.2f} | {p['kernel_us']:.2f} "
-                         f"| {p['rows_us']:.2f} | {p['select_many_us']:.2f} | {p['loop_rest_us']:.2f} "
+                         f"| {_fmt(p['rows_us'], '.2f')} | {p['select_many_us']:.2f} | {p['loop_rest_us']:.2f} "
                          f"| {p['metrics_us']:.2f} | {p['load']:.1f} |")
             print(lines[-1], flush=True)
             flush()

@@ -14,7 +14,6 @@ import sys
 import time
 from pathlib import Path
 
-import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -22,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_swarm import scenario  # noqa: E402
 
 from vo3d_opt import swarm  # noqa: E402
-from vo3d_opt.selector import warm_up_many  # noqa: E402
+from vo3d_opt.swarm import cores  # noqa: E402
 from vo3d_opt.sim.deciders import SwarmSelect  # noqa: E402
 from vo3d_opt.sim.metrics import summarize  # noqa: E402
 from vo3d_opt.sim.simulator import fly, scenario_selector  # noqa: E402
@@ -56,8 +55,7 @@ def main() -> None:
     args = ap.parse_args()
     sc = scenario("swap", args.n)
     sel, _, _ = scenario_selector(sc)
-    warm_up_many()
-    step = SwarmSelect(sc, sel, max_neighbors=10, threads=numba.config.NUMBA_NUM_THREADS)
+    step = SwarmSelect(sc, sel, max_neighbors=10, threads=cores())
     t0 = time.perf_counter()
     rec = fly(sc, step, progress=False)
     print(f"# sphere swap, N = {args.n}, flown in {time.perf_counter() - t0:.0f} s\n")

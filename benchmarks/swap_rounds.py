@@ -28,9 +28,9 @@ from bench_swarm import scenario  # noqa: E402
 
 def record(n: int, every: int, max_steps: int | None, fast: bool = False
            ) -> tuple[Any, list[tuple[tuple, dict]]]:
-    """Fly the swap (``fast``: with ``FAST_OPTIONS``); the selector and every ``every``-th
+    """Fly the swap (``fast``: with the fast preset); the selector and every ``every``-th
     select_many call's arguments."""
-    from vo3d_opt.selector import VelocitySelector, warm_up_many
+    from vo3d_opt.selector import VelocitySelector
     from vo3d_opt.sim.deciders import SwarmSelect
     from vo3d_opt.sim.scenario import scenario_variant
     from vo3d_opt.sim.simulator import fly, scenario_selector
@@ -54,7 +54,6 @@ def record(n: int, every: int, max_steps: int | None, fast: bool = False
         sc = scenario_variant(sc, selector_options={**sc.selector_options, "preset": "fast"})
     sel, formulation, solver = scenario_selector(sc)
     step = SwarmSelect(sc, sel, formulation=formulation, solver=solver, max_neighbors=10, threads=2)
-    warm_up_many()
     VelocitySelector.select_many = kept
     try:
         fly(sc, step, progress=False, max_steps=max_steps)
@@ -69,16 +68,16 @@ def replay(sel: Any, calls: list[tuple[tuple, dict]]) -> dict[str, dict[str, flo
     from vo3d_opt.formulations.kernel import ROUND_NAMES
     from vo3d_opt.formulations.swarm import MANY_OUT_SIZE, decide_range
 
-    packed = sel.options.packed
+    cfg = sel.options.config
     out_stats: dict[str, dict[str, float]] = defaultdict(lambda: {"n": 0, "ns": 0, "solved": 0})
     for args, kwargs in calls:
         kwargs = {k: v for k, v in kwargs.items() if k != "threads"}
         sw = swarm.SwarmInputs.checked(*args, **kwargs).arrays()
         out = np.empty((sw.who.shape[0], MANY_OUT_SIZE))
-        decide_range(sw, 0, 1, *packed, out)  # loaded once before timing
+        decide_range(sw, 0, 1, cfg, out)  # once before timing
         for d in range(sw.who.shape[0]):
             t0 = time.perf_counter_ns()
-            decide_range(sw, d, d + 1, *packed, out)
+            decide_range(sw, d, d + 1, cfg, out)
             elapsed = time.perf_counter_ns() - t0
             st = out_stats[ROUND_NAMES[int(out[d, 5])]]
             st["n"] += 1
@@ -109,7 +108,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--n", type=int, default=1000)
     ap.add_argument("--every", type=int, default=10, help="keep every K-th select_many call")
     ap.add_argument("--max-steps", type=int, default=None)
-    ap.add_argument("--fast", action="store_true", help="fly it with vo3d_opt.FAST_OPTIONS")
+    ap.add_argument("--fast", action="store_true", help="fly it with the fast preset")
     ap.add_argument("--out", type=Path, default=Path(__file__).with_name("results_swap_rounds.md"))
     args = ap.parse_args(argv)
     if args.n < 2 or args.every < 1:
@@ -120,7 +119,7 @@ def main(argv: list[str] | None = None) -> None:
                             cwd=Path(__file__).parent).stdout.strip() or "unknown"
     flown = "whole run" if args.max_steps is None else f"first {args.max_steps} steps"
     machine = platform.processor() or platform.machine()
-    options = ", FAST_OPTIONS" if args.fast else ""
+    options = ", preset fast" if args.fast else ""
     lines = [f"## Sphere swap{options}, N = {args.n}, {flown}, every {args.every}th select_many "
              "call (odd and even steps alike) replayed", "", f"{platform.platform()}; {machine}; commit {commit}; "
              f"{time.strftime('%Y-%m-%d')}; one vehicle per compiled call, one thread.", "",

@@ -18,7 +18,7 @@
 #
 # The four simulation cases of section 5 and the indoor flight test of section 6, from the
 # bundled `scenarios/paper-*.yaml`, flown with the default selector (`plane_qp`, default QP
-# backend), with figures like the paper's (`vo3d_opt.plots`: top view, 3D paths, vehicle–vehicle
+# backend), with figures like the paper's (`vo3d_opt.figures`: top view, 3D paths, vehicle–vehicle
 # and vehicle–obstacle distances over time) and the paper's reported numbers beside ours.
 #
 # The paper gives no coordinates for its cases: the scenario files are our reconstructions (each
@@ -34,7 +34,7 @@ from IPython.display import Image, Markdown, display
 from nbcommon import ROOT, figure_dir, fmt, md_table
 
 from vo3d_opt.animation import write_animation
-from vo3d_opt.plots import write_plots
+from vo3d_opt.figures import write_plots
 from vo3d_opt.sim.metrics import summarize
 from vo3d_opt.sim.simulator import run_scenario
 

@@ -434,7 +434,7 @@ def test_run_hands_threads_neighbours_and_spill_to_the_simulator(cli, small, tmp
 @pytest.mark.parametrize("args, flag", [
     (["--threads", "0"], "--threads"),
     (["--threads", "-1"], "--threads"),
-    (["--threads", "9999"], "--threads"),  # above NUMBA_NUM_THREADS
+    (["--threads", "9999"], "--threads"),  # above the cores this process may use
     (["--max-neighbors", "two"], "--max-neighbors"),
     (["--spill-dir", "/no/such/dir"], "--spill-dir"),
     (["--no-spill", "--spill-dir", "."], "--spill-dir"),

@@ -5,7 +5,6 @@ clipped into the reachable box) within the limits, the latest first intrusion, t
 the preferred velocity, the first such candidate in that order."""
 from __future__ import annotations
 
-import numba
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -33,17 +32,13 @@ from vo3d_opt.geometry.membership import ball_in_cone, in_vo_cones
 
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
 
-# the compiled helpers have no Python wrapper: called through these
-_grid_of = numba.njit(lambda bounds, cfg: grid_of(bounds, cfg, False))
+def _grid_of(bounds, cfg):
+    return grid_of(bounds, cfg, False)
 
 
-@numba.njit
 def _block_covered(cones, to_plane, discs, b, p):
     c = discs[b, 0] * to_plane[0, 0] + discs[b, 1] * to_plane[p, 1]
-    for k in range(cones.d_oi.shape[0]):
-        if ball_in_cone(cones, k, c, discs[b, 2]):
-            return True
-    return False
+    return any(ball_in_cone(cones, k, c, discs[b, 2]) for k in range(cones.d_oi.shape[0]))
 
 
 def _candidates(enc, planes, tried, grid):
@@ -227,7 +222,7 @@ def _check_crowd(seed, kw, options, accel):
         qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg, True)
         R, P = qps.key.shape
         tried = np.empty((R * P * (len(enc.pref_in) + 1), 3))
-        n_tried = py_search(enc.vos, planes, qps, G3, h3, enc.bounds, cfg, tried)[3]
+        n_tried = py_search(qps, enc.bounds, tried)[3]
         tried = np.ascontiguousarray(tried[:n_tried])
     position = np.asarray(enc.position, float)
     found, v, p = py_fallback(enc.vos, planes, tried, position, enc.v_now, G3, h3, enc.bounds, cfg,
@@ -271,16 +266,12 @@ def test_the_crowds_use_the_blocks():
 
 # ------------------------------------------- the blocks' certificates against brute force
 
-@numba.njit
 def _zone_times(vos, k, v):
-    out = np.empty(v.shape[0])
-    for m in range(v.shape[0]):
-        out[m] = _zone_time(vos, k, v[m])
-    return out
+    return np.array([_zone_time(vos, k, x) for x in np.asarray(v, dtype=float)])
 
 
-_time_bound = numba.njit(lambda vos, k, c, rho: zone_time_bound(vos, k, c, rho))
-_ball_in = numba.njit(lambda cones, k, c, rho: ball_in_cone(cones, k, c, rho))
+_time_bound = zone_time_bound
+_ball_in = ball_in_cone
 
 
 def _ball_points(rng, c, rho, m=400, worst=None):

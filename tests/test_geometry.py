@@ -7,7 +7,6 @@ direction and the plane angle; ``_world`` maps it to the world frame.
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -28,7 +27,7 @@ from vo3d_opt.geometry import (
     vo_cones,
     vo_pyramids,
 )
-from vo3d_opt.geometry.cone import outward_normal
+from vo3d_opt.geometry.cone import outward_normals
 from vo3d_opt.types import Box, Cylinder
 
 REACH = 6.0  # largest own speed of interest (m/s) in these tests
@@ -60,20 +59,6 @@ def rotation_plane(phi):
     c, s = np.cos(phi), np.sin(phi)
     one, zero = np.ones_like(c), np.zeros_like(c)
     return np.stack([np.stack([one, zero, zero], -1), np.stack([zero, c, s], -1), np.stack([zero, -s, c], -1)], -2)
-
-
-@numba.njit
-def _normals(R, sin_alpha, t):
-    out = np.empty((R.shape[0], t.shape[0], 3))
-    for i in range(R.shape[0]):
-        for k in range(t.shape[0]):
-            out[i, k, 0], out[i, k, 1], out[i, k, 2] = outward_normal(R[i], sin_alpha[i], np.cos(t[k]), np.sin(t[k]))
-    return out
-
-
-def outward_normals(cones, t):
-    """The compiled outward normal of every cone (n) along generators t (K,): (n, K, 3)."""
-    return _normals(cones.R, cones.sin_alpha, np.asarray(t, dtype=float))
 
 
 def _unit(v):

@@ -19,7 +19,7 @@ from vo3d_opt.formulations.common import (
     py_decision_planes,
     py_pref_clear,
 )
-from vo3d_opt.formulations.kernel import py_add_rows, py_gather, py_lift, py_plane_qps, py_search
+from vo3d_opt.formulations.kernel import py_lift, py_plane_qps, py_search
 from vo3d_opt.formulations.rows import ROUNDS, py_pick
 from vo3d_opt.geometry.pyramid import prism_rows
 from vo3d_opt.solvers import QP, get_backend
@@ -41,7 +41,7 @@ def _exhaustive(enc, solve, has_cones):
     for r in range(len(ROUNDS)):
         for p in range(len(planes.phi)):
             while True:
-                m = py_gather(qps, r, p)
+                m = qps.gather(r, p)
                 res = solve(QP(P=2 * np.eye(2), q=-2 * qps.w0, G=np.vstack([qps.rows[:m], G_speed]),
                                h=np.concatenate([qps.rhs[:m], h_speed]),
                                soc_radius=enc.limits.v_max if has_cones else None))
@@ -56,7 +56,7 @@ def _exhaustive(enc, solve, has_cones):
                 if np.all(qps.included[r, p][entered]):
                     break
                 for k in np.flatnonzero(entered):
-                    py_add_rows(qps, enc.vos, planes, cfg, int(k), p)
+                    qps.add_rows(int(k), p)
                 qps.included[r, p] |= entered
     return best
 
@@ -129,7 +129,7 @@ def test_rows_on_demand_give_the_same_search_bit_for_bit(kw):
         qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg, lazy)
         R, P = qps.key.shape
         tried = np.full((R * P * (qps.included.shape[2] + 1), 3), np.nan)
-        out = py_search(enc.vos, planes, qps, G3, h3, enc.bounds, cfg, tried)
+        out = py_search(qps, enc.bounds, tried)
         runs.append((out, tried, qps.sol))
     (a, tried_a, sol_a), (b, tried_b, sol_b) = runs
     assert a == b

@@ -14,7 +14,7 @@ from PIL import Image
 from test_cli import SMALL, vo3d
 
 from vo3d_opt.animation import MAX_FRAMES, frame_indices, write_animation
-from vo3d_opt.plots import (
+from vo3d_opt.figures import (
     figure_obstacle_distance,
     figure_top_view,
     figure_trajectories_3d,
@@ -165,20 +165,23 @@ def _legend_texts(fig) -> list[str]:
 def test_legends_explain_markers_outlines_and_zones(pair):
     for fig in (figure_top_view(pair), figure_trajectories_3d(pair)):
         texts = _legend_texts(fig)
-        assert {"u0", "u1", "start", "goal", "obstacle"} <= set(texts), texts
+        assert {"u0", "u1", "start", "goal"} <= set(texts), texts
+        assert any(t.startswith("obstacle") for t in texts), texts
         assert any(t.startswith("protected zone r_pz") and "closest approach" in t
                    for t in texts), texts
     assert any(t.startswith("protected prism C_pz") for t in _legend_texts(figure_top_view(pair)))
 
 
-def test_colour_bar_names_the_agents_above_twelve(crowd, pair):
+def test_above_twelve_vehicles_a_named_sample_of_paths(crowd, pair):
+    """13 vehicles are a swarm: the key names a sample of them, not all; 12 or fewer are all
+    named, each in its own colour and pattern."""
+    from vo3d_opt.figures.swarm import SAMPLE_PATHS
+
     for fig in (figure_top_view(crowd), figure_trajectories_3d(crowd)):
-        bars = [ax for ax in fig.axes if ax.get_ylabel() == "agent (13)"]
-        assert len(bars) == 1
-        ticks = [t.get_text() for t in bars[0].get_yticklabels()]
-        assert ticks[0] == "c00" and ticks[-1] == "c12"
-        assert not set(crowd.ids) & set(_legend_texts(fig))
-    assert not any(ax.get_ylabel().startswith("agent") for ax in figure_top_view(pair).axes)
+        named = {t.split()[0] for t in _legend_texts(fig)} & set(crowd.ids)
+        assert len(named) == SAMPLE_PATHS, named
+        assert not any(ax.get_ylabel().startswith("agent") for ax in fig.axes)
+    assert {"u0", "u1"} <= set(_legend_texts(figure_top_view(pair)))
 
 
 # ------------------------------------------------------------------------ protected zones
@@ -319,7 +322,7 @@ def swarm():
 
 
 def test_drawn_samples_spread_evenly_and_keep_both_ends():
-    from vo3d_opt.plots import drawn_samples
+    from vo3d_opt.figures import drawn_samples
 
     assert drawn_samples(7, 10).tolist() == list(range(7))
     for n, budget in ((1001, 10), (2634, 200), (11, 4)):
@@ -329,19 +332,18 @@ def test_drawn_samples_spread_evenly_and_keep_both_ends():
 
 
 def test_a_swarms_paths_are_drawn_through_samples_of_its_record(swarm, monkeypatch):
-    from matplotlib.collections import LineCollection
+    from vo3d_opt.figures import scene
+    from vo3d_opt.figures.swarm import SAMPLE_PATHS
 
-    from vo3d_opt import plots
-
-    assert swarm.n_agents > plots.SWARM_AGENTS and swarm.positions.shape[0] > 4
-    monkeypatch.setattr(plots, "PLOT_POINTS", 4 * swarm.n_agents)  # four points per path
-    lines = [c for c in figure_top_view(swarm).axes[0].collections
-             if isinstance(c, LineCollection)]
-    paths = lines[-1].get_segments()
-    assert len(paths) == swarm.n_agents and {len(s) for s in paths} == {4}
-    for i in (0, 57, swarm.n_agents - 1):
-        assert np.array_equal(paths[i][0], swarm.positions[0, i, :2])
-        assert np.array_equal(paths[i][-1], swarm.positions[-1, i, :2])
+    assert swarm.n_agents > scene.SWARM_AGENTS and swarm.positions.shape[0] > 4
+    monkeypatch.setattr(scene, "PLOT_POINTS", 4 * swarm.n_agents)  # four points per path
+    ax = figure_top_view(swarm).axes[0]
+    paths = [line for line in ax.get_lines() if len(line.get_xdata()) > 1]
+    assert len(paths) == SAMPLE_PATHS and {len(line.get_xdata()) for line in paths} == {4}
+    for line in paths:
+        i = swarm.ids.index(line.get_gid())
+        assert np.array_equal(line.get_xydata()[0], swarm.positions[0, i, :2])
+        assert np.array_equal(line.get_xydata()[-1], swarm.positions[-1, i, :2])
     # the view still holds every position, not only the drawn ones
     flat = swarm.positions.reshape(-1, 3)
     lo, hi = scene_bounds(swarm)
@@ -349,11 +351,11 @@ def test_a_swarms_paths_are_drawn_through_samples_of_its_record(swarm, monkeypat
 
 
 def test_position_bounds_read_in_chunks_are_the_exact_extremes(swarm, monkeypatch):
-    from vo3d_opt import plots
+    from vo3d_opt.figures import scene
 
-    monkeypatch.setattr(plots, "CHUNK_ELEMENTS", 3 * swarm.n_agents * 2)  # two samples a chunk
+    monkeypatch.setattr(scene, "CHUNK_ELEMENTS", 3 * swarm.n_agents * 2)  # two samples a chunk
     flat = swarm.positions.reshape(-1, 3)
-    assert np.array_equal(plots.position_bounds(swarm),
+    assert np.array_equal(scene.position_bounds(swarm),
                           np.stack([flat.min(axis=0), flat.max(axis=0)]))
 
 
@@ -361,12 +363,12 @@ def test_a_swarms_distances_are_bands_over_the_vehicles(swarm, monkeypatch):
     """The least line is the closest pair's distance at every sample (brute force over every
     pair), the median and the band at the drawn samples (brute force too), the key names
     them, and no colour bar names 120 vehicles."""
-    from vo3d_opt import plots
+    from vo3d_opt.figures import distances, drawn_samples
 
-    monkeypatch.setattr(plots, "BAND_SAMPLES", 4)
-    fig = plots.figure_vehicle_distance(swarm)
+    monkeypatch.setattr(distances, "BAND_SAMPLES", 4)
+    fig = distances.figure_vehicle_distance(swarm)
     ax = fig.axes[0]
-    idx = plots.drawn_samples(swarm.positions.shape[0], 4)
+    idx = drawn_samples(swarm.positions.shape[0], 4)
     assert len(idx) == 4 < swarm.positions.shape[0]
     p = swarm.positions
     gaps = np.linalg.norm(p[:, :, None] - p[:, None, :], axis=-1)
@@ -375,7 +377,7 @@ def test_a_swarms_distances_are_bands_over_the_vehicles(swarm, monkeypatch):
     least = next(line for line in ax.get_lines() if line.get_color() == "k")
     np.testing.assert_allclose(least.get_xdata(), swarm.times)
     np.testing.assert_allclose(least.get_ydata(), nearest.min(axis=1), rtol=1e-12)
-    median = next(line for line in ax.get_lines() if line.get_color() == "tab:blue")
+    median = next(line for line in ax.get_lines() if line.get_color() == distances.BAND_COLOR)
     np.testing.assert_allclose(median.get_xdata(), swarm.times[idx])
     np.testing.assert_allclose(median.get_ydata(), np.median(nearest[idx], axis=1), rtol=1e-12)
     texts = _legend_texts(fig)

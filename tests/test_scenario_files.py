@@ -310,11 +310,11 @@ def test_starting_at_the_goal_and_ints_are_fine():
 def test_exponent_without_dot_is_a_number(tmp_path):
     """YAML 1.1 reads 1e9 as a string; the loader reads YAML 1.2 floats."""
     text = yaml.safe_dump(mutated(lambda d: d.update(max_time=20.0)), sort_keys=False)
-    text = text.replace("max_time: 20.0", "max_time: 1e9").replace("dt: 0.2", "dt: 2E-1")
+    text = text.replace("max_time: 20.0", "max_time: 1e5").replace("dt: 0.2", "dt: 2E-1")
     sc = load_scenario(write(tmp_path, text))
-    assert sc.max_time == 1e9 and sc.dt == 0.2
-    quoted = text.replace("max_time: 1e9", "max_time: '1e9'")
-    with pytest.raises(ScenarioError, match="max_time: must be a number, got '1e9'"):
+    assert sc.max_time == 1e5 and sc.dt == 0.2
+    quoted = text.replace("max_time: 1e5", "max_time: '1e5'")
+    with pytest.raises(ScenarioError, match="max_time: must be a number, got '1e5'"):
         load_scenario(write(tmp_path, quoted))
     assert yaml.safe_load("x: 1e9") == {"x": "1e9"}  # PyYAML's own loader is left as it was
 
@@ -378,7 +378,10 @@ def test_every_bundled_file_loads(path):
     sc = load_scenario(path)
     assert sc.name == path.stem, "the file is named after its scenario"
     assert sc.description.strip(), "every bundled scenario says what it is"
-    assert sc.warnings() == [], "bundled scenarios start outside every protected zone"
+    if sc.name == "rvo2-sphere-812":  # RVO2-3D's own example, as its authors wrote it
+        assert len(sc.warnings()) == 3 and all("start" in w for w in sc.warnings())
+    else:
+        assert sc.warnings() == [], "bundled scenarios start outside every protected zone"
     assert resolve(sc.name) == path
 
 

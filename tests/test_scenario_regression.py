@@ -17,7 +17,7 @@ from vo3d_opt.sim.simulator import run_scenario
 
 
 #: Bundled scenarios too large for the suite's time budget.
-SWARMS = {"random-crossing-1000"}
+SWARMS = {"random-crossing-1000", "rvo2-sphere-812"}
 FILES = [p for p in bundled_files() if p.stem not in SWARMS]
 PAPER = [p for p in FILES if p.stem.startswith("paper-")]
 CASES = [pytest.param(p, "plane_qp", id=f"{p.stem}-plane_qp") for p in FILES] + [

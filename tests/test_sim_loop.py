@@ -17,7 +17,7 @@ from vo3d_opt.sim.scenario import bundled_dir, bundled_files, load_scenario, sce
 from vo3d_opt.generators import random_crossing_scenario
 from vo3d_opt.sim.simulator import fly, scenario_selector
 
-SWARMS = {"random-crossing-1000"}
+SWARMS = {"random-crossing-1000", "rvo2-sphere-812"}
 SMALL = [p for p in bundled_files() if p.stem not in SWARMS]
 
 
@@ -153,7 +153,7 @@ def test_swarm_figures_draw_collections(tmp_path):
     sc = random_crossing_scenario(120, seed=5)
     sel, _, _ = scenario_selector(sc)
     rec = fly(sc, SwarmSelect(sc, sel), progress=False, max_steps=20)
-    from vo3d_opt.plots import figure_top_view
+    from vo3d_opt.figures import figure_top_view
 
     ax = figure_top_view(rec).axes[0]
     assert len(ax.collections) >= 3 and len(ax.get_lines()) < 10

@@ -9,7 +9,7 @@ summary and the figures. One module for the CLI and the demo.
   longer to write than many runs take to fly);
 * ``summary.json``: the summary (contract §3 and the extras), floats to :data:`JSON_DIGITS`
   significant digits;
-* the figures of ``vo3d_opt.plots`` and, when asked, ``animation.gif``.
+* the figures of ``vo3d_opt.figures`` and, when asked, ``animation.gif``.
 
 Every file is written under a temporary name in the same directory and renamed into place once
 complete (a rename replaces a symbolic link planted there, never the file it points to), and
@@ -193,7 +193,7 @@ def write_outputs(
     """trajectories.parquet, trajectories.csv (up to CSV_MAX_ROWS rows), summary.json, the
     figures (``plot_options``: ``write_plots``' keywords) and with ``animate`` animation.gif of
     a run in ``out``; the paths written."""
-    from vo3d_opt.plots import skipped_plots, write_plots  # matplotlib only when asked for
+    from vo3d_opt.figures import skipped_plots, write_plots  # matplotlib only when asked for
 
     out.mkdir(parents=True, exist_ok=True)
     _remove_earlier(out)

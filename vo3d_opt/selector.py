@@ -2,8 +2,9 @@
 ``select_many(...)`` for a whole swarm in one call (contracts §4).
 
 With the default formulation and solver (``plane_qp`` on ``exact2d``) a decision is: validate
-→ arrays → one compiled call (``formulations/kernel.py``) → ``Decision``. The other
-formulations and backends run the Python formulations over the same compiled geometry.
+→ arrays → one call of the compiled core (``vo3d_opt._core``; the algorithm reads in
+``vo3d_opt/algorithm/decide.hpp``) → ``Decision``. The other formulations and backends run the
+Python formulations over the same compiled geometry.
 Statuses: ``vo3d_opt.status.Status`` (documented in the README).
 """
 
@@ -11,9 +12,8 @@ from __future__ import annotations
 
 import logging
 import math
-import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -21,7 +21,7 @@ import numpy as np
 
 from . import swarm
 from .config import SelectorConfig
-from .formulations import aot, cone_qp, kernel, nlp, plane_qp, sampled
+from .formulations import cone_qp, kernel, nlp, plane_qp, sampled
 from .formulations.common import (
     Bounds,
     Encounter,
@@ -31,7 +31,7 @@ from .formulations.common import (
     neighbor_rows,
     py_build_vos,
 )
-from .formulations.swarm import decide_range
+from .formulations.swarm import MANY_OUT_SIZE, decide_many
 from .geometry.pyramid import prism_rows
 from .solvers import (
     FEAS_TOL,
@@ -59,27 +59,6 @@ DEFAULT_QP_SOLVER = DEFAULT_SOLVERS["plane_qp"]
 DEFAULT_NLP_SOLVER = DEFAULT_SOLVERS["nlp"]
 
 
-#: Seconds a first compilation may take before the user is told about it on stderr.
-_COMPILE_NOTICE_AFTER = 3.0
-_warm_lock = threading.Lock()
-_warm = False
-_warm_many = False
-_module_tried = False
-#: The compiled decision ``select`` calls, set by ``warm_up``: the ahead-of-time module when one
-#: built from this code for this machine is there (formulations/aot.py), else numba's JIT kernel.
-_decide_kernel: Callable[..., None] = kernel.decide
-#: The same without the module's check of its arguments' types (``aot._checked``: 2.6 µs a
-#: call), for ``select``: it builds every other array it passes itself, float64, C-contiguous and
-#: of the compiled dimensions (``check_vector``, ``neighbor_rows``, ``prism_rows``,
-#: ``bounds_array``, ``Options.packed``; tests/test_aot.py holds it to that), and checks the
-#: two it takes from ``AgentState`` (``_vec3_ok``: a model built without validation).
-_decide_unchecked: Callable[..., None] = kernel.decide
-_F8 = np.dtype(np.float64)
-#: The same for ``select_many``'s ``decide_range``.
-_range_kernel: Callable[..., None] = decide_range
-_kernel_note = "not loaded yet"
-
-
 @dataclass
 class Decision:
     """What ``select`` returns. ``velocity`` (3,) m/s world frame; ``solve_time`` s."""
@@ -98,14 +77,6 @@ def _vec3(value, name: str) -> np.ndarray:
         return check_vector(value, 3)
     except ValueError as exc:
         raise ValueError(f"{name}: {exc}") from None
-
-
-def _vec3_ok(a: object) -> bool:
-    """``a`` as ``check_vector`` leaves a vector: a (3,) float64, C-contiguous, aligned ndarray."""
-    if type(a) is not np.ndarray or a.dtype != _F8 or a.shape != (3,):
-        return False
-    flags = a.flags
-    return flags.c_contiguous and flags.aligned
 
 
 def _items(value, cls, name: str) -> list:
@@ -146,162 +117,6 @@ def _checked(backend: Backend, method: str):
     return call
 
 
-def _use_module() -> bool:
-    """Load the ahead-of-time module once per process, under ``_warm_lock``, when it matches
-    this code and machine (``vo3d compile``): ``select``, ``select_many`` and the neighbour
-    lists of every selector (the looped ones too) then run it. Whether it is in use."""
-    global _module_tried, _decide_kernel, _decide_unchecked, _range_kernel, _kernel_note
-    if not _module_tried:
-        compiled, _kernel_note = aot.load()
-        if compiled is not None:
-            _decide_kernel, _range_kernel = compiled.decide, compiled.decide_range
-            _decide_unchecked = compiled.decide.compiled  # type: ignore[attr-defined]
-            swarm.use_neighbor_lists(compiled.neighbor_lists, compiled.nearest_lists)
-        _module_tried = True
-    return _decide_kernel is not kernel.decide
-
-
-def warm_up() -> None:
-    """Load the decision kernel once per process: the ahead-of-time module when it matches
-    this code and machine (``vo3d compile``), else numba's JIT kernel, compiled or loaded from
-    numba's on-disk cache, saying on stderr when that takes a while (a first run on a machine
-    compiles it). Called by the selector's constructor, so that no reported time includes it."""
-    global _warm
-    with _warm_lock:
-        if _warm:
-            return
-        if _use_module():
-            _warm = True
-            return
-        own = AgentState(position=(0.0, 0.0, 10.0), velocity=(1.0, 0.0, 0.0))
-        nbrs = neighbor_rows(
-            [Neighbor(position=(10.0, 0.0, 10.0), velocity=(-1.0, 0.0, 0.0), r_pz=3.0)]
-        )
-        _compiling(
-            "the decision kernel",
-            lambda: kernel.decide(
-                own.position,
-                own.velocity,
-                check_vector((1.0, 0.0, 0.0), 3),
-                nbrs,
-                np.zeros((0, 4)),
-                bounds_array(Limits(), 0.2),
-                *Options().packed,
-                np.empty(kernel.OUT_SIZE),
-            ),
-            hint="; `vo3d compile` builds it ahead of time",
-        )
-        _warm = True
-
-
-_warm_paths: set[tuple[str, str | None, str | None]] = set()
-_warm_paths_lock = threading.Lock()
-
-
-def _warm_formulation(selector: VelocitySelector) -> None:
-    """Run a selector that is not the compiled default once per process (per formulation and
-    backends) on two small encounters, an avoidance and a vehicle surrounded by closing
-    neighbours (the fallbacks), so that the compiled geometry its Python formulation calls is
-    compiled (or loaded from numba's cache) here, with the notice on stderr, and not inside
-    the first decision's ``solve_time``."""
-    key = (
-        selector.formulation,
-        selector.solver,
-        None if selector._qp is None else selector._qp.name,
-    )
-    with _warm_paths_lock:
-        if key in _warm_paths:
-            return
-        what = f"the geometry for {selector.formulation}" + (
-            f" on {selector.solver}" if selector.solver else ""
-        )
-        with _warm_lock:
-            module = _use_module()
-
-        def run() -> None:
-            for kw in _warm_encounters():
-                selector.select(**kw)
-            if not module:  # select_many's neighbour lists, on numba's JIT
-                swarm.warm_lists()
-
-        _compiling(what, run)
-        _warm_paths.add(key)
-
-
-def _warm_encounters() -> list[dict]:
-    """``_warm_formulation``'s encounters: a neighbour head-on with a cylinder and a box on the
-    way; then 14 neighbours on a sphere 12 m round, all closing in (no safe velocity)."""
-    own = AgentState(position=(0.0, 0.0, 30.0), velocity=(4.0, 0.0, 0.0))
-    ahead = [Neighbor(position=(30.0, 0.0, 30.0), velocity=(-4.0, 0.0, 0.0), r_pz=10.0)]
-    obstacles = [
-        Cylinder(center=(15.0, 3.0), radius=2.0, height=40.0),
-        Box(center=(20.0, -8.0), size=(4.0, 3.0), height=40.0, yaw=0.3),
-    ]
-    k = np.arange(14) + 0.5
-    z, phi = 1.0 - 2.0 * k / 14, np.pi * (1.0 + 5.0**0.5) * k  # a Fibonacci sphere
-    d = np.column_stack([np.sqrt(1.0 - z * z) * np.cos(phi), np.sqrt(1.0 - z * z) * np.sin(phi), z])
-    around = [Neighbor(position=own.position + 12.0 * u, velocity=-3.0 * u, r_pz=5.0) for u in d]
-    common = dict(own=own, preferred_velocity=(4.0, 0.0, 0.0), limits=Limits(), dt=0.2)
-    return [
-        dict(common, neighbors=ahead, obstacles=obstacles),
-        dict(common, neighbors=around, obstacles=[]),
-    ]
-
-
-def decision_kernel() -> str:
-    """Which compiled decision ``select`` and ``select_many`` run: the ahead-of-time module
-    (its path) or numba's JIT kernels, and why."""
-    warm_up()
-    return _kernel_note if _decide_kernel is not kernel.decide else f"JIT kernels: {_kernel_note}"
-
-
-def _compiling(what: str, run: Callable[[], object], hint: str = "") -> None:
-    """``run()``, saying on stderr that ``what`` compiles when that takes over
-    _COMPILE_NOTICE_AFTER s (a first run on a machine; numba caches it on disk), and then
-    when it is ready. Loading from the cache says nothing. ``hint``: a clause added to the
-    notice."""
-    shown = threading.Event()
-
-    def tell() -> None:
-        log.warning(
-            "vo3d-opt: compiling %s (numba caches it on disk for later runs%s)...", what, hint
-        )
-        shown.set()
-
-    notice = threading.Timer(_COMPILE_NOTICE_AFTER, tell)
-    notice.daemon = True
-    notice.start()
-    t0 = time.perf_counter()
-    try:
-        run()
-    finally:
-        notice.cancel()
-    if shown.is_set():
-        log.warning("vo3d-opt: %s is ready (%.0f s)", what, time.perf_counter() - t0)
-
-
-def warm_up_many() -> None:
-    """Compile (or load from numba's cache) ``select_many``'s kernel once per process,
-    outside every reported time; said on stderr when it takes a while."""
-    global _warm_many
-    warm_up()
-    with _warm_lock:
-        if _warm_many:
-            return
-        v = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
-        inputs = swarm.SwarmInputs.checked(
-            [[0.0, 0.0, 10.0], [10.0, 0.0, 10.0]], v, v, 3.0, [], None, 0.2, 55.0, None, None
-        )
-        # with the ahead-of-time module nothing compiles here (scipy's k-d tree gets imported)
-        _compiling(
-            "the swarm kernel",
-            lambda: _select_many_compiled(
-                [(Options(), np.arange(2))], inputs, 1, time.perf_counter()
-            ),
-        )
-        _warm_many = True
-
-
 def _select_many_compiled(
     groups: list[tuple[Options, np.ndarray]], inputs: swarm.SwarmInputs, threads: int, t0: float
 ) -> SwarmDecision:
@@ -309,9 +124,9 @@ def _select_many_compiled(
     the options and the deciding vehicles (rows of ``who``) that plan with them."""
     sw = inputs.arrays(threads)
     if len(groups) == 1:
-        out = swarm.decide_all(sw, groups[0][0].packed, threads, _range_kernel)
+        out = decide_many(sw, groups[0][0].config, threads)
     else:
-        out = np.empty((sw.who.shape[0], swarm.MANY_OUT_SIZE))
+        out = np.empty((sw.who.shape[0], MANY_OUT_SIZE))
         for options, rows in groups:
             part = sw._replace(
                 who=sw.who[rows],
@@ -319,7 +134,7 @@ def _select_many_compiled(
                 sp_span=sw.sp_span[rows],
                 ob_span=sw.ob_span[rows],
             )
-            out[rows] = swarm.decide_all(part, options.packed, threads, _range_kernel)
+            out[rows] = decide_many(part, options.config, threads)
     result = _swarm_decision(
         inputs.V,
         sw.who,
@@ -433,10 +248,6 @@ class VelocitySelector:
             self._qp = self._qp_backend(self.solver, formulation)
         #: The whole decision runs compiled: plane_qp (or nlp's start) on exact2d.
         self._compiled = self._qp is not None and self._qp.name == "exact2d"
-        if self._compiled:
-            warm_up()
-        if not self.compiled:
-            _warm_formulation(self)
 
     def options_for(self, v_max: float, dt: float, sensing_range: float | None = None) -> Options:
         """The numbers a decision with top speed ``v_max`` and period ``dt`` plans with
@@ -544,8 +355,7 @@ class VelocitySelector:
     ) -> Decision:
         """The compiled decision and its ``Decision``."""
         out = np.empty(kernel.OUT_SIZE)
-        decide = _decide_unchecked if _vec3_ok(p) and _vec3_ok(v_now) else _decide_kernel
-        decide(p, v_now, v_pref, nbrs, prisms, limits, *options.packed, out)
+        kernel.decide(p, v_now, v_pref, nbrs, prisms, limits, options.config, out)
         vx, vy, vz, status, phi, rnd, solved = out.tolist()
         return Decision(
             velocity=out[:3],
@@ -595,20 +405,17 @@ class VelocitySelector:
         ``spheres`` (S, 5): x, y, z, radius, r_pz of static spheres, seen as zero-velocity,
         non-cooperative neighbours with their own r_pz after the vehicles; ``max_speed`` ((N,)
         or one number, m/s): each vehicle's own cap on ``limits``' v_max; ``threads``: threads
-        for this call, at most ``NUMBA_NUM_THREADS`` (default: ``numba.get_num_threads()``, i.e.
-        what ``numba.set_num_threads`` set, else the ``NUMBA_NUM_THREADS`` environment variable,
-        else every core; the answers do not depend on it). Who senses whom: ``vo3d_opt.swarm``.
+        for this call, at most the cores this process may use (default: all of them; the
+        answers do not depend on it). Who senses whom: ``vo3d_opt.swarm``.
 
         With the default formulation and backend (plane_qp on exact2d) the deciding vehicles
-        are decided by compiled code, parallel over vehicles on ``threads`` threads, without a
-        Python object per vehicle or neighbour (its first use in a process compiles or loads a
-        kernel, outside ``solve_time``). Any other formulation or backend (sampled, cone_qp,
-        nlp, an outside QP solver) cannot run compiled: then ``select_many`` calls ``select``
-        for each deciding vehicle in turn, with the same neighbours, and returns the same.
+        are decided by the compiled core in one call, parallel over vehicles on ``threads``
+        threads, without a Python object per vehicle or neighbour. Any other formulation or
+        backend (sampled, cone_qp, nlp, an outside QP solver) cannot run compiled: then
+        ``select_many`` calls ``select`` for each deciding vehicle in turn, with the same
+        neighbours, and returns the same.
         Malformed arrays raise ``ValueError`` naming the argument.
         """
-        if self.compiled:
-            warm_up_many()
         t0 = time.perf_counter()
         inputs = swarm.SwarmInputs.checked(
             positions,
@@ -737,7 +544,4 @@ __all__ = [
     "VelocitySelector",
     "DEFAULT_SOLVERS",
     "FORMULATIONS",
-    "decision_kernel",
-    "warm_up",
-    "warm_up_many",
 ]

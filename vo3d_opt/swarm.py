@@ -21,46 +21,29 @@ Sensing, for deciding vehicle i (the same rules as a loop of ``select`` calls wo
 
 from __future__ import annotations
 
-import itertools
 import math
 import numbers
+import os
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numba
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .formulations.common import bounds_array
 from .formulations.swarm import (
     AGENT_COLUMNS,
-    MANY_OUT_SIZE,
     Swarm,
-    decide_range,
     nearest_lists,
     neighbor_lists,
 )
 from .geometry.pyramid import prism_rows
-from .types import Box, Cylinder, Limits, short_repr
+from .types import MAX_MAGNITUDE, Box, Cylinder, Limits, positive_seconds, short_repr
 
-#: The compiled ``neighbor_lists`` and ``nearest_lists`` that ``vehicle_links`` calls: numba's
-#: JIT ones, or the ahead-of-time module's once the selector has loaded it
-#: (``use_neighbor_lists``).
-_neighbor_lists: Callable[..., np.ndarray] = neighbor_lists
-_nearest_lists: Callable[..., np.ndarray] = nearest_lists
-
-
-def use_neighbor_lists(
-    lists: Callable[..., np.ndarray], nearest: Callable[..., np.ndarray]
-) -> None:
-    """Make ``vehicle_links`` call ``lists`` and ``nearest`` (``formulations.swarm``'s
-    ``neighbor_lists`` and ``nearest_lists`` compiled ahead of time: formulations/aot.py)
-    instead of numba's JIT ones."""
-    global _neighbor_lists, _nearest_lists
-    _neighbor_lists, _nearest_lists = lists, nearest
+if TYPE_CHECKING:  # scipy.spatial is imported by the functions that use it: it takes 0.3 s
+    from scipy.spatial import cKDTree
 
 
 #: The k-d trees propose candidates within range·(1 + _REACH) + _REACH, m: a hair more than the
@@ -84,7 +67,7 @@ class SwarmDecision:
     (N,) s: each vehicle's share of the time (its own ``select`` call when looping, the call's
     time shared equally among the deciding vehicles when compiled; NaN when not deciding);
     ``compiled``: whether the one compiled call ran (else a loop of ``select``); ``threads``:
-    numba threads used."""
+    threads used."""
 
     velocities: np.ndarray
     statuses: np.ndarray
@@ -105,22 +88,45 @@ class SwarmDecision:
 
 
 def _real(value: Any) -> bool:
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
 def _array(value: Any, name: str, shape: tuple[int, ...]) -> np.ndarray:
-    """A finite float array of exactly ``shape`` (C-contiguous, a copy), or ValueError."""
+    """A finite float array of exactly ``shape`` (C-contiguous, a copy), or ValueError: real
+    numbers only (as ``select`` takes them: no booleans, strings or complex numbers), each at
+    most ``MAX_MAGNITUDE``."""
     try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"{name}: expected numbers of shape {shape}, got {type(value).__name__}"
-        ) from None
-    if arr.shape != shape:
-        raise ValueError(f"{name}: expected shape {shape}, got {arr.shape}")
+        raw = np.asarray(value)
+    except (TypeError, ValueError, OverflowError):
+        raw = np.asarray(None)
+    if raw.dtype.kind not in "iuf":
+        if raw.dtype.kind == "O" and raw.size and all(_real(x) for x in raw.ravel().tolist()):
+            raw = _objects_as_floats(raw, name)
+        else:
+            raise ValueError(
+                f"{name}: expected real numbers of shape {shape}, got {_kind_of(value, raw)}"
+            )
+    if raw.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape}, got {raw.shape}")
+    arr = np.array(raw, dtype=float)
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name}: must be finite (no NaN or inf)")
+    if np.any(np.abs(arr) > MAX_MAGNITUDE):
+        raise ValueError(f"{name}: must be at most {MAX_MAGNITUDE:g} in magnitude")
     return np.ascontiguousarray(arr)
+
+
+def _objects_as_floats(raw: np.ndarray, name: str) -> np.ndarray:
+    """An object array of Python numbers (ints beyond int64 among them) as floats."""
+    try:
+        return raw.astype(float)
+    except OverflowError:
+        raise ValueError(f"{name}: must be at most {MAX_MAGNITUDE:g} in magnitude") from None
+
+
+def _kind_of(value: Any, raw: np.ndarray) -> str:
+    kinds = {"b": "booleans", "c": "complex numbers", "U": "text", "S": "bytes", "O": "objects"}
+    return kinds.get(raw.dtype.kind, type(value).__name__)
 
 
 def points(value: Any, name: str, n: int | None = None) -> np.ndarray:
@@ -158,11 +164,21 @@ def mask(value: Any, name: str, n: int) -> np.ndarray:
 
 
 def distance(value: Any, name: str, *, allow_inf: bool = False) -> float:
-    """A positive distance in m (inf allowed when ``allow_inf``)."""
-    if not _real(value) or math.isnan(value) or value <= 0 or (math.isinf(value) and not allow_inf):
+    """A positive distance in m (inf allowed when ``allow_inf``; a finite one at most
+    ``MAX_MAGNITUDE``)."""
+    try:
+        metres = float(value) if _real(value) else math.nan
+    except OverflowError:  # an int beyond a float's range: as far as any
+        metres = math.inf
+    if math.isinf(metres) and allow_inf and metres > 0:
+        return metres
+    if not (math.isfinite(metres) and 0 < metres <= MAX_MAGNITUDE):
         what = "positive" if allow_inf else "positive finite"
-        raise ValueError(f"{name}: must be a {what} number of metres, got {value!r}")
-    return float(value)
+        raise ValueError(
+            f"{name}: must be a {what} number of metres (at most {MAX_MAGNITUDE:g} when "
+            f"finite), got {short_repr(value)}"
+        )
+    return metres
 
 
 #: A count beyond this is as good as "all" (no swarm has more vehicles).
@@ -242,6 +258,8 @@ def vehicle_links(
     n, D = P.shape[0], who.shape[0]
     if D == 0 or n < 2 or max_neighbors == 0:
         return np.zeros((D, 2), dtype=np.int64), _EMPTY
+    from scipy.spatial import cKDTree
+
     tree = cKDTree(P)
     if max_neighbors is not None and _crowded(tree, P, who, sensing_range, max_neighbors):
         links = _nearest_links(tree, P, who, sensing_range, int(max_neighbors), threads)
@@ -254,7 +272,7 @@ def vehicle_links(
     place[who] = np.arange(D)
     span = np.empty((D, 2), dtype=np.int64)
     k = -1 if max_neighbors is None else int(max_neighbors)
-    idx = _neighbor_lists(a, b, dist, float(sensing_range), place, k, span)
+    idx = neighbor_lists(a, b, dist, float(sensing_range), place, k, span)
     return span, idx
 
 
@@ -347,7 +365,7 @@ def _nearest_links(
         far, near = tree.query(
             P[who[lo:hi]], k=_proposed(k), distance_upper_bound=_reach(sensing_range)
         )
-        settled[lo:hi] = _nearest_lists(
+        settled[lo:hi] = nearest_lists(
             P, who[lo:hi], near, far, float(sensing_range), chosen[lo:hi]
         )
 
@@ -373,16 +391,6 @@ def _nearest_links(
     return span, np.ascontiguousarray(chosen[chosen < n], dtype=np.int64)
 
 
-def warm_lists() -> None:
-    """Compile (or load from numba's cache) both ways of listing neighbours: every pair within
-    range and each vehicle's nearest."""
-    P = np.arange(24.0).reshape(8, 3)
-    who = np.arange(8, dtype=np.int64)
-    vehicle_links(P, who, 1.0, None)
-    if _NEAREST_OK:
-        _nearest_links(cKDTree(P), P, who, 100.0, 1)
-
-
 def _all(D: int, m: int) -> tuple[np.ndarray, np.ndarray]:
     """Every one of m items for each of D vehicles, as (span, idx)."""
     span = np.zeros((D, 2), dtype=np.int64)
@@ -403,6 +411,8 @@ def _near(
     ``surface(m, pts)`` decides."""
     rows, cols = [], []
     if tree is None:
+        from scipy.spatial import cKDTree
+
         tree = cKDTree(points)
     for m, near in enumerate(tree.query_ball_point(centres, _reach(rng + bound))):
         if near:
@@ -431,6 +441,8 @@ def obstacle_links(
         [o.radius if isinstance(o, Cylinder) else 0.5 * math.hypot(*o.size) for o in obstacles],
         dtype=float,
     )
+    from scipy.spatial import cKDTree
+
     rows, cols = _near(
         cKDTree(Pd[:, :2]),
         Pd,
@@ -508,8 +520,7 @@ class SwarmInputs:
         limits = Limits() if limits is None else limits
         if not isinstance(limits, Limits):
             raise ValueError(f"limits: expected Limits, got {type(limits).__name__}")
-        if not (_real(dt) and math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt: must be a positive finite number of seconds, got {dt!r}")
+        dt = positive_seconds(dt, "dt")
         return cls(
             P=P,
             V=points(velocities, "velocities", n),
@@ -570,10 +581,6 @@ class SwarmInputs:
 
 # ------------------------------------------------------------------------------ threads
 
-#: Vehicles per compiled call when several threads share the work: small enough that the
-#: threads finish together (a crowded vehicle costs many times a lone one), large enough that
-#: the call overhead (about 20 µs) stays negligible.
-CHUNK = 64
 _pool_lock = threading.Lock()
 _pool: ThreadPoolExecutor | None = None
 
@@ -586,54 +593,28 @@ def _workers(n: int) -> ThreadPoolExecutor:
         return _pool
 
 
+def cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system tells it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
+
+
 def thread_count(threads: Any) -> int:
-    """``threads`` checked (an integer in [1, NUMBA_NUM_THREADS]); None: numba's current setting
-    (``numba.set_num_threads``, else the ``NUMBA_NUM_THREADS`` environment variable, else every
-    core)."""
-    limit = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+    """``threads`` checked (an integer in [1, ``cores()``]); None: every core."""
+    limit = cores()
     if threads is None:
-        return int(numba.get_num_threads())
+        return limit
     if (
         not isinstance(threads, numbers.Integral)
         or isinstance(threads, bool)
         or not 1 <= int(threads) <= limit
     ):
         raise ValueError(
-            f"threads: must be an integer in [1, {limit}] (NUMBA_NUM_THREADS), got {threads!r}"
+            f"threads: must be an integer in [1, {limit}] (the cores this process may use), "
+            f"got {threads!r}"
         )
     return int(threads)
-
-
-def decide_all(
-    sw: Swarm,
-    packed: tuple[np.ndarray, np.ndarray, np.ndarray],
-    threads: int,
-    kernel: Callable[..., None] = decide_range,
-) -> np.ndarray:
-    """Every deciding vehicle of ``sw`` by the compiled ``kernel`` (``decide_range``, numba's
-    JIT or the ahead-of-time module's): (D, MANY_OUT_SIZE). With several threads, each takes
-    the next CHUNK vehicles until none are left (the compiled code releases the GIL); the rows
-    do not depend on who computed them."""
-    D = sw.who.shape[0]
-    out = np.empty((D, MANY_OUT_SIZE))
-    chunks = -(-D // CHUNK)
-    if threads <= 1 or chunks <= 1:
-        kernel(sw, 0, D, *packed, out)
-        return out
-    claim = itertools.count()  # next() on it is atomic under the GIL
-
-    def work() -> None:
-        while (c := next(claim)) < chunks:
-            kernel(sw, c * CHUNK, min(D, (c + 1) * CHUNK), *packed, out)
-
-    helpers = [_workers(threads - 1).submit(work) for _ in range(min(threads, chunks) - 1)]
-    try:
-        work()
-    finally:  # no helper left writing into ``out``, whatever raised
-        wait(helpers)
-    for h in helpers:
-        h.result()
-    return out
 
 
 __all__ = ["SwarmDecision", "SwarmInputs", "vehicle_links", "obstacle_links", "sphere_links"]

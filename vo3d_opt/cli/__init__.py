@@ -29,7 +29,6 @@ from vo3d_opt.types import one_line
 
 from .common import EXIT_FAIL, EXIT_USAGE, Parser, UsageError, common_parser, log
 from .compare import add_compare_parser
-from .compile import add_compile_parser
 from .listing import add_list_parser
 from .run import add_run_parser
 from .sweep import add_sweep_parser
@@ -41,7 +40,6 @@ SUBCOMMANDS = (
     add_list_parser,
     add_sweep_parser,
     add_link_parsers,
-    add_compile_parser,
 )
 
 

@@ -153,7 +153,7 @@ def _dpi(text: str) -> int:
 
 
 def _zones(text: str) -> Any:
-    from vo3d_opt.plots import parse_zones
+    from vo3d_opt.figures import parse_zones
 
     try:
         return parse_zones(text)
@@ -177,8 +177,8 @@ def _add_swarm_flags(run: argparse.ArgumentParser) -> None:
         "--threads",
         type=positive_int,
         metavar="K",
-        help="threads of the compiled decisions (select_many; default: every core, at most "
-        "NUMBA_NUM_THREADS); the answers do not depend on it. No effect where the agents "
+        help="threads of the compiled decisions (select_many; default: every core this process "
+        "may use, at most that); the answers do not depend on it. No effect where the agents "
         "decide one at a time (noisy or late sensing, formulations run in Python)",
     )
     run.add_argument(
@@ -204,8 +204,8 @@ def _add_swarm_flags(run: argparse.ArgumentParser) -> None:
 
 
 def _swarm_checked(args: argparse.Namespace, sc: Scenario) -> None:
-    """Refuse before the run what the run would refuse at its start: --threads above numba's
-    limit, --max-neighbors under noisy or late sensing, a spill that cannot happen."""
+    """Refuse before the run what the run would refuse at its start: --threads above the cores,
+    --max-neighbors under noisy or late sensing, a spill that cannot happen."""
     if args.threads is not None:
         from vo3d_opt.swarm import thread_count
 

@@ -83,7 +83,7 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     where.add_argument(
         "--scheduler",
         metavar="ADDRESS",
-        help="use the existing Dask scheduler at ADDRESS (tcp://host:8786)",
+        help="use the existing Dask scheduler at ADDRESS (tcp://HOST:PORT or tls://HOST:PORT)",
     )
     sw.add_argument(
         "--method",
@@ -305,6 +305,13 @@ def _sweep(args: argparse.Namespace) -> int:
         solver=args.solver,
         selector_options=tuple(options.items()),
     )
+    if args.scheduler is not None:
+        from vo3d_opt.sweep.cluster import ConnectError, check_address
+
+        try:
+            check_address(args.scheduler)
+        except ConnectError as exc:
+            raise SweepError(f"--scheduler: {exc}") from None
     workers = 1 if args.workers is None and args.scheduler else args.workers
     validate(
         args.family,

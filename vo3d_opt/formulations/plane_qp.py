@@ -1,9 +1,9 @@
 """plane_qp on an outside backend (formulations/plane_qp.md).
 
 The default backend, ``exact2d``, runs the whole decision compiled (``kernel.decide``). Every
-other QP backend gets the same QPs, built from the same rows (``rows.plane_rows``), searched the
+other QP backend gets the same QPs, built from the same rows (``kernel.PlaneQPs``), searched the
 same way: best first, with constraint generation per QP. Here each QP's exact optimum over the
-speed disc (``kernel.solve_qp``) serves as its lower bound: the backend's answer is at least as
+speed disc (``PlaneQPs.solve``) serves as its lower bound: the backend's answer is at least as
 far from the preferred velocity (its speed bound is the disc itself or a polygon inside it), so
 once the best safe answer beats every remaining bound the search is over, and it returns what
 solving every QP to its fixpoint would. The bound also proves infeasible QPs infeasible without
@@ -20,7 +20,7 @@ from ..solvers import QP
 from ..status import Status
 from .common import Encounter, Outcome, Solve, py_decision_planes
 from .fallback import fallback
-from .kernel import py_add_rows, py_gather, py_lift, py_plane_qps, py_solve_qp
+from .kernel import py_lift, py_plane_qps
 from .rows import ROUNDS
 
 #: Bounds within this much (m/s) of the best deviation found cannot improve on it meaningfully.
@@ -53,7 +53,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     R, P = qps.key.shape
     for r in range(R):
         for p in range(P):
-            py_solve_qp(qps, r, p, bounds)  # the exact optimum: a lower bound of the backend's
+            qps.solve(r, p, bounds)  # the exact optimum: a lower bound of the backend's
     G_speed, h_speed = (
         (np.zeros((0, 2)), np.zeros(0))
         if has_cones
@@ -67,7 +67,7 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
         r, p = divmod(int(np.argmin(qps.key)), P)
         if not qps.key[r, p] < best_dev - _TIE:  # no remaining QP can beat the best answer
             break
-        m = py_gather(qps, r, p)
+        m = qps.gather(r, p)
         G, h = np.vstack([qps.rows[:m], G_speed]), np.concatenate([qps.rhs[:m], h_speed])
         qps.key[r, p] = math.inf  # done, unless its answer brings new constraints
         if (key := (p, G.tobytes(), h.tobytes())) in solved:
@@ -92,9 +92,9 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
                 best, best_dev = (v.copy(), p, ROUNDS[r]), dev
         elif not np.all(qps.included[r, p][entered]):  # constrain the VOs it entered, solve again
             for j in np.flatnonzero(entered):
-                py_add_rows(qps, enc.vos, planes, cfg, int(j), p)
+                qps.add_rows(int(j), p)
             qps.included[r, p] |= entered
-            py_solve_qp(qps, r, p, bounds)
+            qps.solve(r, p, bounds)
     if best is not None:
         v, p, mode = best
         return Outcome(v, Status.OPTIMAL, float(planes.phi[p]), {"round": mode, "solved": attempts})

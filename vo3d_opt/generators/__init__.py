@@ -24,8 +24,10 @@ from vo3d_opt.generators.encounter import (
     schema_has,
 )
 from vo3d_opt.generators.swarms import (
+    RVO2_SPHERE,
     fibonacci_sphere,
     random_crossing_scenario,
+    rvo2_sphere_scenario,
     sphere_swap_scenario,
 )
 
@@ -45,7 +47,9 @@ __all__ = [
     "fibonacci_sphere",
     "get_family",
     "make_encounter",
+    "RVO2_SPHERE",
     "random_crossing_scenario",
+    "rvo2_sphere_scenario",
     "register",
     "schema_has",
     "sphere_swap_scenario",

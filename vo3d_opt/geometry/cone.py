@@ -1,9 +1,8 @@
 """VO cones of moving vehicles with spherical protected zones: eqs (1)–(6) and the virtual
 sphere of section 3.1.6, for n neighbours at once.
 
-``VOCones`` is a NamedTuple of arrays, so the same value flows through Python and compiled code
-(numba reads its fields by name); ``build_cones`` is the compiled constructor and ``vo_cones``
-its Python front end.
+``VOCones`` is a NamedTuple of arrays; the compiled core (``vo3d_opt._core``, whose algorithm
+reads in ``vo3d_opt/algorithm/vo.hpp``) builds its fields and ``vo_cones`` is the Python front end.
 """
 
 from __future__ import annotations
@@ -12,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import entry, inline, jit
+import vo3d_opt._core as _core
 
 #: The paper's smallest virtual-sphere factor (section 3.1.6: tau >= 1.5).
 TAU_MIN = 1.5
@@ -101,88 +100,6 @@ def vo_cones(
     return py_build_cones(np.asarray(p_A, dtype=float), p_B, a, r_pz, mode, float(tau_min))
 
 
-@inline
-def outward_normal(
-    R: np.ndarray, sin_alpha: float, cos_t: float, sin_t: float
-) -> tuple[float, float, float]:
-    """The cone's unit outward normal along the generator through B_vo(t): R_{theta_el|psi_az}
-    (eq. 6) applied to (-sin alpha, cos alpha cos t, cos alpha sin t) in the cone's own frame.
-    The plane through the apex with this normal touches the cone along the whole generator: a
-    supporting plane of the (convex) VO."""
-    ca = np.sqrt(1.0 - sin_alpha * sin_alpha)
-    b0, b1, b2 = -sin_alpha, ca * cos_t, ca * sin_t
-    return (
-        R[0, 0] * b0 + R[0, 1] * b1 + R[0, 2] * b2,
-        R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2,
-        R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2,
-    )
-
-
-@inline
-def offset(p_B: np.ndarray, p_A: np.ndarray, rel: np.ndarray) -> float:
-    """p_B - p_A into rel (3,), and its length d_oi (eq. 1)."""
-    for k in range(3):
-        rel[k] = p_B[k] - p_A[k]
-    return np.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2)
-
-
-@jit
-def build_cones(
-    p_A: np.ndarray,
-    p_B: np.ndarray,
-    apex: np.ndarray,
-    r_pz: np.ndarray,
-    reach: float,
-    tau_min: float,
-) -> VOCones:
-    """Eqs (1), (2), (6) and the virtual-sphere factor for every neighbour. ``reach``: the
-    largest own speed, PAPER_RULE (NaN) for the paper's rule, NO_VIRTUAL_SPHERE (< 0) for none."""
-    n = p_B.shape[0]
-    rel, R = np.empty((n, 3)), np.empty((n, 3, 3))
-    d_oi, theta_el, psi_az = np.empty(n), np.empty(n), np.empty(n)
-    d_vo, r_vo, tau, sin_alpha = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    for i in range(n):
-        d = offset(p_B[i], p_A, rel[i])  # eq. (1)
-        safe_d = max(d, 1e-12)
-        th = np.arcsin(min(max(rel[i, 2] / safe_d, -1.0), 1.0))  # eq. (1), = atan(dz / dxy)
-        ps = np.arctan2(rel[i, 1], rel[i, 0])  # eq. (1)
-        ct, st, cp, sp = np.cos(th), np.sin(th), np.cos(ps), np.sin(ps)
-        # eq. (6): columns are the axis, the horizontal side and the 'up' side
-        R[i, 0, 0], R[i, 0, 1], R[i, 0, 2] = cp * ct, -sp, -cp * st
-        R[i, 1, 0], R[i, 1, 1], R[i, 1, 2] = sp * ct, cp, -sp * st
-        R[i, 2, 0], R[i, 2, 1], R[i, 2, 2] = st, 0.0, ct
-        # eq. (2): the tangent circle of the cone on the sphere, at distance d_vo along the axis
-        dd = max(d * d - r_pz[i] ** 2, 0.0)
-        dv, rv = dd / safe_d, r_pz[i] * np.sqrt(dd) / safe_d
-        t = 1.0
-        if d > r_pz[i]:  # never expanded when A is inside the zone
-            if np.isnan(reach):
-                t = tau_min if d < 2.0 * r_pz[i] else 1.0
-            elif reach >= 0.0:
-                # The base must lie beyond every |v| <= reach: axial(v - apex) <= reach + |apex|.
-                a_len = np.sqrt(apex[i, 0] ** 2 + apex[i, 1] ** 2 + apex[i, 2] ** 2)
-                needed = (reach + a_len) / max(dv, 1e-12)
-                t = max(tau_min, needed * 1.01) if needed > 1.0 else 1.0
-        d_oi[i], theta_el[i], psi_az[i] = d, th, ps
-        d_vo[i], r_vo[i], tau[i] = dv * t, rv * t, t
-        sin_alpha[i] = min(max(r_pz[i] / safe_d, 0.0), 1.0)
-    return VOCones(
-        rel,
-        apex.copy(),
-        r_pz.copy(),
-        d_oi,
-        theta_el,
-        psi_az,
-        R,
-        d_vo,
-        r_vo,
-        tau,
-        sin_alpha,
-        d_oi <= r_pz,
-    )
-
-
-@entry
 def py_build_cones(
     p_A: np.ndarray,
     p_B: np.ndarray,
@@ -191,24 +108,26 @@ def py_build_cones(
     reach: float,
     tau_min: float,
 ) -> VOCones:
-    """``build_cones`` for Python callers (compiled code calls ``build_cones``: no Python
-    wrapper)."""
-    return build_cones(p_A, p_B, apex, r_pz, reach, tau_min)
+    """Eqs (1), (2), (6) and the virtual-sphere factor for every neighbour (compiled:
+    ``build_cone``). ``reach``: the largest own speed, PAPER_RULE (NaN) for the paper's rule,
+    NO_VIRTUAL_SPHERE (< 0) for none."""
+    return VOCones(*_core.build_cones(p_A, p_B, apex, r_pz, float(reach), float(tau_min)))
 
 
-@inline
-def min_speed(cones: VOCones, i: int) -> float:
-    """The smallest |v| inside VO cone i: the distance from the velocity origin to the
+def outward_normals(cones: VOCones, t: np.ndarray) -> np.ndarray:
+    """(n, K, 3) each cone's unit outward normal along the generators through B_vo(t) (eq. 6
+    applied to (-sin alpha, cos alpha cos t, cos alpha sin t)): the normal of a supporting plane
+    of the (convex) VO, touching it along the whole generator."""
+    return _core.outward_normals(
+        cones.R, cones.sin_alpha, np.ascontiguousarray(np.atleast_1d(np.asarray(t, dtype=float)))
+    )
+
+
+def min_speeds(cones: VOCones) -> np.ndarray:
+    """(n,) the smallest |v| inside each VO cone: the distance from the velocity origin to the
     (infinite) cone; 0 when A is inside the zone or the origin is in the cone."""
-    if cones.inside[i]:
-        return 0.0
-    a, R = cones.apex[i], cones.R[i]
-    L = np.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
-    cos_b = -(a[0] * R[0, 0] + a[1] * R[1, 0] + a[2] * R[2, 0]) / max(L, 1e-12)
-    beta = np.arccos(min(max(cos_b, -1.0), 1.0))
-    alpha = np.arcsin(cones.sin_alpha[i])
-    if beta <= alpha:  # the origin is in the cone
-        return 0.0
-    if beta >= alpha + np.pi / 2:  # the apex is the nearest point
-        return L
-    return L * np.sin(beta - alpha)
+    return _core.min_speeds(cones)
+
+
+#: The constructor by the name the package exports (``vo3d_opt.geometry.build_cones``).
+build_cones = py_build_cones

@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import entry, jit
+import vo3d_opt._core as _core
 
 
 class AvoidancePlanes(NamedTuple):
@@ -64,44 +64,20 @@ class AvoidancePlanes(NamedTuple):
         return np.einsum("pij,...j->p...i", self.to_plane, v)
 
 
-@entry
 def avoidance_frame(direction: np.ndarray) -> np.ndarray:
     """Rows e_x (unit ``direction``), e_y0 (horizontal, left of e_x), e_z0 = e_x × e_y0 (up)."""
-    x, y, z = direction[0], direction[1], direction[2]
-    norm = np.sqrt(x * x + y * y + z * z)
-    x, y, z = (x / norm, y / norm, z / norm) if norm > 1e-12 else (1.0, 0.0, 0.0)
-    hy = np.sqrt(x * x + y * y)  # e_y0 = z_world × e_x, normalised
-    ly, my = (-y / hy, x / hy) if hy >= 1e-9 else (0.0, 1.0)  # vertical e_x: any side works
-    out = np.empty((3, 3))
-    out[0, 0], out[0, 1], out[0, 2] = x, y, z
-    out[1, 0], out[1, 1], out[1, 2] = ly, my, 0.0
-    out[2, 0], out[2, 1], out[2, 2] = -z * my, z * ly, x * my - y * ly
-    return out
+    return _core.avoidance_frame(direction)
 
 
-@jit
-def build_planes(
-    direction: np.ndarray, phi: np.ndarray, cos_phi: np.ndarray, sin_phi: np.ndarray
-) -> AvoidancePlanes:
-    """The planes P_phi for angles ``phi`` (rad, with their cosines and sines: a decision takes
-    them from its ``Config``, where the rows take them too) about the axis ``direction``:
-    eq. (8), R_{P_phi} @ frame for every phi; the rotation only mixes e_y0 and e_z0."""
-    frame = avoidance_frame(direction)
-    to_plane = np.empty((phi.shape[0], 3, 3))
-    for p in range(phi.shape[0]):
-        c, s = cos_phi[p], sin_phi[p]
-        for k in range(3):
-            to_plane[p, 0, k] = frame[0, k]
-            to_plane[p, 1, k] = c * frame[1, k] + s * frame[2, k]
-            to_plane[p, 2, k] = c * frame[2, k] - s * frame[1, k]
-    return AvoidancePlanes(phi, frame, to_plane)
-
-
-@entry
 def py_build_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:
-    """``build_planes`` for Python callers (compiled code calls ``build_planes``: no Python
-    wrapper)."""
-    return build_planes(direction, phi, np.cos(phi), np.sin(phi))
+    """The planes P_phi for angles ``phi`` (rad) about the axis ``direction``: eq. (8),
+    R_{P_phi} @ frame for every phi (compiled: ``build_planes``; the rotation only mixes e_y0
+    and e_z0)."""
+    return AvoidancePlanes(*_core.build_planes(direction, phi))
+
+
+#: The constructor by the name the package exports (``vo3d_opt.geometry.build_planes``).
+build_planes = py_build_planes
 
 
 def avoidance_planes(direction: np.ndarray, phi: np.ndarray) -> AvoidancePlanes:

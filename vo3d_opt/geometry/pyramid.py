@@ -16,7 +16,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._jit import entry, jit
+import vo3d_opt._core as _core
+
 from ..types import Box, Cylinder
 
 #: The 12 edges of a box as pairs of corner indices (corners differing in one bit).
@@ -53,18 +54,9 @@ class VOPyramids(NamedTuple):
         return self.corners[:, [0, 2, 6, 4], :]
 
 
-@entry
 def prism_corners(frame: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Corner k of each prism (bits far, left, top of k pick hi over lo), world frame (m, 8, 3)."""
-    m = frame.shape[0]
-    out = np.zeros((m, 8, 3))
-    for j in range(m):
-        for k in range(8):
-            for a in range(3):
-                local = hi[j, a] if (k >> a) & 1 else lo[j, a]
-                for c in range(3):
-                    out[j, k, c] += local * frame[j, a, c]
-    return out
+    return _core.prism_corners(frame, lo, hi)
 
 
 def prism_rows(obstacles: Sequence[Cylinder | Box]) -> np.ndarray:
@@ -77,32 +69,14 @@ def vo_pyramids(p_A: np.ndarray, obstacles: Sequence[Cylinder | Box]) -> VOPyram
     return py_build_pyramids(np.asarray(p_A, dtype=float), prism_rows(obstacles))
 
 
-@jit
-def build_pyramids(p_A: np.ndarray, prisms: np.ndarray) -> VOPyramids:
-    """Section 4.1 for prisms (x, y, L_pz, h_pz): C_pz turned square to the line of sight."""
-    m = prisms.shape[0]
-    frame, lo, hi = np.zeros((m, 3, 3)), np.empty((m, 3)), np.empty((m, 3))
-    inside = np.empty(m, dtype=np.bool_)
-    for j in range(m):
-        dx, dy = prisms[j, 0] - p_A[0], prisms[j, 1] - p_A[1]
-        L, H = prisms[j, 2], prisms[j, 3]
-        dist = np.sqrt(dx * dx + dy * dy)
-        hx, hy = (dx / dist, dy / dist) if dist > 1e-9 else (1.0, 0.0)
-        frame[j, 0, 0], frame[j, 0, 1] = hx, hy  # h: horizontal, towards the obstacle
-        frame[j, 1, 0], frame[j, 1, 1] = -hy, hx  # s: horizontal, left
-        frame[j, 2, 2] = 1.0  # z: up
-        lo[j, 0], lo[j, 1], lo[j, 2] = dist - L / 2, -L / 2, -p_A[2]
-        hi[j, 0], hi[j, 1], hi[j, 2] = dist + L / 2, L / 2, H - p_A[2]
-        # Turned to face A, the square contains A exactly when A is within its apothem L/2.
-        inside[j] = dist < L / 2 and p_A[2] < H
-    return VOPyramids(frame, lo, hi, prisms[:, 2].copy(), prisms[:, 3].copy(), inside)
-
-
-@entry
 def py_build_pyramids(p_A: np.ndarray, prisms: np.ndarray) -> VOPyramids:
-    """``build_pyramids`` for Python callers (compiled code calls ``build_pyramids``: no Python
-    wrapper)."""
-    return build_pyramids(p_A, prisms)
+    """Section 4.1 for prisms (x, y, L_pz, h_pz): C_pz turned square to the line of sight
+    (compiled: ``build_pyramid``)."""
+    return VOPyramids(*_core.build_pyramids(p_A, prisms))
+
+
+#: The constructor by the name the package exports (``vo3d_opt.geometry.build_pyramids``).
+build_pyramids = py_build_pyramids
 
 
 def supporting_faces(pyr: VOPyramids, v0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -72,7 +72,7 @@ class Plan:
         self.r_pz = float(sc.r_pz[i])
         self.top_speed = float(sc.max_speed[i])
         self._prefer = GoalWithDetours(
-            sc.goals[i : i + 1], sc.max_speed[i : i + 1], period, near=sc.r_pz[i : i + 1]
+            sc.goals[i : i + 1], sc.cruise_speed[i : i + 1], period, near=sc.r_pz[i : i + 1]
         )
 
     def arrived(self, p: np.ndarray) -> bool:

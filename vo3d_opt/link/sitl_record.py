@@ -114,7 +114,7 @@ def build_record(
     buf.vel[:steps] = np.diff(pos, axis=0) / dt
     buf.cmd[:steps] = np.stack([lg.commands(times[:-1]) for lg in logs], axis=1)
     for k in range(steps):
-        buf.pref[k] = goal_velocity(pos[k], sc.goals, sc.max_speed, dt)
+        buf.pref[k] = goal_velocity(pos[k], sc.goals, sc.cruise_speed, dt)
     _put_ticks(buf, sc.ids, links, times)
     near = np.linalg.norm(pos - sc.goals[None], axis=-1) <= sc.goal_tolerance
     buf.arrived[: steps + 1] = np.logical_or.accumulate(near, axis=0)

@@ -94,7 +94,7 @@ class Vehicle:
         i = sc.ids.index(cfg.agent)
         self.sc, self.i = sc, i
         self.straight = not bool(sc.avoids[i])
-        self.goal, self.v_max = sc.goals[i], float(sc.max_speed[i])
+        self.goal, self.v_max = sc.goals[i], float(sc.cruise_speed[i])
         self.dyn = make_dynamics(sc.vehicle_dynamics, sc.wind, seed=sc.sensing.seed)
         self.dyn.reset(sc.starts[i : i + 1])
         self.frame = GeodeticFrame(*cfg.origin)

@@ -86,7 +86,7 @@ def scenario_goal_velocity(sc: Scenario) -> Callable[[np.ndarray], np.ndarray]:
     """The scenario's preferred-velocity rule as a function of the positions (N, 3), one per
     run (it keeps state): :func:`~vo3d_opt.sim.traffic.goal_velocity` towards each agent's goal,
     with :class:`~vo3d_opt.sim.traffic.GoalWithDetours`' way out of deadlocks."""
-    return GoalWithDetours(sc.goals, sc.max_speed, float(sc.dt), near=sc.r_pz)
+    return GoalWithDetours(sc.goals, sc.cruise_speed, float(sc.dt), near=sc.r_pz)
 
 
 def _checked_commands(out: StepDecision, deciding: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -14,7 +14,6 @@ from typing import Literal
 
 import numpy as np
 
-from vo3d_opt._jit import entry
 from vo3d_opt.solvers.problem import NLP, QP, Result
 from vo3d_opt.status import Status
 
@@ -108,23 +107,21 @@ class Standard:
         )
 
 
-@entry
-def _violation(C, l, u, x, r):  # noqa: E741 - l as in Standard
-    worst = -np.inf
-    for i in range(C.shape[0]):
-        cx = 0.0
-        for j in range(x.shape[0]):
-            cx += C[i, j] * x[j]
-        worst = max(worst, l[i] - cx, cx - u[i])
+def _violation(C: np.ndarray, l: np.ndarray, u: np.ndarray, x: np.ndarray, r: float) -> float:  # noqa: E741
+    """``Standard.violation`` (r < 0: no radius): each row's C x summed column by column, as
+    the rows are written."""
+    cx = np.zeros(C.shape[0])
+    for j in range(x.shape[0]):
+        cx = cx + C[:, j] * x[j]
+    gaps = np.concatenate([l - cx, cx - u])
+    gaps = gaps[~np.isnan(gaps)]  # a NaN never wins a max
+    worst = float(gaps.max(initial=-np.inf))
     if r >= 0.0:
-        worst = max(worst, np.sqrt(np.sum(x * x)) - r)
+        worst = max(worst, float(np.sqrt(np.sum(x * x))) - r)
     if worst <= FEAS_TOL:  # the scale only matters for larger violations
         return worst
-    scale = 0.0 if r < 0.0 else r
-    for i in range(l.shape[0]):
-        for bound in (l[i], u[i]):
-            if np.isfinite(bound):
-                scale = max(scale, abs(bound))
+    bounds = np.abs(np.concatenate([l, u]))
+    scale = max(0.0 if r < 0.0 else r, float(bounds[np.isfinite(bounds)].max(initial=0.0)))
     return worst / (1.0 + scale)
 
 
@@ -209,16 +206,14 @@ def _free_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:
     return lb, ub
 
 
-@entry
-def _rows(G, h, A, b, lb, ub):
+def _rows(
+    G: np.ndarray, h: np.ndarray, A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """C = [G; A; I], l = [-inf; b; lb], u = [h; b; ub]."""
-    mg, ma, n = G.shape[0], A.shape[0], lb.shape[0]
-    C, l, u = np.zeros((mg + ma + n, n)), np.empty(mg + ma + n), np.empty(mg + ma + n)  # noqa: E741
-    C[:mg], l[:mg], u[:mg] = G, -np.inf, h
-    C[mg : mg + ma], l[mg : mg + ma], u[mg : mg + ma] = A, b, b
-    for j in range(n):
-        C[mg + ma + j, j] = 1.0
-    l[mg + ma :], u[mg + ma :] = lb, ub
+    n = lb.shape[0]
+    C = np.vstack([G, A, np.eye(n)])
+    l = np.concatenate([np.full(G.shape[0], -np.inf), b, lb])  # noqa: E741
+    u = np.concatenate([h, b, ub])
     return C, l, u
 
 
@@ -252,22 +247,26 @@ def screen(std: Standard, solver: str) -> Result | None:
     )
 
 
-@entry
-def _screen(P, q, C, l, u, r, has_r, m_ineq, m_eq):  # noqa: E741 - l as in Standard
+def _screen(
+    P: np.ndarray,
+    q: np.ndarray,
+    C: np.ndarray,
+    l: np.ndarray,  # noqa: E741 - l as in Standard
+    u: np.ndarray,
+    r: float,
+    has_r: bool,
+    m_ineq: int,
+    m_eq: int,
+) -> int:
     """0: fine; 1: NaN or a misplaced infinity; 2: an infinite b; 3: infeasible bounds."""
     finite = np.isfinite(P.sum() + q.sum() + C.sum()) and (not has_r or np.isfinite(r))
-    if not finite:
+    if not finite or np.isnan(l).any() or np.isnan(u).any():
         return 1
-    bad = False
-    for i in range(l.shape[0]):
-        if np.isnan(l[i]) or np.isnan(u[i]):
-            return 1
-        bad |= not (l[i] <= u[i] and l[i] < np.inf and u[i] > -np.inf)
+    bad = not bool(np.all((l <= u) & (l < np.inf) & (u > -np.inf)))
     if not bad and (not has_r or r >= 0):
         return 0
-    for i in range(m_ineq, m_ineq + m_eq):
-        if np.isinf(l[i]):
-            return 2
+    if np.isinf(l[m_ineq : m_ineq + m_eq]).any():
+        return 2
     return 3
 
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 import daqp
 import numpy as np
 
-from vo3d_opt._jit import entry
 from vo3d_opt.solvers.base import Backend, Standard, make_result
 from vo3d_opt.solvers.problem import QP, Result
 from vo3d_opt.status import Status
@@ -52,15 +51,18 @@ class DaqpBackend(Backend):
         )
 
 
-@entry
-def _daqp_rows(l, u, n, m_ineq, m_eq):  # noqa: E741 - l as in Standard
+def _daqp_rows(
+    l: np.ndarray,  # noqa: E741 - l as in Standard
+    u: np.ndarray,
+    n: int,
+    m_ineq: int,
+    m_eq: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """DAQP's bounds: the simple bounds (the identity rows, last in Standard) first, clipped to
     its infinity, and the ``sense`` flags marking equalities immutable."""
     m = m_ineq + m_eq
-    upper, lower = np.empty(n + m), np.empty(n + m)
-    for i in range(n + m):
-        k = m + i if i < n else i - n
-        upper[i], lower[i] = min(u[k], INF), max(l[k], -INF)
+    rows = np.concatenate([np.arange(m, m + n), np.arange(m)])
+    upper, lower = np.minimum(u[rows], INF), np.maximum(l[rows], -INF)
     sense = np.zeros(n + m, dtype=np.int32)
     sense[n + m_ineq :] = EQUALITY
     return upper, lower, sense

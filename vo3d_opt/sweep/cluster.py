@@ -37,7 +37,7 @@ class ConnectError(OSError):
 class WarmUp(WorkerPlugin):
     """Runs :func:`~vo3d_opt.sweep.flight.warm` on every worker when registered and on every
     worker that joins later (e.g. restarted after a death), in a thread so that the worker
-    keeps answering the scheduler while numba loads its cache."""
+    keeps answering the scheduler while it imports and loads the selector's backends."""
 
     name = "vo3d-sweep-warm-up"
 
@@ -53,6 +53,14 @@ class WarmUp(WorkerPlugin):
 SCHEDULER_ADDRESS = re.compile(r"^(tcp|tls)://[^/\s:]+:[0-9]{1,5}$")
 
 
+def check_address(scheduler: str) -> None:
+    """``ConnectError`` unless ``scheduler`` is an address ``--scheduler`` takes."""
+    if not SCHEDULER_ADDRESS.match(scheduler):
+        raise ConnectError(
+            f"{scheduler!r} is not a scheduler address (tcp://HOST:PORT or tls://HOST:PORT)"
+        )
+
+
 @contextlib.contextmanager
 def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> Iterator[Client]:
     """A client of the scheduler at ``scheduler``, or of a new local cluster of ``workers``
@@ -60,10 +68,7 @@ def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> It
     import dask
 
     if scheduler:
-        if not SCHEDULER_ADDRESS.match(scheduler):
-            raise ConnectError(
-                f"{scheduler!r} is not a scheduler address (tcp://HOST:PORT or tls://HOST:PORT)"
-            )
+        check_address(scheduler)
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT)
         except Exception as exc:  # noqa: BLE001 - any failure to connect is one line

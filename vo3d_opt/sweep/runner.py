@@ -1,8 +1,8 @@
 """A sweep: encounters 0..N-1 of a family, flown on Dask (:func:`run_sweep`), and its summary.
 
 Before the clock starts, every worker (and every worker that joins later, e.g. a restarted
-one) flies a tiny encounter with the same method, so the compiled kernels are loaded from
-numba's cache and no encounter's timing pays for it. ``wall_time`` is the time from the first
+one) flies a tiny encounter with the same method, so the modules and backends it needs are
+loaded and no encounter's timing pays for it. ``wall_time`` is the time from the first
 submission to the last row; ``setup_time`` the cluster's start and the warm-up before it.
 """
 

@@ -17,7 +17,8 @@ A scenario file is a YAML mapping::
     defaults:                              # default: r_pz 10, radius 0.5, max_speed 4
       r_pz: 10.0                           # protected-zone radius, m
       radius: 0.5                          # physical radius, m (collision counting)
-      max_speed: 4.0                       # m/s
+      max_speed: 4.0                       # m/s, the speed bound
+      cruise_speed: 2.0                    # m/s, the speed preferred on the way (default max_speed)
     agents:                                # required, at least one
       - {id: u0, start: [40, 0, 20], goal: [-40, 0, 20]}
       - {id: u1, start: [-40, 0, 20], goal: [40, 0, 20], r_pz: 8.0, radius: 0.3, max_speed: 3}
@@ -427,6 +428,15 @@ class Scenario(Spec):
     def max_speed(self) -> np.ndarray:
         """Speed bound per agent: min(limits.speed[1], the agent's max_speed), m/s."""
         return np.minimum(self._per_agent("max_speed"), self.limits.v_max)
+
+    @property
+    def cruise_speed(self) -> np.ndarray:
+        """The speed each agent prefers on its way, m/s: its ``cruise_speed`` (or the
+        defaults'), else its speed bound; never above the bound."""
+        default = self.defaults.cruise_speed
+        wanted = [a.cruise_speed if a.cruise_speed is not None else default for a in self.agents]
+        cruise = np.array([np.inf if w is None else w for w in wanted], dtype=float)
+        return np.minimum(cruise, self.max_speed)
 
     @property
     def sensing_horizon(self) -> float:

@@ -70,6 +70,8 @@ class DefaultsSpec(Spec):
     r_pz: Positive = 10.0
     radius: Positive = 0.5
     max_speed: Positive = 4.0
+    #: m/s: the speed an agent prefers on its way (the preferred velocity's); None: max_speed
+    cruise_speed: Positive | None = None
 
 
 class AgentSpec(Spec):
@@ -81,6 +83,7 @@ class AgentSpec(Spec):
     r_pz: Positive | None = None
     radius: Positive | None = None
     max_speed: Positive | None = None
+    cruise_speed: Positive | None = None
     avoids: StrictBool = True  # false: flies straight to its goal, never avoids (contract §5)
 
 

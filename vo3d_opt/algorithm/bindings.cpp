@@ -1,0 +1,598 @@
+// vo3d_opt._core: the algorithm of this folder for Python (nanobind glue, not the algorithm).
+//
+// Every array argument is checked (convert.hpp): its dtype (float64, int64 or bool as the name
+// says), its number of dimensions and its fixed sizes; anything else raises ValueError naming
+// the argument, never a crash. The shapes of the Python side travel as tuples of arrays in
+// their fields' order; the Python NamedTuples are built from them.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/pair.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/tuple.h>
+#include <nanobind/stl/vector.h>
+
+#include "convert.hpp"
+
+namespace nb = nanobind;
+using namespace nb::literals;
+using namespace vo3d;
+using namespace vo3d::glue;
+
+NB_MODULE(_core, m) {
+    m.doc() = "vo3d-opt's compiled core: the decision of vo3d_opt/algorithm/decide.hpp and its parts";
+    m.attr("OUT_SIZE") = 7;
+    m.attr("MANY_OUT_SIZE") = MANY_OUT_SIZE;
+    m.attr("AGENT_COLUMNS") = AGENT_COLUMNS;
+    m.attr("FINE_SPEED_LEVELS") = FINE_SPEED_LEVELS;
+    m.attr("FINE_HEADING_STEP") = FINE_HEADING_STEP;
+    m.attr("LIMIT_TOL") = LIMIT_TOL;
+    m.attr("NEVER") = NEVER;
+
+    nb::class_<Config>(m, "Config", "The formulation options as the core reads them (Options.config).")
+        .def(nb::new_([](bool reciprocal, double horizon, double pz_buffer, double margin,
+                         std::vector<bool> corrections, nb::handle phi, nb::handle cos_phi,
+                         nb::handle sin_phi, nb::handle t, nb::handle cos_t, nb::handle sin_t,
+                         int64_t speed_levels, double heading_step, bool closing_guard,
+                         bool least_bad_escape, bool fine_fallback) {
+                 return make_config(reciprocal, horizon, pz_buffer, margin, corrections, phi,
+                                    cos_phi, sin_phi, t, cos_t, sin_t, speed_levels, heading_step,
+                                    closing_guard, least_bad_escape, fine_fallback);
+             }),
+             nb::kw_only(), "reciprocal"_a, "horizon"_a, "pz_buffer"_a, "margin"_a, "corrections"_a,
+             "phi"_a, "cos_phi"_a, "sin_phi"_a, "t"_a, "cos_t"_a, "sin_t"_a, "speed_levels"_a,
+             "heading_step"_a, "closing_guard"_a, "least_bad_escape"_a, "fine_fallback"_a)
+        .def_ro("reciprocal", &Config::reciprocal)
+        .def_ro("horizon", &Config::horizon)
+        .def_ro("pz_buffer", &Config::pz_buffer)
+        .def_ro("margin", &Config::margin)
+        .def_prop_ro("phi", [](const Config& c) { return numpy(c.phi, {c.phi.size()}); })
+        .def_prop_ro("t", [](const Config& c) { return numpy(c.t, {c.t.size()}); })
+        .def_ro("speed_levels", &Config::speed_levels)
+        .def_ro("heading_step", &Config::heading_step)
+        .def_ro("closing_guard", &Config::closing_guard)
+        .def_ro("least_bad_escape", &Config::least_bad_escape)
+        .def_ro("fine_fallback", &Config::fine_fallback);
+
+    // ------------------------------------------------------------------ the decision
+    m.def("decide",
+          [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs, nb::handle prisms,
+             nb::handle limits, const Config& cfg, nb::handle out) {
+              double P_[3], V[3], W[3];
+              vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
+              In<double> nb_ = arr<double>(nbrs, "nbrs", {ANY, 8});
+              In<double> pr = arr<double>(prisms, "prisms", {ANY, 4});
+              Bounds b = bounds_of_array(limits);
+              Out<double> o = out_arr<double>(out, "out", {7});
+              Decision d;
+              {
+                  nb::gil_scoped_release free;
+                  d = decide_one(P_, V, W, rows_of(nb_), rows_of(pr), b, cfg);
+              }
+              double vals[7] = {d.velocity[0], d.velocity[1], d.velocity[2], double(d.status),
+                                d.phi, double(d.round), double(d.solved)};
+              for (int k = 0; k < 7; ++k) o.data()[k * o.stride(0)] = vals[k];
+          },
+          "p"_a, "v_now"_a, "v_pref"_a, "nbrs"_a, "prisms"_a, "limits"_a, "cfg"_a, "out"_a,
+          "One decision (decide.hpp) into out (7,): velocity, status, phi, round, solved.");
+
+    m.def("decide_many",
+          [](nb::handle swarm, const Config& cfg, int64_t threads, nb::handle out, int64_t lo,
+             int64_t hi) {
+              nb::tuple t = fields(swarm, "swarm", 11);
+              In<double> agents = arr<double>(t[0], "agents", {ANY, AGENT_COLUMNS});
+              int64_t N = agents.shape(0);
+              In<double> limits = arr<double>(t[1], "limits", {N, 6});
+              In<int64_t> who = arr<int64_t>(t[2], "who", {ANY});
+              int64_t D = who.shape(0);
+              In<int64_t> nb_span = arr<int64_t>(t[3], "nb_span", {D, 2}), nb_idx = arr<int64_t>(t[4], "nb_idx", {ANY});
+              In<double> spheres = arr<double>(t[5], "spheres", {ANY, 4});
+              In<int64_t> sp_span = arr<int64_t>(t[6], "sp_span", {D, 2}), sp_idx = arr<int64_t>(t[7], "sp_idx", {ANY});
+              In<double> prisms = arr<double>(t[8], "prisms", {ANY, 4});
+              In<int64_t> ob_span = arr<int64_t>(t[9], "ob_span", {D, 2}), ob_idx = arr<int64_t>(t[10], "ob_idx", {ANY});
+              Out<double> o = out_arr<double>(out, "out", {D, MANY_OUT_SIZE});
+              if (!c_contig(o) || !c_contig(who))
+                  throw nb::value_error("out, who: expected C-contiguous arrays");
+              for (int64_t d = 0; d < D; ++d)
+                  if (who.data()[d] < 0 || who.data()[d] >= N) throw nb::value_error("who: index out of range");
+              Swarm sw{rows_of(agents), rows_of(limits), who.data(), D,
+                       links_of(nb_span, nb_idx, D, "nb_span"), rows_of(spheres),
+                       links_of(sp_span, sp_idx, D, "sp_span"), rows_of(prisms),
+                       links_of(ob_span, ob_idx, D, "ob_span")};
+              check_indices(nb_span, nb_idx, N, "nb_idx");
+              check_indices(sp_span, sp_idx, int64_t(spheres.shape(0)), "sp_idx");
+              check_indices(ob_span, ob_idx, int64_t(prisms.shape(0)), "ob_idx");
+              if (hi < 0) hi = D;
+              if (lo < 0 || lo > hi || hi > D) throw nb::value_error("lo, hi: not a range of the deciding vehicles");
+              if (threads < 1) throw nb::value_error("threads: expected at least 1");
+              nb::gil_scoped_release free;
+              decide_many(sw, cfg, lo, hi, threads, o.data());
+          },
+          "swarm"_a, "cfg"_a, "threads"_a, "out"_a, "lo"_a = 0, "hi"_a = -1,
+          "Deciding vehicles lo <= d < hi of a Swarm (swarm.hpp) into out (D, 9), on threads.");
+
+    m.def("neighbor_lists",
+          [](nb::handle a, nb::handle b, nb::handle dist, double sensing_range, nb::handle place,
+             int64_t k, nb::handle span) {
+              In<int64_t> A = arr<int64_t>(a, "a", {ANY});
+              int64_t E = A.shape(0);
+              In<int64_t> B = arr<int64_t>(b, "b", {E}), pl = arr<int64_t>(place, "place", {ANY});
+              In<double> dd = arr<double>(dist, "dist", {E});
+              Out<int64_t> sp = out_arr<int64_t>(span, "span", {ANY, 2});
+              if (!c_contig(A) || !c_contig(B) || !c_contig(dd) || !c_contig(pl) || !c_contig(sp))
+                  throw nb::value_error("neighbor_lists: expected C-contiguous arrays");
+              int64_t n = pl.shape(0), D = sp.shape(0);
+              for (int64_t e = 0; e < E; ++e)
+                  if (A.data()[e] < 0 || A.data()[e] >= n || B.data()[e] < 0 || B.data()[e] >= n)
+                      throw nb::value_error("a, b: index out of range");
+              for (int64_t i = 0; i < n; ++i)
+                  if (pl.data()[i] >= D) throw nb::value_error("place: row out of range");
+              std::vector<int64_t> idx = neighbor_lists(A.data(), B.data(), dd.data(), E, sensing_range,
+                                                        pl.data(), k, D, sp.data());
+              size_t size = idx.size();
+              return numpy(std::move(idx), {size});
+          },
+          "a"_a, "b"_a, "dist"_a, "sensing_range"_a, "place"_a, "k"_a, "span"_a);
+
+    m.def("nearest_lists",
+          [](nb::handle P, nb::handle who, nb::handle near, nb::handle far, double sensing_range,
+             nb::handle chosen) {
+              In<double> pos = arr<double>(P, "P", {ANY, 3});
+              In<int64_t> w = arr<int64_t>(who, "who", {ANY});
+              int64_t D = w.shape(0);
+              In<int64_t> nr = arr<int64_t>(near, "near", {D, ANY});
+              int64_t K = nr.shape(1);
+              In<double> fr = arr<double>(far, "far", {D, K});
+              Out<int64_t> ch = out_arr<int64_t>(chosen, "chosen", {D, ANY});
+              int64_t k = ch.shape(1);
+              if (!c_contig(w) || !c_contig(nr) || !c_contig(fr) || !c_contig(ch)) throw nb::value_error("nearest_lists: expected C-contiguous arrays");
+              if (k < 1 || k > K) throw nb::value_error("chosen: expected 1 <= k <= the proposals");
+              for (int64_t r = 0; r < D; ++r)
+                  if (w.data()[r] < 0 || w.data()[r] >= int64_t(pos.shape(0))) throw nb::value_error("who: index out of range");
+              std::vector<uint8_t> settled(D);
+              {
+                  nb::gil_scoped_release free;
+                  nearest_lists(rows_of(pos), w.data(), D, nr.data(), fr.data(), K, sensing_range, k,
+                                ch.data(), settled.data());
+              }
+              return numpy_bool(settled, {size_t(D)});
+          },
+          "P"_a, "who"_a, "near"_a, "far"_a, "sensing_range"_a, "chosen"_a);
+
+    // ------------------------------------------------------------------ the VOs (vo.hpp)
+    m.def("build_cones", [](nb::handle p_A, nb::handle p_B, nb::handle apex, nb::handle r_pz,
+                            double reach, double tau_min) {
+        double pa[3];
+        vec3(p_A, "p_A", pa);
+        In<double> pb = arr<double>(p_B, "p_B", {ANY, 3});
+        int64_t n = pb.shape(0);
+        In<double> ap = arr<double>(apex, "apex", {n, 3}), r = arr<double>(r_pz, "r_pz", {n});
+        std::vector<Cone> cones;
+        for (int64_t i = 0; i < n; ++i) {
+            double b[3], a[3];
+            for (int k = 0; k < 3; ++k)
+                b[k] = pb.data()[i * pb.stride(0) + k * pb.stride(1)],
+                a[k] = ap.data()[i * ap.stride(0) + k * ap.stride(1)];
+            cones.push_back(build_cone(pa, b, a, at(r, i), reach, tau_min));
+        }
+        return cones_to_py(cones);
+    });
+    m.def("min_speeds", [](nb::handle cones) {
+        std::vector<Cone> c = cones_of(cones);
+        std::vector<double> out;
+        for (const Cone& cone : c) out.push_back(min_speed(cone));
+        size_t n = c.size();
+        return numpy(std::move(out), {n});
+    });
+    m.def("outward_normals", [](nb::handle R, nb::handle sin_alpha, nb::handle t) {
+        In<double> r = arr<double>(R, "R", {ANY, 3, 3});
+        int64_t n = r.shape(0);
+        In<double> sa = arr<double>(sin_alpha, "sin_alpha", {n});
+        std::vector<double> ts = vec(t, "t"), out;
+        for (int64_t i = 0; i < n; ++i) {
+            double M[3][3];
+            for (int a = 0; a < 3; ++a)
+                for (int c = 0; c < 3; ++c) M[a][c] = r.data()[i * r.stride(0) + a * r.stride(1) + c * r.stride(2)];
+            for (double tk : ts) {
+                double N[3];
+                outward_normal(M, at(sa, i), std::cos(tk), std::sin(tk), N);
+                out.insert(out.end(), N, N + 3);
+            }
+        }
+        return numpy(std::move(out), {size_t(n), ts.size(), 3});
+    });
+    m.def("build_pyramids", [](nb::handle p_A, nb::handle prisms) {
+        double pa[3];
+        vec3(p_A, "p_A", pa);
+        Rows pr = rows_of(arr<double>(prisms, "prisms", {ANY, 4}));
+        std::vector<Pyramid> out;
+        for (int64_t j = 0; j < pr.n; ++j) out.push_back(build_pyramid(pa, pr(j, 0), pr(j, 1), pr(j, 2), pr(j, 3)));
+        return pyramids_to_py(out);
+    });
+    m.def("prism_corners", [](nb::handle frame, nb::handle lo, nb::handle hi) {
+        In<double> f = arr<double>(frame, "frame", {ANY, 3, 3});
+        int64_t m = f.shape(0);
+        In<double> l = arr<double>(lo, "lo", {m, 3}), h = arr<double>(hi, "hi", {m, 3});
+        std::vector<double> out(m * 24, 0.0);
+        for (int64_t j = 0; j < m; ++j)
+            for (int k = 0; k < 8; ++k)
+                for (int a = 0; a < 3; ++a) {
+                    const In<double>& src = (k >> a) & 1 ? h : l;
+                    double local = src.data()[j * src.stride(0) + a * src.stride(1)];
+                    for (int c = 0; c < 3; ++c)
+                        out[24 * j + 3 * k + c] += local * f.data()[j * f.stride(0) + a * f.stride(1) + c * f.stride(2)];
+                }
+        return numpy(std::move(out), {size_t(m), 8, 3});
+    });
+    m.def("avoidance_frame", [](nb::handle direction) {
+        double d[3], f[3][3];
+        vec3(direction, "direction", d);
+        avoidance_frame(d, f);
+        return numpy(std::vector<double>(&f[0][0], &f[0][0] + 9), {3, 3});
+    });
+    m.def("build_planes", [](nb::handle direction, nb::handle phi) {
+        double d[3];
+        vec3(direction, "direction", d);
+        std::vector<double> ph = vec(phi, "phi"), c, s;
+        for (double x : ph) c.push_back(std::cos(x)), s.push_back(std::sin(x));
+        return planes_to_py(build_planes(d, ph, c, s));
+    });
+    m.def("in_vos", [](nb::handle cones, nb::handle pyramids, nb::handle v, double horizon, double tol) {
+        VOs vos;
+        vos.cones = cones_of(cones), vos.pyramids = pyramids_of(pyramids);
+        Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
+        int64_t n = vos.n(), count = vos.count();
+        std::vector<uint8_t> out(count * vel.n);
+        for (int64_t k = 0; k < vel.n; ++k) {
+            double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
+            for (int64_t i = 0; i < n; ++i) out[i * vel.n + k] = in_cone(vos.cones[i], x, horizon, tol);
+            for (int64_t j = n; j < count; ++j) out[j * vel.n + k] = in_pyramid(vos.pyramids[j - n], x, horizon);
+        }
+        return numpy_bool(out, {size_t(count), size_t(vel.n)});
+    });
+    m.def("cone_penetration", [](nb::handle cones, nb::handle v) {
+        std::vector<Cone> c = cones_of(cones);
+        Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
+        std::vector<double> out;
+        for (const Cone& cone : c)
+            for (int64_t k = 0; k < vel.n; ++k) {
+                double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
+                out.push_back(cone.r_pz - approach(cone.apex, cone.rel, x, NO_HORIZON).closest);
+            }
+        return numpy(std::move(out), {c.size(), size_t(vel.n)});
+    });
+    m.def("entry_times", [](nb::handle pyramids, nb::handle v) {
+        std::vector<Pyramid> py = pyramids_of(pyramids);
+        Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
+        std::vector<double> out;
+        for (const Pyramid& pyr : py)
+            for (int64_t k = 0; k < vel.n; ++k) {
+                double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
+                out.push_back(entry_time(pyr, x));
+            }
+        return numpy(std::move(out), {py.size(), size_t(vel.n)});
+    });
+    m.def("clearances", [](nb::handle cones, nb::handle pyramids, nb::handle v, double horizon) {
+        VOs vos;
+        vos.cones = cones_of(cones), vos.pyramids = pyramids_of(pyramids);
+        Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
+        std::vector<double> out;
+        for (int64_t k = 0; k < vel.n; ++k) {
+            double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
+            out.push_back(clearance(vos, x, horizon));
+        }
+        return numpy(std::move(out), {size_t(vel.n)});
+    });
+    m.def("ball_in_cone", [](nb::handle cones, int64_t k, nb::handle c, double rho) {
+        std::vector<Cone> cs = cones_of(cones);
+        if (k < 0 || k >= int64_t(cs.size())) throw nb::value_error("k: not a cone");
+        double x[3];
+        vec3(c, "c", x);
+        return ball_in_cone(cs[k], x, rho);
+    });
+
+    // ------------------------------------------------------------------ sections (sections.hpp)
+    m.def("cone_sections", [](nb::handle cones, nb::handle planes, nb::handle t, std::vector<bool> corr) {
+        std::vector<Cone> cs = cones_of(cones);
+        Planes pl = planes_of(planes);
+        std::vector<double> ts = vec(t, "t"), cos_t, sin_t;
+        for (double x : ts) cos_t.push_back(std::cos(x)), sin_t.push_back(std::sin(x));
+        if (corr.size() != 6) throw nb::value_error("corrections: expected six flags");
+        Corrections c{corr[0], corr[1], corr[2], corr[3], corr[4], corr[5]};
+        size_t n = cs.size(), P = pl.phi.size(), K = ts.size();
+        std::vector<int64_t> kind(n * P);
+        std::vector<double> curve(n * P * K * 2), chord(n * P * 4), chord_cs(n * P * 4), apex(n * P * 2),
+            sym(n * P * 2), half(n * P * 3);
+        Base base;
+        Section sec{int64_t(K)};
+        for (size_t i = 0; i < n; ++i) {
+            base.resize(int64_t(K) + 3);
+            cone_base_points(cs[i], pl.frame, cos_t, sin_t, base);
+            for (size_t p = 0; p < P; ++p) {
+                size_t ip = i * P + p;
+                kind[ip] = cone_section(cs[i], base, pl.frame, std::cos(pl.phi[p]), std::sin(pl.phi[p]), c, sec);
+                for (size_t k = 0; k < K; ++k) curve[(ip * K + k) * 2] = sec.curve_x[k], curve[(ip * K + k) * 2 + 1] = sec.curve_y[k];
+                for (int a = 0; a < 2; ++a) {
+                    for (int b = 0; b < 2; ++b) chord[ip * 4 + 2 * a + b] = sec.chord[a][b], chord_cs[ip * 4 + 2 * a + b] = sec.chord_cs[a][b];
+                    apex[ip * 2 + a] = sec.apex[a], sym[ip * 2 + a] = sec.symmetry[a];
+                }
+                for (int a = 0; a < 3; ++a) half[ip * 3 + a] = sec.halfplane[a];
+            }
+        }
+        return nb::make_tuple(numpy(kind, {n, P}), numpy(curve, {n, P, K, 2}), numpy(chord, {n, P, 2, 2}),
+                              numpy(chord_cs, {n, P, 2, 2}), numpy(apex, {n, P, 2}), numpy(sym, {n, P, 2}),
+                              numpy(half, {n, P, 3}));
+    });
+    m.def("pyramid_sections", [](nb::handle pyramids, nb::handle planes) {
+        std::vector<Pyramid> py = pyramids_of(pyramids);
+        Planes pl = planes_of(planes);
+        size_t m = py.size(), P = pl.phi.size();
+        std::vector<int64_t> kind(m * P);
+        std::vector<double> chord(m * P * 4, kNaN), chord_cs(m * P * 4, kNaN), apex(m * P * 2, 0.0),
+            sym(m * P * 2, kNaN), half(m * P * 3, 0.0);
+        Base base;
+        base.resize(9);
+        Section sec(0);
+        for (size_t j = 0; j < m; ++j) {
+            pyramid_base_points(py[j], pl.frame, base);
+            for (size_t p = 0; p < P; ++p) {
+                size_t jp = j * P + p;
+                kind[jp] = pyramid_section(py[j], base, std::cos(pl.phi[p]), std::sin(pl.phi[p]), sec);
+                for (int a = 0; a < 2; ++a) {
+                    for (int b = 0; b < 2; ++b) chord[jp * 4 + 2 * a + b] = sec.chord[a][b], chord_cs[jp * 4 + 2 * a + b] = sec.chord_cs[a][b];
+                    apex[jp * 2 + a] = sec.apex[a], sym[jp * 2 + a] = sec.symmetry[a];
+                }
+                for (int a = 0; a < 3; ++a) half[jp * 3 + a] = sec.halfplane[a];
+            }
+        }
+        return nb::make_tuple(numpy(kind, {m, P}), numpy(std::vector<double>(), {m, P, 0, 2}),
+                              numpy(chord, {m, P, 2, 2}), numpy(chord_cs, {m, P, 2, 2}), numpy(apex, {m, P, 2}),
+                              numpy(sym, {m, P, 2}), numpy(half, {m, P, 3}));
+    });
+    m.def("pick", [](nb::handle curve, nb::handle chord, nb::handle w0) {
+        In<double> cu = arr<double>(curve, "curve", {2, ANY});
+        In<double> ch = arr<double>(chord, "chord", {2, 2});
+        In<double> w = arr<double>(w0, "w0", {2});
+        int64_t K = cu.shape(1);
+        Section sec(K);
+        for (int64_t k = 0; k < K; ++k)
+            sec.curve_x[k] = cu.data()[k * cu.stride(1)], sec.curve_y[k] = cu.data()[cu.stride(0) + k * cu.stride(1)];
+        for (int a = 0; a < 2; ++a)
+            for (int b = 0; b < 2; ++b) sec.chord[a][b] = ch.data()[a * ch.stride(0) + b * ch.stride(1)];
+        double ww[2] = {at(w, 0), at(w, 1)};
+        std::vector<double> dist(K + 2), side(K + 2);
+        Picks pk = pick(sec, K, ww, dist, side);
+        return std::make_tuple(pk.round[0], pk.round[1], pk.round[2]);
+    });
+
+    // ------------------------------------------------------------------ build_vos and limits
+    m.def("build_vos", [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs,
+                          nb::handle prisms, nb::handle bounds, const Config& cfg) {
+        double P_[3], V[3], W[3];
+        vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
+        Rows nb_ = rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), pr = rows_of(arr<double>(prisms, "prisms", {ANY, 4}));
+        return vos_to_py(build_vos(P_, V, W, nb_, pr, bounds_of(bounds), cfg));
+    });
+    m.def("pref_clear", [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs,
+                           nb::handle prisms, nb::handle bounds, const Config& cfg) {
+        double P_[3], V[3], W[3], pref[3];
+        vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
+        Rows nb_ = rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), pr = rows_of(arr<double>(prisms, "prisms", {ANY, 4}));
+        Bounds b = bounds_of(bounds);
+        aimed(W, b, pref);
+        return pref_clear(P_, cone_rows(P_, V, nb_, b, cfg), pyramids_in_reach(P_, pr, b, cfg), pref, cfg.horizon);
+    });
+    m.def("decision_planes", [](nb::handle vos, nb::handle v_now, const Config& cfg) {
+        double V[3];
+        vec3(v_now, "v_now", V);
+        return planes_to_py(decision_planes(vos_of_py(vos), V, cfg));
+    });
+    m.def("limit_rows", [](nb::handle p, nb::handle v_now, nb::handle nbrs, nb::handle bounds, const Config& cfg) {
+        double P_[3], V[3];
+        vec3(p, "p", P_), vec3(v_now, "v_now", V);
+        LimitRows L = limit_rows(P_, V, rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), bounds_of(bounds), cfg);
+        size_t n = L.h.size();
+        return nb::make_tuple(numpy(L.G, {n, 3}), numpy(L.h, {n}));
+    });
+    m.def("vz_range", [](double z, nb::handle bounds) {
+        VzRange r = vz_range(z, bounds_of(bounds));
+        return std::make_pair(r.lo, r.hi);
+    });
+    m.def("enforce_limits", [](nb::handle v, nb::handle p, nb::handle bounds) {
+        double x[3], P_[3];
+        vec3(v, "v", x), vec3(p, "p", P_);
+        std::vector<double> out(3);
+        enforce_limits(x, P_, bounds_of(bounds), out.data());
+        return numpy(std::move(out), {3});
+    });
+    auto per_velocity = [](nb::handle v, auto&& fn) {
+        Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
+        std::vector<double> out;
+        for (int64_t k = 0; k < vel.n; ++k) {
+            double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
+            out.push_back(fn(x));
+        }
+        return numpy(std::move(out), {size_t(vel.n)});
+    };
+    m.def("closing_rates", [per_velocity](nb::handle vos, nb::handle v) {
+        VOs V = vos_of_py(vos);
+        return per_velocity(v, [&](const double* x) { return closing_rate(V, x); });
+    });
+    m.def("times_to_intrusion", [per_velocity](nb::handle vos, nb::handle v) {
+        VOs V = vos_of_py(vos);
+        int64_t hint = 0;
+        return per_velocity(v, [&](const double* x) { return time_to_intrusion(V, x, -1.0, hint); });
+    });
+    m.def("zone_times", [per_velocity](nb::handle vos, int64_t k, nb::handle v) {
+        VOs V = vos_of_py(vos);
+        if (k < 0 || k >= V.count()) throw nb::value_error("k: not a zone");
+        return per_velocity(v, [&](const double* x) { return zone_time(V, k, x); });
+    });
+    m.def("zone_time_bound", [](nb::handle vos, int64_t k, nb::handle c, double rho) {
+        VOs V = vos_of_py(vos);
+        if (k < 0 || k >= V.n()) throw nb::value_error("k: not a cone");
+        double x[3];
+        vec3(c, "c", x);
+        return zone_time_bound(V, k, x, rho);
+    });
+    m.def("all_within", [](nb::handle v, nb::handle G, nb::handle h, nb::handle bounds) {
+        LimitRows L = limits_of(G, h);
+        Bounds b = bounds_of(bounds);
+        Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
+        std::vector<uint8_t> out;
+        for (int64_t k = 0; k < vel.n; ++k) {
+            double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
+            out.push_back(within_limits(x, L, b));
+        }
+        return numpy_bool(out, {size_t(vel.n)});
+    });
+
+    // ------------------------------------------------------------------ fallbacks (fallback.hpp)
+    m.def("polar_grid", [](nb::handle bounds, const Config& cfg) {
+        Grid g = polar(bounds_of(bounds), cfg.speed_levels, cfg.heading_step);
+        size_t M = g.points.size() / 2;
+        return numpy(g.points, {M, 2});
+    });
+    m.def("grid_of", [](nb::handle bounds, const Config& cfg, bool hazard) {
+        Grid g = grid_of(bounds_of(bounds), cfg, hazard);
+        size_t M = size_t(g.size()), B = size_t(g.blocks());
+        return nb::make_tuple(numpy(g.points, {M, 2}), numpy(g.block, {M}), numpy(g.discs, {B, 3}));
+    });
+    m.def("has_hazard", [](nb::handle vos, nb::handle nbrs) {
+        return has_hazard(vos_of_py(vos), rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})));
+    });
+    m.def("fallback", [](nb::handle vos, nb::handle planes, nb::handle tried, nb::handle p, nb::handle v_now,
+                         nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg, bool hazard) {
+        VOs V = vos_of_py(vos);
+        Planes pl = planes_of(planes);
+        if (pl.count() != cfg.planes()) throw nb::value_error("planes: expected cfg's planes");
+        Rows tr = rows_of(arr<double>(tried, "tried", {ANY, 3}));
+        double P_[3], W[3], v[3];
+        vec3(p, "p", P_), vec3(v_now, "v_now", W);
+        LimitRows L = limits_of(G3, h3);
+        Bounds b = bounds_of(bounds);
+        Grid g = grid_of(b, cfg, hazard);
+        Cover cover;
+        Found f = grid_search(V, pl, g, L, b, cfg, cover);
+        if (f.found) return std::make_tuple(true, numpy(std::vector<double>(f.v, f.v + 3), {3}), f.plane);
+        least_bad(V, pl, g, cover, tr, P_, W, L, b, cfg, v);
+        return std::make_tuple(false, numpy(std::vector<double>(v, v + 3), {3}), int64_t(-1));
+    });
+    m.def("least_bad", [](nb::handle vos, nb::handle planes, nb::handle tried, nb::handle p, nb::handle v_now,
+                          nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg) {
+        VOs V = vos_of_py(vos);
+        Planes pl = planes_of(planes);
+        Rows tr = rows_of(arr<double>(tried, "tried", {ANY, 3}));
+        double P_[3], W[3], v[3];
+        vec3(p, "p", P_), vec3(v_now, "v_now", W);
+        LimitRows L = limits_of(G3, h3);
+        Bounds b = bounds_of(bounds);
+        Grid g = grid_of(b, cfg, false);
+        Cover cover;  // no block known to lie in a cone
+        cover.B = g.blocks();
+        cover.cone.assign(pl.count() * cover.B, -2);
+        least_bad(V, pl, g, cover, tr, P_, W, L, b, cfg, v);
+        return numpy(std::vector<double>(v, v + 3), {3});
+    });
+    m.def("first_safe", [](nb::handle vos, nb::handle v, nb::handle G3, nb::handle h3, nb::handle bounds,
+                           const Config& cfg) {
+        VOs V = vos_of_py(vos);
+        Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
+        LimitRows L = limits_of(G3, h3);
+        Bounds b = bounds_of(bounds);
+        int64_t hint = 0;
+        for (int64_t k = 0; k < vel.n; ++k) {
+            double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
+            if (safe_by_margin(V, x, L, b, cfg, hint)) return k;
+        }
+        return int64_t(-1);
+    });
+
+    // ------------------------------------------------------------------ exact2d, plane QPs
+    m.def("nearest_in_disc", [](nb::handle G, nb::handle h, int64_t m_, nb::handle w0, double r_max,
+                                double r_min, nb::handle order, nb::handle out) {
+        In<double> g = arr<double>(G, "G", {ANY, 2});
+        In<double> hh = arr<double>(h, "h", {ANY});
+        Out<int64_t> ord = out_arr<int64_t>(order, "order", {ANY});
+        Out<double> o = out_arr<double>(out, "out", {2});
+        In<double> w = arr<double>(w0, "w0", {2});
+        if (m_ < 0 || m_ > int64_t(g.shape(0)) || m_ > int64_t(hh.shape(0)) || m_ > int64_t(ord.shape(0)))
+            throw nb::value_error("m: more rows than G, h or order hold");
+        std::vector<double> rows(2 * m_), rhs(m_);
+        for (int64_t k = 0; k < m_; ++k)
+            rows[2 * k] = g.data()[k * g.stride(0)], rows[2 * k + 1] = g.data()[k * g.stride(0) + g.stride(1)],
+            rhs[k] = at(hh, k);
+        std::vector<int64_t> ordv(m_);
+        seidel_order(m_, ordv.data());
+        double ww[2] = {at(w, 0), at(w, 1)}, res[2] = {o.data()[0], o.data()[o.stride(0)]};
+        bool ok = nearest_in_disc({rows.data(), rhs.data(), m_}, ww, r_max, r_min, ordv.data(), res);
+        for (int64_t k = 0; k < m_; ++k) ord.data()[k * ord.stride(0)] = ordv[k];
+        o.data()[0] = res[0], o.data()[o.stride(0)] = res[1];
+        return ok;
+    });
+    m.def("lift", [](nb::handle planes, nb::handle w, int64_t p, nb::handle out) {
+        Planes pl = planes_of(planes);
+        In<double> ww = arr<double>(w, "w", {2});
+        Out<double> o = out_arr<double>(out, "out", {3});
+        if (p < 0 || p >= pl.count()) throw nb::value_error("p: not a plane");
+        double x[2] = {at(ww, 0), at(ww, 1)}, v[3];
+        lift(pl, x, p, v);
+        for (int c = 0; c < 3; ++c) o.data()[c * o.stride(0)] = v[c];
+    });
+
+    nb::class_<PyPlaneQPs>(m, "PlaneQPs",
+                           "The (round, plane) QPs of one decision (decide.hpp), for the Python "
+                           "search on outside backends; its arrays are views of the C++ state.")
+        .def("__init__",
+             [](PyPlaneQPs* self, nb::handle vos, nb::handle planes, nb::handle G3, nb::handle h3,
+                nb::handle initial, const Config& cfg, bool lazy) {
+                 new (self) PyPlaneQPs();
+                 self->vos = vos_of_py(vos);
+                 self->planes = planes_of(planes);
+                 self->limits = limits_of(G3, h3);
+                 self->cfg = cfg;
+                 if (self->planes.count() != cfg.planes()) throw nb::value_error("planes: expected cfg's planes");
+                 In<bool> ini = arr<bool>(initial, "initial", {self->vos.count()});
+                 std::vector<uint8_t> init(self->vos.count());
+                 for (size_t k = 0; k < init.size(); ++k) init[k] = ini.data()[k * ini.stride(0)];
+                 self->qps = std::make_unique<PlaneQPs>(self->vos, self->planes, self->limits, init, self->cfg, lazy);
+             },
+             "vos"_a, "planes"_a, "G3"_a, "h3"_a, "initial"_a, "cfg"_a, "lazy"_a)
+        .def_prop_ro("key", [](PyPlaneQPs& s) { return view(s, s.qps->key.data(), {ROUNDS, size_t(s.qps->P)}); })
+        .def_prop_ro("sol", [](PyPlaneQPs& s) { return view(s, s.qps->sol.data(), {ROUNDS, size_t(s.qps->P), 2}); })
+        .def_prop_ro("included", [](PyPlaneQPs& s) {
+            return bool_view(s, s.qps->included.data(), {ROUNDS, size_t(s.qps->P), size_t(s.qps->V)});
+        })
+        .def_prop_ro("w0", [](PyPlaneQPs& s) { return view(s, s.qps->w0, {2}); })
+        .def_prop_ro("rows", [](PyPlaneQPs& s) { return view(s, s.qps->rows.data(), {size_t(s.qps->V + s.qps->L), 2}); })
+        .def_prop_ro("rhs", [](PyPlaneQPs& s) { return view(s, s.qps->rhs.data(), {size_t(s.qps->V + s.qps->L)}); })
+        .def("add_rows",
+             [](PyPlaneQPs& s, int64_t k, int64_t p) {
+                 check_qp(s, 0, p);
+                 if (k < 0 || k >= s.qps->V) throw nb::value_error("k: not a VO of this decision");
+                 s.qps->todo.emplace_back(k, p);
+                 s.qps->add_rows();
+             },
+             "k"_a, "p"_a, "Build VO k's rows on plane p (every round), once.")
+        .def("gather",
+             [](PyPlaneQPs& s, int64_t r, int64_t p) {
+                 check_qp(s, r, p);
+                 return s.qps->gather(r, p);
+             },
+             "r"_a, "p"_a, "QP (r, p)'s rows into rows / rhs: how many.")
+        .def("solve",
+             [](PyPlaneQPs& s, int64_t r, int64_t p, nb::handle bounds) {
+                 check_qp(s, r, p);
+                 s.qps->solve(r, p, bounds_of(bounds));
+             },
+             "r"_a, "p"_a, "bounds"_a, "QP (r, p) solved exactly: its optimum into sol, its deviation into key.")
+        .def("search",
+             [](PyPlaneQPs& s, nb::handle bounds, nb::handle tried) {
+                 Out<double> t = out_arr<double>(tried, "tried", {ANY, 3});
+                 int64_t need = ROUNDS * s.qps->P * (s.qps->V + 1);
+                 if (int64_t(t.shape(0)) < need || !c_contig(t))
+                     throw nb::value_error("tried: expected a C-contiguous (3 P (V + 1), 3) array at least");
+                 SearchResult r = s.qps->search(bounds_of(bounds), t.data());
+                 return std::make_tuple(r.r, r.p, r.solved, r.n_tried);
+             },
+             "bounds"_a, "tried"_a, "The best-first search of decide.hpp: (r, p, solved, n_tried).");
+}

@@ -1,0 +1,360 @@
+// The conversions of the nanobind glue (bindings.cpp), not the algorithm: numpy arrays in,
+// checked (dtype, dimensions, fixed sizes: anything else raises ValueError naming the argument,
+// never a crash; any strides are read as they are), and numpy arrays out; the Python side's
+// shapes (VOCones, VOPyramids, AvoidancePlanes, VOs, Bounds) as tuples of arrays in their
+// fields' order.
+#pragma once
+
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+
+#include <memory>
+#include <string>
+
+#include "swarm.hpp"
+
+namespace nb = nanobind;
+
+namespace vo3d::glue {
+
+
+template <class T>
+using In = nb::ndarray<const T, nb::device::cpu>;
+template <class T>
+using Out = nb::ndarray<T, nb::device::cpu>;
+constexpr int64_t ANY = -1;
+
+const char* dtype_name(const double*) { return "float64"; }
+const char* dtype_name(const int64_t*) { return "int64"; }
+const char* dtype_name(const bool*) { return "bool"; }
+
+template <class A>
+void check_shape(const A& a, const char* name, const char* dtype, std::initializer_list<int64_t> shape) {
+    bool ok = a.ndim() == shape.size();
+    size_t i = 0;
+    for (int64_t s : shape) {
+        if (ok && s != ANY && int64_t(a.shape(i)) != s) ok = false;
+        ++i;
+    }
+    if (ok) return;
+    std::string want = "(";
+    for (int64_t s : shape) want += (want.size() > 1 ? ", " : "") + (s == ANY ? std::string("n") : std::to_string(s));
+    want += ")";
+    throw nb::value_error((std::string(name) + ": expected a " + dtype + " array of shape " + want)
+                              .c_str());
+}
+
+// A read-only array of dtype T and the given shape (ANY: any size), or ValueError.
+template <class T>
+In<T> arr(nb::handle h, const char* name, std::initializer_list<int64_t> shape) {
+    In<T> a;
+    if (!nb::try_cast(h, a, false))
+        throw nb::value_error((std::string(name) + ": expected a " + dtype_name((T*)nullptr) +
+                               " numpy array, got " + nb::type_name(h.type()).c_str())
+                                  .c_str());
+    check_shape(a, name, dtype_name((T*)nullptr), shape);
+    return a;
+}
+
+// A writable array of dtype T and the given shape, or ValueError.
+template <class T>
+Out<T> out_arr(nb::handle h, const char* name, std::initializer_list<int64_t> shape) {
+    Out<T> a;
+    if (!nb::try_cast(h, a, false))
+        throw nb::value_error((std::string(name) + ": expected a writable " +
+                               dtype_name((T*)nullptr) + " numpy array")
+                                  .c_str());
+    check_shape(a, name, dtype_name((T*)nullptr), shape);
+    return a;
+}
+
+// Whether a is C-contiguous (the strides of dimensions of size 1 do not matter, nor those of
+// an empty array).
+template <class A>
+bool c_contig(const A& a) {
+    if (a.size() == 0) return true;
+    int64_t expect = 1;
+    for (size_t i = a.ndim(); i-- > 0;) {
+        if (a.shape(i) > 1 && a.stride(i) != expect) return false;
+        expect *= int64_t(a.shape(i));
+    }
+    return true;
+}
+
+Rows rows_of(const In<double>& a) {
+    return Rows{a.data(), int64_t(a.shape(0)), int64_t(a.shape(1)), int64_t(a.stride(0)),
+                int64_t(a.stride(1))};
+}
+
+template <class T>
+T at(const In<T>& a, int64_t i) { return a.data()[i * a.stride(0)]; }
+
+void vec3(nb::handle h, const char* name, double* out) {
+    In<double> a = arr<double>(h, name, {3});
+    for (int k = 0; k < 3; ++k) out[k] = at(a, k);
+}
+
+std::vector<double> vec(nb::handle h, const char* name) {
+    In<double> a = arr<double>(h, name, {ANY});
+    std::vector<double> v(a.shape(0));
+    for (size_t k = 0; k < v.size(); ++k) v[k] = at(a, int64_t(k));
+    return v;
+}
+
+nb::tuple fields(nb::handle h, const char* name, size_t n) {
+    if (!nb::isinstance<nb::tuple>(h) || nb::len(h) != n)
+        throw nb::value_error((std::string(name) + ": expected a tuple of " + std::to_string(n) +
+                               " fields")
+                                  .c_str());
+    return nb::borrow<nb::tuple>(h);
+}
+
+Bounds bounds_of(nb::handle h) {
+    nb::tuple t = fields(h, "bounds", 6);
+    double v[6];
+    for (size_t k = 0; k < 6; ++k) {
+        if (!nb::try_cast(t[k], v[k]))
+            throw nb::value_error("bounds: expected six numbers (v_min, v_max, z_min, z_max, "
+                                  "acceleration, dt)");
+    }
+    return Bounds{v[0], v[1], v[2], v[3], v[4], v[5]};
+}
+
+Bounds bounds_of_array(nb::handle h) {
+    In<double> a = arr<double>(h, "limits", {6});
+    return Bounds{at(a, 0), at(a, 1), at(a, 2), at(a, 3), at(a, 4), at(a, 5)};
+}
+
+// ------------------------------------------------------------------------------ to numpy
+
+template <class T>
+nb::object numpy(std::vector<T> v, std::initializer_list<size_t> shape) {
+    if (v.empty()) v.resize(1);  // a valid pointer for an empty array
+    auto* buf = new std::vector<T>(std::move(v));
+    nb::capsule owner(buf, [](void* p) noexcept { delete static_cast<std::vector<T>*>(p); });
+    return nb::cast(nb::ndarray<nb::numpy, T>(buf->data(), shape, owner));
+}
+
+nb::object numpy_bool(const std::vector<uint8_t>& v, std::initializer_list<size_t> shape) {
+    std::vector<uint8_t> copy(v);
+    if (copy.empty()) copy.resize(1);
+    auto* buf = new std::vector<uint8_t>(std::move(copy));
+    nb::capsule owner(buf, [](void* p) noexcept { delete static_cast<std::vector<uint8_t>*>(p); });
+    return nb::cast(nb::ndarray<nb::numpy, bool>(reinterpret_cast<bool*>(buf->data()), shape, owner));
+}
+
+// ------------------------------------------------------------------------------ the shapes
+
+std::vector<Cone> cones_of(nb::handle h) {
+    nb::tuple t = fields(h, "cones", 12);
+    In<double> rel = arr<double>(t[0], "cones.rel", {ANY, 3});
+    int64_t n = rel.shape(0);
+    In<double> apex = arr<double>(t[1], "cones.apex", {n, 3}), r_pz = arr<double>(t[2], "cones.r_pz", {n}),
+               d_oi = arr<double>(t[3], "cones.d_oi", {n}), th = arr<double>(t[4], "cones.theta_el", {n}),
+               ps = arr<double>(t[5], "cones.psi_az", {n}), R = arr<double>(t[6], "cones.R", {n, 3, 3}),
+               d_vo = arr<double>(t[7], "cones.d_vo", {n}), r_vo = arr<double>(t[8], "cones.r_vo", {n}),
+               tau = arr<double>(t[9], "cones.tau", {n}), sa = arr<double>(t[10], "cones.sin_alpha", {n});
+    In<bool> inside = arr<bool>(t[11], "cones.inside", {n});
+    std::vector<Cone> out(n);
+    for (int64_t i = 0; i < n; ++i) {
+        Cone& c = out[i];
+        for (int k = 0; k < 3; ++k) {
+            c.rel[k] = rel.data()[i * rel.stride(0) + k * rel.stride(1)];
+            c.apex[k] = apex.data()[i * apex.stride(0) + k * apex.stride(1)];
+            for (int j = 0; j < 3; ++j)
+                c.R[k][j] = R.data()[i * R.stride(0) + k * R.stride(1) + j * R.stride(2)];
+        }
+        c.r_pz = at(r_pz, i), c.d_oi = at(d_oi, i), c.theta_el = at(th, i), c.psi_az = at(ps, i);
+        c.d_vo = at(d_vo, i), c.r_vo = at(r_vo, i), c.tau = at(tau, i), c.sin_alpha = at(sa, i);
+        c.inside = inside.data()[i * inside.stride(0)];
+    }
+    return out;
+}
+
+nb::tuple cones_to_py(const std::vector<Cone>& cones) {
+    size_t n = cones.size();
+    std::vector<double> rel(3 * n), apex(3 * n), R(9 * n), r_pz(n), d_oi(n), th(n), ps(n), d_vo(n),
+        r_vo(n), tau(n), sa(n);
+    std::vector<uint8_t> inside(n);
+    for (size_t i = 0; i < n; ++i) {
+        const Cone& c = cones[i];
+        for (int k = 0; k < 3; ++k) {
+            rel[3 * i + k] = c.rel[k], apex[3 * i + k] = c.apex[k];
+            for (int j = 0; j < 3; ++j) R[9 * i + 3 * k + j] = c.R[k][j];
+        }
+        r_pz[i] = c.r_pz, d_oi[i] = c.d_oi, th[i] = c.theta_el, ps[i] = c.psi_az;
+        d_vo[i] = c.d_vo, r_vo[i] = c.r_vo, tau[i] = c.tau, sa[i] = c.sin_alpha, inside[i] = c.inside;
+    }
+    return nb::make_tuple(numpy(rel, {n, 3}), numpy(apex, {n, 3}), numpy(r_pz, {n}),
+                          numpy(d_oi, {n}), numpy(th, {n}), numpy(ps, {n}), numpy(R, {n, 3, 3}),
+                          numpy(d_vo, {n}), numpy(r_vo, {n}), numpy(tau, {n}), numpy(sa, {n}),
+                          numpy_bool(inside, {n}));
+}
+
+std::vector<Pyramid> pyramids_of(nb::handle h) {
+    nb::tuple t = fields(h, "pyramids", 6);
+    In<double> frame = arr<double>(t[0], "pyramids.frame", {ANY, 3, 3});
+    int64_t m = frame.shape(0);
+    In<double> lo = arr<double>(t[1], "pyramids.lo", {m, 3}), hi = arr<double>(t[2], "pyramids.hi", {m, 3}),
+               L = arr<double>(t[3], "pyramids.L_pz", {m}), H = arr<double>(t[4], "pyramids.h_pz", {m});
+    In<bool> inside = arr<bool>(t[5], "pyramids.inside", {m});
+    std::vector<Pyramid> out(m);
+    for (int64_t j = 0; j < m; ++j) {
+        Pyramid& py = out[j];
+        for (int a = 0; a < 3; ++a) {
+            py.lo[a] = lo.data()[j * lo.stride(0) + a * lo.stride(1)];
+            py.hi[a] = hi.data()[j * hi.stride(0) + a * hi.stride(1)];
+            for (int c = 0; c < 3; ++c)
+                py.frame[a][c] = frame.data()[j * frame.stride(0) + a * frame.stride(1) + c * frame.stride(2)];
+        }
+        py.L_pz = at(L, j), py.h_pz = at(H, j), py.inside = inside.data()[j * inside.stride(0)];
+    }
+    return out;
+}
+
+nb::tuple pyramids_to_py(const std::vector<Pyramid>& pyramids) {
+    size_t m = pyramids.size();
+    std::vector<double> frame(9 * m), lo(3 * m), hi(3 * m), L(m), H(m);
+    std::vector<uint8_t> inside(m);
+    for (size_t j = 0; j < m; ++j) {
+        const Pyramid& py = pyramids[j];
+        for (int a = 0; a < 3; ++a) {
+            lo[3 * j + a] = py.lo[a], hi[3 * j + a] = py.hi[a];
+            for (int c = 0; c < 3; ++c) frame[9 * j + 3 * a + c] = py.frame[a][c];
+        }
+        L[j] = py.L_pz, H[j] = py.h_pz, inside[j] = py.inside;
+    }
+    return nb::make_tuple(numpy(frame, {m, 3, 3}), numpy(lo, {m, 3}), numpy(hi, {m, 3}),
+                          numpy(L, {m}), numpy(H, {m}), numpy_bool(inside, {m}));
+}
+
+VOs vos_of_py(nb::handle h) {
+    nb::tuple t = fields(h, "vos", 3);
+    VOs vos;
+    vos.cones = cones_of(t[0]);
+    vos.pyramids = pyramids_of(t[1]);
+    vec3(t[2], "vos.v_pref", vos.v_pref);
+    return vos;
+}
+
+nb::tuple vos_to_py(const VOs& vos) {
+    return nb::make_tuple(cones_to_py(vos.cones), pyramids_to_py(vos.pyramids),
+                          numpy(std::vector<double>(vos.v_pref, vos.v_pref + 3), {3}));
+}
+
+Planes planes_of(nb::handle h) {
+    nb::tuple t = fields(h, "planes", 3);
+    Planes pl;
+    pl.phi = vec(t[0], "planes.phi");
+    size_t P = pl.phi.size();
+    In<double> frame = arr<double>(t[1], "planes.frame", {3, 3});
+    In<double> T = arr<double>(t[2], "planes.to_plane", {int64_t(P), 3, 3});
+    for (int a = 0; a < 3; ++a)
+        for (int c = 0; c < 3; ++c) pl.frame[a][c] = frame.data()[a * frame.stride(0) + c * frame.stride(1)];
+    pl.to_plane.resize(P);
+    for (size_t p = 0; p < P; ++p)
+        for (int a = 0; a < 3; ++a)
+            for (int c = 0; c < 3; ++c)
+                pl.to_plane[p].m[a][c] = T.data()[p * T.stride(0) + a * T.stride(1) + c * T.stride(2)];
+    if (P == 0) throw nb::value_error("planes.phi: expected at least one plane");
+    return pl;
+}
+
+nb::tuple planes_to_py(const Planes& pl) {
+    size_t P = pl.phi.size();
+    std::vector<double> frame(9), T(9 * P);
+    for (int a = 0; a < 3; ++a)
+        for (int c = 0; c < 3; ++c) {
+            frame[3 * a + c] = pl.frame[a][c];
+            for (size_t p = 0; p < P; ++p) T[9 * p + 3 * a + c] = pl.to_plane[p].m[a][c];
+        }
+    return nb::make_tuple(numpy(pl.phi, {P}), numpy(frame, {3, 3}), numpy(T, {P, 3, 3}));
+}
+
+LimitRows limits_of(nb::handle G, nb::handle h) {
+    In<double> g = arr<double>(G, "G3", {ANY, 3});
+    In<double> hh = arr<double>(h, "h3", {int64_t(g.shape(0))});
+    LimitRows L;
+    for (size_t j = 0; j < g.shape(0); ++j) {
+        for (int c = 0; c < 3; ++c) L.G.push_back(g.data()[j * g.stride(0) + c * g.stride(1)]);
+        L.h.push_back(at(hh, int64_t(j)));
+    }
+    return L;
+}
+
+Rows nbrs_of(const In<double>& a) { return rows_of(a); }
+
+// ------------------------------------------------------------------------------ the options
+
+Config make_config(bool reciprocal, double horizon, double pz_buffer, double margin,
+                   std::vector<bool> corrections, nb::handle phi, nb::handle cos_phi,
+                   nb::handle sin_phi, nb::handle t, nb::handle cos_t, nb::handle sin_t,
+                   int64_t speed_levels, double heading_step, bool closing_guard,
+                   bool least_bad_escape, bool fine_fallback) {
+    Config c;
+    c.reciprocal = reciprocal, c.horizon = horizon, c.pz_buffer = pz_buffer, c.margin = margin;
+    if (corrections.size() != 6) throw nb::value_error("corrections: expected six flags");
+    c.corrections = Corrections{corrections[0], corrections[1], corrections[2],
+                                corrections[3], corrections[4], corrections[5]};
+    c.phi = vec(phi, "phi"), c.cos_phi = vec(cos_phi, "cos_phi"), c.sin_phi = vec(sin_phi, "sin_phi");
+    c.t = vec(t, "t"), c.cos_t = vec(cos_t, "cos_t"), c.sin_t = vec(sin_t, "sin_t");
+    if (c.phi.empty() || c.cos_phi.size() != c.phi.size() || c.sin_phi.size() != c.phi.size())
+        throw nb::value_error("phi, cos_phi, sin_phi: expected arrays of one length, at least 1");
+    if (c.t.empty() || c.cos_t.size() != c.t.size() || c.sin_t.size() != c.t.size())
+        throw nb::value_error("t, cos_t, sin_t: expected arrays of one length, at least 1");
+    if (speed_levels < 2) throw nb::value_error("speed_levels: expected at least 2");
+    if (!(heading_step > 0.0)) throw nb::value_error("heading_step: expected a positive angle");
+    c.speed_levels = speed_levels, c.heading_step = heading_step;
+    c.closing_guard = closing_guard, c.least_bad_escape = least_bad_escape;
+    c.fine_fallback = fine_fallback;
+    return c;
+}
+
+// ------------------------------------------------------------------------------ plane QPs
+
+// PlaneQPs with the decision it belongs to, for the Python search on outside backends
+// (formulations/plane_qp.py): its arrays are numpy views of the C++ state.
+struct PyPlaneQPs {
+    VOs vos;
+    Planes planes;
+    LimitRows limits;
+    Config cfg;
+    std::unique_ptr<PlaneQPs> qps;
+};
+
+template <class T>
+nb::object view(PyPlaneQPs& self, T* data, std::initializer_list<size_t> shape) {
+    return nb::cast(nb::ndarray<nb::numpy, T>(data, shape, nb::find(&self)));
+}
+
+nb::object bool_view(PyPlaneQPs& self, uint8_t* data, std::initializer_list<size_t> shape) {
+    return nb::cast(nb::ndarray<nb::numpy, bool>(reinterpret_cast<bool*>(data), shape, nb::find(&self)));
+}
+
+void check_qp(const PyPlaneQPs& self, int64_t r, int64_t p) {
+    if (r < 0 || r >= ROUNDS || p < 0 || p >= self.qps->P)
+        throw nb::value_error("(r, p): not a QP of this decision");
+}
+
+// ------------------------------------------------------------------------------ swarms
+
+Links links_of(const In<int64_t>& span, const In<int64_t>& idx, int64_t D, const char* name) {
+    if (!c_contig(span) || !c_contig(idx))
+        throw nb::value_error((std::string(name) + ": expected C-contiguous arrays").c_str());
+    int64_t E = idx.shape(0), bound = 0;
+    for (int64_t d = 0; d < D; ++d) {
+        int64_t lo = span.data()[2 * d], hi = span.data()[2 * d + 1];
+        if (lo < 0 || hi < lo || hi > E) throw nb::value_error((std::string(name) + ": span out of range").c_str());
+        bound = std::max(bound, hi);
+    }
+    return Links{span.data(), idx.data()};
+}
+
+void check_indices(const In<int64_t>& span, const In<int64_t>& idx, int64_t n, const char* name) {
+    for (int64_t d = 0; d < int64_t(span.shape(0)); ++d)
+        for (int64_t e = span.data()[2 * d]; e < span.data()[2 * d + 1]; ++e)
+            if (idx.data()[e] < 0 || idx.data()[e] >= n)
+                throw nb::value_error((std::string(name) + ": index out of range").c_str());
+}
+
+}  // namespace vo3d::glue
