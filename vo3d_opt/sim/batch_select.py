@@ -10,9 +10,8 @@ runs the selector's compiled kernel over them, one range per set of planning opt
 vehicle's velocity and status are bit for bit those of its swarm's ``select_many``
 (tests/test_lockstep.py holds it to that).
 
-It drives the kernel through the selector's internals (``vo3d_opt.selector._range_kernel``,
-``formulations.swarm.Swarm``): :func:`available` says whether this build has them, and
-without them a sweep flies each encounter through ``select_many``.
+It drives the kernel through the arrays ``select_many`` builds
+(``formulations.swarm.Swarm``) and its range entry (``formulations.swarm.decide_range``).
 """
 
 from __future__ import annotations
@@ -25,47 +24,29 @@ from typing import Any
 
 import numpy as np
 
+from vo3d_opt import swarm
+from vo3d_opt.formulations.common import Config, Options
+from vo3d_opt.formulations.swarm import (
+    AGENT_COLUMNS,
+    MANY_OUT_SIZE,
+    Swarm,
+    decide_range,
+    neighbor_lists,
+)
+from vo3d_opt.geometry.pyramid import prism_rows
 from vo3d_opt.sim.deciders import SwarmSelect
 from vo3d_opt.sim.scenario import Scenario
 from vo3d_opt.status import DECISION_STATUSES
+from vo3d_opt.types import Box
 
 #: The kernel's status codes as names (its code c is ``DECISION_STATUSES[c]``).
 STATUS_NAMES = tuple(str(s) for s in DECISION_STATUSES)
 
 
-def available() -> bool:
-    """Whether the selector's compiled kernel can be driven directly in this build."""
-    try:
-        from vo3d_opt import selector, swarm
-        from vo3d_opt.formulations import swarm as kernel_swarm
-
-        return all(
-            hasattr(mod, name)
-            for mod, name in (
-                (selector, "_range_kernel"),
-                (selector, "warm_up_many"),
-                (swarm, "_neighbor_lists"),
-                (swarm, "vehicle_limits"),
-                (swarm, "obstacle_links"),
-                (swarm, "sphere_links"),
-                (kernel_swarm, "Swarm"),
-                (kernel_swarm, "AGENT_COLUMNS"),
-                (kernel_swarm, "MANY_OUT_SIZE"),
-            )
-        )
-    except ImportError:
-        return False
-
-
 def fits(step: Any) -> bool:
     """Whether ``step`` decides as :class:`BatchSelect` can: a ``SwarmSelect`` whose selector
     runs compiled, with every vehicle in range as a neighbour (no ``max_neighbors``)."""
-    return (
-        isinstance(step, SwarmSelect)
-        and step.compiled
-        and step.max_neighbors is None
-        and available()
-    )
+    return isinstance(step, SwarmSelect) and step.compiled and step.max_neighbors is None
 
 
 @dataclass(frozen=True)
@@ -89,17 +70,13 @@ class BatchSelect:
     that may sense each other (those of one member), the members' obstacles and spheres."""
 
     def __init__(self, members: Sequence[Member], n: int) -> None:
-        from vo3d_opt import selector, swarm
-        from vo3d_opt.geometry.pyramid import prism_rows
-
-        selector.warm_up_many()  # the compiled kernel, loaded outside every timing
         self.members = list(members)
         self.n = n
         self.r_pz = np.zeros(n)
         self.limits = np.zeros((n, 6))
         self.group = np.full(n, -1, dtype=np.int64)
-        self.packed: list[tuple[np.ndarray, ...]] = []
-        keys: dict[tuple[bytes, ...], int] = {}
+        self.configs: list[Config] = []
+        keys: dict[Options, int] = {}
         pairs_a, pairs_b, ranges = [], [], []
         prisms, spheres = [], []
         self.prism_base, self.sphere_base = [], []
@@ -111,10 +88,10 @@ class BatchSelect:
             self.r_pz[sl] = sc.r_pz
             self.limits[sl] = swarm.vehicle_limits(step.limits, dt, sc.n_agents, sc.max_speed)
             for i in range(mem.lo, mem.hi):
-                key, packed = self._options(step, float(self.limits[i, 1]), dt, rng)
-                self.group[i] = keys.setdefault(key, len(keys))
-                if self.group[i] == len(self.packed):
-                    self.packed.append(packed)
+                options = self._options(step, float(self.limits[i, 1]), dt, rng)
+                self.group[i] = keys.setdefault(options, len(keys))
+                if self.group[i] == len(self.configs):
+                    self.configs.append(options.config)
             a, b = np.triu_indices(sc.n_agents, 1)
             pairs_a.append(a + mem.lo)
             pairs_b.append(b + mem.lo)
@@ -138,17 +115,14 @@ class BatchSelect:
         self.obstacles = _ObstaclePairs(self.members, self.prism_base)
 
     @staticmethod
-    def _options(
-        step: SwarmSelect, top: float, dt: float, rng: float
-    ) -> tuple[tuple[bytes, ...], tuple[np.ndarray, ...]]:
+    def _options(step: SwarmSelect, top: float, dt: float, rng: float) -> Options:
         """The planning options ``select_many`` gives a deciding vehicle with top speed
-        ``top`` (its own under a buffer in steps, else the limits'), packed, and a key equal
-        for equal options."""
+        ``top`` (its own under a buffer in steps, else the limits'); equal options compare
+        equal."""
         sel = step.selector
         if not sel.config.per_decision:
             top = step.limits.v_max
-        packed = tuple(sel.options_for(top, dt, rng).packed)
-        return tuple(a.tobytes() for a in packed), packed
+        return sel.options_for(top, dt, rng)
 
     def retire(self, members: Sequence[int]) -> None:
         """Forget the vehicle pairs of these members (done flying): fewer distances a step."""
@@ -161,9 +135,6 @@ class BatchSelect:
     ) -> tuple[np.ndarray, np.ndarray, float]:
         """Commands (N, 3) (the current velocity of a vehicle that does not decide), kernel
         status codes (N,) (-1 where none) and the seconds the call took."""
-        from vo3d_opt import selector, swarm
-        from vo3d_opt.formulations.swarm import AGENT_COLUMNS, MANY_OUT_SIZE, Swarm
-
         t0 = time.perf_counter()
         u, codes = V.copy(), np.full(self.n, -1, dtype=np.int64)
         who = np.flatnonzero(deciding)
@@ -177,7 +148,7 @@ class BatchSelect:
         dist = np.linalg.norm(P[self.pair_a] - P[self.pair_b], axis=-1)
         near = dist <= self.pair_range
         nb_span = np.empty((D, 2), dtype=np.int64)
-        nb_idx = swarm._neighbor_lists(
+        nb_idx = neighbor_lists(
             self.pair_a[near], self.pair_b[near], dist[near], np.inf, place, -1, nb_span
         )
         (sp_span, sp_idx), (ob_span, ob_idx) = self._item_links(P, who)
@@ -201,7 +172,7 @@ class BatchSelect:
         groups = self.group[who]
         cuts = [0, *(np.flatnonzero(np.diff(groups)) + 1).tolist(), D]
         for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
-            selector._range_kernel(sw, lo, hi, *self.packed[groups[lo]], out)
+            decide_range(sw, lo, hi, self.configs[groups[lo]], out)
         u[who] = out[:, :3]
         codes[who] = out[:, 3].astype(np.int64)
         return u, codes, time.perf_counter() - t0
@@ -211,8 +182,6 @@ class BatchSelect:
     ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
         """(span, idx) of the spheres and of the obstacles each deciding vehicle takes into
         account: each member's own, within its obstacle range, as ``select_many`` lists them."""
-        from vo3d_opt import swarm
-
         D = who.shape[0]
         spheres = _empty_links(D)
         if self.with_spheres:
@@ -278,8 +247,6 @@ class _ObstaclePairs:
 def _shape_row(body: Any) -> np.ndarray:
     """kind (0 cylinder, 1 box), centre x, y, height, radius, half sides x, y, cos yaw, sin
     yaw: the numbers ``surface_distance`` computes with."""
-    from vo3d_opt.types import Box
-
     cx, cy = (float(c) for c in body.center)
     if isinstance(body, Box):
         hx, hy = (float(h) for h in body.size / 2.0)
