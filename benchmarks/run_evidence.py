@@ -2,7 +2,8 @@
 avoidance, resumable across sittings, and one results page per family.
 
     python benchmarks/run_evidence.py [--n 100000] [--n-rotorpy 1000]
-        [--families pair group dense lagged noisy intruder rotorpy] [--workers 2 |
+        [--families pair group dense lagged noisy intruder rotorpy] [--methods none vo3d rvo2]
+        [--workers 2 |
         --scheduler tcp://HOST:8786] [--out-root /work/evidence] [--pages docs/results/sweeps]
         [--stages sweeps pages]
 
@@ -192,6 +193,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--n", type=int, default=100_000)
     p.add_argument("--n-rotorpy", type=int, default=1000)
     p.add_argument("--families", nargs="+", default=list(FAMILIES))
+    p.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS),
+                   help="of each family's methods, fly these (none first: the risk ratios)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int)
     where.add_argument("--scheduler")
@@ -204,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     if "sweeps" in args.stages:
         for family in args.families:
             n = args.n_rotorpy if family == "rotorpy" else args.n
-            for method in methods_of(family):
+            for method in (m for m in methods_of(family) if m in args.methods):
                 run_one(family, method, n, args.out_root, place)
     if "pages" in args.stages:
         args.pages.mkdir(parents=True, exist_ok=True)
