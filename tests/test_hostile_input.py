@@ -212,6 +212,38 @@ def test_python_integers_beyond_a_float_are_value_errors():
         Neighbor(position=(1.0, 0, 0), r_pz=huge)
 
 
+def test_sampled_memory_is_bounded_whatever_the_number_of_neighbours():
+    """The sampled selection tests its grid against the VO shapes in chunks: a crowd of 240
+    neighbours once built arrays of about 1.2 GB; its peak stays that of a few chunks, and
+    the answer is the one of the whole set (what the chunks' union must give)."""
+    import tracemalloc
+
+    from vo3d_opt.formulations import sampled
+
+    rng = np.random.default_rng(7)
+    crowd = [Neighbor(position=rng.uniform(-150.0, 150.0, 3) + (0.0, 0.0, 250.0),
+                      velocity=rng.uniform(-3.0, 3.0, 3), r_pz=5.0) for _ in range(240)]
+    call = dict(own=AgentState(position=(0.0, 0.0, 250.0), velocity=(3.0, 0.0, 0.0)),
+                preferred_velocity=(4.0, 0.0, 0.0), neighbors=crowd,
+                limits=Limits(speed=(0.0, 5.0), altitude=(0.0, 500.0)), dt=0.2)
+    sel = VelocitySelector(formulation="sampled")
+    tracemalloc.start()
+    try:
+        chunked = sel.select(**call)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 150e6, f"peak {peak / 1e6:.0f} MB"
+    whole = sampled.CHUNK
+    try:
+        sampled.CHUNK = 1000  # every shape at once, as one block
+        sel_whole = VelocitySelector(formulation="sampled").select(**call)
+    finally:
+        sampled.CHUNK = whole
+    assert np.array_equal(chunked.velocity, sel_whole.velocity)
+    assert chunked.status == sel_whole.status
+
+
 # ------------------------------------------------------------------------ output
 
 def test_out_replaces_a_planted_link_and_an_earlier_runs_figures(tmp_path):

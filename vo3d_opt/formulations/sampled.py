@@ -7,6 +7,8 @@ away from every VO, as the QPs' rows are: never an answer on a VO's boundary."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 
 from ..geometry import AvoidancePlanes, Sections, cone_sections, pyramid_sections
@@ -15,14 +17,25 @@ from .common import Encounter, Outcome, py_decision_planes
 from .fallback import first_safe, py_least_bad, py_polar_grid
 
 
-def plane_sections(enc: Encounter, planes: AvoidancePlanes) -> tuple[Sections, Sections]:
-    """The conic sections of the decision's cones and pyramids on ``planes``."""
-    return (
-        cone_sections(
-            enc.cones, planes, corrections=enc.options.corrections, n_samples=enc.options.n_samples
-        ),
-        pyramid_sections(enc.pyramids, planes),
-    )
+#: VO shapes tested against the grid at once. The test's arrays are (shapes, planes, grid
+#: points, section vertices): about 3 MB a shape at the default grid, so chunks keep a
+#: decision's memory bounded (tens of MB) however many neighbours it has.
+CHUNK = 16
+
+
+def plane_sections(enc: Encounter, planes: AvoidancePlanes) -> Iterator[Sections]:
+    """The conic sections of the decision's cones and pyramids on ``planes``, ``CHUNK``
+    shapes at a time."""
+    cones, pyramids, chunk = enc.cones, enc.pyramids, CHUNK
+    for lo in range(0, cones.n, chunk):
+        yield cone_sections(
+            cones.subset(np.arange(lo, min(cones.n, lo + chunk))),
+            planes,
+            corrections=enc.options.corrections,
+            n_samples=enc.options.n_samples,
+        )
+    for lo in range(0, pyramids.n, chunk):
+        yield pyramid_sections(pyramids.subset(np.arange(lo, min(pyramids.n, lo + chunk))), planes)
 
 
 def select(enc: Encounter) -> Outcome:
@@ -32,8 +45,7 @@ def select(enc: Encounter) -> Outcome:
     xy = np.ascontiguousarray(np.broadcast_to(grid, (len(planes.phi),) + grid.shape))
     inside = np.zeros(xy.shape[:2], dtype=bool)
     for sections in plane_sections(enc, planes):
-        if sections.kind.shape[0]:
-            inside |= np.any(sections.contains(xy), axis=0)
+        inside |= np.any(sections.contains(xy), axis=0)
     v = planes.lift(xy).reshape(-1, 3)
     order = np.flatnonzero(~inside.ravel())
     order = order[np.argsort(enc.deviation(v[order]), kind="stable")]  # nearest first
