@@ -244,6 +244,14 @@ def test_sampled_memory_is_bounded_whatever_the_number_of_neighbours():
     assert chunked.status == sel_whole.status
 
 
+def test_a_sampled_grid_beyond_its_budget_is_refused_when_the_selector_is_made():
+    with pytest.raises(ValueError, match="^plane_step_deg, heading_step_deg.*sampled grid"):
+        VelocitySelector(formulation="sampled", plane_step_deg=1, n_samples=720)
+    VelocitySelector(formulation="plane_qp", plane_step_deg=1, n_samples=720)  # no grid there
+    refused(vo3d("run", "paper-case2-two-uav-six-obstacles", "--formulation", "sampled",
+                 "-o", "plane_step_deg=1", "-o", "n_samples=720", "-q"), "sampled grid")
+
+
 # ------------------------------------------------------------------------ output
 
 def test_out_replaces_a_planted_link_and_an_earlier_runs_figures(tmp_path):

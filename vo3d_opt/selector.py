@@ -231,6 +231,7 @@ class VelocitySelector:
         self._qp = self._nlp = None
         self.solver: str | None = None
         if formulation == "sampled":
+            sampled.check_grid(self.config)
             if solver is not None:
                 get_backend(solver)  # a wrong name is still an error; sampled needs no solver
         elif formulation == "nlp":

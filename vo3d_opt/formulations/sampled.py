@@ -7,20 +7,27 @@ away from every VO, as the QPs' rows are: never an answer on a VO's boundary."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 
 import numpy as np
 
+from ..config import SelectorConfig
 from ..geometry import AvoidancePlanes, Sections, cone_sections, pyramid_sections
 from ..status import Status
 from .common import Encounter, Outcome, py_decision_planes
 from .fallback import first_safe, py_least_bad, py_polar_grid
 
-
 #: VO shapes tested against the grid at once. The test's arrays are (shapes, planes, grid
-#: points, section vertices): about 3 MB a shape at the default grid, so chunks keep a
-#: decision's memory bounded (tens of MB) however many neighbours it has.
+#: points, section vertices): about 3 MB a shape at the default grid, so chunks, and blocks
+#: of grid points within them (``BLOCK`` elements at most), keep a decision's memory bounded
+#: (a few hundred MB at most) however many neighbours it has and however fine its grid.
 CHUNK = 16
+BLOCK = 2_000_000
+
+#: Planes x grid points x section points of one shape's test: the finest grid a decision
+#: takes (about 60 times the default's): one neighbour then costs up to about half a second.
+MAX_GRID_WORK = 25_000_000
 
 
 def plane_sections(enc: Encounter, planes: AvoidancePlanes) -> Iterator[Sections]:
@@ -38,6 +45,32 @@ def plane_sections(enc: Encounter, planes: AvoidancePlanes) -> Iterator[Sections
         yield pyramid_sections(pyramids.subset(np.arange(lo, min(pyramids.n, lo + chunk))), planes)
 
 
+def check_grid(config: SelectorConfig) -> None:
+    """``ValueError`` when ``config``'s sampled grid is finer than ``MAX_GRID_WORK`` allows
+    (counted from above: planes every ``plane_step_deg`` in [-90, 90], every heading times
+    every speed and the origin, the section points)."""
+    planes = math.floor(180.0 / config.planes.plane_step_deg) + 1
+    grid = math.ceil(360.0 / config.sampled.heading_step_deg) * config.sampled.speed_levels + 1
+    work = planes * grid * (config.sampled.n_samples + 4)
+    if work > MAX_GRID_WORK:
+        raise ValueError(
+            "plane_step_deg, heading_step_deg, speed_levels, n_samples: the sampled grid "
+            f"would test {work:,} points per neighbour, more than {MAX_GRID_WORK:,}; coarsen "
+            "one of them"
+        )
+
+
+def _mark_inside(sections: Sections, xy: np.ndarray, inside: np.ndarray) -> None:
+    """``inside`` (P, M) |= whether each grid point lies in one of ``sections``, in blocks of
+    grid points small enough for ``BLOCK``."""
+    n, n_planes = sections.kind.shape
+    per_point = max(1, n * n_planes * sections.curve.shape[2])
+    step = max(1, BLOCK // per_point)
+    for m0 in range(0, xy.shape[1], step):
+        block = np.ascontiguousarray(xy[:, m0 : m0 + step])
+        inside[:, m0 : m0 + step] |= np.any(sections.contains(block), axis=0)
+
+
 def select(enc: Encounter) -> Outcome:
     cfg = enc.options.config
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)
@@ -45,7 +78,7 @@ def select(enc: Encounter) -> Outcome:
     xy = np.ascontiguousarray(np.broadcast_to(grid, (len(planes.phi),) + grid.shape))
     inside = np.zeros(xy.shape[:2], dtype=bool)
     for sections in plane_sections(enc, planes):
-        inside |= np.any(sections.contains(xy), axis=0)
+        _mark_inside(sections, xy, inside)
     v = planes.lift(xy).reshape(-1, 3)
     order = np.flatnonzero(~inside.ravel())
     order = order[np.argsort(enc.deviation(v[order]), kind="stable")]  # nearest first
