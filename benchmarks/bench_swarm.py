@@ -1,31 +1,26 @@
 """Swarm scale: vo3d_opt's select_many (1 thread and every thread) against RVO2-3D's doStep.
 
-``ours-noguard`` is ours on every thread with the ``closing_guard`` option, one of the
-simulator's defaults (with reciprocal and pz_buffer), turned off: README, "Safety in
-simulation". ``ours-coarse`` is ours on
-every thread with avoidance planes every 30 degrees instead of 10 (``plane_step_deg``: 7 planes,
-21 QPs instead of 57, and the fallbacks' grid on 7 planes: fewer velocities tried, the same
-exact check of each). ``ours-nearest`` is ours on every thread with ``least_bad_escape`` off
-(the rule of 0.1.0): the least-bad fallback, when every velocity enters a zone at once, takes
-the one nearest the preferred velocity, not the one closing slowest on the zones the vehicle is
-inside. ``ours-fast`` is ours on every thread with ``vo3d_opt.FAST_OPTIONS`` (``--fast`` on the
-command line) added: planes every 45 degrees (5 planes, 15 QPs), tangent points among 12
-generator samples instead of 36, the fallbacks' grid 8 headings by 3 speeds per plane.
-``ours-swarm`` is the swarm preset (``--swarm`` on the command line, ``vo3d_opt.swarm_options``
-in Python; ``ours-fast-h`` before 2026-11-26, evening): those and RVO2-3D's own time horizon
-(``horizon``: the sensing range over twice the top speed, 6.875 s here; a velocity that would
-meet a zone only later is allowed, as RVO2-3D allows it): ours by default, like the paper's VO,
-has no horizon.
+``ours-1`` and ``ours-all`` fly the ``safe`` preset (the default) on one thread and on every
+thread; ``ours-paper``, ``ours-fast`` and ``ours-swarm`` the other presets on every thread
+(``--preset NAME`` on the command line); ``ours-noguard``, ``ours-coarse`` and
+``ours-nearest`` the safe preset with ``closing_guard`` off, planes every 30 degrees, and
+``least_bad_escape`` off. The swarm preset plans with RVO2-3D's own time horizon (the sensing
+range over twice the top speed): a velocity that would meet a zone only later is allowed, as
+RVO2-3D allows it; the other presets, like the paper's VO, have no horizon.
 
 Every method flies the same scenarios in the same loop (``vo3d_opt.sim.simulator.fly``: the same
 preferred velocities, dynamics and metrics), with the same dt (0.2 s), speeds (0-4 m/s),
-sensing range (55 m) and neighbour count (``--max-neighbors``, default 10 for both):
+sensing range (55 m) and neighbour count (``--max-neighbors``, default 10 for both), except
+``rvo2-sphere``:
 
 * ``swap``: the sphere swap (``sphere_swap_scenario``: N agents on a sphere, each to its
   antipode, every path through the centre; r_pz 8 m);
 * ``crossing``: the constant-density random crossing (``random_crossing_scenario``: one agent per
   64,000 m³ in a slab whose area grows with N, each flying 200 m in a random direction; r_pz
-  10 m). The bundled ``random-crossing-1000`` is its N = 1000 instance.
+  10 m). The bundled ``random-crossing-1000`` is its N = 1000 instance;
+* ``rvo2-sphere``: RVO2-3D's own ``Sphere`` example as its authors wrote it (the bundled
+  ``rvo2-sphere-812``: 812 agents, dt 0.125 s, neighbour distance 15 m, 10 neighbours, radius
+  1.5 m, top speed 2 m/s; RVO2-3D with its time horizon of 10 s); the size is always 812.
 
 "decide µs" is the time inside ``select_many()`` (ours: validation, k-d tree, neighbour lists
 and the compiled decisions) or ``doStep()`` (RVO2-3D: its k-d tree, its linear programs and its
@@ -62,11 +57,11 @@ from typing import Any
 
 import numpy as np
 
-METHODS = ("ours-1", "ours-all", "ours-noguard", "ours-coarse", "ours-nearest", "ours-fast", "ours-swarm",
-           "rvo2")
-#: Options each ``ours-*`` method adds to the simulator's (ours-1 and ours-all add none;
-#: ours-fast adds ``vo3d_opt.FAST_OPTIONS``, ours-swarm those and ``horizon: sensing``:
-#: ``extra_options``).
+METHODS = ("ours-1", "ours-all", "ours-paper", "ours-noguard", "ours-coarse", "ours-nearest", "ours-fast",
+           "ours-swarm", "rvo2")
+PRESET_METHODS = ("ours-paper", "ours-fast", "ours-swarm")
+#: Options each ``ours-*`` method adds to the scenario's (ours-1 and ours-all add none; the
+#: preset methods their preset: ``extra_options``).
 EXTRA_OPTIONS = {
     "ours-noguard": {"closing_guard": False},
     "ours-coarse": {"plane_step_deg": 30.0},
@@ -75,11 +70,10 @@ EXTRA_OPTIONS = {
 
 
 def extra_options(method: str) -> dict[str, Any] | None:
-    """The selector options ``method`` adds to the simulator's (None: none), as ``-o`` would:
+    """The selector options ``method`` adds to the scenario's (None: none), as ``-o`` would:
     ours-swarm's ``horizon: sensing`` is each scenario's sensing range over twice its top speed
-    (RVO2-3D's ``timeHorizon`` on it), as ``vo3d run --swarm`` flies it. Imported here, not at
-    the top: the parent process of the runs loads no vo3d_opt."""
-    if method in ("ours-fast", "ours-swarm"):
+    (RVO2-3D's ``timeHorizon`` on it), as ``vo3d run --preset swarm`` flies it."""
+    if method in PRESET_METHODS:
         return {"preset": method.removeprefix("ours-")}
     return EXTRA_OPTIONS.get(method)
 
@@ -92,7 +86,14 @@ def resolved_options(method: str, sc: Any) -> dict[str, Any] | None:
     return extra
 
 
+CASES = ("swap", "crossing", "rvo2-sphere")
+
+
 def scenario(case: str, n: int):
+    if case == "rvo2-sphere":
+        from vo3d_opt.sim.scenario import load_scenario
+
+        return load_scenario("rvo2-sphere-812")
     if case == "swap":
         from vo3d_opt.generators import sphere_swap_scenario
 
@@ -112,7 +113,10 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
 
     sc = scenario(case, n)
     if method == "rvo2":
-        step: Any = RVO2Step(sc, max_neighbors=max_neighbors)
+        from vo3d_opt.generators.swarms import RVO2_SPHERE
+
+        horizon = RVO2_SPHERE["time_horizon"] if case == "rvo2-sphere" else None
+        step: Any = RVO2Step(sc, max_neighbors=max_neighbors, time_horizon=horizon)
         threads = 1
     else:
         from vo3d_opt.swarm import cores
@@ -171,7 +175,7 @@ def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dic
 
     swarm.SwarmInputs.checked = classmethod(timed("checks", swarm.SwarmInputs.checked.__func__))
     swarm.SwarmInputs.arrays = timed("tree", swarm.SwarmInputs.arrays)
-    selector.decide_many = timed("kernel", selector.decide_many)
+    selector.decide_many = timed("kernel", selector.decide_many)  # type: ignore[attr-defined]
     sc = scenario(case, n)
     sel, formulation, solver = scenario_selector(sc)
     step = SwarmSelect(sc, sel, max_neighbors=max_neighbors, threads=1)
@@ -206,10 +210,10 @@ def table_row(r: dict[str, Any]) -> str:
             "ours-coarse": f"vo3d_opt select_many, plane_step_deg "
                            f"{EXTRA_OPTIONS['ours-coarse']['plane_step_deg']:g}, {r['threads']} threads",
             "ours-nearest": f"vo3d_opt select_many, least_bad_escape off, {r['threads']} threads",
-            "ours-fast": f"vo3d_opt select_many, FAST_OPTIONS ({_options_text(r.get('options'))}), "
-                         f"{r['threads']} threads",
-            "ours-swarm": f"vo3d_opt select_many, the swarm preset: FAST_OPTIONS and RVO2-3D's "
-                          f"time horizon ({_options_text(r.get('options'))}), {r['threads']} threads",
+            "ours-paper": f"vo3d_opt select_many, preset paper, {r['threads']} threads",
+            "ours-fast": f"vo3d_opt select_many, preset fast, {r['threads']} threads",
+            "ours-swarm": f"vo3d_opt select_many, preset swarm (horizon "
+                          f"{(r.get('options') or {}).get('horizon', 0):.3g} s), {r['threads']} threads",
             "rvo2": "RVO2-3D doStep, 1 thread"}[r["method"]]
     flown = "whole run" if r["steps"] < r["n_steps"] or r["all_reached"] else f"{r['steps']} steps (max_time)"
     if r.get("capped"):
@@ -242,7 +246,7 @@ def _machine() -> str:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000])
-    ap.add_argument("--cases", nargs="+", choices=("swap", "crossing"), default=["swap", "crossing"])
+    ap.add_argument("--cases", nargs="+", choices=CASES, default=["swap", "crossing"])
     ap.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
     ap.add_argument("--max-neighbors", type=int, default=10)
     ap.add_argument("--max-steps", nargs="*", default=[], metavar="N=K", help="cap the runs of size N at K steps")
@@ -268,7 +272,8 @@ def main(argv: list[str] | None = None) -> None:
         return
     caps = {int(k): int(v) for k, v in (item.split("=") for item in args.max_steps)}
     lines = [f"# Swarm benchmark ({Path(__file__).name})", "", _machine(), "",
-             f"max_neighbors {args.max_neighbors} for both methods; dt 0.2 s, 0-4 m/s, sensing 55 m.", "",
+             f"max_neighbors {args.max_neighbors} for both methods; swap and crossing: dt 0.2 s, 0-4 m/s, "
+             "sensing 55 m; rvo2-sphere: RVO2-3D's own Sphere example (dt 0.125 s, 0-2 m/s, sensing 15 m).", "",
              HEADER]
     jsonl = args.out.with_suffix(".jsonl")
     jsonl.write_text("")
@@ -278,7 +283,7 @@ def main(argv: list[str] | None = None) -> None:
 
     flush()
     for case in args.cases:
-        for n in args.sizes:
+        for n in [812] if case == "rvo2-sphere" else args.sizes:
             for method in args.methods:
                 cmd = [sys.executable, __file__, "--one", case, str(n), method, "--max-neighbors",
                        str(args.max_neighbors)] + (["--cap", str(caps[n])] if n in caps else [])
