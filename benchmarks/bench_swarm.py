@@ -129,9 +129,9 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
         step = SwarmSelect(sc, sel, formulation=formulation, solver=solver, max_neighbors=max_neighbors,
                            threads=threads)
     load = os.getloadavg()[0]
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     rec = fly(sc, step, progress=False, max_steps=max_steps)
-    loop = time.perf_counter() - t0
+    loop, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     t0 = time.perf_counter()
     s = summarize_rvo2(rec) if method == "rvo2" else summarize(rec)
     metrics = time.perf_counter() - t0
@@ -141,7 +141,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
         "case": case, "n": n, "method": method, "threads": threads, "max_neighbors": max_neighbors,
         "steps": rec.steps, "n_steps": sc.n_steps, "agent_steps": agent_steps,
         "decide_us": decide / agent_steps * 1e6, "loop_us": loop / agent_steps * 1e6,
-        "loop_s": loop, "metrics_s": metrics,
+        "loop_s": loop, "metrics_s": metrics, "loop_cpu_us": cpu / agent_steps * 1e6,
         "min_vehicle_distance": s["min_vehicle_distance"], "r_pz": float(sc.r_pz.max()),
         "pz_intrusions": s["pz_intrusions"], "collisions": s["collisions"], "reached": s["reached"],
         "all_reached": s["all_reached"], "arrival_time_max": s["arrival_time_max"],
@@ -220,15 +220,17 @@ def table_row(r: dict[str, Any]) -> str:
         flown = f"first {r['steps']} steps"
     arrive = _fmt(r["arrival_time_max"]) if r["all_reached"] else "—"
     return (f"| {r['case']} | {r['n']} | {name} | {flown} | {_fmt(r['decide_us'])} | {_fmt(r['loop_us'])} "
+            f"| {_fmt(r.get('loop_cpu_us'))} "
             f"| {_fmt(r['min_vehicle_distance'], '.2f')} / {r['r_pz']:g} | {r['pz_intrusions']} | {r['collisions']} "
             f"| {r['reached']}/{r['n']} | {arrive} | {_fmt(r['fallbacks'], 'd') if r['fallbacks'] is not None else '—'} "
             f"| {r['metrics_s']:.1f} | {r['peak_mb']:.0f}{' (spilled)' if r.get('record') == 'spilled' else ''} "
             f"| {r['load_start']:.1f}–{r['load_end']:.1f} |")
 
 
-HEADER = ("| case | N | method | flown | decide µs/agent-step | loop µs/agent-step | min distance / r_pz (m) "
+HEADER = ("| case | N | method | flown | decide µs/agent-step | loop µs/agent-step | loop CPU µs/agent-step "
+          "| min distance / r_pz (m) "
           "| pz intrusions | collisions | arrived | last arrival (s) | fallbacks | metrics s | peak MB | load |\n"
-          "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+          "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
 
 
 def _machine() -> str:
