@@ -40,7 +40,7 @@ MAX_WIND = 100.0
 
 
 class WindConfig(_Config):
-    """The ``wind`` mapping of contract §5 (``rotorpy`` only). ``sigma`` (turbulence intensity
+    """The ``wind`` mapping of a scenario (``rotorpy`` only). ``sigma`` (turbulence intensity
     per axis, m/s) and ``altitude`` (m, sets the Dryden length scales) are extensions that
     default to RotorPy's ``DrydenGust`` defaults."""
 
@@ -84,7 +84,7 @@ def _missing_batched_extra() -> str:
 
 
 class DynamicsConfig(_Config):
-    """The ``dynamics`` mapping of contract §5; ``substep_rate`` (Hz), ``command_ramp``
+    """The ``dynamics`` mapping of a scenario; ``substep_rate`` (Hz), ``command_ramp``
     (default true) and ``batched`` (default false: all vehicles in one RotorPy
     ``BatchedMultirotor``, needs the ``batched`` extra), all ``rotorpy`` only, extend it."""
 

@@ -1,7 +1,7 @@
 """One encounter, flown where it is called (a Dask worker, or this process).
 
 :func:`run_encounter` regenerates encounter ``index`` of a family from (family, seed, index),
-flies it with the :class:`Method` and returns one row: its parameters and its contract §3
+flies it with the :class:`Method` and returns one row: its parameters and its run
 summary, or the error it raised. It is a pure function of its arguments but for the timing
 columns (:data:`TIMING_COLUMNS`), which is why a sweep's results do not depend on how many
 workers ran it.
