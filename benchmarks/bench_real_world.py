@@ -1,4 +1,4 @@
-"""Issue 12's conditions on the bundled scenarios: writes benchmarks/results_real_world.md.
+"""Issue 12's conditions on the bundled scenarios: writes docs/results/real-world.md.
 
 Every bundled scenario under ideal kinematics (the reference for the cost columns), under
 ``first_order`` (tau 0.5 s and 1 s; and tau 1 s with the derived margins switched off, to show
@@ -14,7 +14,7 @@ comparison; one period of the one-by-one model at N = 1000 is timed too (hours i
     .venv/bin/python benchmarks/bench_real_world.py --swarm  # the swarm preset (vo3d run --swarm)
 
 ``--swarm``: every run with the swarm preset merged into its ``selector_options``
-(``FAST_OPTIONS`` and ``horizon: sensing``), into ``results_real_world_swarm.md``.
+(``FAST_OPTIONS`` and ``horizon: sensing``), into ``docs/results/real-world-swarm.md``.
 """
 from __future__ import annotations
 
@@ -40,8 +40,11 @@ from vo3d_opt.sim.scenario import (
     scenario_variant,
 )
 
-OUT = Path(__file__).with_name("results_real_world.md")
-SWARM_OUT = Path(__file__).with_name("results_real_world_swarm.md")
+#: The docs' results pages, which these benchmarks write.
+RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
+
+OUT = RESULTS / "real-world.md"
+SWARM_OUT = RESULTS / "real-world-swarm.md"
 #: ``vo3d run --swarm``'s selector options.
 SWARM = {"preset": "swarm"}
 BIG = "random-crossing-1000"

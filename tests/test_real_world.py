@@ -408,7 +408,7 @@ def test_rotorpy_keeps_its_altitude_through_horizontal_manoeuvres_at_the_command
     """Random horizontal commands, rate-limited as the simulator does and ramped over each
     period: the hummingbird stays within 0.25 m of its altitude (the ceiling-squeeze scenario
     leaves 0.5 m). At twice the rate, stepped, the same commands throw it further than 0.5 m;
-    ramped, they do not (benchmarks/results_acceleration_bound.md): the ramp is what keeps it."""
+    ramped, they do not (docs/results/acceleration-bound.md): the ramp is what keeps it."""
     from vo3d_opt.sim.dynamics import RotorPyDynamics
 
     sc = small(dynamics={"model": "rotorpy", "vehicle": "hummingbird"})

@@ -23,7 +23,7 @@ DEFAULT_SUBSTEP_RATE = 100.0
 #: The same for ``batched: true``: RotorPy's batched vehicles take one fixed RK4 step per
 #: sub-step. At 100 Hz a set-point jump of 4 m/s (a right angle, a diagonal from hover) puts
 #: that 2.4-3.4 m from the adaptive RK45 of a single ``Multirotor``; at 200 Hz 1.8-4.6 mm
-#: (benchmarks/results_dynamics.md, formulations/dynamics.md).
+#: (docs/results/dynamics.md, formulations/dynamics.md).
 BATCHED_SUBSTEP_RATE = 200.0
 
 MODELS = ("kinematic", "first_order", "rotorpy")

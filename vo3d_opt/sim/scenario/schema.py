@@ -119,7 +119,7 @@ MAX_SUBSTEPS = 10_000
 
 #: From this many vehicles a run under RotorPy one by one suggests ``batched: true``: at 50,
 #: random-crossing-50 took 237 s batched against 1313 s one by one (at its default 100 Hz) in
-#: benchmarks/results_real_world.md.
+#: docs/results/real-world.md.
 BATCHED_ADVISED = 50
 
 
