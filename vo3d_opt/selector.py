@@ -5,7 +5,7 @@ With the default formulation and solver (``plane_qp`` on ``exact2d``) a decision
 → arrays → one call of the compiled core (``vo3d_opt._core``; the algorithm reads in
 ``vo3d_opt/algorithm/decide.hpp``) → ``Decision``. The other formulations and backends run the
 Python formulations over the same compiled geometry.
-Statuses: ``vo3d_opt.status.Status`` (documented in the README).
+Statuses: ``vo3d_opt.status.Status`` (documented in docs/guide/statuses.md).
 """
 
 from __future__ import annotations
