@@ -179,7 +179,7 @@ def _rows(jobs: list[tuple[str, str, Scenario, bool]],
 
 
 def condensed(path: Path) -> str:
-    """One row per condition of a results file: the README's table (sums over its scenarios,
+    """One row per condition of a results file: the summary table of docs/results/real-world.md (sums over its scenarios,
     the smallest distances, the median cost)."""
     rows = [[c.strip() for c in line.strip().strip("|").split("|")]
             for line in path.read_text(encoding="utf-8").splitlines()
@@ -215,7 +215,7 @@ def main() -> None:
                     help="every run with the swarm preset (vo3d run --swarm)")
     ap.add_argument("--jobs", type=int, default=2, help="runs at once (processes)")
     ap.add_argument("--readme", action="store_true",
-                    help="print the README's condensed table of --out (runs nothing)")
+                    help="print the condensed table of --out, one row per condition (runs nothing)")
     args = ap.parse_args()
     if args.out is None:
         args.out = SWARM_OUT if args.swarm else OUT

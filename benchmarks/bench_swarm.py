@@ -1,8 +1,8 @@
 """Swarm scale: vo3d_opt's select_many (1 thread and every thread) against RVO2-3D's doStep.
 
 ``ours-noguard`` is ours on every thread with the ``closing_guard`` option, one of the
-simulator's defaults (with reciprocal and pz_buffer), turned off: README, "Safety in
-simulation". ``ours-coarse`` is ours on
+simulator's defaults (with reciprocal and pz_buffer), turned off
+(docs/guide/presets.md). ``ours-coarse`` is ours on
 every thread with avoidance planes every 30 degrees instead of 10 (``plane_step_deg``: 7 planes,
 21 QPs instead of 57, and the fallbacks' grid on 7 planes: fewer velocities tried, the same
 exact check of each). ``ours-nearest`` is ours on every thread with ``least_bad_escape`` off

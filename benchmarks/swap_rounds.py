@@ -1,4 +1,4 @@
-"""Where the sphere swap's decision time goes, by how each decision was found (README, Swarms).
+"""Where the sphere swap's decision time goes, by how each decision was found (docs/results/swarm.md).
 
 Flies the sphere swap of ``bench_swarm.py`` with ``select_many`` (both cores), keeps the
 arguments of every ``--every``-th call (shifted by one every other time, so that odd and even

@@ -121,3 +121,35 @@ def test_schema_refuses_what_the_loader_refuses(extra: dict[str, Any], validator
     with pytest.raises(ScenarioError):
         scenario_from_dict(data)
     assert list(validator.iter_errors(data))
+
+
+def _keys(schema: dict[str, Any]) -> set[str]:
+    """Every property name anywhere in a JSON Schema."""
+    found: set[str] = set()
+    stack: list[Any] = [schema]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, dict):
+            found |= set(node.get("properties", {}))
+            stack += list(node.values())
+        elif isinstance(node, list):
+            stack += node
+    return found
+
+
+def test_the_reference_pages_name_every_key(validator: Any) -> None:
+    """docs/reference/scenario.md documents every key of the format (the selector options on
+    the presets page), and docs/reference/summary.md every key of a run's summary."""
+    docs = ROOT / "docs"
+    scenario_page = (docs / "reference" / "scenario.md").read_text()
+    presets_page = (docs / "guide" / "presets.md").read_text()
+    options = set(validator.schema["properties"]["selector_options"]["properties"])
+    missing = [k for k in _keys(validator.schema) - options if f"`{k}`" not in scenario_page]
+    missing += [k for k in options if f"`{k}`" not in presets_page + scenario_page]
+    assert not missing, f"keys not documented: {sorted(missing)}"
+
+    from vo3d_opt.sim import run_scenario, summarize
+
+    summary = summarize(run_scenario("vertical-encounter"))
+    summary_page = (docs / "reference" / "summary.md").read_text()
+    assert not [k for k in summary if f"`{k}`" not in summary_page]
