@@ -61,3 +61,22 @@ def test_example_runs_as_written(code: str, tmp_path: Path) -> None:
         env={**os.environ, "MPLBACKEND": "Agg"},
     )
     assert result.returncode == 0, result.stderr[-3000:]
+
+
+_YAML = re.compile(r"^```yaml\n(.*?)^```", re.S | re.M)
+
+
+def test_whole_scenarios_in_the_documents_load() -> None:
+    """A ```yaml block that is a whole scenario (it has a ``name``) loads as written; the others
+    are fragments of one."""
+    from vo3d_opt.sim.scenario import scenario_from_dict
+    from vo3d_opt.sim.scenario.reading import parse
+
+    whole = 0
+    for path in documents():
+        for match in _YAML.finditer(path.read_text()):
+            data = parse(match.group(1))
+            if isinstance(data, dict) and "name" in data:
+                scenario_from_dict(data, source=str(path.relative_to(ROOT)))
+                whole += 1
+    assert whole >= 1
