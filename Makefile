@@ -1,11 +1,12 @@
 # Entry points: `make demo`, `make test` (and `make lint`). They create .venv when missing.
-# `make notebooks` opens the notebooks in Jupyter Lab.
+# `make notebooks` opens the notebooks in Jupyter Lab, `make notebooks-run` executes them outside it;
+# `make docs` builds the documentation site.
 PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test install bench lint clean notebooks notebooks-sync figures
+.PHONY: demo test install bench lint clean notebooks notebooks-sync notebooks-run figures docs
 
 $(PY):
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) on PATH (or run: make PYTHON=python3 ...)"; exit 2; }
@@ -20,7 +21,7 @@ $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet $(BUILD_REQS)
 	@command -v cmake >/dev/null 2>&1 || $(PY) -m pip install --quiet 'cmake>=3.18'
 	@command -v ninja >/dev/null 2>&1 || $(PY) -m pip install --quiet ninja
-	$(PY) -m pip install --quiet --no-build-isolation -e '.[dev,baselines,batched,link]'
+	$(PY) -m pip install --quiet --no-build-isolation -e '.[dev,baselines,batched,link,docs]'
 	@touch $(STAMP) $(CORE_STAMP)
 
 # The compiled core (vo3d_opt/algorithm/, CMakeLists.txt), rebuilt when a source changes:
@@ -59,6 +60,17 @@ notebooks-sync: $(STAMP)
 	$(VENV)/bin/jupytext --update --to ipynb notebooks/[0-9]*.py
 	$(VENV)/bin/jupyter nbconvert --log-level WARN --clear-output --inplace notebooks/[0-9]*.ipynb
 
+# Every notebook executed outside Jupyter Lab (nbconvert, the venv's own kernel), top to bottom;
+# the executed copies go to out/notebooks/, the committed .ipynb stay without outputs.
+notebooks-run: $(STAMP) $(CORE_STAMP)
+	$(VENV)/bin/jupyter nbconvert --log-level WARN --to notebook --execute \
+		--ExecutePreprocessor.timeout=600 --output-dir out/notebooks notebooks/[0-9]*.ipynb
+
+# The documentation site (mkdocs.yml, docs/) into site/, strictly: a broken link, a page missing
+# from the navigation or a renamed function in the API pages fails it (tests/test_docs.py too).
+docs: $(STAMP) $(CORE_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
+
 bench: $(STAMP) $(CORE_STAMP)
 	$(PY) benchmarks/bench_select.py
 
@@ -67,4 +79,4 @@ figures: $(STAMP) $(CORE_STAMP)
 	$(PY) benchmarks/figures.py
 
 clean:
-	rm -rf $(VENV) out build
+	rm -rf $(VENV) out build site

@@ -11,7 +11,7 @@ corresponds to, ``a = share g / (k_v dt)``) and each way of handing a command to
 ``dynamics.command_ramp``): the largest altitude excursion over the run, per seed, the largest
 vertical speed, and the largest speed over the largest command.
 
-    python benchmarks/bench_acceleration_bound.py > benchmarks/results_acceleration_bound.md
+    python benchmarks/bench_acceleration_bound.py > docs/results/acceleration-bound.md
 """
 from __future__ import annotations
 

@@ -24,7 +24,7 @@ hovering in a constant 3 m/s wind, crossing it at s, 20 s of hover in Dryden gus
 Sensing: ``Sensor.sensed(i)`` for N = 1000. Batched RotorPy vehicles (``batched: true``, the
 ``batched`` extra): their cost against one ``Multirotor`` per vehicle, and their accuracy.
 
-    python benchmarks/bench_dynamics.py [--quick] > benchmarks/results_dynamics.md
+    python benchmarks/bench_dynamics.py [--quick] > docs/results/dynamics.md
 """
 from __future__ import annotations
 

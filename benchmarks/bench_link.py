@@ -8,7 +8,7 @@ For each scenario: ``vo3d run --json`` once, then ``vo3d sitl --json`` at ``--ti
 defaults (10 Hz decisions, vehicles at 50 Hz dynamics and 25 Hz telemetry). The machine's
 cores are shared by every process of the run (a vehicle, a link per agent, the router).
 
-    python benchmarks/bench_link.py [--time-scale K] [SCENARIO ...] > benchmarks/results_link.md
+    python benchmarks/bench_link.py [--time-scale K] [SCENARIO ...] > docs/results/link.md
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 12's conditions on the bundled scenarios: writes benchmarks/results_real_world.md.
+"""Issue 12's conditions on the bundled scenarios: writes docs/results/real-world.md.
 
 Every bundled scenario under ideal kinematics (the reference for the cost columns), under
 ``first_order`` (tau 0.5 s and 1 s; and tau 1 s with the derived margins switched off, to show
@@ -14,7 +14,7 @@ comparison; one period of the one-by-one model at N = 1000 is timed too (hours i
     .venv/bin/python benchmarks/bench_real_world.py --swarm  # the swarm preset (vo3d run --swarm)
 
 ``--swarm``: every run with the swarm preset merged into its ``selector_options``
-(``FAST_OPTIONS`` and ``horizon: sensing``), into ``results_real_world_swarm.md``.
+(``FAST_OPTIONS`` and ``horizon: sensing``), into ``docs/results/real-world-swarm.md``.
 """
 from __future__ import annotations
 
@@ -40,8 +40,11 @@ from vo3d_opt.sim.scenario import (
     scenario_variant,
 )
 
-OUT = Path(__file__).with_name("results_real_world.md")
-SWARM_OUT = Path(__file__).with_name("results_real_world_swarm.md")
+#: The docs' results pages, which these benchmarks write.
+RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
+
+OUT = RESULTS / "real-world.md"
+SWARM_OUT = RESULTS / "real-world-swarm.md"
 #: ``vo3d run --swarm``'s selector options.
 SWARM = {"preset": "swarm"}
 BIG = "random-crossing-1000"
@@ -176,7 +179,7 @@ def _rows(jobs: list[tuple[str, str, Scenario, bool]],
 
 
 def condensed(path: Path) -> str:
-    """One row per condition of a results file: the README's table (sums over its scenarios,
+    """One row per condition of a results file: the summary table of docs/results/real-world.md (sums over its scenarios,
     the smallest distances, the median cost)."""
     rows = [[c.strip() for c in line.strip().strip("|").split("|")]
             for line in path.read_text(encoding="utf-8").splitlines()
@@ -212,7 +215,7 @@ def main() -> None:
                     help="every run with the swarm preset (vo3d run --swarm)")
     ap.add_argument("--jobs", type=int, default=2, help="runs at once (processes)")
     ap.add_argument("--readme", action="store_true",
-                    help="print the README's condensed table of --out (runs nothing)")
+                    help="print the condensed table of --out, one row per condition (runs nothing)")
     args = ap.parse_args()
     if args.out is None:
         args.out = SWARM_OUT if args.swarm else OUT

@@ -37,7 +37,7 @@ process, so "peak MB" is that run's peak resident memory (the run, its record an
         [--max-neighbors 10]
         [--max-steps N=K ...]
         [--profile [--profile-steps K]]
-        [--out benchmarks/results_swarm.md]
+        [--out docs/results/swarm.md]
 
 Writes the markdown table to ``--out`` as rows finish (one line of JSON per run also goes to
 ``--out`` with ``.jsonl``).
@@ -56,6 +56,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+#: The docs' results pages, which these benchmarks write.
+RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 
 METHODS = ("ours-1", "ours-all", "ours-paper", "ours-noguard", "ours-coarse", "ours-nearest", "ours-fast",
            "ours-swarm", "rvo2")
@@ -255,7 +258,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--profile", action="store_true", help="also profile ours on the first steps at N = 1000")
     ap.add_argument("--profile-steps", type=int, default=100, metavar="K",
                     help="profile the first K steps (0: the whole run)")
-    ap.add_argument("--out", type=Path, default=Path(__file__).with_name("results_swarm.md"))
+    ap.add_argument("--out", type=Path, default=RESULTS / "swarm.md")
     ap.add_argument("--one", nargs=3, metavar=("CASE", "N", "METHOD"), help=argparse.SUPPRESS)
     ap.add_argument("--profile-one", nargs=2, metavar=("CASE", "N"), help=argparse.SUPPRESS)
     ap.add_argument("--cap", type=int, default=None, help=argparse.SUPPRESS)

@@ -17,7 +17,7 @@ git into a temporary directory and its decision kernel compiled ahead of time th
 
     python benchmarks/bench_sweep.py [--family pair] [--n 2000] [--old-n 300]
         [--workers 1 2] [--rows pair=2000 group=2000 ...] [--old-rev REV]
-        [--save-old DIR | --old-rows DIR] [--results benchmarks/results_sweep_throughput.md]
+        [--save-old DIR | --old-rows DIR] [--results docs/results/sweep-throughput.md]
 
 Writes a markdown page (machine, date and commit at the top) to ``--results``.
 """
@@ -183,7 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--save-old", type=Path)
     p.add_argument("--old-rows", type=Path)
     p.add_argument("--no-throughput", action="store_true")
-    p.add_argument("--results", type=Path, default=HERE / "results_sweep_throughput.md")
+    p.add_argument("--results", type=Path, default=HERE.parent / "docs" / "results" / "sweep-throughput.md")
     args = p.parse_args(argv)
 
     work = Path(tempfile.mkdtemp(prefix="bench-sweep-"))

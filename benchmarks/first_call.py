@@ -1,7 +1,7 @@
 """Time of ``import vo3d_opt`` and of each formulation's first select() in a fresh process
-(README, Speed; docs/design-compiled-core.md).
+(docs/results/compiled-core.md; docs/design-compiled-core.md).
 
-Each row is its own child process on the contract's example (a neighbour head-on and a
+Each row is its own child process on the README's example (a neighbour head-on and a
 cylinder on the way): the time to import vo3d_opt, to import the formulation's backend library
 (none for plane_qp on exact2d and for sampled: the compiled core), to construct the selector,
 and its first select(); then a second select() for comparison, and for the default a first

@@ -1,4 +1,4 @@
-"""Our figures for the paper's cases beside the paper's own (README table).
+"""Our figures for the paper's cases beside the paper's own (docs/results/paper-cases.md).
 
 Runs every scenarios/paper-*.yaml under the given formulations and prints a markdown table:
 closest vehicle-vehicle and vehicle-obstacle distances, safety counts, and time per decision;

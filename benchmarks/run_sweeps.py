@@ -9,14 +9,14 @@ Three stages (all by default, or those named with ``--stages``):
   every family of ``--families``, and ``--method rvo2`` into ``OUT_ROOT/FAMILY-rvo2`` for every
   family of ``--rvo2`` (obstacle-free ones: the same encounters), each as its own process;
   with several ``--seeds``, seed 0 goes there and seed S into ``.../seedS``;
-* ``table``: ``benchmarks/results_sweeps.md`` from the runs found under ``OUT_ROOT`` and
+* ``table``: ``docs/results/sweeps.md`` from the runs found under ``OUT_ROOT`` and
   ``throughput.md`` (so the table can be rebuilt without flying anything). The runs of one
   family and method with different seeds are independent encounters (the stream of encounter
   i is seeded by (seed, i)): their rows are pooled into one line, rates and bounds recomputed.
 
     python benchmarks/run_sweeps.py --n 10000 [--families pair group dense lagged]
         [--rvo2 pair dense] [--seeds 0] [--workers 2] [--out-root /work/sweep-out]
-        [--stages throughput sweeps table] [--results benchmarks/results_sweeps.md]
+        [--stages throughput sweeps table] [--results docs/results/sweeps.md]
         [--selector-option KEY=VALUE ...]
 
 ``--n`` is one N for every family, or ``FAMILY=N`` items for per-family counts.
@@ -36,6 +36,9 @@ import sys
 import time
 from pathlib import Path
 from typing import Any
+
+#: The docs' results pages, which these benchmarks write.
+RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 
 HERE = Path(__file__).resolve().parent
 FAMILIES = ("pair", "group", "dense", "lagged")
@@ -241,7 +244,7 @@ def main(argv: list[str] | None = None) -> int:
                    default=["throughput", "sweeps", "table"])
     p.add_argument("--bench-family", default="pair")
     p.add_argument("--bench-n", type=int, default=300)
-    p.add_argument("--results", type=Path, default=HERE / "results_sweeps.md")
+    p.add_argument("--results", type=Path, default=RESULTS / "sweeps.md")
     p.add_argument("--selector-option", "-o", action="append", default=[], metavar="KEY=VALUE",
                    help="passed to every vo3d sweep")
     args = p.parse_args(argv)

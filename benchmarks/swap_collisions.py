@@ -1,4 +1,4 @@
-"""What the vehicles of the sphere swap did before they collided (README, Swarms): the swap flown
+"""What the vehicles of the sphere swap did before they collided (docs/results/swarm.md): the swap flown
 with ours on every core (``select_many``, max_neighbors 10, the simulator's defaults), then, for
 the first pairs that came within ``--within`` m of each other at a step, the steps before:
 their distances, speeds and statuses, and whether each had the other among its neighbours.

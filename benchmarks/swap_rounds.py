@@ -1,4 +1,4 @@
-"""Where the sphere swap's decision time goes, by how each decision was found (README, Swarms).
+"""Where the sphere swap's decision time goes, by how each decision was found (docs/results/swarm.md).
 
 Flies the sphere swap of ``bench_swarm.py`` with ``select_many`` (both cores), keeps the
 arguments of every ``--every``-th call (shifted by one every other time, so that odd and even
@@ -7,7 +7,7 @@ steps are both kept), then replays each kept call one vehicle at a time
 preferred velocity, a QP round (near / left / right), the sampled grid, the least-bad fallback.
 
     python benchmarks/swap_rounds.py [--n 1000] [--every 10] [--max-steps K] [--fast]
-                                     [--out benchmarks/results_swap_rounds.md]
+                                     [--out docs/results/swap-rounds.md]
 """
 from __future__ import annotations
 
@@ -24,6 +24,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_swarm import scenario  # noqa: E402
+
+#: The docs' results pages, which these benchmarks write.
+RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 
 
 def record(n: int, every: int, max_steps: int | None, fast: bool = False
@@ -109,7 +112,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--every", type=int, default=10, help="keep every K-th select_many call")
     ap.add_argument("--max-steps", type=int, default=None)
     ap.add_argument("--fast", action="store_true", help="fly it with the fast preset")
-    ap.add_argument("--out", type=Path, default=Path(__file__).with_name("results_swap_rounds.md"))
+    ap.add_argument("--out", type=Path, default=RESULTS / "swap-rounds.md")
     args = ap.parse_args(argv)
     if args.n < 2 or args.every < 1:
         ap.error("--n must be at least 2 and --every at least 1")

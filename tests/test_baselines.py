@@ -126,7 +126,7 @@ def test_sphere_swap_scenario_geometry(n):
     z_lo, z_hi = sc.limits.altitude
     assert starts[:, 2].min() > z_lo and starts[:, 2].max() < z_hi
     # three straight flights' time + 30 s: the whole N = 10,000 swap's last agents, held in the
-    # centre's jam for minutes, were still flying home after twice that (README, Swarms)
+    # centre's jam for minutes, were still flying home after twice that (docs/results/swarm.md)
     straight = 2.0 * radius[0] / float(sc.max_speed[0])
     assert 3.0 * straight + 30.0 <= sc.max_time < 3.0 * straight + 31.0
 

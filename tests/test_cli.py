@@ -1,4 +1,4 @@
-"""The ``vo3d`` command line (contract §3), run as a separate process like a user would."""
+"""The ``vo3d`` command line, run as a separate process like a user would."""
 from __future__ import annotations
 
 import csv

@@ -1,4 +1,4 @@
-"""Issue 12: the real-world keys of contract §5 in the scenario and the loop (dynamics, wind,
+"""Issue 12: the real-world keys in the scenario and the loop (dynamics, wind,
 noisy and late sensing, agents that do not avoid), the margins the simulator derives from them
 (vo3d_opt.sim.safety) and the safety they buy, on small cases."""
 from __future__ import annotations
@@ -408,7 +408,7 @@ def test_rotorpy_keeps_its_altitude_through_horizontal_manoeuvres_at_the_command
     """Random horizontal commands, rate-limited as the simulator does and ramped over each
     period: the hummingbird stays within 0.25 m of its altitude (the ceiling-squeeze scenario
     leaves 0.5 m). At twice the rate, stepped, the same commands throw it further than 0.5 m;
-    ramped, they do not (benchmarks/results_acceleration_bound.md): the ramp is what keeps it."""
+    ramped, they do not (docs/results/acceleration-bound.md): the ramp is what keeps it."""
     from vo3d_opt.sim.dynamics import RotorPyDynamics
 
     sc = small(dynamics={"model": "rotorpy", "vehicle": "hummingbird"})

@@ -1,4 +1,4 @@
-"""Scenario files (contract §2): every bundled file loads, names are unique, and invalid files
+"""Scenario files: every bundled file loads, names are unique, and invalid files
 are rejected with one line naming the file and the key."""
 from __future__ import annotations
 

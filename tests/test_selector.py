@@ -1,4 +1,4 @@
-"""VelocitySelector: the contract of shared/spec/contracts.md §1, properties over random
+"""VelocitySelector: its documented promises, properties over random
 encounters checked against the exact 3D membership, and the hard cases."""
 from __future__ import annotations
 

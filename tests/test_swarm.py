@@ -1,4 +1,4 @@
-"""VelocitySelector.select_many (contracts §4) against a loop of select() calls, built here by
+"""VelocitySelector.select_many against a loop of select() calls, built here by
 brute force (every pairwise distance, the neighbours in index order), for every option."""
 from __future__ import annotations
 

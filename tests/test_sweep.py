@@ -1,4 +1,4 @@
-"""``vo3d sweep`` (contract §6): families, Dask runs, rates, outputs and replays.
+"""``vo3d sweep``: families, Dask runs, rates, outputs and replays.
 
 Clusters are small (2 local worker processes) and the encounters short, so the module stays
 well under a minute of wall time beyond the clusters' start.
@@ -458,7 +458,7 @@ def test_horizon_sensing_is_each_encounter_s_own_sensing_horizon():
     assert run_encounter("pair", 0, 1, method)["error"] is None
 
 
-# ------------------------------------------------- group variants (contracts §5 keys)
+# ------------------------------------------------- group variants (real-world keys)
 
 SECTION5_FAMILIES = ("intruder", "rotorpy", "noisy")
 #: The §5 keys each family adds to its ``group`` draw (removed, the rest is a group scenario).

@@ -1,4 +1,4 @@
-"""Validation of the public data types (shared/spec/contracts.md §1): malformed input raises
+"""Validation of the public data types: malformed input raises
 ValueError naming the field; well-formed input, including numpy input, is accepted; L_pz and
 h_pz are derived from the obstacle's size plus the documented margin."""
 from __future__ import annotations

@@ -16,4 +16,4 @@ __all__ = [
     "Box",
     "Limits",
 ]
-__version__ = "0.1.0"
+__version__ = "0.3.0.dev0"

@@ -7,8 +7,8 @@ summary and the figures. One module for the CLI and the demo.
 * ``trajectories.csv``: the same rows as text, up to :data:`CSV_MAX_ROWS` rows (agents × samples);
   a larger run writes only the Parquet file (a CSV of a million rows is over 100 MB and takes
   longer to write than many runs take to fly);
-* ``summary.json``: the summary (contract §3 and the extras), floats to :data:`JSON_DIGITS`
-  significant digits;
+* ``summary.json``: the run's summary (``vo3d_opt.sim.metrics.summarize``), floats to
+  :data:`JSON_DIGITS` significant digits;
 * the figures of ``vo3d_opt.figures`` and, when asked, ``animation.gif``.
 
 Every file is written under a temporary name in the same directory and renamed into place once

@@ -1,11 +1,11 @@
-"""The public API: ``VelocitySelector(formulation, solver).select(...)`` (contracts §1) and
-``select_many(...)`` for a whole swarm in one call (contracts §4).
+"""The public API: ``VelocitySelector(formulation, solver).select(...)`` and
+``select_many(...)`` for a whole swarm in one call.
 
 With the default formulation and solver (``plane_qp`` on ``exact2d``) a decision is: validate
 → arrays → one call of the compiled core (``vo3d_opt._core``; the algorithm reads in
 ``vo3d_opt/algorithm/decide.hpp``) → ``Decision``. The other formulations and backends run the
 Python formulations over the same compiled geometry.
-Statuses: ``vo3d_opt.status.Status`` (documented in the README).
+Statuses: ``vo3d_opt.status.Status`` (documented in docs/guide/statuses.md).
 """
 
 from __future__ import annotations
@@ -392,7 +392,7 @@ class VelocitySelector:
         max_speed: float | np.ndarray | None = None,
         threads: int | None = None,
     ) -> SwarmDecision:
-        """Decide for every vehicle of a swarm in one call (contracts §4): vehicle i gets exactly
+        """Decide for every vehicle of a swarm in one call: vehicle i gets exactly
         ``select``'s velocity and status with, as its ``Neighbor``s, the other vehicles within
         ``sensing_range`` (centre distance; with ``max_neighbors = k`` the k nearest of them)
         in index order, each with ``r_pz = max(r_pz[i], r_pz[j])``, cooperative when it decides

@@ -1,7 +1,7 @@
 """The statuses every layer reports: a solver's answer, a decision, a simulated step.
 
 ``Status`` is a ``str`` (a ``StrEnum``), so ``decision.status == "optimal"`` holds and JSON
-writes the plain name (contract §1: ``decision.status`` is a str).
+writes the plain name (``decision.status`` is a str).
 """
 
 from __future__ import annotations

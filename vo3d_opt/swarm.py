@@ -1,4 +1,4 @@
-"""The Python side of ``VelocitySelector.select_many`` (contracts §4): the arrays checked, who
+"""The Python side of ``VelocitySelector.select_many``: the arrays checked, who
 senses whom (k-d trees, never an N×N matrix), and the answer, ``SwarmDecision``.
 
 Sensing, for deciding vehicle i (the same rules as a loop of ``select`` calls would apply):
@@ -10,7 +10,7 @@ Sensing, for deciding vehicle i (the same rules as a loop of ``select`` calls wo
   ``max_neighbors``, each vehicle's few nearest: a crowd does not cost the square of its size);
   the range and the ranking are then numpy's distance, so the neighbour sets are exactly those
   of a brute-force ``np.linalg.norm`` test;
-* obstacles: all of them, in the order given (contract §4: "the same for every vehicle"); with
+* obstacles: all of them, in the order given (the same for every vehicle); with
   the ``obstacle_range`` extension only those whose surface is within that distance
   (``Cylinder.surface_distance`` / ``Box.surface_distance``), found through a 2D k-d tree over
   the vehicles so that many obstacles stay cheap;
@@ -55,11 +55,11 @@ _EMPTY = np.zeros(0, dtype=np.int64)
 
 @dataclass
 class SwarmDecision:
-    """What ``select_many`` returns (contracts §4), per vehicle in the order given.
+    """What ``select_many`` returns, per vehicle in the order given.
 
     ``velocities`` (N, 3) m/s: the decision, or the current velocity of a vehicle that does not
-    decide; ``statuses`` (N,) str: the status of contract §1, "" for a vehicle that does not
-    decide; ``solve_time`` s: the whole call. Beyond the contract: ``decided`` (N,) bool;
+    decide; ``statuses`` (N,) str: the status of ``select``, "" for a vehicle that does not
+    decide; ``solve_time`` s: the whole call. Also: ``decided`` (N,) bool;
     ``rounds`` (N,) str: how each velocity was found (``Decision.info["round"]``: "preferred", a
     QP round, "sampled", "least_bad"); ``planes`` (N,) rad: the avoidance plane chosen (NaN: none);
     ``neighbors`` (N,) int: the vehicles each took into account; ``obstacles`` (N,) int: the

@@ -1,4 +1,4 @@
-"""Public data types of the contract (shared/spec/contracts.md §1), validated with pydantic.
+"""Public data types of the API, validated with pydantic.
 
 Malformed input raises :class:`InputError` (a ``ValueError``) with a one-line message naming
 each bad field: ``Cylinder: radius: must be a number, got '3'``. Numbers are numbers: booleans

@@ -17,7 +17,7 @@
 //    generation per QP, so no answer depends on the order the QPs are solved in);
 // 5. no QP gives a safe answer: the sampled grid with the exact check and the margin, else the
 //    least-bad velocity (latest first intrusion: fallback.hpp);
-// 6. the last line of the contract: never above v_max, never leaving the altitude band in dt.
+// 6. the limits, whatever came before: never above v_max, never leaving the altitude band in dt.
 //
 // A plane QP costs well under a microsecond, so its key in the best-first order is a one-line
 // lower bound until it is the least key, and only then its exact optimum: QPs that cannot win

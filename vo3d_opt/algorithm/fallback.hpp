@@ -111,7 +111,7 @@ inline bool within_limits(const double* v, const LimitRows& L, const Bounds& b) 
     return true;
 }
 
-// The last line of the contract: never above v_max, never leaving [z_min, z_max] within dt
+// The limits, whatever came before: never above v_max, never leaving [z_min, z_max] within dt
 // (from an in-bounds start); non-finite components become 0.
 inline void enforce_limits(const double* v, const double* p, const Bounds& b, double* out) {
     for (int c = 0; c < 3; ++c) out[c] = std::isfinite(v[c]) ? v[c] : 0.0;

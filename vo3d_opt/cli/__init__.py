@@ -1,8 +1,8 @@
 """The ``vo3d`` command line: one module per subcommand.
 
 * ``vo3d run SCENARIO`` (:mod:`.run`), ``vo3d compare`` (:mod:`.compare`), ``vo3d list``
-  (:mod:`.listing`), ``vo3d sweep FAMILY --n N`` (:mod:`.sweep`), ``vo3d link`` and
-  ``vo3d sitl`` (``vo3d_opt.link.command``).
+  (:mod:`.listing`), ``vo3d sweep FAMILY --n N`` (:mod:`.sweep`), ``vo3d schema``
+  (:mod:`.schema`), ``vo3d link`` and ``vo3d sitl`` (``vo3d_opt.link.command``).
 * ``--preset NAME`` (``--fast``, ``--swarm`` its aliases) and ``-o KEY=VALUE`` (run, compare,
   sweep): the selector's configuration, merged over the scenario's ``selector_options`` in the
   order given (the last of a key wins) and checked as the file's are.
@@ -31,6 +31,7 @@ from .common import EXIT_FAIL, EXIT_USAGE, Parser, UsageError, common_parser, lo
 from .compare import add_compare_parser
 from .listing import add_list_parser
 from .run import add_run_parser
+from .schema import add_schema_parser
 from .sweep import add_sweep_parser
 
 #: Each subcommand's parser, in the order ``vo3d --help`` lists them.
@@ -39,6 +40,7 @@ SUBCOMMANDS = (
     add_compare_parser,
     add_list_parser,
     add_sweep_parser,
+    add_schema_parser,
     add_link_parsers,
 )
 

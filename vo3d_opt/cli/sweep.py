@@ -56,7 +56,7 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     sw = sub.add_parser(
         "sweep",
         parents=common,
-        help="run N random encounters of a family on Dask (contract §6)",
+        help="run N random encounters of a family on Dask",
         description="Run N random encounters of a family on a Dask cluster and report rates with "
         "95% Clopper-Pearson bounds. Exit status 0 when every encounter ran, 1 when "
         "some raised or lost their worker (listed in the summary) or writing --out failed, "

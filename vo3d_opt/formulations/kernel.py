@@ -6,7 +6,7 @@ reads: the VOs' inputs and the limits as rows; the preferred velocity itself whe
 the VO cones and pyramids, the avoidance planes about the preferred direction and, on each
 plane and in each linearisation round, one QP solved exactly; a best-first search over those
 QPs with constraint generation and the exact 3D check; the sampled grid and the least-bad
-velocity when no QP gives a safe answer; the last line of the contract.
+velocity when no QP gives a safe answer; the limits, whatever came before.
 
 Here: the names of its answer's fields, the entry ``decide``, and the plane QPs for the Python
 search on outside backends (``plane_qp.py``: ``PlaneQPs``, whose arrays are numpy views of the
@@ -70,7 +70,7 @@ def py_search(qps: _core.PlaneQPs, bounds: Bounds, tried: np.ndarray) -> tuple[i
 
 
 def enforce_limits(v: np.ndarray, p: np.ndarray, bounds: Bounds) -> np.ndarray:
-    """The last line of the contract: never above v_max, never leaving [z_min, z_max] within dt
+    """The limits, whatever came before: never above v_max, never leaving [z_min, z_max] within dt
     (from an in-bounds start); non-finite components become 0."""
     return _core.enforce_limits(v, p, bounds)
 

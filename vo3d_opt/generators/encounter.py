@@ -49,7 +49,8 @@ SPEED_DECIMALS = 6
 @dataclass(frozen=True)
 class Draw:
     """One draw of a family: its parameters (scalars, the parquet columns ``param_*``) and the
-    scenario dict (contract §2, without ``name`` and ``description``, which the sweep sets)."""
+    scenario dict (a scenario file's keys but ``name`` and ``description``, which the sweep
+    sets)."""
 
     params: dict[str, float | int | str]
     scenario: dict[str, Any]
@@ -65,7 +66,7 @@ class Family:
     can fly it (``--method rvo2``). ``warm_keys``: scenario keys added to the workers' warm-up
     encounter, so that it runs the same code as the family's (e.g. its ``dynamics``).
     ``needs``: the scenario keys (dotted paths) its draws use that not every build's schema
-    defines (contracts §5); the sweep refuses the family while one is missing. ``batched``:
+    defines (the real-world keys); the sweep refuses the family while one is missing. ``batched``:
     its encounters can fly side by side (``vo3d_opt.sim.lockstep``: kinematic or first-order
     dynamics, noiseless sensing), so a sweep hands a task many of them; else one each (an
     encounter of seconds or minutes is a task of its own)."""

@@ -294,12 +294,13 @@ def dense(rng: np.random.Generator) -> Draw | None:
     return Draw(params=params, scenario=scenario)
 
 
-# ---------------------------------------------------- group variants (contracts §5 keys)
+# ---------------------------------------------------- group variants (real-world keys)
 #
 # Each draws a ``group`` encounter from the same stream and then the variant's own parameters,
 # so encounter i of ``lagged`` is encounter i of ``group`` (same agents and obstacles) plus a
-# time constant. ``SECTION5_KEYS`` of a family: the contract §5 keys its draws use (the sweep
-# refuses the family, naming them, when this build's scenario loader does not accept them).
+# time constant. ``SECTION5_KEYS`` of a family: the real-world scenario keys its draws use
+# (the sweep refuses the family, naming them, when this build's scenario loader does not
+# accept them).
 
 
 def _group_variant(rng: np.random.Generator) -> Draw | None:
@@ -322,7 +323,7 @@ LAGGED_TAU = (0.1, 1.0)  # s, first-order velocity time constant, uniform
 def lagged(rng: np.random.Generator) -> Draw | None:
     """A ``group`` draw flown under first-order velocity dynamics: every vehicle's velocity
     follows its command as ``v += (v_cmd - v) min(1, dt / tau)``, with one time constant
-    ``tau`` for the encounter, uniform 0.1-1 s, written as contracts §5's
+    ``tau`` for the encounter, uniform 0.1-1 s, written as the scenario key
     ``dynamics: {model: first_order, tau}``."""
     draw = _group_variant(rng)
     if draw is None:

@@ -1,4 +1,4 @@
-"""How a vehicle follows its commanded velocity: one template, three models (contract §5).
+"""How a vehicle follows its commanded velocity: one template, three models.
 
 Every model integrates N vehicles at once and keeps their state between control periods::
 
@@ -96,7 +96,7 @@ def make_dynamics(
     seed: int = 0,
     **rotorpy_options: Any,
 ) -> Dynamics:
-    """The model of a scenario's ``dynamics`` and ``wind`` mappings (contract §5; None: the
+    """The model of a scenario's ``dynamics`` and ``wind`` mappings (None: the
     defaults, ``kinematic`` and no wind). ``seed`` fixes the Dryden gusts; ``rotorpy_options``
     (``integrator_kwargs``) go to :class:`RotorPyDynamics` (refused by the batched model).
     Bad values raise ``ValueError`` naming the key."""

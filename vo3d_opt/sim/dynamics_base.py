@@ -23,7 +23,7 @@ DEFAULT_SUBSTEP_RATE = 100.0
 #: The same for ``batched: true``: RotorPy's batched vehicles take one fixed RK4 step per
 #: sub-step. At 100 Hz a set-point jump of 4 m/s (a right angle, a diagonal from hover) puts
 #: that 2.4-3.4 m from the adaptive RK45 of a single ``Multirotor``; at 200 Hz 1.8-4.6 mm
-#: (benchmarks/results_dynamics.md, formulations/dynamics.md).
+#: (docs/results/dynamics.md, formulations/dynamics.md).
 BATCHED_SUBSTEP_RATE = 200.0
 
 MODELS = ("kinematic", "first_order", "rotorpy")
@@ -40,7 +40,7 @@ MAX_WIND = 100.0
 
 
 class WindConfig(_Config):
-    """The ``wind`` mapping of contract §5 (``rotorpy`` only). ``sigma`` (turbulence intensity
+    """The ``wind`` mapping of a scenario (``rotorpy`` only). ``sigma`` (turbulence intensity
     per axis, m/s) and ``altitude`` (m, sets the Dryden length scales) are extensions that
     default to RotorPy's ``DrydenGust`` defaults."""
 
@@ -84,7 +84,7 @@ def _missing_batched_extra() -> str:
 
 
 class DynamicsConfig(_Config):
-    """The ``dynamics`` mapping of contract §5; ``substep_rate`` (Hz), ``command_ramp``
+    """The ``dynamics`` mapping of a scenario; ``substep_rate`` (Hz), ``command_ramp``
     (default true) and ``batched`` (default false: all vehicles in one RotorPy
     ``BatchedMultirotor``, needs the ``batched`` extra), all ``rotorpy`` only, extend it."""
 

@@ -1,4 +1,5 @@
-"""Safety and timing summary of a run (contract §3) and the distance series behind the plots.
+"""Safety and timing summary of a run (``vo3d run --json``) and the distance series behind
+the plots.
 
 The metrics judge the vehicles' real trajectory: the control steps, or the dynamics' finer
 samples when it records them (``RunRecord.track``: rotorpy's sub-steps); "step" below means one
@@ -13,14 +14,14 @@ a k-d tree, the pairs that come closer than the largest protected-zone (or colli
 and the closest pair of the run, so its cost grows with the vehicles and their near neighbours,
 not with their square; every per-step array is taken a chunk of steps at a time.
 
-Keys of :func:`summarize` beyond the contract: ``decisions`` (select() calls),
-``status_counts`` (per status), ``vehicle_collisions`` / ``obstacle_collisions`` (the two parts
-of ``collisions``), ``obstacle_pz_intrusions`` (vehicle–obstacle pairs whose centre ever entered
-the obstacle's protected prism C_pz, or a sphere's protected zone), ``starts_inside_pz``
-(vehicle pairs and vehicle–obstacle pairs already inside such a zone at t = 0, which also count
-in the intrusions), ``arrival_time_max`` (s, null unless all arrived), ``path_length_ratio``
-(flown path over straight start–goal distance, mean over arrived agents), ``decision_time_max_us``
-and ``wall_time`` (s).
+Keys of :func:`summarize` beyond :data:`CONTRACT_KEYS` (the fixed ones): ``decisions`` (select()
+calls), ``status_counts`` (per status), ``vehicle_collisions`` / ``obstacle_collisions`` (the two
+parts of ``collisions``), ``obstacle_pz_intrusions`` (vehicle–obstacle pairs whose centre ever
+entered the obstacle's protected prism C_pz, or a sphere's protected zone), ``starts_inside_pz``
+(vehicle pairs and vehicle–obstacle pairs already inside such a zone at t = 0, which also count in
+the intrusions), ``arrival_time_max`` (s, null unless all arrived), ``path_length_ratio`` (flown
+path over straight start–goal distance, mean over arrived agents), ``decision_time_max_us`` and
+``wall_time`` (s).
 """
 
 from __future__ import annotations
@@ -436,7 +437,7 @@ def decision_times_us(record: RunRecord) -> np.ndarray:
 
 
 def summarize(record: RunRecord) -> dict[str, Any]:
-    """The JSON summary of contract §3 (exact keys first) plus the extra keys listed above."""
+    """The JSON summary of a run (:data:`CONTRACT_KEYS` first) plus the extra keys listed above."""
     sc = record.scenario
     n, steps = record.n_agents, record.steps
     r_pz, radius = sc.r_pz, sc.radius

@@ -33,7 +33,7 @@ class DecisionLike(Protocol):
 
 
 class SelectorLike(Protocol):
-    """Anything with ``VelocitySelector.select``'s signature (contract §1)."""
+    """Anything with ``VelocitySelector.select``'s signature."""
 
     def select(
         self,

@@ -281,7 +281,7 @@ class BatchedRotorPyDynamics(_RotorPyModel):
     :class:`RotorPyDynamics` (a seed gives both the same Dryden gusts), integrated by RotorPy's
     fixed-step ``rk4`` (one step per sub-step, hence the higher default ``substep_rate``): for
     swarms, where the one-by-one model takes hours (cost and accuracy:
-    ``benchmarks/results_dynamics.md``). Needs the ``batched`` extra. RotorPy's batched motor
+    ``docs/results/dynamics.md``). Needs the ``batched`` extra. RotorPy's batched motor
     noise draws from torch's random stream (its scale is 0 for both vehicles): the model keeps
     that stream private and seeded by ``seed``, as it does numpy's."""
 

@@ -67,7 +67,7 @@ GAP_SHARE = 0.5
 #: :func:`within_reach`), ramped over the period as it hands it to RotorPy
 #: (``dynamics.command_ramp``). Stepped at the start of each period, commands changing by half
 #: threw the hummingbird 2.6 m off its altitude on purely horizontal manoeuvres, a quarter 0.13
-#: m; ramped, 0.02 m at either rate (``benchmarks/results_acceleration_bound.md``). But at half,
+#: m; ramped, 0.02 m at either rate (``docs/results/acceleration-bound.md``). But at half,
 #: even ramped, ``ceiling-squeeze-four-uav`` braked out of its altitude band (3 samples) and
 #: over the speed limit (5): a quarter it is. The selector's bound is around the real velocity,
 #: the rate limit around the previous command: in a steady wind a P loop keeps a steady gap

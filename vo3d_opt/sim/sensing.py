@@ -1,4 +1,4 @@
-"""What each vehicle senses of the others: Gaussian noise and latency (contract §5 ``sensing``).
+"""What each vehicle senses of the others: Gaussian noise and latency (the scenario's ``sensing``).
 
 ::
 

@@ -70,14 +70,14 @@ from vo3d_opt.sim.safety import derive_margins, within_reach
 from vo3d_opt.sim.scenario import Scenario, load_scenario
 from vo3d_opt.sim.traffic import GoalWithDetours
 
-#: Default formulation when neither the caller nor the scenario names one (contract §1).
+#: Default formulation when neither the caller nor the scenario names one.
 DEFAULT_FORMULATION = "plane_qp"
 #: The status of a command that was not a finite 3-vector (replaced by 0).
 INVALID = "invalid_velocity"
 
 
 def scenario_dynamics(sc: Scenario) -> Dynamics:
-    """The scenario's dynamics and wind (contract §5; ``velocity_response_tau`` is
+    """The scenario's dynamics and wind (``velocity_response_tau`` is
     ``first_order``); the Dryden gusts are seeded with ``sensing.seed``."""
     return make_dynamics(sc.vehicle_dynamics, sc.wind, seed=sc.sensing.seed)
 

@@ -1,5 +1,5 @@
-"""Non-cooperative traffic (contract §5 ``avoids: false``): agents that fly straight to their goal
-and never avoid. Their command is the goal-seeking velocity every agent prefers."""
+"""Non-cooperative traffic (a scenario agent's ``avoids: false``): agents that fly straight
+to their goal and never avoid. Their command is the goal-seeking velocity every agent prefers."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Monte Carlo sweeps of random encounters on Dask (``vo3d sweep``, contract §6).
+"""Monte Carlo sweeps of random encounters on Dask (``vo3d sweep``).
 
 The last layer: it uses the simulator, the scenario loader, the selector (through the
 simulator), the metrics and the RVO2-3D baseline; nothing but the CLI imports it.

@@ -1,7 +1,7 @@
 """Encounters flown where they are called (a Dask worker, or this process).
 
 :func:`run_encounter` regenerates encounter ``index`` of a family from (family, seed, index),
-flies it with the :class:`Method` and returns one row: its parameters and its contract §3
+flies it with the :class:`Method` and returns one row: its parameters and its run
 summary, or the error it raised. :func:`run_encounters` does the same for several, flying
 those it can side by side (``vo3d_opt.sim.lockstep``), with the same rows. A row is a pure
 function of (family, seed, index, method) but for the timing columns

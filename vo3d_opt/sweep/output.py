@@ -1,9 +1,9 @@
 """What a sweep writes with ``--out DIR``:
 
-* ``encounters.parquet``: one row per encounter (family, seed, index, ``param_*``, the §3
+* ``encounters.parquet``: one row per encounter (family, seed, index, ``param_*``, the run
   summary with ``selector_options`` as JSON text, ``min_normalised_distance``, ``error``,
   ``run_time``, ``worker``);
-* ``summary.json``: the sweep's summary (contract §6 keys and more);
+* ``summary.json``: the sweep's summary (:func:`vo3d_opt.sweep.stats.aggregate`);
 * ``min_distance.png``: the distribution of each encounter's smallest vehicle-vehicle distance
   over the larger protected-zone radius of the pair (d / r_pz; below 1 is an intrusion), as an
   ECDF and a histogram, per family and method;

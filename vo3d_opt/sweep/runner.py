@@ -40,8 +40,8 @@ class SweepError(ValueError):
 
 @dataclass
 class SweepResult:
-    """A finished sweep: one row per encounter (sorted by index) and the summary (contract §6
-    keys and more, see :func:`vo3d_opt.sweep.stats.aggregate`)."""
+    """A finished sweep: one row per encounter (sorted by index) and the summary (see
+    :func:`vo3d_opt.sweep.stats.aggregate`)."""
 
     family: Family
     seed: int
@@ -126,7 +126,7 @@ def validate(
     if missing:
         raise SweepError(
             f"family: {fam.name!r} needs the scenario keys {', '.join(missing)} "
-            f"(contracts §5), which this build's scenario loader does not accept"
+            f"(real-world keys), which this build's scenario loader does not accept"
         )
     _check_counts(n=n, seed=seed, workers=workers, in_flight=in_flight, batch=batch)
     return (fam, *check_method(fam, method))

@@ -4,7 +4,7 @@ Per event (an encounter with at least one collision, one protected-zone intrusio
 summary gives ``events`` out of ``encounters``, the ``rate``, the two-sided 95 % Clopper–Pearson
 interval ``ci95`` and the one-sided 95 % upper bound ``upper95``: the rate is below it with 95 %
 confidence. With 0 events in n, ``upper95 = 1 - 0.05**(1/n)``, about 3/n (the "rule of three");
-the contract's ``collision_rate_upper95`` is this bound for collisions.
+the summary's ``collision_rate_upper95`` is this bound for collisions.
 """
 
 from __future__ import annotations
@@ -76,11 +76,11 @@ def aggregate(
 ) -> dict[str, Any]:
     """The sweep's summary from its rows (one per encounter, ``error`` None when it ran).
 
-    Contract §6 keys: ``collisions``, ``pz_intrusions`` (vehicle pairs plus vehicle–obstacle
-    pairs, i.e. the §3 ``pz_intrusions`` plus ``obstacle_pz_intrusions``), ``not_arrived``
-    (agents), ``limit_violations`` (altitude plus speed) summed over the encounters that ran,
-    ``encounters_with_collision`` / ``_intrusion`` and ``collision_rate_upper95``. Encounters
-    that raised are listed under ``errors`` and left out of every count and rate but
+    The sweep's own keys: ``collisions``, ``pz_intrusions`` (vehicle pairs plus vehicle–obstacle
+    pairs, i.e. the run summary's ``pz_intrusions`` plus ``obstacle_pz_intrusions``),
+    ``not_arrived`` (agents), ``limit_violations`` (altitude plus speed) summed over the encounters
+    that ran, ``encounters_with_collision`` / ``_intrusion`` and ``collision_rate_upper95``.
+    Encounters that raised are listed under ``errors`` and left out of every count and rate but
     ``rates.error``.
     """
     import pandas as pd

@@ -1,4 +1,4 @@
-"""Scenario files (contract §2): the schema (:mod:`.schema`, pydantic models built on the public
+"""Scenario files: the schema (:mod:`.schema`, pydantic models built on the public
 types of ``vo3d_opt.types``) and the loader (:mod:`.loader`: YAML, bundled names, one-line
 errors). The format is documented in :mod:`.schema`, what is rejected in :mod:`.loader`."""
 

@@ -1,4 +1,4 @@
-"""The scenario format (contract §2 and our extensions) as pydantic models.
+"""The scenario format as pydantic models.
 
 A scenario file is a YAML mapping::
 
@@ -26,7 +26,7 @@ A scenario file is a YAML mapping::
       - {type: cylinder, center: [0, 10], radius: 3, height: 30}
       - {type: box, center: [10, -10], size: [6, 6], height: 25, yaw: 0.3}
 
-Extensions beyond the contract (all optional):
+Further keys (all optional):
 
 * obstacle keys ``L_pz``, ``h_pz``, ``margin`` (those of ``types.Cylinder`` / ``types.Box``: the
   side and height of the protected prism C_pz of the paper's section 4, derived from the size
@@ -42,7 +42,7 @@ Extensions beyond the contract (all optional):
 * ``velocity_response_tau`` (s): first-order velocity response ``v += (v_cmd - v) * dt / tau``
   (clamped to a full step when ``dt >= tau``); off (ideal kinematics) when omitted.
 * ``dynamics``, ``wind``, ``sensing.position_noise`` / ``velocity_noise`` / ``latency`` /
-  ``seed`` and the agents' ``avoids`` (contract §5; ``vo3d_opt.sim.dynamics``,
+  ``seed`` and the agents' ``avoids`` (the real-world keys; ``vo3d_opt.sim.dynamics``,
   ``vo3d_opt.sim.sensing``); ``dynamics.substep_rate`` (Hz), ``dynamics.command_ramp`` and
   ``dynamics.batched`` (rotorpy) and ``wind.sigma`` / ``wind.altitude`` (Dryden) extend it.
   ``velocity_response_tau`` is an alias of ``dynamics: {model: first_order, tau: ...}`` (not
@@ -119,7 +119,7 @@ MAX_SUBSTEPS = 10_000
 
 #: From this many vehicles a run under RotorPy one by one suggests ``batched: true``: at 50,
 #: random-crossing-50 took 237 s batched against 1313 s one by one (at its default 100 Hz) in
-#: benchmarks/results_real_world.md.
+#: docs/results/real-world.md.
 BATCHED_ADVISED = 50
 
 
@@ -238,7 +238,7 @@ class Scenario(Spec):
         return out
 
     def _real_world_problems(self) -> list[Problem]:
-        """The keys of contract §5 that depend on others: one way to name the dynamics, wind
+        """The real-world keys that depend on others: one way to name the dynamics, wind
         only with RotorPy, a latency of whole steps."""
         out: list[Problem] = []
         if self.dynamics is not None and self.velocity_response_tau is not None:

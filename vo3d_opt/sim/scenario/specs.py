@@ -33,7 +33,7 @@ class Spec(Model):
 
 class SensingSpec(Spec):
     """Sensing ranges of Table 1 (vehicles by centre distance, obstacles by nearest point) and
-    what a vehicle senses of the others (contract §5): Gaussian noise per axis (1-sigma, m and
+    what a vehicle senses of the others: Gaussian noise per axis (1-sigma, m and
     m/s), latency (s, a multiple of ``dt``: checked by the scenario) and the noise's seed."""
 
     vehicle_range: Positive = 55.0
@@ -84,7 +84,7 @@ class AgentSpec(Spec):
     radius: Positive | None = None
     max_speed: Positive | None = None
     cruise_speed: Positive | None = None
-    avoids: StrictBool = True  # false: flies straight to its goal, never avoids (contract §5)
+    avoids: StrictBool = True  # false: flies straight to its goal, never avoids
 
 
 class _Placed:
