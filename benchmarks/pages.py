@@ -14,7 +14,9 @@ import datetime
 import json
 import os
 import platform
+import shlex
 import subprocess
+import sys
 import tempfile
 from collections.abc import Iterable
 from pathlib import Path
@@ -63,10 +65,10 @@ def _load() -> str:
     return f"load average {one:.2f} / {five:.2f} / {fifteen:.2f} (1 / 5 / 15 min) when written"
 
 
-def machine_line(*extras: str) -> str:
+def machine_line(*extras: str, against: str | None = None) -> str:
     """The page's one line of provenance: CPU model and count, load average, Python and
     platform, ``extras`` (versions of what the page measures, e.g. ``"rvo23d 0.1.6"``), date
-    and commit."""
+    and commit (and ``against``, the revision a page compares this code with)."""
     python = f"{platform.python_implementation()} {platform.python_version()}"
     what = [
         f"{_cpu_model()}, {os.cpu_count()} CPUs, {_load()}",
@@ -74,7 +76,22 @@ def machine_line(*extras: str) -> str:
         *extras,
     ]
     now = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
-    return f"**Machine** {' · '.join(what)} · **Date** {now} · **Commit** `{commit()}`"
+    other = f" against `{against}`" if against else ""
+    return f"**Machine** {' · '.join(what)} · **Date** {now} · **Commit** `{commit()}`{other}"
+
+
+def command_line(hide: tuple[str, ...] = ("--out", "--results")) -> str:
+    """This script's command line as a page quotes it, ``python benchmarks/NAME.py ARGS``, the
+    options of ``hide`` (where the page goes) and their values left out."""
+    args, skip = [], False
+    for arg in sys.argv[1:]:
+        if skip:
+            skip = False
+        elif arg in hide:
+            skip = True
+        elif not arg.startswith(tuple(f"{h}=" for h in hide)):
+            args.append(arg)
+    return shlex.join(["python", f"benchmarks/{Path(sys.argv[0]).name}", *args])
 
 
 def write_page(path: Path, text: str) -> None:
