@@ -101,33 +101,38 @@ def write_page(path: Path, text: str) -> None:
 
 
 def write_atomic(path: Path, text: str) -> None:
+    """``text`` into ``path`` through a temporary file renamed over it, with the mode a new
+    file gets (the temporary file's own is private)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.NamedTemporaryFile(
         "w", encoding="utf-8", dir=path.parent, delete=False, prefix=f".{path.name}.", suffix=".tmp"
     ) as tmp:
         tmp.write(text)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp.name, 0o666 & ~umask)
     os.replace(tmp.name, path)
 
 
-def write_rows(path: Path, machine: str, rows: Iterable[dict[str, Any]]) -> None:
-    """The rows a page is rendered from, as JSON lines: first ``{"machine": LINE, "commit":
-    ...}``, then one row a line."""
-    lines = [json.dumps({"machine": machine, "commit": commit()})]
-    lines += [json.dumps(row) for row in rows]
+def write_rows(path: Path, rows: Iterable[dict[str, Any]], *, machine: str, command: str) -> None:
+    """The rows a page is rendered from, as JSON lines: first the header ``{"machine": LINE,
+    "commit": ..., "command": ...}``, then one row a line."""
+    head = {"machine": machine, "commit": commit(), "command": command}
+    lines = [json.dumps(head), *(json.dumps(row) for row in rows)]
     write_atomic(path, "\n".join(lines) + "\n")
 
 
-def read_rows(path: Path) -> tuple[str | None, str | None, list[dict[str, Any]]]:
-    """(machine line, commit, rows) of a file ``write_rows`` wrote; a file of rows alone (no
-    machine record) gives None for both."""
-    machine = head = None
+def read_rows(path: Path) -> tuple[dict[str, str], list[dict[str, Any]]]:
+    """(header, rows) of a file ``write_rows`` wrote; a file of rows alone gives an empty
+    header."""
+    head: dict[str, str] = {}
     rows = []
     for line in path.read_text(encoding="utf-8").splitlines():
         if not line.strip():
             continue
         record = json.loads(line)
-        if "machine" in record and len(record) <= 2:
-            machine, head = record["machine"], record.get("commit")
+        if "machine" in record and set(record) <= {"machine", "commit", "command"}:
+            head = record
         else:
             rows.append(record)
-    return machine, head, rows
+    return head, rows
