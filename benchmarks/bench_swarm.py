@@ -217,6 +217,8 @@ def kept_rows(path: Path, append: bool) -> list[dict[str, Any]]:
     if not append or not path.exists():
         return []
     head, rows = read_rows(path)
+    if " + " in commit():  # uncommitted changes: no way to tell two states of them apart
+        raise SystemExit("--append: the tree has uncommitted changes; commit them first")
     if head.get("commit") != commit():
         raise SystemExit(f"--append: the rows of {path} were measured at "
                          f"{head.get('commit', 'an unknown commit')}, not at {commit()}")
