@@ -80,9 +80,13 @@ def machine_line(*extras: str, against: str | None = None) -> str:
     return f"**Machine** {' · '.join(what)} · **Date** {now} · **Commit** `{commit()}`{other}"
 
 
-def command_line(hide: tuple[str, ...] = ("--out", "--results")) -> str:
+#: Options whose value is a path of the machine that ran the script, not the page's business.
+PATH_OPTIONS = ("--out", "--results", "--out-root", "--pages", "--old-rows", "--save-old")
+
+
+def command_line(hide: tuple[str, ...] = PATH_OPTIONS) -> str:
     """This script's command line as a page quotes it, ``python benchmarks/NAME.py ARGS``, the
-    options of ``hide`` (where the page goes) and their values left out."""
+    options of ``hide`` (where the page goes, where the runs are) and their values left out."""
     args, skip = [], False
     for arg in sys.argv[1:]:
         if skip:
