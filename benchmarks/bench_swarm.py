@@ -211,18 +211,19 @@ def child(args: list[str]) -> dict[str, Any] | str:
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
-def kept_rows(path: Path, append: bool) -> list[dict[str, Any]]:
-    """The rows of an earlier run to keep (``--append``), refused unless that run measured the
-    code of this commit (a page names one commit)."""
+def kept(path: Path, append: bool) -> tuple[list[str], list[dict[str, Any]]]:
+    """The commands and rows of an earlier run to keep (``--append``), refused unless that run
+    measured the code of this commit (a page names one commit)."""
     if not append or not path.exists():
-        return []
+        return [], []
     head, rows = read_rows(path)
     if " + " in commit():  # uncommitted changes: no way to tell two states of them apart
         raise SystemExit("--append: the tree has uncommitted changes; commit them first")
     if head.get("commit") != commit():
         raise SystemExit(f"--append: the rows of {path} were measured at "
                          f"{head.get('commit', 'an unknown commit')}, not at {commit()}")
-    return rows
+    earlier = head.get("command", [])
+    return ([earlier] if isinstance(earlier, str) else earlier), rows
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -272,8 +273,8 @@ def main(argv: list[str] | None = None) -> None:
         write_page(out, render(rows, head["machine"], head["command"]))
         print(f"wrote {out} from {rows_file}", file=sys.stderr)
         return
-    rows = kept_rows(rows_file, args.append)
-    command = command_line()
+    earlier, rows = kept(rows_file, args.append)
+    command = [*earlier, command_line()]
 
     def flush() -> None:
         from vo3d_opt.baselines.rvo2 import version

@@ -118,18 +118,21 @@ def write_atomic(path: Path, text: str) -> None:
     os.replace(tmp.name, path)
 
 
-def write_rows(path: Path, rows: Iterable[dict[str, Any]], *, machine: str, command: str) -> None:
+def write_rows(
+    path: Path, rows: Iterable[dict[str, Any]], *, machine: str, command: str | list[str]
+) -> None:
     """The rows a page is rendered from, as JSON lines: first the header ``{"machine": LINE,
-    "commit": ..., "command": ...}``, then one row a line."""
+    "commit": ..., "command": ...}`` (the command, or the commands of a page run in parts),
+    then one row a line."""
     head = {"machine": machine, "commit": commit(), "command": command}
     lines = [json.dumps(head), *(json.dumps(row) for row in rows)]
     write_atomic(path, "\n".join(lines) + "\n")
 
 
-def read_rows(path: Path) -> tuple[dict[str, str], list[dict[str, Any]]]:
+def read_rows(path: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """(header, rows) of a file ``write_rows`` wrote; a file of rows alone gives an empty
     header."""
-    head: dict[str, str] = {}
+    head: dict[str, Any] = {}
     rows = []
     for line in path.read_text(encoding="utf-8").splitlines():
         if not line.strip():

@@ -193,7 +193,12 @@ def arrival_finding(runs: list[dict[str, Any]]) -> list[str]:
     return [f"- Not every agent arrives: {'; '.join(short)}."]
 
 
-def swarm_intro(runs: list[dict[str, Any]], command: str) -> list[str]:
+def quoted(commands: str | list[str]) -> str:
+    """The command (or the commands, one after the other, of an appended page) as code."""
+    return ", then ".join(f"`{c}`" for c in ([commands] if isinstance(commands, str) else commands))
+
+
+def swarm_intro(runs: list[dict[str, Any]], command: str | list[str]) -> list[str]:
     from vo3d_opt.generators import random_crossing_scenario, sphere_swap_scenario
 
     cases = dict.fromkeys(r["case"] for r in runs)
@@ -214,9 +219,10 @@ def swarm_intro(runs: list[dict[str, Any]], command: str) -> list[str]:
     rvo2 = ("RVO2-3D (PyPI `jt-pyrvo23d`) runs on one thread with agents of radius r_pz/2"
             + (f" and its time horizon {_and([f'{h:.3g}' for h in horizons])} s (the sensing "
                "range over twice the top speed)" if horizons else "") + ".")
-    return [f"`{command}`: each run its own process, every method the same scenarios in the same "
-            "loop (`vo3d_opt.sim.fly`: the same preferred velocities, kinematic dynamics, detours "
-            f"and metrics), at most {_and([str(k) for k in neighbours])} neighbours each.", "",
+    return [f"{quoted(command)}: each run its own process, every method the same scenarios in "
+            "the same loop (`vo3d_opt.sim.fly`: the same preferred velocities, kinematic dynamics, "
+            f"detours and metrics), at most {_and([str(k) for k in neighbours])} neighbours "
+            "each.", "",
             " ".join(said), "",
             "\"decide\" is the time inside `select_many()` or RVO2-3D's `doStep()` per "
             "agent-step, \"loop\" the whole loop's wall time per agent-step, \"loop CPU\" the "
@@ -228,7 +234,7 @@ def swarm_intro(runs: list[dict[str, Any]], command: str) -> list[str]:
             "no horizon, so in the swap they see the meeting at the centre from the first step."]
 
 
-def swarm_page(rows: list[dict[str, Any]], machine: str, command: str) -> str:
+def swarm_page(rows: list[dict[str, Any]], machine: str, command: str | list[str]) -> str:
     runs = _runs(rows)
     lines = ["# Swarms against RVO2-3D", "", machine, "", *swarm_intro(runs, command), "",
              HEADER, *(table_row(r) for r in rows if r.get("kind", "run") != "profile"),
@@ -254,7 +260,8 @@ def starting_overlaps() -> list[float]:
     return sorted(float(np.linalg.norm(sc.starts[i] - sc.starts[j])) for i, j in pairs)
 
 
-def sphere_intro(runs: list[dict[str, Any]], command: str, floor: list[float]) -> list[str]:
+def sphere_intro(runs: list[dict[str, Any]], command: str | list[str],
+                 floor: list[float]) -> list[str]:
     from vo3d_opt.generators.swarms import RVO2_SPHERE, RVO2_SPHERE_LIFT
     from vo3d_opt.sim.scenario import load_scenario
 
@@ -271,7 +278,7 @@ def sphere_intro(runs: list[dict[str, Any]], command: str, floor: list[float]) -
         f"{p['preferred_speed']:g} m/s; the run ends when every agent is within "
         f"{sc.goal_tolerance / p['radius']:g} radii of its goal. RVO2-3D flies with its own time "
         f"horizon of {p['time_horizon']:g} s. Every method flies it in the same loop with the "
-        f"same metrics (`{command}`).", "",
+        f"same metrics ({quoted(command)}).", "",
         f"RVO2-3D's own generator places {len(floor)} pairs of agents closer than two radii at "
         f"the start ({apart} apart): every method counts those as intrusions, so "
         f"**{len(floor)} is the floor** of the intrusion column. \"decide\" is the time in "
@@ -324,7 +331,7 @@ def sphere_findings(runs: list[dict[str, Any]], floor: int) -> list[str]:
     return out
 
 
-def sphere_page(rows: list[dict[str, Any]], machine: str, command: str) -> str:
+def sphere_page(rows: list[dict[str, Any]], machine: str, command: str | list[str]) -> str:
     runs = [r for r in _runs(rows) if r["case"] == "rvo2-sphere"]
     floor = starting_overlaps()
     lines = ["# RVO2-3D's own benchmark: the Sphere example, flown by RVO2-3D and by every preset",
