@@ -119,10 +119,11 @@ def page(table: dict[str, np.ndarray], cases: int, repeat: int, png: Path) -> st
         "",
         machine_line(),
         "",
-        f"`python benchmarks/bench_cost_model.py --cases {cases} --repeat {repeat}`: one `select()` "
-        "through the public API, `plane_qp` on its default solver, for each preset; each cell "
-        f"the median over {cases} random encounters of the fastest of {repeat} calls (the "
-        "script's docstring says how they are drawn). Sensing range 55 m.",
+        f"`python benchmarks/bench_cost_model.py --cases {cases} --repeat {repeat}`: one "
+        "`select()` through the public API, `plane_qp` on its default solver, for each preset; "
+        f"each cell the median over {cases} random encounters of the fastest of {repeat} calls "
+        "(the script's docstring says how they are drawn). Sensing range "
+        f"{SENSING_RANGE:g} m.",
         "",
         f"![µs per decision]({png.name})",
         "",

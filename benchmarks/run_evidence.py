@@ -25,14 +25,13 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
-import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from pages import RESULTS, machine_line, write_page
-from run_sweeps import vo3d_cmd  # this folder's
+from run_sweeps import vo3d_cmd, vo3d_sweep  # this folder's
 
 FAMILIES = ("pair", "group", "dense", "lagged", "noisy", "intruder", "rotorpy")
 RVO2 = ("pair", "dense")  # the obstacle-free families: RVO2-3D flies them
@@ -53,13 +52,8 @@ def run_one(family: str, method: str, n: int, out_root: Path, where: list[str]) 
                         "--out", str(out), "--json", "--resume", *where]
     if method != "none":
         cmd += ["--against", str(out_root / family / "none")]
-    print(" ".join(cmd), file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    with open(out / "sweep.log", "a") as log:
-        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
-    if proc.returncode not in (0, 1):  # 1: some encounters raised (listed in the summary)
-        raise SystemExit(f"{family} ({method}): exit status {proc.returncode}, see {out}/sweep.log")
-    summary = json.loads(proc.stdout)
+    summary = vo3d_sweep(cmd, out, f"{family} ({method})", log_mode="a")
     print(f"  {family} {method}: {summary['encounters']} encounters, this sitting "
           f"{time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
     return summary

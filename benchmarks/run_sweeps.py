@@ -97,6 +97,17 @@ def pooled(dirs: list[Path]) -> dict[str, Any]:
     return s
 
 
+def vo3d_sweep(cmd: list[str], out: Path, what: str, log_mode: str = "w") -> dict[str, Any]:
+    """Run one ``vo3d sweep`` command, its stderr (progress) into ``out/sweep.log`` (``"a"``:
+    appended to it); its JSON summary."""
+    print(" ".join(cmd), file=sys.stderr, flush=True)
+    with open(out / "sweep.log", log_mode) as log:
+        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
+    if proc.returncode not in (0, 1):  # 1: some encounters raised (listed in the summary)
+        raise SystemExit(f"{what}: exit status {proc.returncode}, see {out}/sweep.log")
+    return json.loads(proc.stdout)
+
+
 def run_one(family: str, n: int, *, seed: int, workers: int, method: str, out: Path,
             options: list[str]) -> None:
     """One ``vo3d sweep`` process; its stderr (progress) goes to ``out/sweep.log``."""
@@ -105,13 +116,8 @@ def run_one(family: str, n: int, *, seed: int, workers: int, method: str, out: P
                         str(workers), "--method", method, "--out", str(out), "--json"]
     if method == "vo3d":
         cmd += [arg for option in options for arg in ("-o", option)]
-    print(" ".join(cmd), file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    with open(out / "sweep.log", "w") as log:
-        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
-    if proc.returncode not in (0, 1):  # 1: some encounters raised (listed in the summary)
-        raise SystemExit(f"{family} ({method}): exit status {proc.returncode}, see {out}/sweep.log")
-    summary = json.loads(proc.stdout)
+    summary = vo3d_sweep(cmd, out, f"{family} ({method})")
     (out / "command.txt").write_text(" ".join(cmd) + "\n")
     (out / "machine.json").write_text(json.dumps({"machine": machine_line(), "commit": commit()}))
     print(f"  {family} ({method}): {summary['encounters']} encounters in "
