@@ -327,10 +327,11 @@ def rotorpy_import_cost(out: list[str], runs: int = 3) -> None:
 
 INTRO = """`{command}`: what a selector can rely on under each vehicle model
 ([formulations: dynamics](../formulations/dynamics.md)), and what the models cost. One vehicle
-flies step commands through `vo3d_opt.sim.dynamics` with 0.2 s control periods: from hover to
-s, a right angle and a reversal after 4 s of cruise at s, and a climb; the figures cover the 4 s
-after the step (the script's docstring defines each column). Costs are CPU time of this process
-(`time.process_time`), so the other work of a shared machine counts less than in wall time."""
+flies step commands through `vo3d_opt.sim.dynamics` with {dt:g} s control periods: from hover to
+s, a right angle and a reversal after {settle:g} s of cruise at s, and a climb; the figures cover
+the {after:g} s after the step (the script's docstring defines each column). Costs are CPU time
+of this process (`time.process_time`), so the other work of a shared machine counts less than in
+wall time."""
 
 
 def page(sections: list[str], rates: list[float], command: str, machine: str) -> str:
@@ -343,8 +344,8 @@ def page(sections: list[str], rates: list[float], command: str, machine: str) ->
         "sensing": sensing_cost,
         "batched": lambda out: batched_cost([1, 10, 50, 200, 1000], out),
     }
-    out = ["# Vehicle models: responses and costs\n", machine + "\n", INTRO.format(command=command)
-           + "\n"]
+    intro = INTRO.format(command=command, dt=DT, settle=SETTLE, after=AFTER)
+    out = ["# Vehicle models: responses and costs\n", machine + "\n", intro + "\n"]
     for name in sections:
         runs[name](out)
         print(f"{name}: done", file=sys.stderr, flush=True)

@@ -44,6 +44,17 @@ def vo3d(*args: str) -> dict:
     return json.loads(res.stdout)
 
 
+def harness() -> str:
+    """The rates ``vo3d sitl`` flies at by default (``SitlOptions``)."""
+    from dataclasses import fields
+
+    from vo3d_opt.link.sitl import SitlOptions
+
+    default = {f.name: f.default for f in fields(SitlOptions)}
+    return (f"{default['rate']:g} Hz decisions, vehicles at {default['physics_rate']:g} Hz "
+            f"dynamics and {default['telemetry_rate']:g} Hz telemetry")
+
+
 def findings(runs: dict[str, dict[str, dict[str, Any]]]) -> list[str]:
     """What the two tables say: whether sitl kept every event count of run, and the range of
     the links' set-point latency."""
@@ -70,9 +81,8 @@ def page(runs: dict[str, dict[str, dict[str, Any]]], time_scale: str, machine: s
     lines = ["# vo3d sitl against vo3d run", "", machine, "",
              f"`{command}`: bundled scenarios "
              f"flown by `vo3d run` and by `vo3d sitl --time-scale {time_scale}` (every vehicle and "
-             "link its own process over UDP; the harness's defaults: 10 Hz decisions, vehicles "
-             "at 50 Hz dynamics and 25 Hz telemetry; the machine's cores shared by every process "
-             "of the run).", "",
+             f"link its own process over UDP; the harness's defaults: {harness()}; the machine's "
+             "cores shared by every process of the run).", "",
              "## Safety: vo3d run against vo3d sitl", "",
              "| scenario | how | " + " | ".join(SAFETY) + " |", "|---|---|" + "---|" * len(SAFETY)]
     for name, s in runs.items():

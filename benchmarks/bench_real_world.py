@@ -161,7 +161,8 @@ def measure(names: list[str], swarm: bool, jobs_at_once: int,
     if swarm:
         base = {n: scenario_variant(sc, selector_options=SWARM) for n, sc in base.items()}
     costs = [{"kind": "rotorpy_cost", "scenario": name, "agents": base[name].n_agents,
-              "n_steps": base[name].n_steps, "period_s": rotorpy_step_cost(base[name])}
+              "n_steps": base[name].n_steps, "dt": base[name].dt,
+              "period_s": rotorpy_step_cost(base[name])}
              for name in ROTORPY_SKIPPED if name in base]
     jobs = [(cond.name, name, variant(base[name], cond.keys), not cond.keys)
             for cond in conditions(names) for name in cond.scenarios]

@@ -172,7 +172,7 @@ def paper_table(runs: list[dict[str, Any]]) -> list[str]:
 
 def cost_note(r: dict[str, Any]) -> str:
     """What RotorPy one by one would have cost on a scenario it does not fly."""
-    return (f"`{r['scenario']}` under RotorPy one by one: not run. One 0.2 s period of its "
+    return (f"`{r['scenario']}` under RotorPy one by one: not run. One {r['dt']:g} s period of its "
             f"{r['agents']} hummingbirds in steady flight costs {r['period_s']:.1f} s of RotorPy "
             f"alone here (each vehicle integrated on its own), so its up to {r['n_steps']} "
             f"periods would take up to {r['period_s'] * r['n_steps'] / 3600:.1f} h. It flies "

@@ -17,7 +17,7 @@ import numpy as np
 #: The method column, and the preset each ``ours-*`` method flies (for the findings).
 PRESET = {"ours-1": "safe", "ours-all": "safe", "ours-paper": "paper", "ours-fast": "fast",
           "ours-swarm": "swarm", "ours-noguard": "safe without the closing guard",
-          "ours-coarse": "safe, planes every 30°", "ours-nearest": "safe, nearest fallback"}
+          "ours-coarse": "safe, coarser planes", "ours-nearest": "safe, nearest fallback"}
 
 
 def _fmt(x: Any, spec: str = ".1f") -> str:
