@@ -100,7 +100,8 @@ def compare(old: pd.DataFrame, new: pd.DataFrame) -> tuple[int, int, list[str]]:
 def throughput(args: argparse.Namespace, tree: Path, tmp: Path) -> dict[str, Any]:
     """Encounters per second of ``--family`` before and now on each worker count, and how the
     rows of the encounters both flew compare."""
-    runs, rows = [], {}
+    runs: list[dict[str, Any]] = []
+    rows: dict[str, Path] = {}
     for label, where, n in (("before", tree, args.old_n), ("now", None, args.n)):
         for k in args.workers:
             path = tmp / f"tp-{label}-{k}.parquet"
