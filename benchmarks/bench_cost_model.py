@@ -18,19 +18,15 @@ Writes the page (machine, date and commit at the top) and its figure beside it (
 from __future__ import annotations
 
 import argparse
-import datetime
-import os
-import platform
-import subprocess
 import time
 from pathlib import Path
 
 import numpy as np
+from pages import RESULTS, machine_line, write_page
 
 from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
 from vo3d_opt.config import PRESETS
 
-HERE = Path(__file__).resolve().parent
 NEIGHBOURS = (0, 1, 2, 5, 10, 15, 20)
 OBSTACLES = (0, 1, 2, 5, 10, 20)
 SENSING_RANGE = 55.0
@@ -117,32 +113,17 @@ def figure(table: dict[str, np.ndarray], path: Path) -> None:
     fig.savefig(path, dpi=150)
 
 
-def header() -> str:
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=HERE
-    ).stdout.strip()
-    cpu = next(
-        (ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
-         if ln.startswith("model name")),
-        platform.processor() or "?",
-    )
-    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    return (
-        f"{datetime.date.today()}, commit {commit}; {cpu}, {os.cpu_count()} CPUs (load average "
-        f"{load} at the end); CPython {platform.python_version()}, {platform.machine()} Linux."
-    )
-
-
 def page(table: dict[str, np.ndarray], cases: int, repeat: int, png: Path) -> str:
     lines = [
         "# Cost model: µs per decision against neighbours and obstacles",
         "",
-        header(),
+        machine_line(),
         "",
-        f"`benchmarks/bench_cost_model.py --cases {cases} --repeat {repeat}`: one `select()` "
-        "through the public API, `plane_qp` on its default solver, for each preset; each cell "
-        f"the median over {cases} random encounters of the fastest of {repeat} calls (the "
-        "script's docstring says how they are drawn). Sensing range 55 m.",
+        f"`python benchmarks/bench_cost_model.py --cases {cases} --repeat {repeat}`: one "
+        "`select()` through the public API, `plane_qp` on its default solver, for each preset; "
+        f"each cell the median over {cases} random encounters of the fastest of {repeat} calls "
+        "(the script's docstring says how they are drawn). Sensing range "
+        f"{SENSING_RANGE:g} m.",
         "",
         f"![µs per decision]({png.name})",
         "",
@@ -161,13 +142,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=40)
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--out", type=Path, default=HERE.parent / "docs" / "results" / "cost-model.md")
+    ap.add_argument("--out", type=Path, default=RESULTS / "cost-model.md")
     args = ap.parse_args(argv)
     table = measure(args.cases, args.repeat)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
     png = args.out.with_suffix(".png")
     figure(table, png)
-    args.out.write_text(page(table, args.cases, args.repeat, png))
+    write_page(args.out, page(table, args.cases, args.repeat, png))
     print(f"wrote {args.out} and {png}")
     return 0
 

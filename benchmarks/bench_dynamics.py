@@ -24,20 +24,24 @@ hovering in a constant 3 m/s wind, crossing it at s, 20 s of hover in Dryden gus
 Sensing: ``Sensor.sensed(i)`` for N = 1000. Batched RotorPy vehicles (``batched: true``, the
 ``batched`` extra): their cost against one ``Multirotor`` per vehicle, and their accuracy.
 
-    python benchmarks/bench_dynamics.py [--quick] > docs/results/dynamics.md
+    python benchmarks/bench_dynamics.py [--quick] [--sections steps,cost,wind,sensing,batched]
+        [--out docs/results/dynamics.md]
 """
 from __future__ import annotations
 
 import argparse
-import platform
+import importlib.metadata
 import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from pathlib import Path
+from typing import Any
 
 import numpy as np
+from pages import RESULTS, command_line, machine_line, write_page
 
 from vo3d_opt.sim.dynamics import (
     BATCHED_SUBSTEP_RATE,
@@ -53,6 +57,7 @@ DT = 0.2
 SETTLE = 4.0   # s of flight before a step from cruise
 AFTER = 4.0    # s of flight after the step
 REFERENCE_RATE = 1000.0
+SECTIONS = ("steps", "cost", "wind", "sensing", "batched")
 
 
 @dataclass
@@ -145,7 +150,7 @@ def rotorpy(vehicle: str, rate: float, wind: dict | None = None,
     return lambda: make_dynamics(spec, wind, seed=1)
 
 
-def step_responses(rates: list[float]) -> None:
+def step_responses(rates: list[float], out: list[str]) -> None:
     models: list[tuple[str, float, Callable[[], Dynamics]]] = [
         ("kinematic", 4.0, lambda: make_dynamics()),
         ("first_order tau 0.5 s", 4.0, lambda: make_dynamics({"model": "first_order", "tau": 0.5})),
@@ -164,7 +169,8 @@ def step_responses(rates: list[float]) -> None:
             fig = figures(f, s)
             rows.append([name, f"{s:g}", m, *fig.values()])
             header = list(fig)
-        costs.append([name, statistics.median(c for f in flights.values() for c in f.step_cost) * 1e3])
+        per_step = [c for f in flights.values() for c in f.step_cost]
+        costs.append([name, statistics.median(per_step) * 1e3])
         if name.startswith("rotorpy") and name.endswith("Hz"):
             vehicle = name.split()[1]
             ends = period_ends(flights["right angle"])
@@ -172,26 +178,41 @@ def step_responses(rates: list[float]) -> None:
                 refs[vehicle] = ends
             else:
                 stability.append((vehicle, name, ends))
-    print("## Step responses (one vehicle, 0.2 s periods)\n")
-    print(table(["model", "s m/s", "manoeuvre", *header], rows))
-    print("\n## Sub-step rate against a 1 kHz integration (right angle)\n")
-    print(table(["model", "largest abs(v - v_1kHz) at period ends, m/s"],
-                [[name, float(np.abs(e - refs[veh]).max())] for veh, name, e in stability]))
-    print("\n## Cost of step() per vehicle per 0.2 s period (one vehicle, median)\n")
-    print(table(["model", "ms"], costs))
+    out.append("## Step responses (one vehicle, 0.2 s periods)\n")
+    out.append(table(["model", "s m/s", "manoeuvre", *header], rows))
+    out.append("\n## Sub-step rate against a 1 kHz integration (right angle)\n")
+    gaps = [(veh, name, float(np.abs(e - refs[veh]).max())) for veh, name, e in stability]
+    out.append(table(["model", "largest abs(v - v_1kHz) at period ends, m/s"],
+                     [[name, gap] for _, name, gap in gaps]))
+    out.append(substep_finding(gaps))
+    out.append("\n## Cost of step() per vehicle per 0.2 s period (one vehicle, median)\n")
+    out.append(table(["model", "ms"], costs))
 
 
-def rotorpy_cost(rates: list[float], n: int = 5) -> None:
+def substep_finding(gaps: list[tuple[str, str, float]], within: float = 0.2) -> str:
+    """The lowest sub-step rate of each vehicle from which every higher rate stays within
+    ``within`` m/s of the 1 kHz integration (the names end in "RATE Hz")."""
+    found = []
+    for vehicle in dict.fromkeys(v for v, _, _ in gaps):
+        rows = [(float(name.split()[-2]), gap) for v, name, gap in gaps if v == vehicle]
+        good = [rate for rate, _ in rows if all(g <= within for r, g in rows if r >= rate)]
+        found.append(f"{vehicle} {min(good):g} Hz" if good else f"{vehicle}: none")
+    return (f"\nThe lowest sub-step rate from which every rate tried stays within {within:g} m/s "
+            f"of the 1 kHz integration: {', '.join(found)} (the simulator's default: "
+            f"{DEFAULT_SUBSTEP_RATE:g} Hz).")
+
+
+def rotorpy_cost(rates: list[float], out: list[str], n: int = 5) -> None:
     rows = []
     for vehicle, s in (("hummingbird", 4.0), ("crazyflie", 1.0)):
         for rate in rates:
             f = fly(rotorpy(vehicle, rate), [(np.array([s, 0.0, 0.0]), 2.0)], n=n)
             rows.append([vehicle, f"{rate:g}", statistics.median(f.step_cost) * 1e3])
-    print(f"\n## RotorPy cost per vehicle per 0.2 s period, {n} vehicles at once (median)\n")
-    print(table(["vehicle", "sub-steps per s", "ms"], rows))
+    out.append(f"\n## RotorPy cost per vehicle per 0.2 s period, {n} vehicles at once (median)\n")
+    out.append(table(["vehicle", "sub-steps per s", "ms"], rows))
 
 
-def wind_figures() -> None:
+def wind_figures(out: list[str]) -> None:
     rows = []
     wind = np.array([3.0, 0.0, 0.0])
     for vehicle, s in (("hummingbird", 4.0), ("crazyflie", 1.0)):
@@ -213,10 +234,11 @@ def wind_figures() -> None:
             rows.append([vehicle, f"Dryden around 3 m/s, sigma {sigma:g}, hover, 20 s",
                          float(np.sqrt(np.mean(speed ** 2))), float(speed.max()),
                          float(np.abs(gust.p[:, 2] - gust.p[0, 2]).max())])
-    print(f"\n## Wind ({DEFAULT_SUBSTEP_RATE:g} Hz sub-steps)\n")
-    print(table(["vehicle", "wind, command", "velocity error at the end (RMS for Dryden) m/s",
-                 "largest velocity error m/s", "altitude excursion m"], rows))
-    print(f"\n### RotorPy's Dryden gusts themselves ({DEFAULT_SUBSTEP_RATE:g} Hz samples, 60 s)\n")
+    out.append(f"\n## Wind ({DEFAULT_SUBSTEP_RATE:g} Hz sub-steps)\n")
+    out.append(table(["vehicle", "wind, command", "velocity error at the end (RMS for Dryden) m/s",
+                     "largest velocity error m/s", "altitude excursion m"], rows))
+    out.append(f"\n### RotorPy's Dryden gusts themselves ({DEFAULT_SUBSTEP_RATE:g} Hz samples, "
+               "60 s)\n")
     gust_rows = []
     for sigma in (1.0, 25.0):
         np.random.seed(0)
@@ -226,10 +248,11 @@ def wind_figures() -> None:
                       for _ in range(round(60 * DEFAULT_SUBSTEP_RATE))])
         gust_rows.append([f"{sigma:g}", *(float(x) for x in w.std(axis=0)),
                           float(np.abs(w - wind).max())])
-    print(table(["sigma m/s", "std x m/s", "std y m/s", "std z m/s", "largest gust m/s"], gust_rows))
+    out.append(table(["sigma m/s", "std x m/s", "std y m/s", "std z m/s", "largest gust m/s"],
+                     gust_rows))
 
 
-def sensing_cost(n: int = 1000) -> None:
+def sensing_cost(out: list[str], n: int = 1000) -> None:
     sensor = Sensor(n, DT, position_noise=0.5, velocity_noise=0.3, latency=0.4, seed=1)
     rng = np.random.default_rng(0)
     p, v = rng.uniform(-100, 100, (n, 3)), rng.uniform(-4, 4, (n, 3))
@@ -242,12 +265,12 @@ def sensing_cost(n: int = 1000) -> None:
         t0 = time.process_time()
         sensor.sensed(i)
         times.append(time.process_time() - t0)
-    print(f"\n## Sensing, N = {n}\n")
-    print(table(["call", "µs (median)"], [["push", push * 1e6],
-                                          ["sensed(i)", statistics.median(times) * 1e6]]))
+    out.append(f"\n## Sensing, N = {n}\n")
+    out.append(table(["call", "µs (median)"], [["push", push * 1e6],
+                                               ["sensed(i)", statistics.median(times) * 1e6]]))
 
 
-def batched_cost(sizes: list[int], one_by_one_up_to: int = 50) -> None:
+def batched_cost(sizes: list[int], out: list[str], one_by_one_up_to: int = 50) -> None:
     """``batched: true`` against one ``Multirotor`` per vehicle: CPU time per vehicle and period
     (hummingbirds commanded 4 m/s from hover, torch on one thread), how far the batched RK4
     strays from RotorPy's RK45 at the same sub-step rate (100 Hz, 200 Hz) in the step
@@ -255,8 +278,8 @@ def batched_cost(sizes: list[int], one_by_one_up_to: int = 50) -> None:
     try:
         import torch
     except ImportError as exc:
-        print(f"\n## Batched RotorPy vehicles: not measured ({exc.name} is not installed; "
-              "pip install 'vo3d-opt[batched]')")
+        out.append(f"\n## Batched RotorPy vehicles: not measured ({exc.name} is not installed; "
+                   "pip install 'vo3d-opt[batched]')")
         return
     torch.set_num_threads(1)
     rate = BATCHED_SUBSTEP_RATE
@@ -268,24 +291,25 @@ def batched_cost(sizes: list[int], one_by_one_up_to: int = 50) -> None:
         single = (statistics.median(fly(rotorpy("hummingbird", rate), cruise, n=n).step_cost)
                   * 1e3 if n <= one_by_one_up_to else float("nan"))
         rows.append([n, batched, single, single / batched])
-    print(f"\n## Batched RotorPy hummingbirds (torch {torch.__version__}, one thread, "
-          f"{rate:g} Hz): CPU ms per vehicle per 0.2 s period (median)\n")
-    print(table(["N", "batched (RK4)", "one by one (RK45)", "one by one / batched"], rows))
-    phases = {**manoeuvres(4.0), "diagonal (4, 4, 0) from hover": [(np.array([4.0, 4.0, 0.0]), AFTER)]}
+    out.append(f"\n## Batched RotorPy hummingbirds (torch {torch.__version__}, one thread, "
+               f"{rate:g} Hz): CPU ms per vehicle per 0.2 s period (median)\n")
+    out.append(table(["N", "batched (RK4)", "one by one (RK45)", "one by one / batched"], rows))
+    diagonal = [(np.array([4.0, 4.0, 0.0]), AFTER)]
+    phases = {**manoeuvres(4.0), "diagonal (4, 4, 0) from hover": diagonal}
     acc = []
     for rate_hz in (100.0, BATCHED_SUBSTEP_RATE):
         for name, phase in phases.items():
             pair = [fly(rotorpy("hummingbird", rate_hz, batched=b), phase) for b in (True, False)]
             acc.append([f"{rate_hz:g}", name, float(np.abs(pair[0].p - pair[1].p).max()),
                         float(np.abs(pair[0].v - pair[1].v).max())])
-    print("\n### Batched (RK4) against one by one (RK45) at the same sub-step rate, one "
+    out.append("\n### Batched (RK4) against one by one (RK45) at the same sub-step rate, one "
           "hummingbird, every sub-step sample\n")
-    print(table(["sub-steps per s", "manoeuvre", "largest position difference m",
-                 "largest velocity difference m/s"], acc))
-    rotorpy_import_cost()
+    out.append(table(["sub-steps per s", "manoeuvre", "largest position difference m",
+                     "largest velocity difference m/s"], acc))
+    rotorpy_import_cost(out)
 
 
-def rotorpy_import_cost(runs: int = 3) -> None:
+def rotorpy_import_cost(out: list[str], runs: int = 3) -> None:
     """Wall time of ``import rotorpy.vehicles.multirotor`` in a fresh process: RotorPy imports
     torch at its top when it is installed, whichever model is used; 'without' blocks it."""
     code = ("import sys, time\nif sys.argv[1] == 'without': sys.modules['torch'] = None\n"
@@ -297,8 +321,35 @@ def rotorpy_import_cost(runs: int = 3) -> None:
                                       capture_output=True, text=True).stdout)
                  for _ in range(runs)]
         rows.append([f"{torch_state} torch", " / ".join(f"{t:.2f}" for t in times)])
-    print(f"\n### Importing RotorPy's vehicles ({runs} fresh processes each, s)\n")
-    print(table(["", "import rotorpy.vehicles.multirotor"], rows))
+    out.append(f"\n### Importing RotorPy's vehicles ({runs} fresh processes each, s)\n")
+    out.append(table(["", "import rotorpy.vehicles.multirotor"], rows))
+
+
+INTRO = """`{command}`: what a selector can rely on under each vehicle model
+([formulations: dynamics](../formulations/dynamics.md)), and what the models cost. One vehicle
+flies step commands through `vo3d_opt.sim.dynamics` with {dt:g} s control periods: from hover to
+s, a right angle and a reversal after {settle:g} s of cruise at s, and a climb; the figures cover
+the {after:g} s after the step (the script's docstring defines each column). Costs are CPU time
+of this process (`time.process_time`), so the other work of a shared machine counts less than in
+wall time."""
+
+
+def page(sections: list[str], rates: list[float], command: str, machine: str) -> str:
+    """The whole page: the sections named (``steps``, ``cost``, ``wind``, ``sensing``,
+    ``batched``), in that order."""
+    runs = {
+        "steps": lambda out: step_responses(rates, out),
+        "cost": lambda out: rotorpy_cost([50.0, 100.0, 200.0], out),
+        "wind": wind_figures,
+        "sensing": sensing_cost,
+        "batched": lambda out: batched_cost([1, 10, 50, 200, 1000], out),
+    }
+    intro = INTRO.format(command=command, dt=DT, settle=SETTLE, after=AFTER)
+    out = ["# Vehicle models: responses and costs\n", machine + "\n", intro + "\n"]
+    for name in sections:
+        runs[name](out)
+        print(f"{name}: done", file=sys.stderr, flush=True)
+    return "\n".join(out)
 
 
 def main() -> None:
@@ -306,19 +357,23 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="fewer sub-step rates")
     ap.add_argument("--sections", default="steps,cost,wind,sensing,batched",
                     help="comma-separated subset of steps,cost,wind,sensing,batched")
+    ap.add_argument("--out", type=Path, default=RESULTS / "dynamics.md")
     args = ap.parse_args()
+    sections = args.sections.split(",")
+    unknown = set(sections) - set(SECTIONS)
+    if unknown:
+        ap.error(f"--sections: unknown {', '.join(sorted(unknown))}")
     rates = [50.0, 100.0] if args.quick else [5.0, 10.0, 20.0, 25.0, 40.0, 50.0, 100.0, 200.0]
-    sections = {
-        "steps": lambda: step_responses(rates),
-        "cost": lambda: rotorpy_cost([50.0, 100.0, 200.0]),
-        "wind": wind_figures,
-        "sensing": sensing_cost,
-        "batched": lambda: batched_cost([1, 10, 50, 200, 1000]),
-    }
-    print(f"# {platform.processor() or platform.machine()}, {platform.python_implementation()} "
-          f"{platform.python_version()}, {time.strftime('%Y-%m-%d')}\n")
-    for name in args.sections.split(","):
-        sections[name]()
+    extras = [f"rotorpy {_version('rotorpy')}", f"torch {_version('torch')}"]
+    write_page(args.out, page(sections, rates, command_line(), machine_line(*extras)))
+    print(f"wrote {args.out}", file=sys.stderr)
+
+
+def _version(dist: str) -> str:
+    try:
+        return importlib.metadata.version(dist)
+    except importlib.metadata.PackageNotFoundError:
+        return "not installed"
 
 
 if __name__ == "__main__":

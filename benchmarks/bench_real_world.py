@@ -15,21 +15,25 @@ comparison; one period of the one-by-one model at N = 1000 is timed too (hours i
 
 ``--swarm``: every run with the swarm preset merged into its ``selector_options``
 (``FAST_OPTIONS`` and ``horizon: sensing``), into ``docs/results/real-world-swarm.md``.
+
+Writes the whole page (``real_world_page.py`` renders it from the rows, as each run finishes)
+and, at the end, its rows beside it (``.jsonl``); ``--render`` writes the page again from those
+rows without flying anything.
 """
 from __future__ import annotations
 
 import argparse
-import datetime
-import os
-import platform
 import sys
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pages import RESULTS, command_line, machine_line, read_rows, write_page, write_rows
+from real_world_page import page, record, row
 
 from vo3d_opt.sim import run_scenario, summarize
 from vo3d_opt.sim.dynamics import make_dynamics
@@ -39,9 +43,6 @@ from vo3d_opt.sim.scenario import (
     load_scenario,
     scenario_variant,
 )
-
-#: The docs' results pages, which these benchmarks write.
-RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 
 OUT = RESULTS / "real-world.md"
 SWARM_OUT = RESULTS / "real-world-swarm.md"
@@ -126,25 +127,6 @@ def run_one(sc: Scenario) -> tuple[dict[str, Any], float]:
     return s, wall
 
 
-def _f(x: Any, digits: int = 2) -> str:
-    return "–" if x is None else f"{x:.{digits}f}"
-
-
-def row(cond: str, name: str, s: dict[str, Any], ideal: dict[str, Any] | None, wall: float) -> str:
-    m = s["margins"]
-    path = (s["path_length_ratio"] / ideal["path_length_ratio"]
-            if ideal and s["path_length_ratio"] and ideal["path_length_ratio"] else None)
-    arrive = (s["arrival_time_max"] / ideal["arrival_time_max"]
-              if ideal and s["arrival_time_max"] and ideal["arrival_time_max"] else None)
-    accel = "–" if m.get("acceleration") is None else f"{m['acceleration']:.3g}"
-    return (f"| {cond} | {name} | {s['reached']}/{s['agents']} | {s['collisions']} | "
-            f"{s['pz_intrusions']} | {s['obstacle_pz_intrusions']} | {s['altitude_violations']} | "
-            f"{s['speed_violations']} | "
-            f"{_f(s['min_vehicle_distance'])} | {_f(s['min_obstacle_distance'])} | "
-            f"{_f(path, 3)} | {_f(arrive, 3)} | {s['fallbacks']} | {_f(m.get('pz_buffer'))} | "
-            f"{accel} | {_f(m.get('altitude_margin'))} | {wall:.1f} |")
-
-
 def rotorpy_step_cost(sc: Scenario, sample: int = 10) -> float:
     """Seconds per control period for all of ``sc``'s vehicles under RotorPy (the dynamics
     alone, in steady flight at 4 m/s), from one period of ``sample`` of them: RotorPy
@@ -161,106 +143,73 @@ def rotorpy_step_cost(sc: Scenario, sample: int = 10) -> float:
     return (time.perf_counter() - t0) / sample * sc.n_agents
 
 
-HEADER = ("| condition | scenario | arrived | collisions | pz intrusions | "
-          "obstacle pz intrusions | "
-          "altitude violations | speed violations | min vehicle dist. m | min obstacle dist. m | "
-          "path vs ideal | arrival vs ideal | fallbacks | pz_buffer m | acceleration m/s² | "
-          "altitude margin m | wall s |\n|" + "---|" * 17)
-
-
-def _rows(jobs: list[tuple[str, str, Scenario, bool]],
-          results: dict[int, tuple[dict[str, Any], float]]) -> list[str]:
-    """The table rows of the finished jobs, in job order; cost columns against the ideal run
-    of the same scenario (when finished)."""
+def records(jobs: list[tuple[str, str, Scenario, bool]],
+            results: dict[int, tuple[dict[str, Any], float]]) -> list[dict[str, Any]]:
+    """The rows of the finished jobs, in job order; cost columns against the ideal run of the
+    same scenario (when finished)."""
     ideal = {name: results[k][0] for k, (_, name, _, is_ideal) in enumerate(jobs)
              if is_ideal and k in results}
-    return [row(cond, name, *results[k][:1], ideal.get(name), results[k][1])
+    return [record(cond, name, results[k][0], ideal.get(name), results[k][1])
             for k, (cond, name, _, _) in enumerate(jobs) if k in results]
 
 
-def condensed(path: Path) -> str:
-    """One row per condition of a results file: the summary table of docs/results/real-world.md (sums over its scenarios,
-    the smallest distances, the median cost)."""
-    rows = [[c.strip() for c in line.strip().strip("|").split("|")]
-            for line in path.read_text(encoding="utf-8").splitlines()
-            if line.startswith("| ") and not line.startswith("| condition")]
-    out = ["| condition | scenarios | arrived | collisions | pz intrusions | altitude violations | "
-           "speed violations | min vehicle dist. m | min obstacle dist. m | "
-           "path vs ideal (median) | arrival vs ideal (median) |", "|" + "---|" * 11]
-    for cond in dict.fromkeys(r[0] for r in rows):
-        rs = [r for r in rows if r[0] == cond]
-        got = [tuple(map(int, r[2].split("/"))) for r in rs]
-
-        def least(col: int, rs: list[list[str]] = rs) -> str:
-            vals = [float(r[col]) for r in rs if r[col] != "–"]
-            return f"{min(vals):.2f}" if vals else "–"
-
-        def median(col: int, rs: list[list[str]] = rs) -> str:
-            vals = [float(r[col]) for r in rs if r[col] != "–"]
-            return f"{np.median(vals):.3f}" if vals else "–"
-
-        out.append(f"| {cond} | {len(rs)} | {sum(a for a, _ in got)}/{sum(b for _, b in got)} | "
-                   f"{sum(int(r[3]) for r in rs)} | {sum(int(r[4]) for r in rs)} | "
-                   f"{sum(int(r[6]) for r in rs)} | {sum(int(r[7]) for r in rs)} | {least(8)} | "
-                   f"{least(9)} | {median(10)} | {median(11)} |")
-    return "\n".join(out)
+def measure(names: list[str], swarm: bool, jobs_at_once: int,
+            progress: Callable[[list[dict[str, Any]]], None]) -> list[dict[str, Any]]:
+    """Every condition's runs (``progress`` called with the rows so far after each), then the
+    cost of RotorPy one by one on the scenarios it does not fly."""
+    base = {n: load_scenario(n) for n in names}
+    if swarm:
+        base = {n: scenario_variant(sc, selector_options=SWARM) for n, sc in base.items()}
+    costs = [{"kind": "rotorpy_cost", "scenario": name, "agents": base[name].n_agents,
+              "n_steps": base[name].n_steps, "dt": base[name].dt,
+              "period_s": rotorpy_step_cost(base[name])}
+             for name in ROTORPY_SKIPPED if name in base]
+    jobs = [(cond.name, name, variant(base[name], cond.keys), not cond.keys)
+            for cond in conditions(names) for name in cond.scenarios]
+    results: dict[int, tuple[dict[str, Any], float]] = {}
+    with ProcessPoolExecutor(max_workers=jobs_at_once) as pool:
+        futures = {pool.submit(run_one, sc): k for k, (_, _, sc, _) in enumerate(jobs)}
+        for fut in as_completed(futures):
+            results[futures[fut]] = fut.result()
+            progress(records(jobs, results) + costs)
+    return records(jobs, results) + costs
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="two small scenarios, to try the script")
     ap.add_argument("--out", type=Path, default=None, help=f"default {OUT.name} ({SWARM_OUT.name} "
-                    "with --swarm)")
+                    "with --swarm); its rows go beside it (.jsonl)")
     ap.add_argument("--swarm", action="store_true",
                     help="every run with the swarm preset (vo3d run --swarm)")
     ap.add_argument("--jobs", type=int, default=2, help="runs at once (processes)")
-    ap.add_argument("--readme", action="store_true",
-                    help="print the condensed table of --out, one row per condition (runs nothing)")
+    ap.add_argument("--render", action="store_true",
+                    help="write --out again from the rows beside it (runs nothing)")
     args = ap.parse_args()
-    if args.out is None:
-        args.out = SWARM_OUT if args.swarm else OUT
-    if args.readme:
-        print(condensed(args.out))
+    out = args.out or (SWARM_OUT if args.swarm else OUT)
+    rows_file = out.with_suffix(".jsonl")
+    if args.render:
+        head, rows = read_rows(rows_file)
+        write_page(out, page(rows, swarm=args.swarm, machine=head["machine"],
+                             command=head["command"]))
+        print(f"wrote {out} from {rows_file}", file=sys.stderr)
         return
     names = [f.stem for f in bundled_files()]
     if args.quick:
         names = ["paper-case3-two-uav-two-cylinders", "intruder-crossing-four"]
-    base = {n: load_scenario(n) for n in names}
-    if args.swarm:
-        base = {n: scenario_variant(sc, selector_options=SWARM) for n, sc in base.items()}
-    head = [f"# Real-world conditions (issue 12)\n\n{platform.machine()}, CPython "
-            f"{platform.python_version()}, {os.cpu_count()} cores shared with other jobs, "
-            f"{datetime.date.today().isoformat()}. `benchmarks/bench_real_world.py"
-            f"{' --swarm' if args.swarm else ''}`.\n",
-            "Cost columns: path length ratio and latest arrival against the same scenario under "
-            "ideal kinematics (1.000 = no cost). Margins: what the simulator derived "
-            "(`vo3d_opt/sim/safety.py`, `formulations/real_world.md`); \"margins off\": no "
-            "acceleration bound, no altitude or obstacle margin, the pz_buffer of ideal "
-            "kinematics (2 v_max dt).\n", HEADER]
-    lines: list[str] = []
-    tail: list[str] = []
-    for name in (n for n in ROTORPY_SKIPPED if n in base):
-        cost = rotorpy_step_cost(base[name])
-        tail.append(f"\n`{name}` under RotorPy one by one: not run. One 0.2 s period of its "
-                    f"{base[name].n_agents} hummingbirds in steady flight costs {cost:.1f} s of "
-                    f"RotorPy alone here "
-                    f"(each vehicle integrated on its own), so its up to {base[name].n_steps} "
-                    f"periods would take up to {cost * base[name].n_steps / 3600:.1f} h. It "
-                    f"flies batched instead (the last rows).")
-    jobs = [(cond.name, name, variant(base[name], cond.keys), not cond.keys)
-            for cond in conditions(names) for name in cond.scenarios]
-    results: dict[int, tuple[dict[str, Any], float]] = {}
-    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        futures = {pool.submit(run_one, sc): k for k, (_, _, sc, _) in enumerate(jobs)}
-        for fut in as_completed(futures):
-            results[futures[fut]] = fut.result()
-            lines = _rows(jobs, results)
-            print(lines[-1] if lines else "", file=sys.stderr, flush=True)
-            args.out.write_text("\n".join(head + lines + tail) + "\n\n(partial: still running)\n",
-                                encoding="utf-8")
-    lines = _rows(jobs, results)
-    args.out.write_text("\n".join(head + lines + tail) + "\n", encoding="utf-8")
-    print(f"wrote {args.out}", file=sys.stderr)
+    command = command_line()
+
+    def progress(rows: list[dict[str, Any]]) -> None:
+        runs = [r for r in rows if r["kind"] == "run"]
+        print(row(runs[-1]) if runs else "", file=sys.stderr, flush=True)
+        write_page(out, page(rows, swarm=args.swarm, machine=machine_line(), command=command,
+                             partial=True))
+
+    rows = measure(names, args.swarm, args.jobs, progress)
+    machine = machine_line()
+    write_rows(rows_file, rows, machine=machine, command=command)
+    write_page(out, page(rows, swarm=args.swarm, machine=machine, command=command))
+    print(f"wrote {out} and {rows_file}", file=sys.stderr)
 
 
 if __name__ == "__main__":

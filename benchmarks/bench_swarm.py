@@ -37,17 +37,21 @@ process, so "peak MB" is that run's peak resident memory (the run, its record an
         [--max-neighbors 10]
         [--max-steps N=K ...]
         [--profile [--profile-steps K]]
-        [--out docs/results/swarm.md]
+        [--page swarm|rvo2-sphere] [--out docs/results/PAGE.md] [--append | --render]
 
-Writes the markdown table to ``--out`` as rows finish (one line of JSON per run also goes to
-``--out`` with ``.jsonl``).
+Writes the whole page to ``--out`` as rows finish (``swarm_page.py`` renders it: the table and
+every sentence with a figure in it come from the rows), and the rows beside it (``.jsonl``, a
+header line with the machine and the command, then one line of JSON per run). ``--page``: the
+layout, ``swarm`` (the default) or ``rvo2-sphere`` (the default when that case is the only one:
+docs/results/rvo2-sphere.md). ``--append`` keeps the rows already there when they were measured
+at this commit (a page names one commit), e.g. to add the whole N = 10,000 swap to a run that
+capped it; ``--render`` writes the page again from the rows without running anything.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
-import platform
 import resource
 import subprocess
 import sys
@@ -55,13 +59,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+from pages import RESULTS, command_line, commit, machine_line, read_rows, write_page, write_rows
+from swarm_page import PAGES, table_row
 
-#: The docs' results pages, which these benchmarks write.
-RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
-
-METHODS = ("ours-1", "ours-all", "ours-paper", "ours-noguard", "ours-coarse", "ours-nearest", "ours-fast",
-           "ours-swarm", "rvo2")
+METHODS = ("ours-1", "ours-all", "ours-paper", "ours-noguard", "ours-coarse", "ours-nearest",
+           "ours-fast", "ours-swarm", "rvo2")
 PRESET_METHODS = ("ours-paper", "ours-fast", "ours-swarm")
 #: Options each ``ours-*`` method adds to the scenario's (ours-1 and ours-all add none; the
 #: preset methods their preset: ``extra_options``).
@@ -106,7 +108,8 @@ def scenario(case: str, n: int):
     return random_crossing_scenario(n, seed=n)
 
 
-def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int | None) -> dict[str, Any]:
+def one_run(case: str, n: int, method: str, max_neighbors: int,
+            max_steps: int | None) -> dict[str, Any]:
     """One (case, N, method) run in this process: its figures as a dict."""
     from vo3d_opt.baselines.rvo2 import RVO2Step, summarize_rvo2
     from vo3d_opt.sim.deciders import SwarmSelect
@@ -129,8 +132,8 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
         if extra is not None:  # the simulator's options plus the method's, as -o adds them
             sc = scenario_variant(sc, selector_options={**sc.selector_options, **extra})
         sel, formulation, solver = scenario_selector(sc)
-        step = SwarmSelect(sc, sel, formulation=formulation, solver=solver, max_neighbors=max_neighbors,
-                           threads=threads)
+        step = SwarmSelect(sc, sel, formulation=formulation, solver=solver,
+                           max_neighbors=max_neighbors, threads=threads)
     load = os.getloadavg()[0]
     t0, cpu0 = time.perf_counter(), time.process_time()
     rec = fly(sc, step, progress=False, max_steps=max_steps)
@@ -153,6 +156,7 @@ def one_run(case: str, n: int, method: str, max_neighbors: int, max_steps: int |
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "load_start": load,
         "record": "spilled" if rec.spill is not None else "memory",
         "options": resolved_options(method, sc),
+        "rvo2_horizon": step.horizon if method == "rvo2" else None,
         "load_end": os.getloadavg()[0],
     }
 
@@ -192,60 +196,34 @@ def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dic
     decide = float(decision_times_us(rec).sum()) / 1e6
     us = {k: v / agent_steps * 1e6 for k, v in spent.items()}
     return {"case": case, "n": n, "steps": rec.steps, "agent_steps": agent_steps,
-            "checks_us": us["checks"], "tree_us": us["tree"], "kernel_us": us["kernel"], "rows_us": None,
+            "checks_us": us["checks"], "tree_us": us["tree"], "kernel_us": us["kernel"],
+            "rows_us": None,
             "select_many_us": decide / agent_steps * 1e6,
             "loop_rest_us": (loop - decide) / agent_steps * 1e6,
             "metrics_us": metrics / agent_steps * 1e6, "load": os.getloadavg()[0]}
 
 
-def _fmt(x: Any, spec: str = ".1f") -> str:
-    return "—" if x is None else format(x, spec)
+def child(args: list[str]) -> dict[str, Any] | str:
+    """This script run in a child process with ``args``: its JSON line, or its last error line."""
+    res = subprocess.run([sys.executable, __file__, *args], capture_output=True, text=True)
+    if res.returncode != 0:
+        return " ".join(res.stderr.strip().splitlines()[-1:])
+    return json.loads(res.stdout.strip().splitlines()[-1])
 
 
-def _options_text(options: dict[str, Any] | None) -> str:
-    """``{"a": 1, "b": 2.0}`` as ``a 1, b 2``."""
-    return ", ".join(f"{k} {v:g}" for k, v in (options or {}).items())
-
-
-def table_row(r: dict[str, Any]) -> str:
-    name = {"ours-1": "vo3d_opt select_many, 1 thread", "ours-all": f"vo3d_opt select_many, {r['threads']} threads",
-            "ours-noguard": f"vo3d_opt select_many, closing_guard off, {r['threads']} threads",
-            "ours-coarse": f"vo3d_opt select_many, plane_step_deg "
-                           f"{EXTRA_OPTIONS['ours-coarse']['plane_step_deg']:g}, {r['threads']} threads",
-            "ours-nearest": f"vo3d_opt select_many, least_bad_escape off, {r['threads']} threads",
-            "ours-paper": f"vo3d_opt select_many, preset paper, {r['threads']} threads",
-            "ours-fast": f"vo3d_opt select_many, preset fast, {r['threads']} threads",
-            "ours-swarm": f"vo3d_opt select_many, preset swarm (horizon "
-                          f"{(r.get('options') or {}).get('horizon', 0):.3g} s), {r['threads']} threads",
-            "rvo2": "RVO2-3D doStep, 1 thread"}[r["method"]]
-    flown = "whole run" if r["steps"] < r["n_steps"] or r["all_reached"] else f"{r['steps']} steps (max_time)"
-    if r.get("capped"):
-        flown = f"first {r['steps']} steps"
-    arrive = _fmt(r["arrival_time_max"]) if r["all_reached"] else "—"
-    return (f"| {r['case']} | {r['n']} | {name} | {flown} | {_fmt(r['decide_us'])} | {_fmt(r['loop_us'])} "
-            f"| {_fmt(r.get('loop_cpu_us'))} "
-            f"| {_fmt(r['min_vehicle_distance'], '.2f')} / {r['r_pz']:g} | {r['pz_intrusions']} | {r['collisions']} "
-            f"| {r['reached']}/{r['n']} | {arrive} | {_fmt(r['fallbacks'], 'd') if r['fallbacks'] is not None else '—'} "
-            f"| {r['metrics_s']:.1f} | {r['peak_mb']:.0f}{' (spilled)' if r.get('record') == 'spilled' else ''} "
-            f"| {r['load_start']:.1f}–{r['load_end']:.1f} |")
-
-
-HEADER = ("| case | N | method | flown | decide µs/agent-step | loop µs/agent-step | loop CPU µs/agent-step "
-          "| min distance / r_pz (m) "
-          "| pz intrusions | collisions | arrived | last arrival (s) | fallbacks | metrics s | peak MB | load |\n"
-          "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
-
-
-def _machine() -> str:
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=Path(__file__).parent).stdout.strip()
-    except OSError:
-        commit = "?"
-    from vo3d_opt.baselines.rvo2 import version
-
-    return (f"{platform.platform()}; {os.cpu_count()} CPUs; Python {platform.python_version()}; compiled core "
-            f"(C++, nanobind); rvo23d {version()}; commit {commit}; {time.strftime('%Y-%m-%d %H:%M')}")
+def kept(path: Path, append: bool) -> tuple[list[str], list[dict[str, Any]]]:
+    """The commands and rows of an earlier run to keep (``--append``), refused unless that run
+    measured the code of this commit (a page names one commit)."""
+    if not append or not path.exists():
+        return [], []
+    head, rows = read_rows(path)
+    if " + " in commit():  # uncommitted changes: no way to tell two states of them apart
+        raise SystemExit("--append: the tree has uncommitted changes; commit them first")
+    if head.get("commit") != commit():
+        raise SystemExit(f"--append: the rows of {path} were measured at "
+                         f"{head.get('commit', 'an unknown commit')}, not at {commit()}")
+    earlier = head.get("command", [])
+    return ([earlier] if isinstance(earlier, str) else earlier), rows
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -254,11 +232,21 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--cases", nargs="+", choices=CASES, default=["swap", "crossing"])
     ap.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
     ap.add_argument("--max-neighbors", type=int, default=10)
-    ap.add_argument("--max-steps", nargs="*", default=[], metavar="N=K", help="cap the runs of size N at K steps")
-    ap.add_argument("--profile", action="store_true", help="also profile ours on the first steps at N = 1000")
+    ap.add_argument("--max-steps", nargs="*", default=[], metavar="N=K",
+                    help="cap the runs of size N at K steps")
+    ap.add_argument("--profile", action="store_true",
+                    help="also profile ours on the first steps at N = 1000")
     ap.add_argument("--profile-steps", type=int, default=100, metavar="K",
                     help="profile the first K steps (0: the whole run)")
-    ap.add_argument("--out", type=Path, default=RESULTS / "swarm.md")
+    ap.add_argument("--page", choices=sorted(PAGES), default=None,
+                    help="the page's layout (default: rvo2-sphere when that case is the only one)")
+    ap.add_argument("--out", type=Path, default=None, help="default docs/results/PAGE.md; its "
+                    "rows go beside it (.jsonl)")
+    ap.add_argument("--append", action="store_true",
+                    help="keep the rows already beside --out (measured at this commit) and add "
+                    "these")
+    ap.add_argument("--render", action="store_true",
+                    help="write --out again from the rows beside it (runs nothing)")
     ap.add_argument("--one", nargs=3, metavar=("CASE", "N", "METHOD"), help=argparse.SUPPRESS)
     ap.add_argument("--profile-one", nargs=2, metavar=("CASE", "N"), help=argparse.SUPPRESS)
     ap.add_argument("--cap", type=int, default=None, help=argparse.SUPPRESS)
@@ -273,55 +261,49 @@ def main(argv: list[str] | None = None) -> None:
         return
     if args.profile_one:
         steps = args.profile_steps or None
-        print(json.dumps(profile_run(args.profile_one[0], int(args.profile_one[1]), args.max_neighbors, steps)))
+        case, n = args.profile_one
+        print(json.dumps(profile_run(case, int(n), args.max_neighbors, steps)))
         return
+    page_name = args.page or ("rvo2-sphere" if args.cases == ["rvo2-sphere"] else "swarm")
+    out = args.out or RESULTS / f"{page_name}.md"
+    rows_file = out.with_suffix(".jsonl")
+    render = PAGES[page_name]
+    if args.render:
+        head, rows = read_rows(rows_file)
+        write_page(out, render(rows, head["machine"], head["command"]))
+        print(f"wrote {out} from {rows_file}", file=sys.stderr)
+        return
+    earlier, rows = kept(rows_file, args.append)
+    command = [*earlier, command_line()]
+
+    def flush() -> None:
+        from vo3d_opt.baselines.rvo2 import version
+
+        machine = machine_line("compiled core (C++, nanobind)", f"rvo23d {version()}")
+        write_rows(rows_file, rows, machine=machine, command=command)
+        write_page(out, render(rows, machine, command))
+
     caps = {int(k): int(v) for k, v in (item.split("=") for item in args.max_steps)}
-    lines = [f"# Swarm benchmark ({Path(__file__).name})", "", _machine(), "",
-             f"max_neighbors {args.max_neighbors} for both methods; swap and crossing: dt 0.2 s, 0-4 m/s, "
-             "sensing 55 m; rvo2-sphere: RVO2-3D's own Sphere example (dt 0.125 s, 0-2 m/s, sensing 15 m).", "",
-             HEADER]
-    jsonl = args.out.with_suffix(".jsonl")
-    jsonl.write_text("")
-
-    def flush(extra: list[str] = ()) -> None:
-        args.out.write_text("\n".join(lines + list(extra)) + "\n")
-
-    flush()
     for case in args.cases:
         for n in [812] if case == "rvo2-sphere" else args.sizes:
             for method in args.methods:
-                cmd = [sys.executable, __file__, "--one", case, str(n), method, "--max-neighbors",
-                       str(args.max_neighbors)] + (["--cap", str(caps[n])] if n in caps else [])
-                res = subprocess.run(cmd, capture_output=True, text=True)
-                if res.returncode != 0:
-                    lines.append(f"| {case} | {n} | {method} | failed: {res.stderr.strip().splitlines()[-1:]} |")
-                    flush()
-                    continue
-                row = json.loads(res.stdout.strip().splitlines()[-1])
-                with jsonl.open("a") as fh:
-                    fh.write(json.dumps(row) + "\n")
-                lines.append(table_row(row))
-                print(lines[-1], flush=True)
+                cap = ["--cap", str(caps[n])] if n in caps else []
+                got = child(["--one", case, str(n), method, "--max-neighbors",
+                             str(args.max_neighbors), *cap])
+                failed = {"kind": "failed", "case": case, "n": n, "method": method, "error": got}
+                rows.append(got if isinstance(got, dict) else failed)
+                print(table_row(rows[-1]), file=sys.stderr, flush=True)
                 flush()
     if args.profile:
-        flown = f"first {args.profile_steps} steps" if args.profile_steps else "the whole run"
-        lines += ["", f"Where ours spends its time (1 thread, {flown} at N = 1000, µs per agent-step):", "",
-                  "| case | checks | k-d tree + neighbour lists | compiled decisions | of which row building "
-                  "| select_many total | rest of the loop | metrics | load |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for case in args.cases:
-            res = subprocess.run([sys.executable, __file__, "--profile-one", case, "1000", "--max-neighbors",
-                                  str(args.max_neighbors), "--profile-steps", str(args.profile_steps)],
-                                 capture_output=True, text=True)
-            if res.returncode != 0:
-                lines.append(f"| {case} | failed: {res.stderr.strip().splitlines()[-1:]} |")
-                continue
-            p = json.loads(res.stdout.strip().splitlines()[-1])
-            lines.append(f"| {case} | {p['checks_us']:.2f} | {p['tree_us']:.2f} | {p['kernel_us']:.2f} "
-                         f"| {_fmt(p['rows_us'], '.2f')} | {p['select_many_us']:.2f} | {p['loop_rest_us']:.2f} "
-                         f"| {p['metrics_us']:.2f} | {p['load']:.1f} |")
-            print(lines[-1], flush=True)
+            got = child(["--profile-one", case, "1000", "--max-neighbors", str(args.max_neighbors),
+                         "--profile-steps", str(args.profile_steps)])
+            failed = {"kind": "failed", "case": case, "n": 1000, "method": "profile", "error": got}
+            rows.append({**got, "kind": "profile", "profile_steps": args.profile_steps}
+                        if isinstance(got, dict) else failed)
             flush()
     flush()
+    print(f"wrote {out} and {rows_file}", file=sys.stderr)
 
 
 if __name__ == "__main__":

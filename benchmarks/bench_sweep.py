@@ -12,30 +12,29 @@ git into a temporary directory and its decision kernel compiled ahead of time th
   per worker;
 * rows (``--rows FAMILY=N ...``): the same N encounters of each family flown by both, compared
   column by column (all but the timing columns; ``FAMILY:METHOD=N`` for another method than
-  vo3d, e.g. ``pair:rvo2=2000``); ``--old-rows DIR`` reuses the old code's rows
-  saved by an earlier run (``--save-old DIR``), which takes the old code long to fly.
+  vo3d, e.g. ``pair:rvo2=2000``); ``--old-rows DIR`` reuses the old code's rows and wall
+  times saved by an earlier run (``--save-old DIR``), which takes the old code long to fly.
 
     python benchmarks/bench_sweep.py [--family pair] [--n 2000] [--old-n 300]
         [--workers 1 2] [--rows pair=2000 group=2000 ...] [--old-rev REV]
         [--save-old DIR | --old-rows DIR] [--results docs/results/sweep-throughput.md]
 
-Writes a markdown page (machine, date and commit at the top) to ``--results``.
+Writes the whole page (``pages.py``: the machine line at the top) to ``--results``.
 """
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
-import platform
 import shutil
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
-from run_sweeps import cpu_model  # this folder's: the same machine line
+from pages import RESULTS, command_line, machine_line, write_page
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -55,11 +54,6 @@ def main():
 if __name__ == "__main__":
     main()
 """
-
-
-def git(*args: str) -> str:
-    return subprocess.run(["git", *args], cwd=ROOT, check=True, capture_output=True,
-                          text=True).stdout.strip()
 
 
 def old_tree(rev: str, where: Path) -> Path:
@@ -103,73 +97,111 @@ def compare(old: pd.DataFrame, new: pd.DataFrame) -> tuple[int, int, list[str]]:
     return n, len(cols), missing + differ
 
 
-def header(args: argparse.Namespace) -> list[str]:
-    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
-    return [
-        "# Sweep throughput and rows: this code against the code before (`bench_sweep.py`)",
-        "",
-        f"{datetime.date.today()}, commit {git('rev-parse', '--short', 'HEAD')} against "
-        f"{args.old_rev}; {cpu_model()}, {os.cpu_count()} CPUs, shared with other sessions "
-        f"(load average {', '.join(f'{x:.2f}' for x in load)} at the end); "
-        f"{platform.python_implementation()} {platform.python_version()}, "
-        f"{platform.machine()} {platform.system()}.",
-        "",
-    ]
-
-
-def throughput(args: argparse.Namespace, tree: Path, tmp: Path) -> tuple[list[str], dict]:
-    lines = [
-        f"## Throughput: `{args.family}`, seed 0, the default method (vo3d, preset safe)",
-        "",
-        "| code | workers | encounters | setup s | wall s | encounters/s | per worker/s |",
-        "|---|---:|---:|---:|---:|---:|---:|",
-    ]
-    rows = {}
+def throughput(args: argparse.Namespace, tree: Path, tmp: Path) -> dict[str, Any]:
+    """Encounters per second of ``--family`` before and now on each worker count, and how the
+    rows of the encounters both flew compare."""
+    runs: list[dict[str, Any]] = []
+    rows: dict[str, Path] = {}
     for label, where, n in (("before", tree, args.old_n), ("now", None, args.n)):
         for k in args.workers:
             path = tmp / f"tp-{label}-{k}.parquet"
             s = fly(where, args.family, n, k, path)
             rows.setdefault(label, path)
-            rate = s["encounters_per_second"]
-            lines.append(f"| {label} | {k} | {n} | {s['setup_time']:.1f} | {s['wall_time']:.2f} "
-                         f"| {rate:.3g} | {rate / k:.3g} |")
-            print(lines[-1], file=sys.stderr, flush=True)
+            runs.append({"code": label, "workers": k, "encounters": n, "setup_s": s["setup_time"],
+                         "wall_s": s["wall_time"], "rate": s["encounters_per_second"]})
+            print(runs[-1], file=sys.stderr, flush=True)
     n, c, bad = compare(pd.read_parquet(rows["before"]), pd.read_parquet(rows["now"]))
-    lines += ["", f"Rows of the {n} encounters both flew: {c} columns compared (all but the "
-              f"timing columns), {'none differs' if not bad else 'DIFFER: ' + ', '.join(bad)}.",
-              ""]
-    return lines, rows
+    return {"family": args.family, "runs": runs, "compared": n, "columns": c, "differ": bad}
 
 
-def rows_check(args: argparse.Namespace, tree: Path, tmp: Path) -> list[str]:
-    lines = [
-        "## Rows before and now, family by family (2 workers, seed 0)",
-        "",
-        "| family | method | encounters | columns compared | differing columns | wall s before "
-        "| wall s now |",
-        "|---|---|---:|---:|---|---:|---:|",
-    ]
+def rows_check(args: argparse.Namespace, tree: Path, tmp: Path) -> list[dict[str, Any]]:
+    """Each ``--rows`` family's encounters flown by both codes (or the old rows saved by an
+    earlier run), compared column by column."""
+    out = []
     for item in args.rows:
         name, _, count = item.partition("=")
         family, _, method = name.partition(":")
         method, n = method or "vo3d", int(count)
         saved = (args.old_rows / f"{family}-{method}.parquet") if args.old_rows else None
         if saved is not None and saved.exists():
-            old, wall_old = pd.read_parquet(saved), "(saved)"
+            old = pd.read_parquet(saved)
+            meta = saved.with_suffix(".json")
+            wall_old = json.loads(meta.read_text())["wall_time"] if meta.exists() else None
+            reused = True
         else:
             path = tmp / f"rows-before-{family}-{method}.parquet"
             s = fly(tree, family, n, 2, path, method)
-            old, wall_old = pd.read_parquet(path), f"{s['wall_time']:.0f}"
+            old, wall_old, reused = pd.read_parquet(path), s["wall_time"], False
             if args.save_old:
                 args.save_old.mkdir(parents=True, exist_ok=True)
                 shutil.copy(path, args.save_old / f"{family}-{method}.parquet")
+                (args.save_old / f"{family}-{method}.json").write_text(
+                    json.dumps({"wall_time": s["wall_time"]}))
         path = tmp / f"rows-now-{family}-{method}.parquet"
         s = fly(None, family, min(n, len(old)), 2, path, method)
         got, cols, bad = compare(old, pd.read_parquet(path))
-        lines.append(f"| {family} | {method} | {got} | {cols} | {', '.join(bad) or 'none'} | "
-                     f"{wall_old} | {s['wall_time']:.0f} |")
-        print(lines[-1], file=sys.stderr, flush=True)
+        out.append({"family": family, "method": method, "encounters": got, "columns": cols,
+                    "differ": bad, "wall_before": wall_old, "before_saved": reused,
+                    "wall_now": s["wall_time"]})
+        print(out[-1], file=sys.stderr, flush=True)
+    return out
+
+
+def throughput_section(tp: dict[str, Any]) -> list[str]:
+    lines = [f"## Throughput: `{tp['family']}`, seed 0, the default method (vo3d, preset safe)",
+             "", "| code | workers | encounters | setup s | wall s | encounters/s | per worker/s |",
+             "|---|---:|---:|---:|---:|---:|---:|"]
+    for r in tp["runs"]:
+        lines.append(f"| {r['code']} | {r['workers']} | {r['encounters']} | {r['setup_s']:.1f} "
+                     f"| {r['wall_s']:.2f} | {r['rate']:.3g} | {r['rate'] / r['workers']:.3g} |")
+    same = "none differs" if not tp["differ"] else "DIFFER: " + ", ".join(tp["differ"])
+    lines += ["", f"Rows of the {tp['compared']} encounters both flew: {tp['columns']} columns "
+              f"compared (all but the timing columns), {same}.", ""]
+    rate = {(r["code"], r["workers"]): r["rate"] for r in tp["runs"]}
+    if ("now", 1) in rate and ("before", 1) in rate:
+        lines.append(f"Per core (the one-worker rows): {rate[('now', 1)]:.3g} encounters/s now "
+                     f"against {rate[('before', 1)]:.3g} before, "
+                     f"{rate[('now', 1)] / rate[('before', 1)]:.3g} times.")
+    more = [f"{rate[(code, 2)] / rate[(code, 1)]:.2f} times {code}"
+            for code in ("before", "now") if (code, 1) in rate and (code, 2) in rate]
+    if more:
+        lines.append("Two workers against one: " + " and ".join(more) + " (below 2 when the "
+                     "machine's second core is busy with other work: see the load in the machine "
+                     "line).")
     return [*lines, ""]
+
+
+def rows_section(checks: list[dict[str, Any]]) -> list[str]:
+    lines = ["## Rows before and now, family by family (2 workers, seed 0)", "",
+             "| family | method | encounters | columns compared | differing columns "
+             "| wall s before | wall s now |", "|---|---|---:|---:|---|---:|---:|"]
+    for r in checks:
+        before = "–" if r["wall_before"] is None else f"{r['wall_before']:.0f}"
+        before += " (saved)" if r["before_saved"] else ""
+        lines.append(f"| {r['family']} | {r['method']} | {r['encounters']} | {r['columns']} | "
+                     f"{', '.join(r['differ']) or 'none'} | {before} | {r['wall_now']:.0f} |")
+    if any(r["before_saved"] for r in checks):
+        lines += ["", "\"(saved)\": the old code's rows were flown by an earlier run of this "
+                  "script (`--save-old`) and reused (`--old-rows`); its wall time is that run's, "
+                  "under that run's load, so the two wall columns are not comparable."]
+    return [*lines, ""]
+
+
+def page(machine: str, command: str, tp: dict[str, Any] | None,
+         checks: list[dict[str, Any]]) -> str:
+    """The whole page from ``throughput``'s and ``rows_check``'s records."""
+    lines = ["# Sweep throughput and rows: this code against the code before", "", machine, "",
+             f"`{command}`: each measurement a fresh process running `run_sweep` on a fresh local "
+             "Dask cluster (one thread per worker process), the clock from the first submission "
+             "to the last row, after every worker has flown its warm-up encounter. The code "
+             "before is the revision named in the machine line, checked out from git and its "
+             "decision kernel compiled ahead of time. Rows are compared column by column, all but "
+             "the timing columns (`TIMING_COLUMNS`).", ""]
+    if tp is not None:
+        lines += throughput_section(tp)
+    if checks:
+        lines += rows_section(checks)
+    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -183,19 +215,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--save-old", type=Path)
     p.add_argument("--old-rows", type=Path)
     p.add_argument("--no-throughput", action="store_true")
-    p.add_argument("--results", type=Path, default=HERE.parent / "docs" / "results" / "sweep-throughput.md")
+    p.add_argument("--results", type=Path, default=RESULTS / "sweep-throughput.md")
     args = p.parse_args(argv)
 
     work = Path(tempfile.mkdtemp(prefix="bench-sweep-"))
     try:
         tree = old_tree(args.old_rev, work)
-        body: list[str] = []
-        if not args.no_throughput:
-            body += throughput(args, tree, work)[0]
-        if args.rows:
-            body += rows_check(args, tree, work)
-        text = "\n".join(header(args) + body)
-        args.results.write_text(text)
+        tp = None if args.no_throughput else throughput(args, tree, work)
+        checks = rows_check(args, tree, work) if args.rows else []
+        text = page(machine_line(against=args.old_rev), command_line(), tp, checks)
+        write_page(args.results, text)
         print(text)
     finally:
         shutil.rmtree(work, ignore_errors=True)

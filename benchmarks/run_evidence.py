@@ -23,21 +23,16 @@ a scenario file that ``vo3d run`` replays (copied to ``PAGES/FAMILY/``).
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
-import os
-import platform
 import shutil
-import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-from run_sweeps import commit, cpu_model, vo3d_cmd  # this folder's: the same machine line
+from pages import RESULTS, machine_line, write_page
+from run_sweeps import vo3d_cmd, vo3d_sweep  # this folder's
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
 FAMILIES = ("pair", "group", "dense", "lagged", "noisy", "intruder", "rotorpy")
 RVO2 = ("pair", "dense")  # the obstacle-free families: RVO2-3D flies them
 #: The order of the runs of a family: none first (the others' risk ratios need it).
@@ -57,13 +52,8 @@ def run_one(family: str, method: str, n: int, out_root: Path, where: list[str]) 
                         "--out", str(out), "--json", "--resume", *where]
     if method != "none":
         cmd += ["--against", str(out_root / family / "none")]
-    print(" ".join(cmd), file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    with open(out / "sweep.log", "a") as log:
-        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
-    if proc.returncode not in (0, 1):  # 1: some encounters raised (listed in the summary)
-        raise SystemExit(f"{family} ({method}): exit status {proc.returncode}, see {out}/sweep.log")
-    summary = json.loads(proc.stdout)
+    summary = vo3d_sweep(cmd, out, f"{family} ({method})", log_mode="a")
     print(f"  {family} {method}: {summary['encounters']} encounters, this sitting "
           f"{time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
     return summary
@@ -162,9 +152,10 @@ def page(family: str, out_root: Path, pages: Path) -> str:
     lines = [
         f"# Sweep results: `{family}`",
         "",
-        f"{datetime.date.today()}, commit {commit()}; {cpu_model()}, {os.cpu_count()} CPUs; "
-        f"{platform.python_implementation()} {platform.python_version()}; seed 0 (encounter i "
-        f"of every method is the same encounter). Made by `benchmarks/run_evidence.py`.",
+        machine_line(),
+        "",
+        "`python benchmarks/run_evidence.py`, seed 0 (encounter i of every method is the same "
+        "encounter).",
         "",
         "Rates are per encounter (an encounter counts once however many pairs collided or "
         "intruded), with two-sided 95 % Clopper–Pearson intervals and the one-sided 95 % upper "
@@ -199,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     where.add_argument("--workers", type=int)
     where.add_argument("--scheduler")
     p.add_argument("--out-root", type=Path, default=Path("/work/evidence"))
-    p.add_argument("--pages", type=Path, default=ROOT / "docs" / "results" / "sweeps")
+    p.add_argument("--pages", type=Path, default=RESULTS / "sweeps")
     p.add_argument("--stages", nargs="+", choices=("sweeps", "pages"), default=["sweeps", "pages"])
     args = p.parse_args(argv)
     place = (["--scheduler", args.scheduler] if args.scheduler else
@@ -213,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
         args.pages.mkdir(parents=True, exist_ok=True)
         for family in args.families:
             path = args.pages / f"{family}.md"
-            path.write_text(page(family, args.out_root, args.pages))
+            write_page(path, page(family, args.out_root, args.pages))
             print(f"wrote {path}", file=sys.stderr)
     return 0
 

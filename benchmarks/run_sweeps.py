@@ -9,14 +9,19 @@ Three stages (all by default, or those named with ``--stages``):
   every family of ``--families``, and ``--method rvo2`` into ``OUT_ROOT/FAMILY-rvo2`` for every
   family of ``--rvo2`` (obstacle-free ones: the same encounters), each as its own process;
   with several ``--seeds``, seed 0 goes there and seed S into ``.../seedS``;
-* ``table``: ``docs/results/sweeps.md`` from the runs found under ``OUT_ROOT`` and
-  ``throughput.md`` (so the table can be rebuilt without flying anything). The runs of one
-  family and method with different seeds are independent encounters (the stream of encounter
-  i is seeded by (seed, i)): their rows are pooled into one line, rates and bounds recomputed.
+* ``table``: the whole page ``docs/results/sweeps.md`` from the runs found under ``OUT_ROOT``
+  and ``throughput.md`` (so the page can be rebuilt without flying anything), one section per
+  configuration: ``OUT_ROOT``'s, then those of ``--also OUT_ROOT ...`` (runs flown with other
+  ``--selector-option``). The runs of one family and method with different seeds are
+  independent encounters (the stream of encounter i is seeded by (seed, i)): their rows are
+  pooled into one line, rates and bounds recomputed. Each run records the machine line and
+  commit it flew at (``machine.json``); the page names them, and refuses runs of several
+  commits.
 
     python benchmarks/run_sweeps.py --n 10000 [--families pair group dense lagged]
         [--rvo2 pair dense] [--seeds 0] [--workers 2] [--out-root /work/sweep-out]
         [--stages throughput sweeps table] [--results docs/results/sweeps.md]
+        [--also OUT_ROOT ...]
         [--selector-option KEY=VALUE ...]
 
 ``--n`` is one N for every family, or ``FAMILY=N`` items for per-family counts.
@@ -27,18 +32,14 @@ throughput stage's); the table names the options beside the method. Such runs ne
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
-import os
-import platform
 import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-#: The docs' results pages, which these benchmarks write.
-RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
+from pages import RESULTS, commit, machine_line, write_page
 
 HERE = Path(__file__).resolve().parent
 FAMILIES = ("pair", "group", "dense", "lagged")
@@ -96,6 +97,17 @@ def pooled(dirs: list[Path]) -> dict[str, Any]:
     return s
 
 
+def vo3d_sweep(cmd: list[str], out: Path, what: str, log_mode: str = "w") -> dict[str, Any]:
+    """Run one ``vo3d sweep`` command, its stderr (progress) into ``out/sweep.log`` (``"a"``:
+    appended to it); its JSON summary."""
+    print(" ".join(cmd), file=sys.stderr, flush=True)
+    with open(out / "sweep.log", log_mode) as log:
+        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
+    if proc.returncode not in (0, 1):  # 1: some encounters raised (listed in the summary)
+        raise SystemExit(f"{what}: exit status {proc.returncode}, see {out}/sweep.log")
+    return json.loads(proc.stdout)
+
+
 def run_one(family: str, n: int, *, seed: int, workers: int, method: str, out: Path,
             options: list[str]) -> None:
     """One ``vo3d sweep`` process; its stderr (progress) goes to ``out/sweep.log``."""
@@ -104,14 +116,10 @@ def run_one(family: str, n: int, *, seed: int, workers: int, method: str, out: P
                         str(workers), "--method", method, "--out", str(out), "--json"]
     if method == "vo3d":
         cmd += [arg for option in options for arg in ("-o", option)]
-    print(" ".join(cmd), file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    with open(out / "sweep.log", "w") as log:
-        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
-    if proc.returncode not in (0, 1):  # 1: some encounters raised (listed in the summary)
-        raise SystemExit(f"{family} ({method}): exit status {proc.returncode}, see {out}/sweep.log")
-    summary = json.loads(proc.stdout)
+    summary = vo3d_sweep(cmd, out, f"{family} ({method})")
     (out / "command.txt").write_text(" ".join(cmd) + "\n")
+    (out / "machine.json").write_text(json.dumps({"machine": machine_line(), "commit": commit()}))
     print(f"  {family} ({method}): {summary['encounters']} encounters in "
           f"{time.perf_counter() - t0:.0f} s, collisions {summary['encounters_with_collision']}, "
           f"intrusions {summary['encounters_with_intrusion']}, errors {len(summary['errors'])}",
@@ -140,82 +148,155 @@ def _pct(x: float) -> str:
     return f"{x:.3%}" if x < 0.01 else f"{x:.2%}"
 
 
-def summary_row(s: dict[str, Any]) -> str:
-    r = s["rates"]
+def method_label(s: dict[str, Any]) -> str:
     options = ", ".join(f"{k}: {json.dumps(v)}" for k, v in s.get("selector_options", {}).items())
     label = "plane_qp" + (f"; {options}" if options else "")
-    name = f"ours ({label})" if s["method"] == "vo3d" else "RVO2-3D"
-    return (f"| {s['family']} | {name} | {s['encounters']} | {len(s['errors'])} | "
+    return f"ours ({label})" if s["method"] == "vo3d" else "RVO2-3D"
+
+
+def summary_row(s: dict[str, Any]) -> str:
+    r = s["rates"]
+    fallbacks = (f"{r['fallback']['events']} ({s['fallbacks']})" if "fallback" in r
+                 else "–")  # RVO2-3D has none
+    return (f"| {s['family']} | {method_label(s)} | {s['encounters']} | {len(s['errors'])} | "
             f"{s['encounters_with_collision']} ({s['collisions']}) | "
             f"{s['encounters_with_intrusion']} ({s['pz_intrusions']}) | {s['deep_intrusions']} | "
             f"{s['encounters_not_all_arrived']} ({s['not_arrived']}) | "
             f"{r['limit_violation']['events']} ({s['limit_violations']}) | "
+            f"{fallbacks} | "
             f"{_pct(s['collision_rate_upper95'])} | {_rate(r['intrusion'])} | "
             f"{s['min_normalised_distance']:.3f} | {s['wall_time']:.0f} | "
             f"{s['encounters_per_second']:.2f} |")
 
 
-def commit() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=HERE, check=True,
-                              capture_output=True, text=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "?"
+TABLE = ("| family | method | N | errors | collisions | intrusions | deeper than 1 % "
+         "| not all arrived | limit violations | fallbacks | collision rate upper 95 % "
+         "| intrusion rate [95 % CI] | min d/r_pz | wall s | encounters/s |\n"
+         "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+COUNTS = ("Counts are encounters (and events in brackets: vehicle pairs for collisions and "
+          "intrusions, agents for not arrived, samples for limit violations, decisions for "
+          "fallbacks). Rates per encounter with Clopper–Pearson bounds: collision one-sided upper "
+          "95 %, intrusion two-sided 95 % CI. min d/r_pz: the smallest closest approach over the "
+          "larger protected-zone radius of the pair, over all encounters; \"deeper than 1 %\": "
+          f"encounters where it fell below {DEEP} (vehicle pairs). RVO2-3D flies the same "
+          "encounters (obstacle-free families only), every agent with radius max(r_pz)/2.")
 
 
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
+def run_dirs(path: Path) -> list[Path]:
+    """A run's directory and its other seeds' (``seedS``), those that finished."""
+    return [d for d in [path, *sorted(path.glob("seed*"))] if (d / "summary.json").exists()]
 
 
-def table(out_root: Path, families: list[str], rvo2: list[str]) -> str:
+def _events(s: dict[str, Any]) -> str:
+    said = [f"{s['encounters_with_collision']} with a collision",
+            f"{s['encounters_with_intrusion']} with an intrusion",
+            f"{s['encounters_not_all_arrived']} with an agent short of its goal",
+            f"{s['rates']['limit_violation']['events']} with a limit broken",
+            f"{len(s['errors'])} that raised"]
+    return ", ".join(x for x in said if not x.startswith("0 "))
+
+
+def findings(summaries: dict[str, dict[str, Any]]) -> list[str]:
+    """Ours family by family, and RVO2-3D beside it."""
+    ours = {s["family"]: s for s in summaries.values() if s["method"] == "vo3d"}
+    clean = [f"`{f}`" for f, s in ours.items() if not _events(s)]
+    out = []
+    if clean:
+        out.append(f"- Ours: no collision, no intrusion, every agent home, no limit broken and no "
+                   f"error in any encounter of {', '.join(clean)}.")
+    out += [f"- Ours, `{f}`: of {s['encounters']:,} encounters {_events(s)}."
+            for f, s in ours.items() if _events(s)]
+    for s in summaries.values():
+        if s["method"] != "vo3d":
+            r = s["rates"]["intrusion"]
+            out.append(f"- {method_label(s)} on the same encounters of `{s['family']}`: an "
+                       f"intrusion in {r['rate']:.2%} of them ({s['deep_intrusions']:,} deeper "
+                       f"than 1 %), {s['encounters_with_collision']:,} with a collision.")
+    return out
+
+
+def provenance(dirs: list[Path]) -> list[str]:
+    """The command of each run (its ``command.txt``) and its wall time."""
+    out = []
+    for d in dirs:
+        words = (d / "command.txt").read_text().split() if (d / "command.txt").exists() else []
+        if words[1:3] == ["-m", "vo3d_opt.cli"]:
+            words = ["vo3d", *words[3:]]
+        elif words:
+            words[0] = Path(words[0]).name
+        if "--out" in words:  # a directory of this machine's, not the page's business
+            k = words.index("--out")
+            del words[k:k + 2]
+        wall = json.loads((d / "summary.json").read_text())["wall_time"]
+        out.append(f"- `{' '.join(words) or '?'}` ({wall:.0f} s)")
+    return out
+
+
+def section(out_root: Path, families: list[str], rvo2: list[str]) -> tuple[list[str], list[Path]]:
+    """One configuration's table (the runs under ``out_root``), its findings and its runs."""
     runs = [out_root / f for f in families] + [out_root / f"{f}-rvo2" for f in rvo2]
-    summaries = {}
+    summaries, dirs = {}, []
     for path in runs:
-        dirs = [d for d in [path, *sorted(path.glob("seed*"))] if (d / "summary.json").exists()]
-        if dirs:
-            summaries[path.name] = pooled(dirs)
+        found = run_dirs(path)
+        if found:
+            summaries[path.name] = pooled(found)
+            dirs += found
         else:
             print(f"missing {path}/summary.json: left out of the table", file=sys.stderr)
     first = next(iter(summaries.values()), {})
     seeds = sorted({x for s in summaries.values()
                     for x in (s["seed"] if isinstance(s["seed"], list) else [s["seed"]])})
-    lines = [
-        "# Sweep results (`benchmarks/run_sweeps.py`)",
-        "",
-        f"{datetime.date.today()}, commit {commit()}; {cpu_model()}, {os.cpu_count()} CPUs "
-        f"shared with other sessions (load average during the runs not controlled); "
-        f"{platform.python_implementation()} {platform.python_version()}; seeds "
-        f"{', '.join(map(str, seeds))} (encounters 0..N_seed-1 of each), "
-        f"{first.get('workers', '?')} local Dask workers.",
-        "",
-        "Counts are encounters (and events in brackets: vehicle pairs for collisions and "
-        "intrusions, agents for not arrived, samples for limit violations). Rates per encounter "
-        "with Clopper–Pearson bounds: collision one-sided upper 95 %, intrusion two-sided 95 % "
-        "CI. min d/r_pz: the smallest closest approach over the larger protected-zone radius "
-        "of the pair, over all encounters; \"deeper than 1 %\": encounters where it fell below "
-        "0.99 (vehicle pairs). RVO2-3D flies the same encounters (obstacle-free "
-        "families only), every agent with radius max(r_pz)/2.",
-        "",
-        "| family | method | N | errors | collisions | intrusions | deeper than 1 % "
-        "| not all arrived "
-        "| limit violations | collision rate upper 95 % | intrusion rate [95 % CI] "
-        "| min d/r_pz | wall s | encounters/s |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
+    options = next((s.get("selector_options") or {} for s in summaries.values()
+                    if s["method"] == "vo3d"), {})
+    title = ("With the defaults (the `safe` preset)" if not options else "With " + ", ".join(
+        f"`-o {k}={json.dumps(v)}`" for k, v in options.items()))
+    lines = [f"## {title}", "", f"Seeds {', '.join(map(str, seeds))} (encounters 0..N_seed-1 of "
+             f"each), {first.get('workers', '?')} local Dask workers.", "", TABLE]
     for family in families:  # ours, then RVO2-3D on the same encounters beside it
-        for key in (family, f"{family}-rvo2"):
-            if key in summaries:
-                lines.append(summary_row(summaries[key]))
-    bench = out_root / "throughput.md"
+        lines += [summary_row(summaries[k]) for k in (family, f"{family}-rvo2") if k in summaries]
+    lines += ["", *findings(summaries), "", "Runs:", "", *provenance(dirs), ""]
+    return lines, dirs
+
+
+def page_machine(dirs: list[Path]) -> str:
+    """The machine line the runs recorded (the last one's), when every run flew one commit;
+    without records, this machine now."""
+    files = [d / "machine.json" for d in dirs if (d / "machine.json").exists()]
+    records = [json.loads(f.read_text()) | {"mtime": f.stat().st_mtime} for f in files]
+    commits = sorted({r["commit"] for r in records})
+    if len(commits) > 1:
+        raise SystemExit(f"the runs were flown at several commits ({', '.join(commits)}): a page "
+                         "names one; fly them again or give them pages of their own")
+    if not records or len(records) < len(dirs):
+        print("some runs recorded no machine line: the page takes this machine's, now",
+              file=sys.stderr)
+        return machine_line()
+    return max(records, key=lambda r: r["mtime"])["machine"]
+
+
+def throughput_section(bench: Path) -> list[str]:
+    """bench_sweep.py's page of the throughput stage, its headings one level down and its own
+    title and machine line left out (the runs share this page's)."""
+    body = bench.read_text().splitlines()
+    start = next((i for i, line in enumerate(body) if line.startswith("`")), len(body))
+    return ["## Throughput (`benchmarks/bench_sweep.py`)", "",
+            *("#" + line if line.startswith("#") else line for line in body[start:])]
+
+
+def table(out_roots: list[Path], families: list[str], rvo2: list[str]) -> str:
+    sections, dirs = [], []
+    for out_root in out_roots:
+        lines, found = section(out_root, families, rvo2)
+        sections += lines
+        dirs += found
+    bench = out_roots[0] / "throughput.md"
     if bench.exists():
-        lines += ["", "## Throughput (`benchmarks/bench_sweep.py`)", "", bench.read_text().strip()]
-    return "\n".join(lines) + "\n"
+        sections += throughput_section(bench)
+    head = ["# Monte Carlo sweeps", "", page_machine(dirs), "",
+            "`python benchmarks/run_sweeps.py`: each section one configuration flown over the "
+            "same encounters (`vo3d sweep`, one process a family and method; each section lists "
+            "its runs).", "", COUNTS, ""]
+    return "\n".join(head + sections)
 
 
 def check_options(args: argparse.Namespace, p: argparse.ArgumentParser) -> None:
@@ -245,6 +326,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--bench-family", default="pair")
     p.add_argument("--bench-n", type=int, default=300)
     p.add_argument("--results", type=Path, default=RESULTS / "sweeps.md")
+    p.add_argument("--also", type=Path, nargs="*", default=[], metavar="OUT_ROOT",
+                   help="table stage: the runs of other configurations (e.g. flown with -o "
+                        "under another --out-root), each a section of the page")
     p.add_argument("--selector-option", "-o", action="append", default=[], metavar="KEY=VALUE",
                    help="passed to every vo3d sweep")
     args = p.parse_args(argv)
@@ -262,8 +346,8 @@ def main(argv: list[str] | None = None) -> int:
                         out=run_dir(args.out_root, family, method, seed),
                         options=args.selector_option)
     if "table" in args.stages:
-        text = table(args.out_root, args.families, args.rvo2)
-        args.results.write_text(text)
+        text = table([args.out_root, *args.also], args.families, args.rvo2)
+        write_page(args.results, text)
         print(text)
     return 0
 

@@ -1,30 +1,30 @@
-"""What the vehicles of the sphere swap did before they collided (docs/results/swarm.md): the swap flown
+"""What the vehicles of the sphere swap did before they collided: the swap flown
 with ours on every core (``select_many``, max_neighbors 10, the simulator's defaults), then, for
 the first pairs that came within ``--within`` m of each other at a step, the steps before:
 their distances, speeds and statuses, and whether each had the other among its neighbours.
 
     python benchmarks/swap_collisions.py [--n 10000] [--within 1.0] [--pairs 200]
+
+An investigation, not a results page: it prints what it finds (under the machine line of
+``pages.py``).
 """
 from __future__ import annotations
 
 import argparse
 import collections
 import json
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
+from bench_swarm import scenario  # this folder's
+from pages import machine_line
 from scipy.spatial import cKDTree
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_swarm import scenario  # noqa: E402
-
-from vo3d_opt import swarm  # noqa: E402
-from vo3d_opt.swarm import cores  # noqa: E402
-from vo3d_opt.sim.deciders import SwarmSelect  # noqa: E402
-from vo3d_opt.sim.metrics import summarize  # noqa: E402
-from vo3d_opt.sim.simulator import fly, scenario_selector  # noqa: E402
+from vo3d_opt import swarm
+from vo3d_opt.sim.deciders import SwarmSelect
+from vo3d_opt.sim.metrics import summarize
+from vo3d_opt.sim.simulator import fly, scenario_selector
+from vo3d_opt.swarm import cores
 
 BEFORE = 4  # steps shown before a pair's first step within range
 
@@ -58,7 +58,8 @@ def main() -> None:
     step = SwarmSelect(sc, sel, max_neighbors=10, threads=cores())
     t0 = time.perf_counter()
     rec = fly(sc, step, progress=False)
-    print(f"# sphere swap, N = {args.n}, flown in {time.perf_counter() - t0:.0f} s\n")
+    print(f"# sphere swap, N = {args.n}, flown in {time.perf_counter() - t0:.0f} s\n\n"
+          f"{machine_line()}\n")
     s = summarize(rec)
     keys = ("min_vehicle_distance", "pz_intrusions", "collisions", "reached", "arrival_time_max",
             "fallbacks", "status_counts")
