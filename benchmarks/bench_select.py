@@ -72,15 +72,16 @@ def time_calls(selector: VelocitySelector, cases: list[dict], repeat: int) -> tu
 def kernel_times(selector: VelocitySelector, cases: list[dict], repeat: int) -> np.ndarray:
     """µs per call of the compiled decision ``select`` runs (``kernel.decide``, the compiled
     core) alone, on the arrays ``select`` builds for each case."""
-    cfg, out, decide = selector.options.config, np.empty(kernel.OUT_SIZE), kernel.decide
+    out, decide = np.empty(kernel.OUT_SIZE), kernel.decide
     args = [(kw["own"].position, kw["own"].velocity, np.asarray(kw["preferred_velocity"], dtype=float),
-             neighbor_rows(kw["neighbors"]), prism_rows(kw["obstacles"]), bounds_array(kw["limits"], kw["dt"]))
+             neighbor_rows(kw["neighbors"]), prism_rows(kw["obstacles"]), bounds_array(kw["limits"], kw["dt"]),
+             selector.options_for(kw["limits"].speed[1], kw["dt"]).config)
             for kw in cases]
     times = []
     for _ in range(repeat):
         for a in args:
             t0 = time.perf_counter()
-            decide(*a, cfg, out)
+            decide(*a, out)
             times.append(time.perf_counter() - t0)
     return np.array(times) * 1e6
 
