@@ -21,49 +21,35 @@ _A = np.ndarray
 # kind, curve, chord, chord_cs, apex, symmetry, halfplane (Sections' arrays)
 _Sections = tuple[_A, _A, _A, _A, _A, _A, _A]
 
+class Corrections:
+    tg_range: bool
+    symmetry_abs: bool
+    triangle: bool
+    base_chord: bool
+    vo_lines: bool
+    virtual_sphere: bool
+    def __init__(self) -> None: ...
+
 class Config:
-    def __init__(
-        self,
-        *,
-        reciprocal: bool,
-        horizon: float,
-        pz_buffer: float,
-        margin: float,
-        corrections: Sequence[bool],
-        phi: np.ndarray,
-        cos_phi: np.ndarray,
-        sin_phi: np.ndarray,
-        t: np.ndarray,
-        cos_t: np.ndarray,
-        sin_t: np.ndarray,
-        speed_levels: int,
-        heading_step: float,
-        closing_guard: bool,
-        least_bad_escape: bool,
-        fine_fallback: bool,
-    ) -> None: ...
-    @property
-    def reciprocal(self) -> bool: ...
-    @property
-    def horizon(self) -> float: ...
-    @property
-    def pz_buffer(self) -> float: ...
-    @property
-    def margin(self) -> float: ...
-    @property
-    def phi(self) -> np.ndarray: ...
-    @property
-    def t(self) -> np.ndarray: ...
-    @property
-    def speed_levels(self) -> int: ...
-    @property
-    def heading_step(self) -> float: ...
-    @property
-    def closing_guard(self) -> bool: ...
-    @property
-    def least_bad_escape(self) -> bool: ...
-    @property
-    def fine_fallback(self) -> bool: ...
+    """Set field by field; the arrays are read back as lists."""
+
+    reciprocal: bool
+    horizon: float
+    pz_buffer: float
+    margin: float
+    corrections: Corrections
+    phi: Sequence[float]
+    cos_phi: Sequence[float]
+    sin_phi: Sequence[float]
+    t: Sequence[float]
+    cos_t: Sequence[float]
+    sin_t: Sequence[float]
+    speed_levels: int
+    heading_step: float
+    closing_guard: bool
+    least_bad_escape: bool
+    fine_fallback: bool
+    def __init__(self) -> None: ...
 
 class PlaneQPs:
     def __init__(

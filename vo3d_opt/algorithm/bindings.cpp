@@ -28,35 +28,40 @@ NB_MODULE(_core, m) {
     m.attr("LIMIT_TOL") = LIMIT_TOL;
     m.attr("NEVER") = NEVER;
 
+    // The options field by field, named as the Python options they come from where the meaning
+    // is the same (Options.config sets them by name); the core checks them when it reads them.
+    nb::class_<Corrections>(m, "Corrections", "The corrections of the paper's section 3.1 that apply.")
+        .def(nb::init<>())
+        .def_rw("tg_range", &Corrections::tg_range)
+        .def_rw("symmetry_abs", &Corrections::symmetry_abs)
+        .def_rw("triangle", &Corrections::triangle)
+        .def_rw("base_chord", &Corrections::base_chord)
+        .def_rw("vo_lines", &Corrections::vo_lines)
+        .def_rw("virtual_sphere", &Corrections::virtual_sphere);
     nb::class_<Config>(m, "Config", "The formulation options as the core reads them (Options.config).")
-        .def(nb::new_([](bool reciprocal, double horizon, double pz_buffer, double margin,
-                         std::vector<bool> corrections, nb::handle phi, nb::handle cos_phi,
-                         nb::handle sin_phi, nb::handle t, nb::handle cos_t, nb::handle sin_t,
-                         int64_t speed_levels, double heading_step, bool closing_guard,
-                         bool least_bad_escape, bool fine_fallback) {
-                 return make_config(reciprocal, horizon, pz_buffer, margin, corrections, phi,
-                                    cos_phi, sin_phi, t, cos_t, sin_t, speed_levels, heading_step,
-                                    closing_guard, least_bad_escape, fine_fallback);
-             }),
-             nb::kw_only(), "reciprocal"_a, "horizon"_a, "pz_buffer"_a, "margin"_a, "corrections"_a,
-             "phi"_a, "cos_phi"_a, "sin_phi"_a, "t"_a, "cos_t"_a, "sin_t"_a, "speed_levels"_a,
-             "heading_step"_a, "closing_guard"_a, "least_bad_escape"_a, "fine_fallback"_a)
-        .def_ro("reciprocal", &Config::reciprocal)
-        .def_ro("horizon", &Config::horizon)
-        .def_ro("pz_buffer", &Config::pz_buffer)
-        .def_ro("margin", &Config::margin)
-        .def_prop_ro("phi", [](const Config& c) { return numpy(c.phi, {c.phi.size()}); })
-        .def_prop_ro("t", [](const Config& c) { return numpy(c.t, {c.t.size()}); })
-        .def_ro("speed_levels", &Config::speed_levels)
-        .def_ro("heading_step", &Config::heading_step)
-        .def_ro("closing_guard", &Config::closing_guard)
-        .def_ro("least_bad_escape", &Config::least_bad_escape)
-        .def_ro("fine_fallback", &Config::fine_fallback);
+        .def(nb::init<>())
+        .def_rw("reciprocal", &Config::reciprocal)
+        .def_rw("horizon", &Config::horizon)
+        .def_rw("pz_buffer", &Config::pz_buffer)
+        .def_rw("margin", &Config::margin)
+        .def_rw("corrections", &Config::corrections)
+        .def_rw("phi", &Config::phi)
+        .def_rw("cos_phi", &Config::cos_phi)
+        .def_rw("sin_phi", &Config::sin_phi)
+        .def_rw("t", &Config::t)
+        .def_rw("cos_t", &Config::cos_t)
+        .def_rw("sin_t", &Config::sin_t)
+        .def_rw("speed_levels", &Config::speed_levels)
+        .def_rw("heading_step", &Config::heading_step)
+        .def_rw("closing_guard", &Config::closing_guard)
+        .def_rw("least_bad_escape", &Config::least_bad_escape)
+        .def_rw("fine_fallback", &Config::fine_fallback);
 
     // ------------------------------------------------------------------ the decision
     m.def("decide",
           [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs, nb::handle prisms,
-             nb::handle limits, const Config& cfg, nb::handle out) {
+             nb::handle limits, const Config& cfg_in, nb::handle out) {
+              const Config& cfg = checked(cfg_in);
               double P_[3], V[3], W[3];
               vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
               In<double> nb_ = arr<double>(nbrs, "nbrs", {ANY, 8});
@@ -76,8 +81,9 @@ NB_MODULE(_core, m) {
           "One decision (decide.hpp) into out (7,): velocity, status, phi, round, solved.");
 
     m.def("decide_many",
-          [](nb::handle swarm, const Config& cfg, int64_t threads, nb::handle out, int64_t lo,
+          [](nb::handle swarm, const Config& cfg_in, int64_t threads, nb::handle out, int64_t lo,
              int64_t hi) {
+              const Config& cfg = checked(cfg_in);
               nb::tuple t = fields(swarm, "swarm", 11);
               In<double> agents = arr<double>(t[0], "agents", {ANY, AGENT_COLUMNS});
               int64_t N = agents.shape(0);
@@ -366,14 +372,16 @@ NB_MODULE(_core, m) {
 
     // ------------------------------------------------------------------ build_vos and limits
     m.def("build_vos", [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs,
-                          nb::handle prisms, nb::handle bounds, const Config& cfg) {
+                          nb::handle prisms, nb::handle bounds, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         double P_[3], V[3], W[3];
         vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
         Rows nb_ = rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), pr = rows_of(arr<double>(prisms, "prisms", {ANY, 4}));
         return vos_to_py(build_vos(P_, V, W, nb_, pr, bounds_of(bounds), cfg));
     });
     m.def("pref_clear", [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs,
-                           nb::handle prisms, nb::handle bounds, const Config& cfg) {
+                           nb::handle prisms, nb::handle bounds, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         double P_[3], V[3], W[3], pref[3];
         vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
         Rows nb_ = rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), pr = rows_of(arr<double>(prisms, "prisms", {ANY, 4}));
@@ -381,12 +389,14 @@ NB_MODULE(_core, m) {
         aimed(W, b, pref);
         return pref_clear(P_, cone_rows(P_, V, nb_, b, cfg), pyramids_in_reach(P_, pr, b, cfg), pref, cfg.horizon);
     });
-    m.def("decision_planes", [](nb::handle vos, nb::handle v_now, const Config& cfg) {
+    m.def("decision_planes", [](nb::handle vos, nb::handle v_now, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         double V[3];
         vec3(v_now, "v_now", V);
         return planes_to_py(decision_planes(vos_of_py(vos), V, cfg));
     });
-    m.def("limit_rows", [](nb::handle p, nb::handle v_now, nb::handle nbrs, nb::handle bounds, const Config& cfg) {
+    m.def("limit_rows", [](nb::handle p, nb::handle v_now, nb::handle nbrs, nb::handle bounds, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         double P_[3], V[3];
         vec3(p, "p", P_), vec3(v_now, "v_now", V);
         LimitRows L = limit_rows(P_, V, rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), bounds_of(bounds), cfg);
@@ -447,12 +457,14 @@ NB_MODULE(_core, m) {
     });
 
     // ------------------------------------------------------------------ fallbacks (fallback.hpp)
-    m.def("polar_grid", [](nb::handle bounds, const Config& cfg) {
+    m.def("polar_grid", [](nb::handle bounds, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         Grid g = polar(bounds_of(bounds), cfg.speed_levels, cfg.heading_step);
         size_t M = g.points.size() / 2;
         return numpy(g.points, {M, 2});
     });
-    m.def("grid_of", [](nb::handle bounds, const Config& cfg, bool hazard) {
+    m.def("grid_of", [](nb::handle bounds, const Config& cfg_in, bool hazard) {
+        const Config& cfg = checked(cfg_in);
         Grid g = grid_of(bounds_of(bounds), cfg, hazard);
         size_t M = size_t(g.size()), B = size_t(g.blocks());
         return nb::make_tuple(numpy(g.points, {M, 2}), numpy(g.block, {M}), numpy(g.discs, {B, 3}));
@@ -461,7 +473,8 @@ NB_MODULE(_core, m) {
         return has_hazard(vos_of_py(vos), rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})));
     });
     m.def("fallback", [](nb::handle vos, nb::handle planes, nb::handle tried, nb::handle p, nb::handle v_now,
-                         nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg, bool hazard) {
+                         nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg_in, bool hazard) {
+        const Config& cfg = checked(cfg_in);
         VOs V = vos_of_py(vos);
         Planes pl = planes_of(planes);
         if (pl.count() != cfg.planes()) throw nb::value_error("planes: expected cfg's planes");
@@ -478,7 +491,8 @@ NB_MODULE(_core, m) {
         return std::make_tuple(false, numpy(std::vector<double>(v, v + 3), {3}), int64_t(-1));
     });
     m.def("least_bad", [](nb::handle vos, nb::handle planes, nb::handle tried, nb::handle p, nb::handle v_now,
-                          nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg) {
+                          nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         VOs V = vos_of_py(vos);
         Planes pl = planes_of(planes);
         Rows tr = rows_of(arr<double>(tried, "tried", {ANY, 3}));
@@ -494,7 +508,8 @@ NB_MODULE(_core, m) {
         return numpy(std::vector<double>(v, v + 3), {3});
     });
     m.def("first_safe", [](nb::handle vos, nb::handle v, nb::handle G3, nb::handle h3, nb::handle bounds,
-                           const Config& cfg) {
+                           const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         VOs V = vos_of_py(vos);
         Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
         LimitRows L = limits_of(G3, h3);
@@ -544,7 +559,8 @@ NB_MODULE(_core, m) {
                            "search on outside backends; its arrays are views of the C++ state.")
         .def("__init__",
              [](PyPlaneQPs* self, nb::handle vos, nb::handle planes, nb::handle G3, nb::handle h3,
-                nb::handle initial, const Config& cfg, bool lazy) {
+                nb::handle initial, const Config& cfg_in, bool lazy) {
+                 const Config& cfg = checked(cfg_in);
                  new (self) PyPlaneQPs();
                  self->vos = vos_of_py(vos);
                  self->planes = planes_of(planes);

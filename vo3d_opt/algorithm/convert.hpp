@@ -286,27 +286,15 @@ Rows nbrs_of(const In<double>& a) { return rows_of(a); }
 
 // ------------------------------------------------------------------------------ the options
 
-Config make_config(bool reciprocal, double horizon, double pz_buffer, double margin,
-                   std::vector<bool> corrections, nb::handle phi, nb::handle cos_phi,
-                   nb::handle sin_phi, nb::handle t, nb::handle cos_t, nb::handle sin_t,
-                   int64_t speed_levels, double heading_step, bool closing_guard,
-                   bool least_bad_escape, bool fine_fallback) {
-    Config c;
-    c.reciprocal = reciprocal, c.horizon = horizon, c.pz_buffer = pz_buffer, c.margin = margin;
-    if (corrections.size() != 6) throw nb::value_error("corrections: expected six flags");
-    c.corrections = Corrections{corrections[0], corrections[1], corrections[2],
-                                corrections[3], corrections[4], corrections[5]};
-    c.phi = vec(phi, "phi"), c.cos_phi = vec(cos_phi, "cos_phi"), c.sin_phi = vec(sin_phi, "sin_phi");
-    c.t = vec(t, "t"), c.cos_t = vec(cos_t, "cos_t"), c.sin_t = vec(sin_t, "sin_t");
+// A Config is built field by field from Python (def_rw): before the core reads one, its
+// arrays must agree and its grid be a grid, or the core would read past an array's end.
+const Config& checked(const Config& c) {
     if (c.phi.empty() || c.cos_phi.size() != c.phi.size() || c.sin_phi.size() != c.phi.size())
-        throw nb::value_error("phi, cos_phi, sin_phi: expected arrays of one length, at least 1");
+        throw nb::value_error("cfg.phi, cfg.cos_phi, cfg.sin_phi: expected arrays of one length, at least 1");
     if (c.t.empty() || c.cos_t.size() != c.t.size() || c.sin_t.size() != c.t.size())
-        throw nb::value_error("t, cos_t, sin_t: expected arrays of one length, at least 1");
-    if (speed_levels < 2) throw nb::value_error("speed_levels: expected at least 2");
-    if (!(heading_step > 0.0)) throw nb::value_error("heading_step: expected a positive angle");
-    c.speed_levels = speed_levels, c.heading_step = heading_step;
-    c.closing_guard = closing_guard, c.least_bad_escape = least_bad_escape;
-    c.fine_fallback = fine_fallback;
+        throw nb::value_error("cfg.t, cfg.cos_t, cfg.sin_t: expected arrays of one length, at least 1");
+    if (c.speed_levels < 2) throw nb::value_error("cfg.speed_levels: expected at least 2");
+    if (!(c.heading_step > 0.0)) throw nb::value_error("cfg.heading_step: expected a positive angle");
     return c;
 }
 
