@@ -89,6 +89,16 @@ def decide(
     cfg: Config,
     out: np.ndarray,
 ) -> None: ...
+def decide_rows(
+    p: np.ndarray,
+    v_now: np.ndarray,
+    v_pref: Sequence[float] | np.ndarray,
+    nbrs: Sequence[tuple[float, ...]],
+    prisms: Sequence[tuple[float, ...]],
+    limits: tuple[float, ...],
+    cfg: Config,
+    out: np.ndarray,
+) -> None: ...
 def decide_many(
     swarm: _Tuple, cfg: Config, threads: int, out: np.ndarray, lo: int = 0, hi: int = -1
 ) -> None: ...

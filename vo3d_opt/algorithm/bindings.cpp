@@ -20,7 +20,7 @@ using namespace vo3d::glue;
 
 NB_MODULE(_core, m) {
     m.doc() = "vo3d-opt's compiled core: the decision of vo3d_opt/algorithm/decide.hpp and its parts";
-    m.attr("OUT_SIZE") = 7;
+    m.attr("OUT_SIZE") = OUT_SIZE;
     m.attr("MANY_OUT_SIZE") = MANY_OUT_SIZE;
     m.attr("AGENT_COLUMNS") = AGENT_COLUMNS;
     m.attr("FINE_SPEED_LEVELS") = FINE_SPEED_LEVELS;
@@ -66,19 +66,25 @@ NB_MODULE(_core, m) {
               vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
               In<double> nb_ = arr<double>(nbrs, "nbrs", {ANY, 8});
               In<double> pr = arr<double>(prisms, "prisms", {ANY, 4});
-              Bounds b = bounds_of_array(limits);
-              Out<double> o = out_arr<double>(out, "out", {7});
-              Decision d;
-              {
-                  nb::gil_scoped_release free;
-                  d = decide_one(P_, V, W, rows_of(nb_), rows_of(pr), b, cfg);
-              }
-              double vals[7] = {d.velocity[0], d.velocity[1], d.velocity[2], double(d.status),
-                                d.phi, double(d.round), double(d.solved)};
-              for (int k = 0; k < 7; ++k) o.data()[k * o.stride(0)] = vals[k];
+              decide_into(P_, V, W, rows_of(nb_), rows_of(pr), bounds_of_array(limits), cfg, out);
           },
           "p"_a, "v_now"_a, "v_pref"_a, "nbrs"_a, "prisms"_a, "limits"_a, "cfg"_a, "out"_a,
           "One decision (decide.hpp) into out (7,): velocity, status, phi, round, solved.");
+
+    m.def("decide_rows",
+          [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs, nb::handle prisms,
+             nb::handle limits, const Config& cfg_in, nb::handle out) {
+              const Config& cfg = checked(cfg_in);
+              double P_[3], V[3], W[3];
+              vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3_of(v_pref, "v_pref", W);
+              std::vector<double> nb_buf, pr_buf;
+              Rows nb_ = rows_of_tuples(nbrs, "nbrs", 8, nb_buf), pr = rows_of_tuples(prisms, "prisms", 4, pr_buf);
+              decide_into(P_, V, W, nb_, pr, bounds_of(limits), cfg, out);
+          },
+          "p"_a, "v_now"_a, "v_pref"_a, "nbrs"_a, "prisms"_a, "limits"_a, "cfg"_a, "out"_a,
+          "decide with the rows as Python tuples (select's fast path): v_pref a tuple of 3 numbers\n"
+          "(or an array), nbrs a list of 8-tuples (Neighbor.row), prisms a list of 4-tuples\n"
+          "(an obstacle's prism), limits a tuple of 6 (Bounds).");
 
     m.def("decide_many",
           [](nb::handle swarm, const Config& cfg_in, int64_t threads, nb::handle out, int64_t lo,

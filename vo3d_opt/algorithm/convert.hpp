@@ -125,6 +125,44 @@ Bounds bounds_of_array(nb::handle h) {
     return Bounds{at(a, 0), at(a, 1), at(a, 2), at(a, 3), at(a, 4), at(a, 5)};
 }
 
+// Python tuples of numbers (Neighbor.row, an obstacle's prism, a 3-vector): what select() holds
+// already, read without building a numpy array for them. A float is read as it is; any other
+// number through its __float__.
+double number_of(PyObject* x, const char* name) {
+    if (PyFloat_Check(x)) return PyFloat_AS_DOUBLE(x);
+    if (PyBool_Check(x) || !PyNumber_Check(x))
+        throw nb::value_error((std::string(name) + ": expected numbers").c_str());
+    double v = PyFloat_AsDouble(x);
+    if (v == -1.0 && PyErr_Occurred()) throw nb::python_error();
+    return v;
+}
+
+void tuple_into(PyObject* row, const char* name, int64_t width, double* out) {
+    if (!PyTuple_Check(row) || PyTuple_GET_SIZE(row) != width)
+        throw nb::value_error((std::string(name) + ": expected tuples of " + std::to_string(width) +
+                               " numbers")
+                                  .c_str());
+    for (int64_t k = 0; k < width; ++k) out[k] = number_of(PyTuple_GET_ITEM(row, k), name);
+}
+
+// A list (or tuple) of tuples of ``width`` numbers as Rows over ``buf``.
+Rows rows_of_tuples(nb::handle h, const char* name, int64_t width, std::vector<double>& buf) {
+    PyObject* seq = h.ptr();
+    if (!PyList_Check(seq) && !PyTuple_Check(seq))
+        throw nb::value_error((std::string(name) + ": expected a list of tuples").c_str());
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(seq);
+    PyObject** items = PySequence_Fast_ITEMS(seq);
+    buf.resize(size_t(n * width));
+    for (Py_ssize_t i = 0; i < n; ++i) tuple_into(items[i], name, width, buf.data() + i * width);
+    return Rows::of(buf, width);
+}
+
+// A 3-vector from a tuple of three numbers or a float64 array of shape (3,).
+void vec3_of(nb::handle h, const char* name, double* out) {
+    if (PyTuple_Check(h.ptr())) return tuple_into(h.ptr(), name, 3, out);
+    vec3(h, name, out);
+}
+
 // ------------------------------------------------------------------------------ to numpy
 
 template <class T>
@@ -283,6 +321,25 @@ LimitRows limits_of(nb::handle G, nb::handle h) {
 }
 
 Rows nbrs_of(const In<double>& a) { return rows_of(a); }
+
+// ------------------------------------------------------------------------------ one decision
+
+// decide's output: velocity (3), status, phi, round, solved.
+constexpr int64_t OUT_SIZE = 7;
+
+// One decision (decide.hpp), the GIL released, into out (OUT_SIZE,).
+void decide_into(const double* p, const double* v_now, const double* v_pref, Rows nbrs, Rows prisms,
+                 Bounds b, const Config& cfg, nb::handle out) {
+    Out<double> o = out_arr<double>(out, "out", {OUT_SIZE});
+    Decision d;
+    {
+        nb::gil_scoped_release free;
+        d = decide_one(p, v_now, v_pref, nbrs, prisms, b, cfg);
+    }
+    double vals[OUT_SIZE] = {d.velocity[0], d.velocity[1], d.velocity[2], double(d.status),
+                             d.phi, double(d.round), double(d.solved)};
+    for (int64_t k = 0; k < OUT_SIZE; ++k) o.data()[k * o.stride(0)] = vals[k];
+}
 
 // ------------------------------------------------------------------------------ the options
 

@@ -37,6 +37,11 @@ OUT_SIZE: int = _core.OUT_SIZE
 #: ``prisms`` (m, 4): x, y, L_pz, h_pz; ``limits``: ``bounds_array``; ``cfg``: ``Options.config``.
 #: Arrays of another dtype or shape raise ValueError naming the argument.
 decide = _core.decide
+#: ``decide`` from the rows ``select`` holds, as Python tuples (``formulations.inputs``): the
+#: preferred velocity a tuple of 3 numbers (or an array), ``nbrs`` a list of ``Neighbor.row``,
+#: ``prisms`` a list of obstacles' ``prism``, ``limits`` ``inputs.bounds_row``. The same numbers
+#: give the same answer as ``decide``; a row of another length raises ValueError naming it.
+decide_rows = _core.decide_rows
 
 #: The (round, plane) QPs of one decision and their rows, filled as VOs join:
 #: ``PlaneQPs(vos, planes, G3, h3, initial, cfg, lazy)``, each QP starting with the rows of the

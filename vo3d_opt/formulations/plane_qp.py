@@ -44,7 +44,7 @@ def speed_polygon(radius: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
     return G, h
 
 
-def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
+def select_plane_qp(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     """The best safe answer over the (round, plane) QPs on the backend ``solve``."""
     cfg, bounds = enc.options.config, enc.bounds
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)

@@ -25,7 +25,7 @@ def plane_sections(enc: Encounter, planes: AvoidancePlanes) -> tuple[Sections, S
     )
 
 
-def select(enc: Encounter) -> Outcome:
+def select_sampled(enc: Encounter) -> Outcome:
     cfg = enc.options.config
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)
     grid = py_polar_grid(enc.bounds, cfg)
