@@ -616,5 +616,53 @@ NB_MODULE(_core, m) {
                  SearchResult r = s.qps->search(bounds_of(bounds), t.data());
                  return std::make_tuple(r.r, r.p, r.solved, r.n_tried);
              },
-             "bounds"_a, "tried"_a, "The best-first search of decide.hpp: (r, p, solved, n_tried).");
+             "bounds"_a, "tried"_a, "The best-first search of decide.hpp: (r, p, solved, n_tried).")
+        // The Python search's checks of an answer, on the VOs, planes and limits held here
+        .def("lift",
+             [](PyPlaneQPs& s, nb::handle w, int64_t p, nb::handle out) {
+                 In<double> ww = arr<double>(w, "w", {2});
+                 Out<double> o = out_arr<double>(out, "out", {3});
+                 check_qp(s, 0, p);
+                 double x[2] = {at(ww, 0), at(ww, 1)}, v[3];
+                 lift(s.planes, x, p, v);
+                 for (int c = 0; c < 3; ++c) o.data()[c * o.stride(0)] = v[c];
+             },
+             "w"_a, "p"_a, "out"_a, "Plane p's coordinates w as the world velocity out (3,).")
+        .def("entered",
+             [](PyPlaneQPs& s, nb::handle v, nb::handle out) {
+                 double x[3];
+                 vec3(v, "v", x);
+                 Out<bool> o = out_arr<bool>(out, "out", {s.vos.count()});
+                 std::vector<uint8_t> in(s.vos.count());
+                 bool any = containing(s.vos, x, s.cfg.horizon, in.data());
+                 for (size_t k = 0; k < in.size(); ++k) o.data()[k * o.stride(0)] = in[k];
+                 return any;
+             },
+             "v"_a, "out"_a, "Which VOs contain v (the exact 3D membership), into out: whether any.")
+        .def("within",
+             [](PyPlaneQPs& s, nb::handle v, nb::handle bounds) {
+                 double x[3];
+                 vec3(v, "v", x);
+                 return within_limits(x, s.limits, bounds_of(bounds));
+             },
+             "v"_a, "bounds"_a, "Whether v keeps the speed and the limit rows (within tolerance).");
+
+    // ------------------------------------------------------------------ solvers/base.py's checks
+    m.def("qp_screen",
+          [](nb::handle P, nb::handle q, nb::handle C, nb::handle l, nb::handle u, double r, bool has_r,
+             int64_t m_ineq, int64_t m_eq) {
+              return qp_screen(arr<double>(P, "P", {ANY, ANY}), arr<double>(q, "q", {ANY}),
+                               arr<double>(C, "C", {ANY, ANY}), arr<double>(l, "l", {ANY}),
+                               arr<double>(u, "u", {ANY}), r, has_r, m_ineq, m_eq);
+          },
+          "P"_a, "q"_a, "C"_a, "l"_a, "u"_a, "r"_a, "has_r"_a, "m_ineq"_a, "m_eq"_a,
+          "0: fine; 1: NaN or a misplaced infinity; 2: an infinite b; 3: infeasible bounds.");
+    m.def("qp_row_violation",
+          [](nb::handle C, nb::handle l, nb::handle u, nb::handle x) {
+              In<double> c = arr<double>(C, "C", {ANY, ANY});
+              int64_t m_ = c.shape(0), n = c.shape(1);
+              return qp_row_violation(c, arr<double>(l, "l", {m_}), arr<double>(u, "u", {m_}),
+                                      arr<double>(x, "x", {n}));
+          },
+          "C"_a, "l"_a, "u"_a, "x"_a, "The largest of l - C x and C x - u (NaN never wins; -inf for no row).");
 }

@@ -381,6 +381,56 @@ void check_qp(const PyPlaneQPs& self, int64_t r, int64_t p) {
         throw nb::value_error("(r, p): not a QP of this decision");
 }
 
+// ------------------------------------------------------------------------------ QP checks
+
+// solvers/base.py's screen of a standard-form QP (min ½xᵀPx + qᵀx, l <= C x <= u, the first
+// m_ineq rows inequalities, the next m_eq equalities): a dozen numpy reductions on arrays of a
+// few tens of entries, in one pass. Finite data: every entry finite and their sum too (as numpy
+// judges it from the sum, which also overflows on huge data).
+int qp_screen(const In<double>& P, const In<double>& q, const In<double>& C, const In<double>& l,
+              const In<double>& u, double r, bool has_r, int64_t m_ineq, int64_t m_eq) {
+    double sum = 0.0;
+    bool finite = !has_r || std::isfinite(r);
+    auto add = [&](const In<double>& a) {
+        int64_t rows = a.shape(0), cols = a.ndim() > 1 ? a.shape(1) : 1;
+        for (int64_t i = 0; i < rows; ++i)
+            for (int64_t j = 0; j < cols; ++j) {
+                double x = a.data()[i * a.stride(0) + (a.ndim() > 1 ? j * a.stride(1) : 0)];
+                finite = finite && std::isfinite(x), sum += x;
+            }
+    };
+    add(P), add(q), add(C);
+    int64_t m = l.shape(0);
+    if (int64_t(u.shape(0)) != m) throw nb::value_error("l, u: expected one length");
+    bool nan = false, bad = false;
+    for (int64_t i = 0; i < m; ++i) {
+        double lo = at(l, i), hi = at(u, i);
+        nan = nan || std::isnan(lo) || std::isnan(hi);
+        bad = bad || !(lo <= hi && lo < kInf && hi > -kInf);
+    }
+    if (!finite || !std::isfinite(sum) || nan) return 1;
+    if (!bad && (!has_r || r >= 0)) return 0;
+    for (int64_t i = m_ineq; i < m_ineq + m_eq && i < m; ++i)
+        if (std::isinf(at(l, i))) return 2;
+    return 3;
+}
+
+// The largest of l - C x and C x - u over the rows, each C x summed column by column as the
+// rows are written (as numpy's column-wise sums do); a NaN never wins; -inf for no row.
+double qp_row_violation(const In<double>& C, const In<double>& l, const In<double>& u,
+                        const In<double>& x) {
+    double worst = -kInf;
+    for (int64_t i = 0; i < int64_t(C.shape(0)); ++i) {
+        double cx = 0.0;
+        for (int64_t j = 0; j < int64_t(C.shape(1)); ++j)
+            cx = cx + C.data()[i * C.stride(0) + j * C.stride(1)] * at(x, j);
+        double lo = at(l, i) - cx, hi = cx - at(u, i);
+        if (lo > worst) worst = lo;
+        if (hi > worst) worst = hi;
+    }
+    return worst;
+}
+
 // ------------------------------------------------------------------------------ swarms
 
 Links links_of(const In<int64_t>& span, const In<int64_t>& idx, int64_t D, const char* name) {

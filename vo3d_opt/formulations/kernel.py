@@ -31,6 +31,7 @@ PREFERRED, SAMPLED, LEAST_BAD = 0, len(ROUNDS) + 1, len(ROUNDS) + 2
 OPTIMAL, INSIDE_PROTECTED_ZONE, INFEASIBLE_MIN_VIOLATION = 0, 1, 2
 #: The entries of ``decide``'s output array: velocity (3), status, phi, round, solved.
 OUT_SIZE: int = _core.OUT_SIZE
+OUT_STATUS, OUT_PHI, OUT_ROUND, OUT_SOLVED = 3, 4, 5, 6
 
 #: One decision from arrays into ``out`` (OUT_SIZE,): ``decide(p, v_now, v_pref, nbrs, prisms,
 #: limits, cfg, out)``; ``nbrs`` (n, 8): position, velocity, r_pz, cooperative (1/0);
