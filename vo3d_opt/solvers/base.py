@@ -122,6 +122,14 @@ def _violation(C: np.ndarray, l: np.ndarray, u: np.ndarray, x: np.ndarray, r: fl
 
 
 @functools.cache
+def _infinite(n: int) -> np.ndarray:
+    """n times +inf, shared (read-only)."""
+    inf = np.full(n, np.inf)
+    inf.setflags(write=False)
+    return inf
+
+
+@functools.cache
 def _eye(n: int) -> np.ndarray:
     """The n×n identity, shared (read-only)."""
     eye = np.eye(n)
@@ -178,13 +186,10 @@ def standardise(qp: QP) -> Standard:
         and qp.h.dtype == float
         and qp.h.shape == (qp.G.shape[0],)
     ):
-        # The formulations' usual problem (inequalities only, float arrays): no conversions,
-        # and _rows' arrays built in place.
+        # The formulations' usual problem (inequalities only, float arrays): _rows' arrays
+        # without conversions.
         m = qp.G.shape[0]
-        C = np.empty((m + n, n))
-        C[:m], C[m:] = qp.G, _eye(n)
-        u = np.empty(m + n)
-        u[:m], u[m:] = qp.h, np.inf
+        C, u = np.concatenate((qp.G, _eye(n))), np.concatenate((qp.h, _infinite(n)))
         l = np.full(m + n, -np.inf)  # noqa: E741
         return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u, r=r, m_ineq=m, m_eq=0)
     G, A = _matrix(qp.G, n, "G"), _matrix(qp.A, n, "A")
