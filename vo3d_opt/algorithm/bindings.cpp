@@ -647,6 +647,16 @@ NB_MODULE(_core, m) {
              },
              "v"_a, "bounds"_a, "Whether v keeps the speed and the limit rows (within tolerance).");
 
+    // ------------------------------------------------------------------ select_arrays' checks
+    m.def("first_bad",
+          [](nb::handle values, double max_magnitude, int64_t positive_from) {
+              In<double> a = arr<double>(values, "values", {ANY, ANY});
+              return first_bad(a, max_magnitude, positive_from);
+          },
+          "values"_a, "max_magnitude"_a, "positive_from"_a,
+          "The flat index of the first entry of values (n, k) that is not finite, beyond\n"
+          "max_magnitude, or (in a column from positive_from on) not positive; -1 for none.");
+
     // ------------------------------------------------------------------ solvers/base.py's checks
     m.def("qp_screen",
           [](nb::handle P, nb::handle q, nb::handle C, nb::handle l, nb::handle u, double r, bool has_r,

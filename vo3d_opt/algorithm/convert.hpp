@@ -431,6 +431,21 @@ double qp_row_violation(const In<double>& C, const In<double>& l, const In<doubl
     return worst;
 }
 
+// ------------------------------------------------------------------------------ array checks
+
+// select_arrays' check of a table of numbers in one pass (formulations/inputs.py words the
+// error): the flat index of the first entry that is not finite or beyond max_magnitude, or, in
+// a column from positive_from on, not positive; -1 for none.
+int64_t first_bad(const In<double>& a, double max_magnitude, int64_t positive_from) {
+    int64_t rows = a.shape(0), cols = a.shape(1);
+    for (int64_t i = 0; i < rows; ++i)
+        for (int64_t j = 0; j < cols; ++j) {
+            double x = a.data()[i * a.stride(0) + j * a.stride(1)];
+            if (!(std::fabs(x) <= max_magnitude) || (j >= positive_from && !(x > 0.0))) return i * cols + j;
+        }
+    return -1;
+}
+
 // ------------------------------------------------------------------------------ swarms
 
 Links links_of(const In<int64_t>& span, const In<int64_t>& idx, int64_t D, const char* name) {

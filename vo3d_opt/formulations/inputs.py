@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+import vo3d_opt._core as _core
+
 from ..geometry.pyramid import prism_rows
 from ..types import (
     MAX_MAGNITUDE,
@@ -130,53 +132,59 @@ def bounds_row(limits: Limits, dt: float) -> Row:
 # ------------------------------------------------------------------------------- arrays
 
 
-def _numbers(value: Any, name: str, columns: Sequence[str] | None) -> np.ndarray:
-    """A float copy of ``value`` (real numbers of a 1D shape, or 2D with ``columns``), finite
-    and within ``MAX_MAGNITUDE``; ValueError naming the first bad entry."""
-    raw = np.asarray(value)
-    width = 3 if columns is None else len(columns)
-    shape = "(3,)" if columns is None else f"(N, {width}) ({', '.join(columns)})"
-    if columns is not None and raw.shape in ((0,), (0, width)):
+def _table(value: Any, name: str, columns: Sequence[str], positive_from: int) -> np.ndarray:
+    """``value`` as an (N, len(columns)) float array (a float array as it is): real numbers,
+    finite, within ``MAX_MAGNITUDE``, positive in the columns from ``positive_from`` on
+    (checked compiled, in one pass); ValueError naming the first bad entry and its column."""
+    raw = value if type(value) is np.ndarray else np.asarray(value)
+    width = len(columns)
+    if raw.shape in ((0,), (0, width)):
         return np.zeros((0, width))  # none (an empty list too)
+    shape = f"(N, {width}) ({', '.join(columns)})"
     if raw.dtype.kind not in "iuf":
         raise ValueError(f"{name}: expected real numbers of shape {shape}, got {raw.dtype}")
-    if (raw.shape != (3,)) if columns is None else (raw.ndim != 2 or raw.shape[1] != width):
+    if raw.ndim != 2 or raw.shape[1] != width:
         raise ValueError(f"{name}: expected shape {shape}, got {raw.shape}")
-    arr = np.array(raw, dtype=float)
-    bad = ~np.isfinite(arr) | (np.abs(arr) > MAX_MAGNITUDE)
-    if bad.any():
-        where = tuple(int(i) for i in np.unravel_index(int(np.argmax(bad)), arr.shape))
-        label = (
-            f"{name}[{where[0]}]"
-            if columns is None
-            else f"{name}[{where[0]}, {where[1]}] ({columns[where[1]]})"
+    arr = raw if raw.dtype == np.float64 else raw.astype(float)
+    bad = _core.first_bad(arr, MAX_MAGNITUDE, positive_from)
+    if bad >= 0:
+        i, j = divmod(bad, width)
+        x = arr[i, j]
+        problem = (
+            "must be positive"
+            if abs(x) <= MAX_MAGNITUDE
+            else f"must be finite and at most {MAX_MAGNITUDE:g} in magnitude"
         )
-        raise ValueError(
-            f"{label}: must be finite and at most {MAX_MAGNITUDE:g} in magnitude, got {arr[where]}"
-        )
+        raise ValueError(f"{name}[{i}, {j}] ({columns[j]}): {problem}, got {x}")
     return arr
 
 
-def _positive(arr: np.ndarray, name: str, columns: Sequence[str], col: int) -> None:
-    bad = np.flatnonzero(arr[:, col] <= 0)
-    if bad.size:
-        i = int(bad[0])
-        label = f"{name}[{i}, {col}] ({columns[col]})"
-        raise ValueError(f"{label}: must be positive, got {arr[i, col]}")
-
-
 def array_vector(value: Any, name: str) -> np.ndarray:
-    """(3,) finite floats."""
-    return _numbers(value, name, None)
+    """(3,) finite floats: a float array as it is."""
+    if type(value) is np.ndarray and value.shape == (3,) and value.dtype == np.float64:
+        if _finite_numbers(value.tolist()):
+            return value
+    else:
+        raw = np.asarray(value)
+        if raw.dtype.kind not in "iuf":
+            raise ValueError(f"{name}: expected real numbers of shape (3,), got {raw.dtype}")
+        if raw.shape != (3,):
+            raise ValueError(f"{name}: expected shape (3,), got {raw.shape}")
+        value = raw.astype(float)
+        if _finite_numbers(value.tolist()):
+            return value
+    k = next(k for k, x in enumerate(value.tolist()) if not _finite_numbers((x,)))
+    raise ValueError(
+        f"{name}[{k}]: must be finite and at most {MAX_MAGNITUDE:g} in magnitude, got {value[k]}"
+    )
 
 
 def neighbor_array(neighbors: Any, cooperative: Any) -> np.ndarray:
-    """(N, 8) rows as ``Neighbor.row``: ``neighbors`` (N, 7) (``NEIGHBOR_COLUMNS``) and
-    ``cooperative`` (N,) booleans (None: all cooperative)."""
+    """(N, 8) rows as ``Neighbor.row``: ``neighbors`` (N, 7) (``NEIGHBOR_COLUMNS``; r_pz
+    positive) and ``cooperative`` (N,) booleans (None: all cooperative)."""
     if neighbors is None:
         neighbors = np.zeros((0, len(NEIGHBOR_COLUMNS)))
-    arr = _numbers(neighbors, "neighbors", NEIGHBOR_COLUMNS)
-    _positive(arr, "neighbors", NEIGHBOR_COLUMNS, 6)
+    arr = _table(neighbors, "neighbors", NEIGHBOR_COLUMNS, 6)
     n = arr.shape[0]
     rows = np.empty((n, 8))
     rows[:, :7] = arr
@@ -185,22 +193,21 @@ def neighbor_array(neighbors: Any, cooperative: Any) -> np.ndarray:
 
 
 def _flags(value: Any, n: int) -> np.ndarray:
-    raw = np.asarray(value)
+    raw = value if type(value) is np.ndarray else np.asarray(value)
     if raw.shape != (n,):
         raise ValueError(f"cooperative: expected shape ({n},) (one per neighbour), got {raw.shape}")
     if raw.dtype != bool and not (raw.dtype.kind in "iu" and np.all((raw == 0) | (raw == 1))):
         raise ValueError(f"cooperative: expected booleans (or 0/1), got {raw.dtype}")
-    return raw.astype(float)
+    return raw
 
 
 def prism_array(obstacles: Any) -> np.ndarray:
-    """(M, 4) protected prisms: an array of ``PRISM_COLUMNS``, or Cylinder and Box objects."""
+    """(M, 4) protected prisms: an array of ``PRISM_COLUMNS`` (L_pz and h_pz positive), or
+    Cylinder and Box objects."""
     if obstacles is None:
         return np.zeros((0, 4))
-    items = obstacles if isinstance(obstacles, (list, tuple)) else None
-    if items is not None and all(isinstance(o, (Cylinder, Box)) for o in items):
-        return prism_rows(items)
-    arr = _numbers(obstacles, "obstacles", PRISM_COLUMNS)
-    _positive(arr, "obstacles", PRISM_COLUMNS, 2)
-    _positive(arr, "obstacles", PRISM_COLUMNS, 3)
-    return arr
+    if isinstance(obstacles, (list, tuple)) and all(
+        isinstance(o, (Cylinder, Box)) for o in obstacles
+    ):
+        return prism_rows(obstacles)
+    return _table(obstacles, "obstacles", PRISM_COLUMNS, 2)
