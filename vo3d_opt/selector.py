@@ -149,8 +149,8 @@ class VelocitySelector:
         t0 = _clock()
         own = inputs.agent(own)
         v_pref = inputs.vector3(preferred_velocity, "preferred_velocity")
-        nbrs = inputs.neighbor_rows(neighbors)
-        prisms = inputs.prisms(obstacles)
+        nbrs = inputs.neighbor_tuples(neighbors)
+        prisms = inputs.prism_tuples(obstacles)
         limits = inputs.limits_of(limits)
         dt = inputs.period(dt)
         if self._python is None:

@@ -87,7 +87,7 @@ def _typed(items: Sequence[Any], kinds: tuple[type, ...], name: str) -> None:
             raise ValueError(f"{name}[{i}]: expected {expected}, got {type(item).__name__}")
 
 
-def neighbor_rows(neighbors: Any) -> list[Row]:
+def neighbor_tuples(neighbors: Any) -> list[Row]:
     """Each ``Neighbor``'s row (position, velocity, r_pz, cooperative 1/0)."""
     items = _listed(neighbors)
     rows = [nb.row for nb in items if type(nb) is Neighbor]
@@ -97,7 +97,7 @@ def neighbor_rows(neighbors: Any) -> list[Row]:
     return rows
 
 
-def prisms(obstacles: Any) -> list[Row]:
+def prism_tuples(obstacles: Any) -> list[Row]:
     """Each obstacle's protected prism (x, y, L_pz, h_pz)."""
     items = _listed(obstacles)
     rows: list[Row] = [o.prism for o in items if type(o) is Cylinder or type(o) is Box]
