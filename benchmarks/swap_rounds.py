@@ -68,11 +68,13 @@ def replay(sel: Any, calls: list[tuple[tuple, dict]]) -> dict[str, dict[str, flo
     from vo3d_opt.formulations.kernel import ROUND_NAMES
     from vo3d_opt.formulations.swarm import MANY_OUT_SIZE, decide_range
 
-    cfg = sel.options.config
     out_stats: dict[str, dict[str, float]] = defaultdict(lambda: {"n": 0, "ns": 0, "solved": 0})
     for args, kwargs in calls:
         kwargs = {k: v for k, v in kwargs.items() if k != "threads"}
-        sw = swarm.SwarmInputs.checked(*args, **kwargs).arrays()
+        inputs = swarm.SwarmInputs.checked(*args, **kwargs)
+        # every vehicle of the swap has the same top speed: one configuration for all
+        cfg = sel.options_for(inputs.limits.v_max, inputs.dt, inputs.sensing_range).config
+        sw = inputs.arrays()
         out = np.empty((sw.who.shape[0], MANY_OUT_SIZE))
         decide_range(sw, 0, 1, cfg, out)  # once before timing
         for d in range(sw.who.shape[0]):
