@@ -667,12 +667,14 @@ NB_MODULE(_core, m) {
           },
           "P"_a, "q"_a, "C"_a, "l"_a, "u"_a, "r"_a, "has_r"_a, "m_ineq"_a, "m_eq"_a,
           "0: fine; 1: NaN or a misplaced infinity; 2: an infinite b; 3: infeasible bounds.");
-    m.def("qp_row_violation",
-          [](nb::handle C, nb::handle l, nb::handle u, nb::handle x) {
+    m.def("qp_violation",
+          [](nb::handle C, nb::handle l, nb::handle u, nb::handle x, double r) {
               In<double> c = arr<double>(C, "C", {ANY, ANY});
               int64_t m_ = c.shape(0), n = c.shape(1);
-              return qp_row_violation(c, arr<double>(l, "l", {m_}), arr<double>(u, "u", {m_}),
-                                      arr<double>(x, "x", {n}));
+              In<double> xx = arr<double>(x, "x", {n});
+              if (r >= 0.0 && n > 8) throw nb::value_error("x: at most 8 entries with a radius");
+              return qp_violation(c, arr<double>(l, "l", {m_}), arr<double>(u, "u", {m_}), xx, r);
           },
-          "C"_a, "l"_a, "u"_a, "x"_a, "The largest of l - C x and C x - u (NaN never wins; -inf for no row).");
+          "C"_a, "l"_a, "u"_a, "x"_a, "r"_a,
+          "The largest of l - C x, C x - u and (r >= 0) |x| - r; a NaN never wins; -inf for none.");
 }

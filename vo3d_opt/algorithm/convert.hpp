@@ -416,10 +416,17 @@ int qp_screen(const In<double>& P, const In<double>& q, const In<double>& C, con
 }
 
 // The largest of l - C x and C x - u over the rows, each C x summed column by column as the
-// rows are written (as numpy's column-wise sums do); a NaN never wins; -inf for no row.
-double qp_row_violation(const In<double>& C, const In<double>& l, const In<double>& u,
-                        const In<double>& x) {
+// rows are written (as numpy's column-wise sums do), and, for r >= 0, of |x| - r (|x|² summed
+// left to right, as numpy sums up to 8 entries); a NaN never wins; -inf for nothing.
+double qp_violation(const In<double>& C, const In<double>& l, const In<double>& u,
+                    const In<double>& x, double r) {
     double worst = -kInf;
+    if (r >= 0.0) {
+        double sq = 0.0;
+        for (int64_t j = 0; j < int64_t(x.shape(0)); ++j) sq = sq + at(x, j) * at(x, j);
+        worst = std::sqrt(sq) - r;
+        if (std::isnan(worst)) worst = -kInf;
+    }
     for (int64_t i = 0; i < int64_t(C.shape(0)); ++i) {
         double cx = 0.0;
         for (int64_t j = 0; j < int64_t(C.shape(1)); ++j)

@@ -110,10 +110,12 @@ class Standard:
 
 def _violation(C: np.ndarray, l: np.ndarray, u: np.ndarray, x: np.ndarray, r: float) -> float:  # noqa: E741
     """``Standard.violation`` (r < 0: no radius): each row's C x summed column by column, as
-    the rows are written (compiled: ``_core.qp_row_violation``; a NaN gap never wins)."""
-    worst = float(_core.qp_row_violation(C, l, u, x))
-    if r >= 0.0:
-        worst = max(worst, float(np.sqrt(np.sum(x * x))) - r)
+    the rows are written; the radius's |x| as numpy sums it (compiled: ``_core.qp_violation``,
+    for up to 8 variables with a radius; a NaN gap never wins)."""
+    if r < 0.0 or x.shape[0] <= 8:
+        worst = float(_core.qp_violation(C, l, u, x, r))
+    else:
+        worst = max(float(_core.qp_violation(C, l, u, x, -1.0)), float(np.sqrt(np.sum(x * x))) - r)
     if worst <= FEAS_TOL:  # the scale only matters for larger violations
         return worst
     bounds = np.abs(np.concatenate([l, u]))
