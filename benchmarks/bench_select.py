@@ -19,7 +19,8 @@ median and mean, the QPs it hands the backend, the solver's own time per QP (ins
 library's calls: DAQP's ``solve``, OSQP's ``setup``/``update``/``solve``, Clarabel's set-up,
 ``update`` and ``solve``) and ours per QP: around the solver call (the problem standardised,
 screened and converted, the answer checked: ``Backend.solve`` less the solver's time) and over
-the whole decision ((decision - solver) / QPs).
+the whole decision ((decision - solver) / QPs); each per QP figure the median over the
+decisions of that decision's ratio.
 
 ``--out PATH``: also write what is printed to PATH as a results page, with the machine, the
 date and the commit at the top.
@@ -39,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+import vo3d_opt
 from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector
 from vo3d_opt.formulations import kernel
 from vo3d_opt.formulations.common import bounds_array, neighbor_rows
@@ -134,7 +136,7 @@ def breakdown(rng: np.random.Generator, grid: list[tuple[int, int]], args: argpa
         cases = [encounter(rng, n, m, conflict=not args.fast_path) for _ in range(args.encounters)]
         t_sel, _ = time_calls(default, cases, args.repeat)
         t_ker = kernel_times(default, cases, args.repeat)
-        t_arr = array_calls(default, cases, args.repeat)
+        t_arr = array_calls(default, cases, args.repeat) if hasattr(default, "select_arrays") else np.nan
         t_ref, _ = time_calls(ref, cases, 1)
         sel, ker, smp = np.median(t_sel), np.median(t_ker), np.median(t_ref)
         print(f"| {n} | {m} | {sel:.1f} | {np.percentile(t_sel, 99):.0f} | {ker:.1f} | {sel - ker:.1f} | "
@@ -218,11 +220,14 @@ def backend_figures(solver: str, cases: list[dict], repeat: int) -> dict[str, fl
                     outside.append(around.seconds - a0)
     finally:
         del backend.solve
-    t, k, s, a = (np.array(x) * (1e6 if x is not qps else 1) for x in (times, qps, inside, outside))
-    n_qp = max(1, int(k.sum()))
+    t, s, a = (np.array(x) * 1e6 for x in (times, inside, outside))
+    k = np.array(qps)
+    some = k > 0  # per QP: the median over the decisions that solved any (a sum would take in
+    # every time the process was preempted on a busy machine)
     return dict(median=float(np.median(t)), mean=float(t.mean()), p90=float(np.percentile(t, 90)),
-                qps=float(k.mean()), solver=float(s.sum() / n_qp), around=float((a.sum() - s.sum()) / n_qp),
-                whole=float((t.sum() - s.sum()) / n_qp))
+                qps=float(k.mean()), solver=float(np.median(s[some] / k[some])),
+                around=float(np.median((a[some] - s[some]) / k[some])),
+                whole=float(np.median((t[some] - s[some]) / k[some])))
 
 
 def backends(rng: np.random.Generator, grid: list[tuple[int, int]], args: argparse.Namespace) -> None:
@@ -268,10 +273,11 @@ def machine() -> str:
     cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
                 if line.startswith("model name")), platform.processor() or platform.machine()) \
         if Path("/proc/cpuinfo").exists() else platform.processor() or platform.machine()
+    where = Path(vo3d_opt.__file__).parent  # the package measured: its checkout's commit
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                            cwd=Path(__file__).parent).stdout.strip() or "unknown"
+                            cwd=where).stdout.strip() or "unknown"
     dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
-                           text=True, cwd=Path(__file__).parent).stdout.strip()
+                           text=True, cwd=where).stdout.strip()
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "unknown"
     return (f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, "
             f"CPython {platform.python_version()}, numpy {np.__version__}; "
@@ -316,11 +322,12 @@ def run(args: argparse.Namespace) -> None:
         + [("cone_qp", s) for s in solvers if s != "exact2d"] + [("nlp", "casadi")]  # exact2d: plane_qp only
     print(f"# {platform.processor() or platform.machine()}, {platform.python_implementation()} "
           f"{platform.python_version()}, {time.strftime('%Y-%m-%d')}")
-    if args.breakdown:
-        breakdown(rng, grid, args)
-        return
-    if args.backends:
-        backends(rng, grid, args)
+    if args.breakdown or args.backends:  # either or both
+        if args.breakdown:
+            breakdown(rng, grid, args)
+        if args.backends:
+            print()
+            backends(rng, grid, args)
         return
     if args.deviation:
         print("| neighbours | obstacles | formulation | mean deviation m/s | max deviation m/s |")
