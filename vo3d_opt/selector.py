@@ -154,11 +154,8 @@ class VelocitySelector:
         limits = inputs.limits_of(limits)
         dt = inputs.period(dt)
         if self._python is None:
-            bounds, config = self._bounds_and_config(limits, dt, sensing_range)
-            out = np.empty(kernel.OUT_SIZE)
             p, v_now = own.position, own.velocity
-            kernel.decide_rows(p, v_now, v_pref, nbrs, prisms, bounds, config, out)
-            return self._answer(out, t0)
+            return self._compiled(p, v_now, v_pref, nbrs, prisms, limits, dt, sensing_range, t0)
         return self._select_python(
             own.position,
             own.velocity,
@@ -198,7 +195,7 @@ class VelocitySelector:
         positive: anything else is a ``ValueError`` naming the argument, and for an array the
         row and the column.
         """
-        t0 = time.perf_counter()
+        t0 = _clock()
         p = inputs.array_vector(position, "position")
         v_now = inputs.array_vector(velocity, "velocity")
         v_pref = inputs.array_vector(preferred_velocity, "preferred_velocity")
@@ -207,11 +204,26 @@ class VelocitySelector:
         limits = inputs.limits_of(limits)
         dt = inputs.period(dt)
         if self._python is None:
-            bounds, config = self._bounds_and_config(limits, dt, sensing_range)
-            out = np.empty(kernel.OUT_SIZE)
-            kernel.decide(p, v_now, v_pref, nbrs, prisms, np.array(bounds), config, out)
-            return self._answer(out, t0)
+            return self._compiled(p, v_now, v_pref, nbrs, prisms, limits, dt, sensing_range, t0)
         return self._select_python(p, v_now, v_pref, nbrs, prisms, limits, dt, sensing_range, t0)
+
+    def _compiled(
+        self,
+        p: np.ndarray,
+        v_now: np.ndarray,
+        v_pref: inputs.Vector3,
+        nbrs: list[inputs.Row] | np.ndarray,
+        prisms: list[inputs.Row] | np.ndarray,
+        limits: Limits,
+        dt: float,
+        sensing_range: float | None,
+        t0: float,
+    ) -> Decision:
+        """The compiled decision (``kernel.decide_rows``: the rows as tuples or arrays)."""
+        bounds, config = self._bounds_and_config(limits, dt, sensing_range)
+        out = np.empty(kernel.OUT_SIZE)
+        kernel.decide_rows(p, v_now, v_pref, nbrs, prisms, bounds, config, out)
+        return self._answer(out, t0)
 
     def _bounds_and_config(
         self, limits: Limits, dt: float, sensing_range: float | None

@@ -82,9 +82,9 @@ NB_MODULE(_core, m) {
               decide_into(P_, V, W, nb_, pr, bounds_of(limits), cfg, out);
           },
           "p"_a, "v_now"_a, "v_pref"_a, "nbrs"_a, "prisms"_a, "limits"_a, "cfg"_a, "out"_a,
-          "decide with the rows as Python tuples (select's fast path): v_pref a tuple of 3 numbers\n"
-          "(or an array), nbrs a list of 8-tuples (Neighbor.row), prisms a list of 4-tuples\n"
-          "(an obstacle's prism), limits a tuple of 6 (Bounds).");
+          "decide with the rows as select holds them: v_pref a tuple of 3 numbers (or an array),\n"
+          "nbrs a list of 8-tuples (Neighbor.row) or an (n, 8) array, prisms a list of 4-tuples\n"
+          "(an obstacle's prism) or an (m, 4) array, limits a tuple of 6 (Bounds).");
 
     m.def("decide_many",
           [](nb::handle swarm, const Config& cfg_in, int64_t threads, nb::handle out, int64_t lo,

@@ -145,11 +145,11 @@ void tuple_into(PyObject* row, const char* name, int64_t width, double* out) {
     for (int64_t k = 0; k < width; ++k) out[k] = number_of(PyTuple_GET_ITEM(row, k), name);
 }
 
-// A list (or tuple) of tuples of ``width`` numbers as Rows over ``buf``.
+// A list (or tuple) of tuples of ``width`` numbers as Rows over ``buf``; or a float64 array
+// of shape (n, width) as it is.
 Rows rows_of_tuples(nb::handle h, const char* name, int64_t width, std::vector<double>& buf) {
     PyObject* seq = h.ptr();
-    if (!PyList_Check(seq) && !PyTuple_Check(seq))
-        throw nb::value_error((std::string(name) + ": expected a list of tuples").c_str());
+    if (!PyList_Check(seq) && !PyTuple_Check(seq)) return rows_of(arr<double>(h, name, {ANY, width}));
     Py_ssize_t n = PySequence_Fast_GET_SIZE(seq);
     PyObject** items = PySequence_Fast_ITEMS(seq);
     buf.resize(size_t(n * width));

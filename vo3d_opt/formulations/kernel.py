@@ -38,10 +38,11 @@ OUT_STATUS, OUT_PHI, OUT_ROUND, OUT_SOLVED = 3, 4, 5, 6
 #: ``prisms`` (m, 4): x, y, L_pz, h_pz; ``limits``: ``bounds_array``; ``cfg``: ``Options.config``.
 #: Arrays of another dtype or shape raise ValueError naming the argument.
 decide = _core.decide
-#: ``decide`` from the rows ``select`` holds, as Python tuples (``formulations.inputs``): the
-#: preferred velocity a tuple of 3 numbers (or an array), ``nbrs`` a list of ``Neighbor.row``,
-#: ``prisms`` a list of obstacles' ``prism``, ``limits`` ``inputs.bounds_row``. The same numbers
-#: give the same answer as ``decide``; a row of another length raises ValueError naming it.
+#: ``decide`` from the rows as ``select`` holds them (``formulations.inputs``): the preferred
+#: velocity a tuple of 3 numbers (or an array), ``nbrs`` a list of ``Neighbor.row`` (or an (n, 8)
+#: array), ``prisms`` a list of obstacles' ``prism`` (or an (m, 4) array), ``limits``
+#: ``inputs.bounds_row``. The same numbers give the same answer as ``decide``; a row of another
+#: length raises ValueError naming it.
 decide_rows = _core.decide_rows
 
 #: The (round, plane) QPs of one decision and their rows, filled as VOs join:
