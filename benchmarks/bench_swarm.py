@@ -165,8 +165,9 @@ def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dic
     """Where ours (1 thread) spends the first ``steps`` steps (None: the whole run): the input
     checks, the k-d tree and neighbour lists, the compiled decisions (building each vehicle's
     rows among them: they are no longer timed apart), the rest of the loop, the metrics."""
-    from vo3d_opt import selector, swarm
+    from vo3d_opt import swarm
     from vo3d_opt.sim.deciders import SwarmSelect
+    from vo3d_opt.swarm import many
     from vo3d_opt.sim.metrics import decision_times_us, summarize
     from vo3d_opt.sim.simulator import fly, scenario_selector
 
@@ -182,7 +183,7 @@ def profile_run(case: str, n: int, max_neighbors: int, steps: int | None) -> dic
 
     swarm.SwarmInputs.checked = classmethod(timed("checks", swarm.SwarmInputs.checked.__func__))
     swarm.SwarmInputs.arrays = timed("tree", swarm.SwarmInputs.arrays)
-    selector.decide_many = timed("kernel", selector.decide_many)  # type: ignore[attr-defined]
+    many.decide_many = timed("kernel", many.decide_many)
     sc = scenario(case, n)
     sel, formulation, solver = scenario_selector(sc)
     step = SwarmSelect(sc, sel, max_neighbors=max_neighbors, threads=1)

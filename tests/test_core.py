@@ -19,6 +19,7 @@ from vo3d_opt.formulations import kernel
 from vo3d_opt.formulations.common import (
     FINE_HEADING_STEP,
     FINE_SPEED_LEVELS,
+    KERNEL_OPTIONS,
     Bounds,
     Options,
     bounds_array,
@@ -59,10 +60,9 @@ def _decide(args: list[np.ndarray], cfg) -> np.ndarray:
 
 def test_decide_is_select_and_takes_any_strides_and_read_only_arrays():
     rng = np.random.default_rng(1)
-    sel = VelocitySelector()
+    sel, cfg = VelocitySelector(preset="paper"), Options().config
     for _ in range(20):
         kw = _encounter(rng)
-        cfg = sel.options_for(kw["limits"].v_max, kw["dt"]).config
         args = _arrays(kw)
         want = _decide(args, cfg)
         d = sel.select(**kw)
@@ -149,7 +149,7 @@ def test_a_bad_swarm_raises_a_value_error():
 
     inputs = swarm_module.SwarmInputs.checked(P, V, V, 5.0, [], None, 0.2, 55.0, None, None)
     sw = inputs.arrays(1)
-    cfg = sel.options_for(5.0, 0.2).config
+    cfg = sel.options_for(4.0, 0.2).config
     out = np.empty((2, _core.MANY_OUT_SIZE))
     _core.decide_many(sw, cfg, 1, out)
     for field, bad in (("nb_idx", np.array([0, 5])), ("who", np.array([0, 9])), ("agents", sw.agents[:, :10])):
@@ -181,7 +181,8 @@ def test_swarm_answers_do_not_depend_on_the_threads(seed: int):
     for threads in (2, 7):  # more threads than cores too: the core takes any number
         sw = _swarm_arrays(kw)
         out = np.empty((sw.who.shape[0], _core.MANY_OUT_SIZE))
-        _core.decide_many(sw, sel.options_for(4.0, 0.2).config, threads, out)
+        cfg = sel.options_for(kw["limits"].speed[1], kw["dt"], 55.0).config
+        _core.decide_many(sw, cfg, threads, out)
         assert np.array_equal(out[:, :3], one.velocities[sw.who])
         assert np.array_equal(out[:, 6], one.solved[sw.who])
     two = sel.select_many(**kw, threads=min(2, __import__("vo3d_opt").swarm.cores()))
@@ -213,6 +214,29 @@ def test_select_many_from_two_python_threads_at_once_is_select_many_alone():
     for t in threads:
         t.join()
     assert len(got) == 2 and all(np.array_equal(g, want) for g in got)
+
+
+def test_the_config_is_set_by_name_and_checked_where_the_core_reads_it():
+    opts = Options(reciprocal=True, pz_buffer=1.5, margin=0.01, speed_levels=5, closing_guard=True,
+                   least_bad_escape=False, fine_fallback=False, horizon=3.0,
+                   corrections=frozenset({"triangle"}), plane_step_deg=30.0, qp_samples=12)
+    cfg = opts.config
+    for name in set(KERNEL_OPTIONS) - {"horizon", "corrections"}:
+        assert getattr(cfg, name) == getattr(opts, name), name
+    assert cfg.horizon == 3.0 and Options().config.horizon < 0  # none: NO_HORIZON
+    assert cfg.corrections.triangle and not cfg.corrections.tg_range
+    assert len(cfg.phi) == len(cfg.cos_phi) == 7 and len(cfg.t) == 12
+    assert cfg.heading_step == math.radians(opts.heading_step_deg)
+    args = _arrays(_encounter(np.random.default_rng(4)))
+    for field, bad in (("cos_phi", [1.0]), ("t", []), ("speed_levels", 1), ("heading_step", 0.0)):
+        partial = _core.Config()
+        for name, value in opts.kernel_fields().items():
+            setattr(partial, name, value)
+        setattr(partial, field, bad)
+        with pytest.raises(ValueError, match=f"cfg.{field}"):
+            _decide(args, partial)
+    with pytest.raises(ValueError, match="cfg.phi"):
+        _decide(args, _core.Config())  # nothing set
 
 
 def test_the_core_constants_are_the_options_defaults():

@@ -1,11 +1,15 @@
 """The package's architecture holds: no import cycle (imports inside functions included; those
-for type checkers only, under ``TYPE_CHECKING``, are not imports at run time), and
-the layers of pyproject.toml's import-linter contract, each importing only those below it."""
+for type checkers only, under ``TYPE_CHECKING``, are not imports at run time), the layers of
+pyproject.toml's import-linter contract, each importing only those below it; no two public
+classes or functions of one name; no module over 600 lines, the public API module at most
+400."""
 
 from __future__ import annotations
 
+import ast
 import subprocess
 import sys
+from collections import defaultdict
 from pathlib import Path
 
 import grimp
@@ -73,3 +77,34 @@ def test_the_layers_contract_is_kept() -> None:
     res = subprocess.run([str(lint)], cwd=ROOT, capture_output=True, text=True)
     assert res.returncode == 0, res.stdout[-2000:]
     assert "1 kept, 0 broken" in res.stdout
+
+
+def public_definitions(package: Path) -> dict[str, list[str]]:
+    """Each public top-level class and function name of ``package``: the modules defining it."""
+    found: dict[str, list[str]] = defaultdict(list)
+    for path in sorted(package.rglob("*.py")):
+        module = ".".join(path.relative_to(package.parent).with_suffix("").parts)
+        for node in ast.parse(path.read_text()).body:
+            kinds = (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)
+            if isinstance(node, kinds) and not node.name.startswith("_"):
+                found[node.name].append(module)
+    return found
+
+
+def test_no_two_public_classes_or_functions_share_a_name() -> None:
+    shared = {k: v for k, v in public_definitions(ROOT / "vo3d_opt").items() if len(v) > 1}
+    assert shared == {}
+
+
+def test_the_check_finds_a_shared_name(tmp_path: Path) -> None:
+    (tmp_path / "p" / "q").mkdir(parents=True)
+    (tmp_path / "p" / "a.py").write_text("def select():\n    pass\n\n\ndef _helper():\n    pass\n")
+    (tmp_path / "p" / "q" / "b.py").write_text("class select:\n    pass\n\n\ndef _helper():\n    pass\n")
+    found = public_definitions(tmp_path / "p")
+    assert found == {"select": ["p.a", "p.q.b"]}
+
+
+def test_no_module_is_over_600_lines_and_the_api_module_over_400() -> None:
+    lines = {p: len(p.read_text().splitlines()) for p in (ROOT / "vo3d_opt").rglob("*.py")}
+    assert {str(p.relative_to(ROOT)): n for p, n in lines.items() if n > 600} == {}
+    assert lines[ROOT / "vo3d_opt" / "selector.py"] <= 400

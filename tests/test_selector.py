@@ -91,7 +91,7 @@ def test_fast_options_try_fewer_velocities_never_an_unchecked_one(kw):
     limits, every optimal one outside every VO by the exact 3D check, as with the defaults; an
     answer on a plane is on one of its 5 planes (every 45 degrees), not the defaults' 19."""
     sel = VelocitySelector(preset="fast")
-    assert sel.options_for(4.0, 0.2).packed[1].shape[1] == 5
+    assert len(sel.options_for(4.0, 0.2).config.phi) == 5
     d = sel.select(**kw)
     assert_within_limits(kw, d.velocity)
     assert d.status in ("optimal", "inside_protected_zone", "infeasible_min_violation")

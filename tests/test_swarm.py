@@ -283,7 +283,7 @@ def test_nearest_lists_are_brute_force_where_the_tree_cannot_settle_them(
     are the brute-force ones, ranges of 0 and inf included; ties (a grid, shared spots) take
     the slow ways, random positions never do. On 3 threads (each ranking at least 8 vehicles
     here) the lists are the same."""
-    from vo3d_opt import swarm
+    from vo3d_opt.swarm import sensing as swarm
 
     ranked, dropped = [], []
     real_ranked, real_nearest = swarm._ranked_within, swarm._nearest_links
@@ -315,7 +315,7 @@ def test_the_nearest_query_serves_only_where_its_distance_is_numpys(monkeypatch)
     vehicles that do not decide counted too."""
     from scipy.spatial import cKDTree
 
-    from vo3d_opt import swarm
+    from vo3d_opt.swarm import sensing as swarm
 
     if not swarm._NEAREST_OK:
         pytest.skip("this numpy sums a norm's squares otherwise: the k-nearest path is off")
@@ -335,7 +335,7 @@ def test_the_nearest_query_serves_only_where_its_distance_is_numpys(monkeypatch)
 def test_the_nearest_lists_distance_is_numpys_to_the_last_bit(monkeypatch):
     """A vehicle exactly at the sensing range by numpy's norm is listed: its squares summed the
     other way round, (x0² + (x1² + x2²)), would put it one ulp beyond (66.98560043024172 m)."""
-    from vo3d_opt import swarm
+    from vo3d_opt.swarm import sensing as swarm
 
     x = np.array([66.46, 4.516, -7.053])
     reach = float(np.linalg.norm(x))

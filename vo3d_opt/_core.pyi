@@ -21,49 +21,35 @@ _A = np.ndarray
 # kind, curve, chord, chord_cs, apex, symmetry, halfplane (Sections' arrays)
 _Sections = tuple[_A, _A, _A, _A, _A, _A, _A]
 
+class Corrections:
+    tg_range: bool
+    symmetry_abs: bool
+    triangle: bool
+    base_chord: bool
+    vo_lines: bool
+    virtual_sphere: bool
+    def __init__(self) -> None: ...
+
 class Config:
-    def __init__(
-        self,
-        *,
-        reciprocal: bool,
-        horizon: float,
-        pz_buffer: float,
-        margin: float,
-        corrections: Sequence[bool],
-        phi: np.ndarray,
-        cos_phi: np.ndarray,
-        sin_phi: np.ndarray,
-        t: np.ndarray,
-        cos_t: np.ndarray,
-        sin_t: np.ndarray,
-        speed_levels: int,
-        heading_step: float,
-        closing_guard: bool,
-        least_bad_escape: bool,
-        fine_fallback: bool,
-    ) -> None: ...
-    @property
-    def reciprocal(self) -> bool: ...
-    @property
-    def horizon(self) -> float: ...
-    @property
-    def pz_buffer(self) -> float: ...
-    @property
-    def margin(self) -> float: ...
-    @property
-    def phi(self) -> np.ndarray: ...
-    @property
-    def t(self) -> np.ndarray: ...
-    @property
-    def speed_levels(self) -> int: ...
-    @property
-    def heading_step(self) -> float: ...
-    @property
-    def closing_guard(self) -> bool: ...
-    @property
-    def least_bad_escape(self) -> bool: ...
-    @property
-    def fine_fallback(self) -> bool: ...
+    """Set field by field; the arrays are read back as lists."""
+
+    reciprocal: bool
+    horizon: float
+    pz_buffer: float
+    margin: float
+    corrections: Corrections
+    phi: Sequence[float]
+    cos_phi: Sequence[float]
+    sin_phi: Sequence[float]
+    t: Sequence[float]
+    cos_t: Sequence[float]
+    sin_t: Sequence[float]
+    speed_levels: int
+    heading_step: float
+    closing_guard: bool
+    least_bad_escape: bool
+    fine_fallback: bool
+    def __init__(self) -> None: ...
 
 class PlaneQPs:
     def __init__(
@@ -92,6 +78,9 @@ class PlaneQPs:
     def gather(self, r: int, p: int) -> int: ...
     def solve(self, r: int, p: int, bounds: _Tuple) -> None: ...
     def search(self, bounds: _Tuple, tried: np.ndarray) -> tuple[int, int, int, int]: ...
+    def lift(self, w: np.ndarray, p: int, out: np.ndarray) -> None: ...
+    def entered(self, v: np.ndarray, out: np.ndarray) -> bool: ...
+    def within(self, v: np.ndarray, bounds: _Tuple) -> bool: ...
 
 def decide(
     p: np.ndarray,
@@ -100,6 +89,16 @@ def decide(
     nbrs: np.ndarray,
     prisms: np.ndarray,
     limits: np.ndarray,
+    cfg: Config,
+    out: np.ndarray,
+) -> None: ...
+def decide_rows(
+    p: np.ndarray,
+    v_now: np.ndarray,
+    v_pref: Sequence[float] | np.ndarray,
+    nbrs: Sequence[tuple[float, ...]] | np.ndarray,
+    prisms: Sequence[tuple[float, ...]] | np.ndarray,
+    limits: tuple[float, ...],
     cfg: Config,
     out: np.ndarray,
 ) -> None: ...
@@ -220,3 +219,16 @@ def nearest_in_disc(
     out: np.ndarray,
 ) -> bool: ...
 def lift(planes: _Tuple, w: np.ndarray, p: int, out: np.ndarray) -> None: ...
+def qp_screen(
+    P: np.ndarray,
+    q: np.ndarray,
+    C: np.ndarray,
+    l: np.ndarray,
+    u: np.ndarray,
+    r: float,
+    has_r: bool,
+    m_ineq: int,
+    m_eq: int,
+) -> int: ...
+def qp_violation(C: np.ndarray, l: np.ndarray, u: np.ndarray, x: np.ndarray, r: float) -> float: ...
+def first_bad(values: np.ndarray, max_magnitude: float, positive_from: int) -> int: ...

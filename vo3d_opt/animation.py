@@ -36,7 +36,7 @@ from PIL import Image
 
 from vo3d_opt.figures.keys import key_handles
 from vo3d_opt.figures.scene import obstacle_names, prism_square, scene_bounds
-from vo3d_opt.figures.sections import Section, side_sections
+from vo3d_opt.figures.sections import SideSection, side_sections
 from vo3d_opt.figures.style import (
     DEFAULT_DPI,
     LEGEND_MAX_AGENTS,
@@ -285,7 +285,7 @@ def build_replay(record: RunRecord) -> Replay:
     return replay
 
 
-def _shape(patch: Patch, cut: Section) -> None:
+def _shape(patch: Patch, cut: SideSection) -> None:
     if isinstance(patch, Circle):
         patch.set_center((cut.cx, cut.cz))
         patch.set_radius(cut.radius)
@@ -294,7 +294,7 @@ def _shape(patch: Patch, cut: Section) -> None:
     patch.set_visible(True)
 
 
-def show_frame(replay: Replay, record: RunRecord, k: int) -> list[Section]:
+def show_frame(replay: Replay, record: RunRecord, k: int) -> list[SideSection]:
     """Move everything to sample k; the side view's sections drawn."""
     p = record.positions
     few = record.n_agents <= LEGEND_MAX_AGENTS

@@ -20,7 +20,7 @@ using namespace vo3d::glue;
 
 NB_MODULE(_core, m) {
     m.doc() = "vo3d-opt's compiled core: the decision of vo3d_opt/algorithm/decide.hpp and its parts";
-    m.attr("OUT_SIZE") = 7;
+    m.attr("OUT_SIZE") = OUT_SIZE;
     m.attr("MANY_OUT_SIZE") = MANY_OUT_SIZE;
     m.attr("AGENT_COLUMNS") = AGENT_COLUMNS;
     m.attr("FINE_SPEED_LEVELS") = FINE_SPEED_LEVELS;
@@ -28,56 +28,68 @@ NB_MODULE(_core, m) {
     m.attr("LIMIT_TOL") = LIMIT_TOL;
     m.attr("NEVER") = NEVER;
 
+    // The options field by field, named as the Python options they come from where the meaning
+    // is the same (Options.config sets them by name); the core checks them when it reads them.
+    nb::class_<Corrections>(m, "Corrections", "The corrections of the paper's section 3.1 that apply.")
+        .def(nb::init<>())
+        .def_rw("tg_range", &Corrections::tg_range)
+        .def_rw("symmetry_abs", &Corrections::symmetry_abs)
+        .def_rw("triangle", &Corrections::triangle)
+        .def_rw("base_chord", &Corrections::base_chord)
+        .def_rw("vo_lines", &Corrections::vo_lines)
+        .def_rw("virtual_sphere", &Corrections::virtual_sphere);
     nb::class_<Config>(m, "Config", "The formulation options as the core reads them (Options.config).")
-        .def(nb::new_([](bool reciprocal, double horizon, double pz_buffer, double margin,
-                         std::vector<bool> corrections, nb::handle phi, nb::handle cos_phi,
-                         nb::handle sin_phi, nb::handle t, nb::handle cos_t, nb::handle sin_t,
-                         int64_t speed_levels, double heading_step, bool closing_guard,
-                         bool least_bad_escape, bool fine_fallback) {
-                 return make_config(reciprocal, horizon, pz_buffer, margin, corrections, phi,
-                                    cos_phi, sin_phi, t, cos_t, sin_t, speed_levels, heading_step,
-                                    closing_guard, least_bad_escape, fine_fallback);
-             }),
-             nb::kw_only(), "reciprocal"_a, "horizon"_a, "pz_buffer"_a, "margin"_a, "corrections"_a,
-             "phi"_a, "cos_phi"_a, "sin_phi"_a, "t"_a, "cos_t"_a, "sin_t"_a, "speed_levels"_a,
-             "heading_step"_a, "closing_guard"_a, "least_bad_escape"_a, "fine_fallback"_a)
-        .def_ro("reciprocal", &Config::reciprocal)
-        .def_ro("horizon", &Config::horizon)
-        .def_ro("pz_buffer", &Config::pz_buffer)
-        .def_ro("margin", &Config::margin)
-        .def_prop_ro("phi", [](const Config& c) { return numpy(c.phi, {c.phi.size()}); })
-        .def_prop_ro("t", [](const Config& c) { return numpy(c.t, {c.t.size()}); })
-        .def_ro("speed_levels", &Config::speed_levels)
-        .def_ro("heading_step", &Config::heading_step)
-        .def_ro("closing_guard", &Config::closing_guard)
-        .def_ro("least_bad_escape", &Config::least_bad_escape)
-        .def_ro("fine_fallback", &Config::fine_fallback);
+        .def(nb::init<>())
+        .def_rw("reciprocal", &Config::reciprocal)
+        .def_rw("horizon", &Config::horizon)
+        .def_rw("pz_buffer", &Config::pz_buffer)
+        .def_rw("margin", &Config::margin)
+        .def_rw("corrections", &Config::corrections)
+        .def_rw("phi", &Config::phi)
+        .def_rw("cos_phi", &Config::cos_phi)
+        .def_rw("sin_phi", &Config::sin_phi)
+        .def_rw("t", &Config::t)
+        .def_rw("cos_t", &Config::cos_t)
+        .def_rw("sin_t", &Config::sin_t)
+        .def_rw("speed_levels", &Config::speed_levels)
+        .def_rw("heading_step", &Config::heading_step)
+        .def_rw("closing_guard", &Config::closing_guard)
+        .def_rw("least_bad_escape", &Config::least_bad_escape)
+        .def_rw("fine_fallback", &Config::fine_fallback);
 
     // ------------------------------------------------------------------ the decision
     m.def("decide",
           [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs, nb::handle prisms,
-             nb::handle limits, const Config& cfg, nb::handle out) {
+             nb::handle limits, const Config& cfg_in, nb::handle out) {
+              const Config& cfg = checked(cfg_in);
               double P_[3], V[3], W[3];
               vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
               In<double> nb_ = arr<double>(nbrs, "nbrs", {ANY, 8});
               In<double> pr = arr<double>(prisms, "prisms", {ANY, 4});
-              Bounds b = bounds_of_array(limits);
-              Out<double> o = out_arr<double>(out, "out", {7});
-              Decision d;
-              {
-                  nb::gil_scoped_release free;
-                  d = decide_one(P_, V, W, rows_of(nb_), rows_of(pr), b, cfg);
-              }
-              double vals[7] = {d.velocity[0], d.velocity[1], d.velocity[2], double(d.status),
-                                d.phi, double(d.round), double(d.solved)};
-              for (int k = 0; k < 7; ++k) o.data()[k * o.stride(0)] = vals[k];
+              decide_into(P_, V, W, rows_of(nb_), rows_of(pr), bounds_of_array(limits), cfg, out);
           },
           "p"_a, "v_now"_a, "v_pref"_a, "nbrs"_a, "prisms"_a, "limits"_a, "cfg"_a, "out"_a,
           "One decision (decide.hpp) into out (7,): velocity, status, phi, round, solved.");
 
+    m.def("decide_rows",
+          [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs, nb::handle prisms,
+             nb::handle limits, const Config& cfg_in, nb::handle out) {
+              const Config& cfg = checked(cfg_in);
+              double P_[3], V[3], W[3];
+              vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3_of(v_pref, "v_pref", W);
+              std::vector<double> nb_buf, pr_buf;
+              Rows nb_ = rows_of_tuples(nbrs, "nbrs", 8, nb_buf), pr = rows_of_tuples(prisms, "prisms", 4, pr_buf);
+              decide_into(P_, V, W, nb_, pr, bounds_of(limits), cfg, out);
+          },
+          "p"_a, "v_now"_a, "v_pref"_a, "nbrs"_a, "prisms"_a, "limits"_a, "cfg"_a, "out"_a,
+          "decide with the rows as select holds them: v_pref a tuple of 3 numbers (or an array),\n"
+          "nbrs a list of 8-tuples (Neighbor.row) or an (n, 8) array, prisms a list of 4-tuples\n"
+          "(an obstacle's prism) or an (m, 4) array, limits a tuple of 6 (Bounds).");
+
     m.def("decide_many",
-          [](nb::handle swarm, const Config& cfg, int64_t threads, nb::handle out, int64_t lo,
+          [](nb::handle swarm, const Config& cfg_in, int64_t threads, nb::handle out, int64_t lo,
              int64_t hi) {
+              const Config& cfg = checked(cfg_in);
               nb::tuple t = fields(swarm, "swarm", 11);
               In<double> agents = arr<double>(t[0], "agents", {ANY, AGENT_COLUMNS});
               int64_t N = agents.shape(0);
@@ -366,14 +378,16 @@ NB_MODULE(_core, m) {
 
     // ------------------------------------------------------------------ build_vos and limits
     m.def("build_vos", [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs,
-                          nb::handle prisms, nb::handle bounds, const Config& cfg) {
+                          nb::handle prisms, nb::handle bounds, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         double P_[3], V[3], W[3];
         vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
         Rows nb_ = rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), pr = rows_of(arr<double>(prisms, "prisms", {ANY, 4}));
         return vos_to_py(build_vos(P_, V, W, nb_, pr, bounds_of(bounds), cfg));
     });
     m.def("pref_clear", [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs,
-                           nb::handle prisms, nb::handle bounds, const Config& cfg) {
+                           nb::handle prisms, nb::handle bounds, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         double P_[3], V[3], W[3], pref[3];
         vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
         Rows nb_ = rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), pr = rows_of(arr<double>(prisms, "prisms", {ANY, 4}));
@@ -381,12 +395,14 @@ NB_MODULE(_core, m) {
         aimed(W, b, pref);
         return pref_clear(P_, cone_rows(P_, V, nb_, b, cfg), pyramids_in_reach(P_, pr, b, cfg), pref, cfg.horizon);
     });
-    m.def("decision_planes", [](nb::handle vos, nb::handle v_now, const Config& cfg) {
+    m.def("decision_planes", [](nb::handle vos, nb::handle v_now, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         double V[3];
         vec3(v_now, "v_now", V);
         return planes_to_py(decision_planes(vos_of_py(vos), V, cfg));
     });
-    m.def("limit_rows", [](nb::handle p, nb::handle v_now, nb::handle nbrs, nb::handle bounds, const Config& cfg) {
+    m.def("limit_rows", [](nb::handle p, nb::handle v_now, nb::handle nbrs, nb::handle bounds, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         double P_[3], V[3];
         vec3(p, "p", P_), vec3(v_now, "v_now", V);
         LimitRows L = limit_rows(P_, V, rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), bounds_of(bounds), cfg);
@@ -447,12 +463,14 @@ NB_MODULE(_core, m) {
     });
 
     // ------------------------------------------------------------------ fallbacks (fallback.hpp)
-    m.def("polar_grid", [](nb::handle bounds, const Config& cfg) {
+    m.def("polar_grid", [](nb::handle bounds, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         Grid g = polar(bounds_of(bounds), cfg.speed_levels, cfg.heading_step);
         size_t M = g.points.size() / 2;
         return numpy(g.points, {M, 2});
     });
-    m.def("grid_of", [](nb::handle bounds, const Config& cfg, bool hazard) {
+    m.def("grid_of", [](nb::handle bounds, const Config& cfg_in, bool hazard) {
+        const Config& cfg = checked(cfg_in);
         Grid g = grid_of(bounds_of(bounds), cfg, hazard);
         size_t M = size_t(g.size()), B = size_t(g.blocks());
         return nb::make_tuple(numpy(g.points, {M, 2}), numpy(g.block, {M}), numpy(g.discs, {B, 3}));
@@ -461,7 +479,8 @@ NB_MODULE(_core, m) {
         return has_hazard(vos_of_py(vos), rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})));
     });
     m.def("fallback", [](nb::handle vos, nb::handle planes, nb::handle tried, nb::handle p, nb::handle v_now,
-                         nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg, bool hazard) {
+                         nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg_in, bool hazard) {
+        const Config& cfg = checked(cfg_in);
         VOs V = vos_of_py(vos);
         Planes pl = planes_of(planes);
         if (pl.count() != cfg.planes()) throw nb::value_error("planes: expected cfg's planes");
@@ -478,7 +497,8 @@ NB_MODULE(_core, m) {
         return std::make_tuple(false, numpy(std::vector<double>(v, v + 3), {3}), int64_t(-1));
     });
     m.def("least_bad", [](nb::handle vos, nb::handle planes, nb::handle tried, nb::handle p, nb::handle v_now,
-                          nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg) {
+                          nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         VOs V = vos_of_py(vos);
         Planes pl = planes_of(planes);
         Rows tr = rows_of(arr<double>(tried, "tried", {ANY, 3}));
@@ -494,7 +514,8 @@ NB_MODULE(_core, m) {
         return numpy(std::vector<double>(v, v + 3), {3});
     });
     m.def("first_safe", [](nb::handle vos, nb::handle v, nb::handle G3, nb::handle h3, nb::handle bounds,
-                           const Config& cfg) {
+                           const Config& cfg_in) {
+        const Config& cfg = checked(cfg_in);
         VOs V = vos_of_py(vos);
         Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
         LimitRows L = limits_of(G3, h3);
@@ -544,7 +565,8 @@ NB_MODULE(_core, m) {
                            "search on outside backends; its arrays are views of the C++ state.")
         .def("__init__",
              [](PyPlaneQPs* self, nb::handle vos, nb::handle planes, nb::handle G3, nb::handle h3,
-                nb::handle initial, const Config& cfg, bool lazy) {
+                nb::handle initial, const Config& cfg_in, bool lazy) {
+                 const Config& cfg = checked(cfg_in);
                  new (self) PyPlaneQPs();
                  self->vos = vos_of_py(vos);
                  self->planes = planes_of(planes);
@@ -594,5 +616,65 @@ NB_MODULE(_core, m) {
                  SearchResult r = s.qps->search(bounds_of(bounds), t.data());
                  return std::make_tuple(r.r, r.p, r.solved, r.n_tried);
              },
-             "bounds"_a, "tried"_a, "The best-first search of decide.hpp: (r, p, solved, n_tried).");
+             "bounds"_a, "tried"_a, "The best-first search of decide.hpp: (r, p, solved, n_tried).")
+        // The Python search's checks of an answer, on the VOs, planes and limits held here
+        .def("lift",
+             [](PyPlaneQPs& s, nb::handle w, int64_t p, nb::handle out) {
+                 In<double> ww = arr<double>(w, "w", {2});
+                 Out<double> o = out_arr<double>(out, "out", {3});
+                 check_qp(s, 0, p);
+                 double x[2] = {at(ww, 0), at(ww, 1)}, v[3];
+                 lift(s.planes, x, p, v);
+                 for (int c = 0; c < 3; ++c) o.data()[c * o.stride(0)] = v[c];
+             },
+             "w"_a, "p"_a, "out"_a, "Plane p's coordinates w as the world velocity out (3,).")
+        .def("entered",
+             [](PyPlaneQPs& s, nb::handle v, nb::handle out) {
+                 double x[3];
+                 vec3(v, "v", x);
+                 Out<bool> o = out_arr<bool>(out, "out", {s.vos.count()});
+                 std::vector<uint8_t> in(s.vos.count());
+                 bool any = containing(s.vos, x, s.cfg.horizon, in.data());
+                 for (size_t k = 0; k < in.size(); ++k) o.data()[k * o.stride(0)] = in[k];
+                 return any;
+             },
+             "v"_a, "out"_a, "Which VOs contain v (the exact 3D membership), into out: whether any.")
+        .def("within",
+             [](PyPlaneQPs& s, nb::handle v, nb::handle bounds) {
+                 double x[3];
+                 vec3(v, "v", x);
+                 return within_limits(x, s.limits, bounds_of(bounds));
+             },
+             "v"_a, "bounds"_a, "Whether v keeps the speed and the limit rows (within tolerance).");
+
+    // ------------------------------------------------------------------ select_arrays' checks
+    m.def("first_bad",
+          [](nb::handle values, double max_magnitude, int64_t positive_from) {
+              In<double> a = arr<double>(values, "values", {ANY, ANY});
+              return first_bad(a, max_magnitude, positive_from);
+          },
+          "values"_a, "max_magnitude"_a, "positive_from"_a,
+          "The flat index of the first entry of values (n, k) that is not finite, beyond\n"
+          "max_magnitude, or (in a column from positive_from on) not positive; -1 for none.");
+
+    // ------------------------------------------------------------------ solvers/base.py's checks
+    m.def("qp_screen",
+          [](nb::handle P, nb::handle q, nb::handle C, nb::handle l, nb::handle u, double r, bool has_r,
+             int64_t m_ineq, int64_t m_eq) {
+              return qp_screen(arr<double>(P, "P", {ANY, ANY}), arr<double>(q, "q", {ANY}),
+                               arr<double>(C, "C", {ANY, ANY}), arr<double>(l, "l", {ANY}),
+                               arr<double>(u, "u", {ANY}), r, has_r, m_ineq, m_eq);
+          },
+          "P"_a, "q"_a, "C"_a, "l"_a, "u"_a, "r"_a, "has_r"_a, "m_ineq"_a, "m_eq"_a,
+          "0: fine; 1: NaN or a misplaced infinity; 2: an infinite b; 3: infeasible bounds.");
+    m.def("qp_violation",
+          [](nb::handle C, nb::handle l, nb::handle u, nb::handle x, double r) {
+              In<double> c = arr<double>(C, "C", {ANY, ANY});
+              int64_t m_ = c.shape(0), n = c.shape(1);
+              In<double> xx = arr<double>(x, "x", {n});
+              if (r >= 0.0 && n > 8) throw nb::value_error("x: at most 8 entries with a radius");
+              return qp_violation(c, arr<double>(l, "l", {m_}), arr<double>(u, "u", {m_}), xx, r);
+          },
+          "C"_a, "l"_a, "u"_a, "x"_a, "r"_a,
+          "The largest of l - C x, C x - u and (r >= 0) |x| - r; a NaN never wins; -inf for none.");
 }

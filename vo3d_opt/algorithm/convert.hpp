@@ -125,6 +125,44 @@ Bounds bounds_of_array(nb::handle h) {
     return Bounds{at(a, 0), at(a, 1), at(a, 2), at(a, 3), at(a, 4), at(a, 5)};
 }
 
+// Python tuples of numbers (Neighbor.row, an obstacle's prism, a 3-vector): what select() holds
+// already, read without building a numpy array for them. A float is read as it is; any other
+// number through its __float__.
+double number_of(PyObject* x, const char* name) {
+    if (PyFloat_Check(x)) return PyFloat_AS_DOUBLE(x);
+    if (PyBool_Check(x) || !PyNumber_Check(x))
+        throw nb::value_error((std::string(name) + ": expected numbers").c_str());
+    double v = PyFloat_AsDouble(x);
+    if (v == -1.0 && PyErr_Occurred()) throw nb::python_error();
+    return v;
+}
+
+void tuple_into(PyObject* row, const char* name, int64_t width, double* out) {
+    if (!PyTuple_Check(row) || PyTuple_GET_SIZE(row) != width)
+        throw nb::value_error((std::string(name) + ": expected tuples of " + std::to_string(width) +
+                               " numbers")
+                                  .c_str());
+    for (int64_t k = 0; k < width; ++k) out[k] = number_of(PyTuple_GET_ITEM(row, k), name);
+}
+
+// A list (or tuple) of tuples of ``width`` numbers as Rows over ``buf``; or a float64 array
+// of shape (n, width) as it is.
+Rows rows_of_tuples(nb::handle h, const char* name, int64_t width, std::vector<double>& buf) {
+    PyObject* seq = h.ptr();
+    if (!PyList_Check(seq) && !PyTuple_Check(seq)) return rows_of(arr<double>(h, name, {ANY, width}));
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(seq);
+    PyObject** items = PySequence_Fast_ITEMS(seq);
+    buf.resize(size_t(n * width));
+    for (Py_ssize_t i = 0; i < n; ++i) tuple_into(items[i], name, width, buf.data() + i * width);
+    return Rows::of(buf, width);
+}
+
+// A 3-vector from a tuple of three numbers or a float64 array of shape (3,).
+void vec3_of(nb::handle h, const char* name, double* out) {
+    if (PyTuple_Check(h.ptr())) return tuple_into(h.ptr(), name, 3, out);
+    vec3(h, name, out);
+}
+
 // ------------------------------------------------------------------------------ to numpy
 
 template <class T>
@@ -284,29 +322,36 @@ LimitRows limits_of(nb::handle G, nb::handle h) {
 
 Rows nbrs_of(const In<double>& a) { return rows_of(a); }
 
+// ------------------------------------------------------------------------------ one decision
+
+// decide's output: velocity (3), status, phi, round, solved.
+constexpr int64_t OUT_SIZE = 7;
+
+// One decision (decide.hpp), the GIL released, into out (OUT_SIZE,).
+void decide_into(const double* p, const double* v_now, const double* v_pref, Rows nbrs, Rows prisms,
+                 Bounds b, const Config& cfg, nb::handle out) {
+    Out<double> o = out_arr<double>(out, "out", {OUT_SIZE});
+    Decision d;
+    {
+        nb::gil_scoped_release free;
+        d = decide_one(p, v_now, v_pref, nbrs, prisms, b, cfg);
+    }
+    double vals[OUT_SIZE] = {d.velocity[0], d.velocity[1], d.velocity[2], double(d.status),
+                             d.phi, double(d.round), double(d.solved)};
+    for (int64_t k = 0; k < OUT_SIZE; ++k) o.data()[k * o.stride(0)] = vals[k];
+}
+
 // ------------------------------------------------------------------------------ the options
 
-Config make_config(bool reciprocal, double horizon, double pz_buffer, double margin,
-                   std::vector<bool> corrections, nb::handle phi, nb::handle cos_phi,
-                   nb::handle sin_phi, nb::handle t, nb::handle cos_t, nb::handle sin_t,
-                   int64_t speed_levels, double heading_step, bool closing_guard,
-                   bool least_bad_escape, bool fine_fallback) {
-    Config c;
-    c.reciprocal = reciprocal, c.horizon = horizon, c.pz_buffer = pz_buffer, c.margin = margin;
-    if (corrections.size() != 6) throw nb::value_error("corrections: expected six flags");
-    c.corrections = Corrections{corrections[0], corrections[1], corrections[2],
-                                corrections[3], corrections[4], corrections[5]};
-    c.phi = vec(phi, "phi"), c.cos_phi = vec(cos_phi, "cos_phi"), c.sin_phi = vec(sin_phi, "sin_phi");
-    c.t = vec(t, "t"), c.cos_t = vec(cos_t, "cos_t"), c.sin_t = vec(sin_t, "sin_t");
+// A Config is built field by field from Python (def_rw): before the core reads one, its
+// arrays must agree and its grid be a grid, or the core would read past an array's end.
+const Config& checked(const Config& c) {
     if (c.phi.empty() || c.cos_phi.size() != c.phi.size() || c.sin_phi.size() != c.phi.size())
-        throw nb::value_error("phi, cos_phi, sin_phi: expected arrays of one length, at least 1");
+        throw nb::value_error("cfg.phi, cfg.cos_phi, cfg.sin_phi: expected arrays of one length, at least 1");
     if (c.t.empty() || c.cos_t.size() != c.t.size() || c.sin_t.size() != c.t.size())
-        throw nb::value_error("t, cos_t, sin_t: expected arrays of one length, at least 1");
-    if (speed_levels < 2) throw nb::value_error("speed_levels: expected at least 2");
-    if (!(heading_step > 0.0)) throw nb::value_error("heading_step: expected a positive angle");
-    c.speed_levels = speed_levels, c.heading_step = heading_step;
-    c.closing_guard = closing_guard, c.least_bad_escape = least_bad_escape;
-    c.fine_fallback = fine_fallback;
+        throw nb::value_error("cfg.t, cfg.cos_t, cfg.sin_t: expected arrays of one length, at least 1");
+    if (c.speed_levels < 2) throw nb::value_error("cfg.speed_levels: expected at least 2");
+    if (!(c.heading_step > 0.0)) throw nb::value_error("cfg.heading_step: expected a positive angle");
     return c;
 }
 
@@ -334,6 +379,78 @@ nb::object bool_view(PyPlaneQPs& self, uint8_t* data, std::initializer_list<size
 void check_qp(const PyPlaneQPs& self, int64_t r, int64_t p) {
     if (r < 0 || r >= ROUNDS || p < 0 || p >= self.qps->P)
         throw nb::value_error("(r, p): not a QP of this decision");
+}
+
+// ------------------------------------------------------------------------------ QP checks
+
+// solvers/base.py's screen of a standard-form QP (min ½xᵀPx + qᵀx, l <= C x <= u, the first
+// m_ineq rows inequalities, the next m_eq equalities): a dozen numpy reductions on arrays of a
+// few tens of entries, in one pass. Finite data: every entry finite and their sum too (as numpy
+// judges it from the sum, which also overflows on huge data).
+int qp_screen(const In<double>& P, const In<double>& q, const In<double>& C, const In<double>& l,
+              const In<double>& u, double r, bool has_r, int64_t m_ineq, int64_t m_eq) {
+    double sum = 0.0;
+    bool finite = !has_r || std::isfinite(r);
+    auto add = [&](const In<double>& a) {
+        int64_t rows = a.shape(0), cols = a.ndim() > 1 ? a.shape(1) : 1;
+        for (int64_t i = 0; i < rows; ++i)
+            for (int64_t j = 0; j < cols; ++j) {
+                double x = a.data()[i * a.stride(0) + (a.ndim() > 1 ? j * a.stride(1) : 0)];
+                finite = finite && std::isfinite(x), sum += x;
+            }
+    };
+    add(P), add(q), add(C);
+    int64_t m = l.shape(0);
+    if (int64_t(u.shape(0)) != m) throw nb::value_error("l, u: expected one length");
+    bool nan = false, bad = false;
+    for (int64_t i = 0; i < m; ++i) {
+        double lo = at(l, i), hi = at(u, i);
+        nan = nan || std::isnan(lo) || std::isnan(hi);
+        bad = bad || !(lo <= hi && lo < kInf && hi > -kInf);
+    }
+    if (!finite || !std::isfinite(sum) || nan) return 1;
+    if (!bad && (!has_r || r >= 0)) return 0;
+    for (int64_t i = m_ineq; i < m_ineq + m_eq && i < m; ++i)
+        if (std::isinf(at(l, i))) return 2;
+    return 3;
+}
+
+// The largest of l - C x and C x - u over the rows, each C x summed column by column as the
+// rows are written (as numpy's column-wise sums do), and, for r >= 0, of |x| - r (|x|² summed
+// left to right, as numpy sums up to 8 entries); a NaN never wins; -inf for nothing.
+double qp_violation(const In<double>& C, const In<double>& l, const In<double>& u,
+                    const In<double>& x, double r) {
+    double worst = -kInf;
+    if (r >= 0.0) {
+        double sq = 0.0;
+        for (int64_t j = 0; j < int64_t(x.shape(0)); ++j) sq = sq + at(x, j) * at(x, j);
+        worst = std::sqrt(sq) - r;
+        if (std::isnan(worst)) worst = -kInf;
+    }
+    for (int64_t i = 0; i < int64_t(C.shape(0)); ++i) {
+        double cx = 0.0;
+        for (int64_t j = 0; j < int64_t(C.shape(1)); ++j)
+            cx = cx + C.data()[i * C.stride(0) + j * C.stride(1)] * at(x, j);
+        double lo = at(l, i) - cx, hi = cx - at(u, i);
+        if (lo > worst) worst = lo;
+        if (hi > worst) worst = hi;
+    }
+    return worst;
+}
+
+// ------------------------------------------------------------------------------ array checks
+
+// select_arrays' check of a table of numbers in one pass (formulations/inputs.py words the
+// error): the flat index of the first entry that is not finite or beyond max_magnitude, or, in
+// a column from positive_from on, not positive; -1 for none.
+int64_t first_bad(const In<double>& a, double max_magnitude, int64_t positive_from) {
+    int64_t rows = a.shape(0), cols = a.shape(1);
+    for (int64_t i = 0; i < rows; ++i)
+        for (int64_t j = 0; j < cols; ++j) {
+            double x = a.data()[i * a.stride(0) + j * a.stride(1)];
+            if (!(std::fabs(x) <= max_magnitude) || (j >= positive_from && !(x > 0.0))) return i * cols + j;
+        }
+    return -1;
 }
 
 // ------------------------------------------------------------------------------ swarms

@@ -24,6 +24,8 @@
 // are never solved, and the rows of a plane are built when one of its QPs first comes up.
 #pragma once
 
+#include <memory>
+
 #include "exact2d.hpp"
 #include "fallback.hpp"
 #include "sections.hpp"
@@ -130,9 +132,9 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
     }
     Planes planes = decision_planes(vos, v_now, cfg);
     PlaneQPs qps(vos, planes, limits, initial, cfg, true);
-    // at most every QP once, then once per VO it gains
-    std::vector<double> tried(3 * ROUNDS * planes.count() * (V + 1));
-    SearchResult s = qps.search(b, tried.data());  // 4
+    // at most every QP once, then once per VO it gains; only the answers written are read
+    std::unique_ptr<double[]> tried(new double[3 * ROUNDS * planes.count() * (V + 1)]);
+    SearchResult s = qps.search(b, tried.get());  // 4
     out.solved = s.solved;
     double v[3];
     if (s.r >= 0) {
@@ -149,7 +151,7 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
         out.phi = cfg.phi[f.plane], out.round = SAMPLED;
         return out;
     }
-    Rows answers{tried.data(), s.n_tried, 3, 3, 1};
+    Rows answers{tried.get(), s.n_tried, 3, 3, 1};
     least_bad(vos, planes, grid, cover, answers, p, v_now, limits, b, cfg, v);
     enforce_limits(v, p, b, out.velocity);  // 6
     out.status = INFEASIBLE_MIN_VIOLATION, out.phi = kNaN, out.round = LEAST_BAD;

@@ -25,7 +25,7 @@ from .scene import box_corners, obstacle_names
 
 
 @dataclass(frozen=True)
-class Section:
+class SideSection:
     """A shape a side view draws: ``kind`` "body" or "prism" (a rectangle [x0, x1] × [z0, z1]),
     or "sphere" (the circle of ``radius`` about (``cx``, ``cz``)); ``depth`` the y it is cut
     at."""
@@ -95,7 +95,7 @@ def _inside(record: RunRecord, kind: str, k: int, p: np.ndarray) -> np.ndarray:
 
 def _section(
     record: RunRecord, kind: str, k: int, y: float, name: str, top: float
-) -> Section | None:
+) -> SideSection | None:
     """Part ``kind`` of obstacle k cut at depth y (heights drawn up to ``top``), or None."""
     sc = record.scenario
     if kind == "sphere":
@@ -105,7 +105,7 @@ def _section(
         if abs(dy) >= s.radius:
             return None
         r = math.sqrt(s.radius**2 - dy**2)
-        return Section(name, kind, y, cx=float(c[0]), cz=float(c[2]), radius=r)
+        return SideSection(name, kind, y, cx=float(c[0]), cz=float(c[2]), radius=r)
     body = sc.bodies[k]
     if kind == "prism":
         chord = disc_chord(float(body.center[0]), float(body.center[1]), body.side / 2.0, y)
@@ -115,10 +115,10 @@ def _section(
         height = body.height
     if chord is None:
         return None
-    return Section(name, kind, y, x0=chord[0], x1=chord[1], z0=0.0, z1=min(height, top))
+    return SideSection(name, kind, y, x0=chord[0], x1=chord[1], z0=0.0, z1=min(height, top))
 
 
-def side_sections(record: RunRecord, p: np.ndarray, top: float = math.inf) -> list[Section]:
+def side_sections(record: RunRecord, p: np.ndarray, top: float = math.inf) -> list[SideSection]:
     """What a side view draws of the obstacles when the vehicles are at p (N, 3) (module
     docstring): at most one section of each body, of each sensed body's protected prism and of
     each sphere. ``top``: heights drawn up to it (the view's upper edge)."""

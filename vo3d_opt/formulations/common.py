@@ -54,9 +54,7 @@ _Deg = Annotated[float, Field(gt=0, le=180, allow_inf_nan=False)]
 
 
 #: The options as the compiled core reads them (``Options.config``): a ``vo3d_opt._core.Config``
-#: of named fields (reciprocal, horizon, pz_buffer, margin, corrections, the planes' and the
-#: generators' angles with their cosines and sines, speed_levels, heading_step, closing_guard,
-#: least_bad_escape, fine_fallback).
+#: of named fields, set one by one (``Options.kernel_fields``).
 Config = _core.Config
 
 
@@ -131,57 +129,42 @@ class Options(Model):
     # reached, and an obstacle does not take its share of the avoidance
     fine_fallback: StrictBool = True
 
-    @cached_property
-    def packed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(values, plane table, generator table): the scalars of ``Config`` (correction flags
-        as 0/1), (phi, cos phi, sin phi) of the planes, (t, cos t, sin t) of the generators."""
+    def kernel_fields(self) -> dict[str, object]:
+        """The compiled core's ``Config`` fields by name: every option the core has a field of
+        the same name for, as it is, save those it reads in another form (the horizon,
+        NO_HORIZON for none; the corrections' flags); and those derived from options (the
+        planes' and the generators' angles with numpy's cosines and sines; the fallbacks'
+        heading step in rad)."""
         t, phi = generator_angles(self.qp_samples), default_phis(self.plane_step_deg)
-        corr = Corrections.of(self.corrections)
-        values = np.array(
-            [
-                self.reciprocal,
-                NO_HORIZON if self.horizon is None else self.horizon,
-                self.pz_buffer,
-                self.margin,
-                self.speed_levels,
-                math.radians(self.heading_step_deg),
-                self.closing_guard,
-                self.least_bad_escape,
-                self.fine_fallback,
-                *corr,  # last: a seventh correction would not shift the others
-            ],
-            dtype=float,
-        )
-        return (
-            values,
-            np.stack([phi, np.cos(phi), np.sin(phi)]),
-            np.stack([t, np.cos(t), np.sin(t)]),
-        )
+        corrections = _core.Corrections()
+        for name, on in Corrections.of(self.corrections)._asdict().items():
+            setattr(corrections, name, on)
+        derived = {
+            "horizon": NO_HORIZON if self.horizon is None else self.horizon,
+            "corrections": corrections,
+            "phi": phi,
+            "cos_phi": np.cos(phi),
+            "sin_phi": np.sin(phi),
+            "t": t,
+            "cos_t": np.cos(t),
+            "sin_t": np.sin(t),
+            "heading_step": math.radians(self.heading_step_deg),
+        }
+        same = {name: getattr(self, name) for name in KERNEL_OPTIONS if name not in derived}
+        return {**same, **derived}
 
     @cached_property
     def config(self) -> Config:
-        """The options as the compiled core reads them; the cosines and sines are numpy's, as
-        ``packed`` holds them."""
-        values, planes, gens = self.packed
-        return Config(
-            reciprocal=self.reciprocal,
-            horizon=float(values[1]),
-            pz_buffer=float(values[2]),
-            margin=float(values[3]),
-            corrections=tuple(Corrections.of(self.corrections)),
-            phi=planes[0],
-            cos_phi=planes[1],
-            sin_phi=planes[2],
-            t=gens[0],
-            cos_t=gens[1],
-            sin_t=gens[2],
-            speed_levels=self.speed_levels,
-            heading_step=float(values[5]),
-            closing_guard=self.closing_guard,
-            least_bad_escape=self.least_bad_escape,
-            fine_fallback=self.fine_fallback,
-        )
+        """The options as the compiled core reads them: a ``Config`` set field by field (shared
+        by every decision with these options: not to be changed)."""
+        config = Config()
+        for name, value in self.kernel_fields().items():
+            setattr(config, name, value)
+        return config
 
+
+#: The options the compiled core has a field of the same name for.
+KERNEL_OPTIONS = tuple(name for name in Options.model_fields if hasattr(Config, name))
 
 #: The fallbacks' grid in a decision with something that does not avoid (``fine_fallback``):
 #: at least the default grid's speeds and headings (rad); the core's (tests hold them to the

@@ -106,7 +106,7 @@ def build_qp(
     )
 
 
-def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
+def select_cone_qp(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     """For each turn of the cone tangents: solve with the half-spaces of the VOs that hold v_pref
     (and the zones A is inside), add those of the VOs the answer enters, and repeat until the
     answer is safe or the QP infeasible (constraint generation, at most one round per VO).

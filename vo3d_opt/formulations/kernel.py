@@ -31,12 +31,19 @@ PREFERRED, SAMPLED, LEAST_BAD = 0, len(ROUNDS) + 1, len(ROUNDS) + 2
 OPTIMAL, INSIDE_PROTECTED_ZONE, INFEASIBLE_MIN_VIOLATION = 0, 1, 2
 #: The entries of ``decide``'s output array: velocity (3), status, phi, round, solved.
 OUT_SIZE: int = _core.OUT_SIZE
+OUT_STATUS, OUT_PHI, OUT_ROUND, OUT_SOLVED = 3, 4, 5, 6
 
 #: One decision from arrays into ``out`` (OUT_SIZE,): ``decide(p, v_now, v_pref, nbrs, prisms,
 #: limits, cfg, out)``; ``nbrs`` (n, 8): position, velocity, r_pz, cooperative (1/0);
 #: ``prisms`` (m, 4): x, y, L_pz, h_pz; ``limits``: ``bounds_array``; ``cfg``: ``Options.config``.
 #: Arrays of another dtype or shape raise ValueError naming the argument.
 decide = _core.decide
+#: ``decide`` from the rows as ``select`` holds them (``formulations.inputs``): the preferred
+#: velocity a tuple of 3 numbers (or an array), ``nbrs`` a list of ``Neighbor.row`` (or an (n, 8)
+#: array), ``prisms`` a list of obstacles' ``prism`` (or an (m, 4) array), ``limits``
+#: ``inputs.bounds_row``. The same numbers give the same answer as ``decide``; a row of another
+#: length raises ValueError naming it.
+decide_rows = _core.decide_rows
 
 #: The (round, plane) QPs of one decision and their rows, filled as VOs join:
 #: ``PlaneQPs(vos, planes, G3, h3, initial, cfg, lazy)``, each QP starting with the rows of the

@@ -52,7 +52,7 @@ def build_nlp(enc: Encounter, start: np.ndarray) -> NLP:
     return NLP(qp=qp, cones=cones, x0=start)
 
 
-def select(enc: Encounter, start: Outcome, solve_nlp: SolveNLP) -> Outcome:
+def select_nlp(enc: Encounter, start: Outcome, solve_nlp: SolveNLP) -> Outcome:
     """Improve ``start`` (plane_qp's decision) with the exact constraints, never worsening it."""
     if start.status != Status.OPTIMAL:
         return start

@@ -20,7 +20,7 @@ from ..solvers import QP
 from ..status import Status
 from .common import Encounter, Outcome, Solve, py_decision_planes
 from .fallback import fallback
-from .kernel import py_lift, py_plane_qps
+from .kernel import py_plane_qps
 from .rows import ROUNDS
 
 #: Bounds within this much (m/s) of the best deviation found cannot improve on it meaningfully.
@@ -44,13 +44,14 @@ def speed_polygon(radius: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
     return G, h
 
 
-def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
+def select_plane_qp(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     """The best safe answer over the (round, plane) QPs on the backend ``solve``."""
     cfg, bounds = enc.options.config, enc.bounds
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)
     G3, h3 = enc.linear_bounds()
     qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg, False)
-    R, P = qps.key.shape
+    key, included = qps.key, qps.included  # views of the compiled state, fixed in size
+    R, P = key.shape
     for r in range(R):
         for p in range(P):
             qps.solve(r, p, bounds)  # the exact optimum: a lower bound of the backend's
@@ -60,19 +61,20 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
         else speed_polygon(enc.limits.v_max, enc.options.polygon_sides)
     )
     q = -2.0 * qps.w0  # ||w - w0||² = wᵀw - 2 w0ᵀw + const
+    w0 = qps.w0.tolist()
     best, best_dev, tried, failed, attempts = None, math.inf, [], 0, 0
     solved: set[tuple[int, bytes, bytes]] = set()
-    v = np.empty(3)
+    v, entered = np.empty(3), np.empty(included.shape[2], dtype=bool)
     while True:
-        r, p = divmod(int(np.argmin(qps.key)), P)
-        if not qps.key[r, p] < best_dev - _TIE:  # no remaining QP can beat the best answer
+        r, p = divmod(int(np.argmin(key)), P)
+        if not key[r, p] < best_dev - _TIE:  # no remaining QP can beat the best answer
             break
         m = qps.gather(r, p)
-        G, h = np.vstack([qps.rows[:m], G_speed]), np.concatenate([qps.rhs[:m], h_speed])
-        qps.key[r, p] = math.inf  # done, unless its answer brings new constraints
-        if (key := (p, G.tobytes(), h.tobytes())) in solved:
+        G, h = np.concatenate((qps.rows[:m], G_speed)), np.concatenate((qps.rhs[:m], h_speed))
+        key[r, p] = math.inf  # done, unless its answer brings new constraints
+        if (done := (p, G.tobytes(), h.tobytes())) in solved:
             continue
-        solved.add(key)
+        solved.add(done)
         res = solve(
             QP(P=_HESSIAN, q=q, G=G, h=h, soc_radius=enc.limits.v_max if has_cones else None)
         )
@@ -80,20 +82,19 @@ def select(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
         if not (res.ok and res.x is not None and res.x.shape == (2,)):
             failed += res.status == Status.FAILED
             continue
-        py_lift(planes, np.ascontiguousarray(res.x, dtype=float), p, v)
+        qps.lift(res.x, p, v)
         tried.append(v.copy())
-        # |v - v_pref|: planes are isometric
-        dev = math.hypot(res.x[0] - qps.w0[0], res.x[1] - qps.w0[1])
+        x, y = res.x.tolist()
+        dev = math.hypot(x - w0[0], y - w0[1])  # |v - v_pref|: planes are isometric
         if dev >= best_dev:  # more constraints only move it farther
             continue
-        entered = enc.containing(v)[:, 0]
-        if not entered.any():
-            if enc.within_limits(v)[0]:
+        if not qps.entered(v, entered):
+            if qps.within(v, bounds):
                 best, best_dev = (v.copy(), p, ROUNDS[r]), dev
-        elif not np.all(qps.included[r, p][entered]):  # constrain the VOs it entered, solve again
+        elif not np.all(included[r, p][entered]):  # constrain the VOs it entered, solve again
             for j in np.flatnonzero(entered):
                 qps.add_rows(int(j), p)
-            qps.included[r, p] |= entered
+            included[r, p] |= entered
             qps.solve(r, p, bounds)
     if best is not None:
         v, p, mode = best

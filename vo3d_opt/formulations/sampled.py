@@ -71,7 +71,7 @@ def _mark_inside(sections: Sections, xy: np.ndarray, inside: np.ndarray) -> None
         inside[:, m0 : m0 + step] |= np.any(sections.contains(block), axis=0)
 
 
-def select(enc: Encounter) -> Outcome:
+def select_sampled(enc: Encounter) -> Outcome:
     cfg = enc.options.config
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)
     grid = py_polar_grid(enc.bounds, cfg)

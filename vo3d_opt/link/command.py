@@ -530,7 +530,7 @@ def _plain(value: Any) -> Any:
 
 @_guarded
 def cmd_sitl(args: argparse.Namespace) -> int:
-    from vo3d_opt.link.sitl import SitlOptions, print_summary, run_sitl
+    from vo3d_opt.link.sitl import SitlOptions, print_sitl_summary, run_sitl
 
     sc = _scenario(args.scenario, "FILE")
     _key(args.signing_key)
@@ -561,7 +561,7 @@ def cmd_sitl(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result.summary, allow_nan=False, default=_plain))
     else:
-        print_summary(result.summary)
+        print_sitl_summary(result.summary)
     return status
 
 

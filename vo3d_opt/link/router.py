@@ -76,7 +76,7 @@ class Router:
         self.stop = True
 
 
-def main() -> int:
+def run_router() -> int:
     router = Router()
     print(json.dumps(router.ports()))
     sys.stdout.flush()
@@ -85,4 +85,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_router())

@@ -35,8 +35,7 @@ from vo3d_opt.link.faults import Fault, Injector
 from vo3d_opt.link.frames import GeodeticFrame
 from vo3d_opt.link.messages import load_signing_key
 from vo3d_opt.link.procs import Forked, Proc
-from vo3d_opt.link.vehicle import VehicleConfig, config_json
-from vo3d_opt.link.vehicle import main as vehicle_main
+from vo3d_opt.link.vehicle import VehicleConfig, config_json, run_vehicle
 from vo3d_opt.sim.scenario import Scenario
 
 log = logging.getLogger("vo3d_opt.link.sitl")
@@ -176,7 +175,7 @@ class Sitl:
             cut=None if cut is None else cut.amount,
         )
         self.vehicles[name] = self._fork(
-            f"vehicle {name}", partial(vehicle_main, [config_json(cfg)])
+            f"vehicle {name}", partial(run_vehicle, [config_json(cfg)])
         )
 
     def _link(self, name: str, port: int) -> None:
@@ -342,7 +341,7 @@ def run_sitl(opts: SitlOptions) -> Any:
         signal.signal(signal.SIGTERM, previous)
 
 
-def print_summary(summary: dict[str, Any]) -> None:
+def print_sitl_summary(summary: dict[str, Any]) -> None:
     """The summary as ``vo3d run`` prints its table, plus the links' figures."""
     keys = [k for k in summary if k not in ("links", "faults")]
     width = max(len(k) for k in keys)

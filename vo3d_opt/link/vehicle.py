@@ -307,7 +307,7 @@ def config_json(cfg: VehicleConfig) -> str:
     return json.dumps(asdict(cfg))
 
 
-def main(argv: list[str] | None = None) -> int:
+def run_vehicle(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     data = json.loads(args[0])
     data["origin"] = tuple(data["origin"])
@@ -316,4 +316,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_vehicle())

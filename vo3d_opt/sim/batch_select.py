@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 
-from vo3d_opt import swarm
 from vo3d_opt.formulations.common import Config, Options
 from vo3d_opt.formulations.swarm import (
     AGENT_COLUMNS,
@@ -37,13 +36,15 @@ from vo3d_opt.geometry.pyramid import prism_rows
 from vo3d_opt.sim.deciders import SwarmSelect
 from vo3d_opt.sim.scenario import Scenario
 from vo3d_opt.status import DECISION_STATUSES
+from vo3d_opt.swarm.checks import vehicle_limits
+from vo3d_opt.swarm.sensing import sphere_links
 from vo3d_opt.types import Box
 
 #: The kernel's status codes as names (its code c is ``DECISION_STATUSES[c]``).
 STATUS_NAMES = tuple(str(s) for s in DECISION_STATUSES)
 
 
-def fits(step: Any) -> bool:
+def decides_in_batches(step: Any) -> bool:
     """Whether ``step`` decides as :class:`BatchSelect` can: a ``SwarmSelect`` whose selector
     runs compiled, with every vehicle in range as a neighbour (no ``max_neighbors``)."""
     return isinstance(step, SwarmSelect) and step.compiled and step.max_neighbors is None
@@ -86,7 +87,7 @@ class BatchSelect:
             sl = slice(mem.lo, mem.hi)
             dt, rng = float(sc.dt), float(sc.sensing.vehicle_range)
             self.r_pz[sl] = sc.r_pz
-            self.limits[sl] = swarm.vehicle_limits(step.limits, dt, sc.n_agents, sc.max_speed)
+            self.limits[sl] = vehicle_limits(step.limits, dt, sc.n_agents, sc.max_speed)
             for i in range(mem.lo, mem.hi):
                 options = self._options(step, float(self.limits[i, 1]), dt, rng)
                 self.group[i] = keys.setdefault(options, len(keys))
@@ -191,9 +192,7 @@ class BatchSelect:
                 if rows.size:
                     mem = self.members[f]
                     Pd = np.ascontiguousarray(P[who[rows]])
-                    span, idx = swarm.sphere_links(
-                        Pd, mem.step.spheres, mem.sc.sensing.obstacle_range
-                    )
+                    span, idx = sphere_links(Pd, mem.step.spheres, mem.sc.sensing.obstacle_range)
                     parts.append((rows, span, idx, self.sphere_base[f]))
             spheres = _merge(parts, D)
         return spheres, self.obstacles.links(P, who)

@@ -26,8 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vo3d_opt.sim.batch_select import STATUS_NAMES, BatchSelect, Member
-from vo3d_opt.sim.batch_select import fits as batch_fits
+from vo3d_opt.sim.batch_select import STATUS_NAMES, BatchSelect, Member, decides_in_batches
 from vo3d_opt.sim.record import DecisionStep, RunRecord, Snapshot, StepDecision, check_allotment
 from vo3d_opt.sim.safety import derive_margins
 from vo3d_opt.sim.scenario import Scenario
@@ -51,7 +50,7 @@ def fits(sc: Scenario, step: DecisionStep) -> bool:
     avoiding, nobody senses: the sensing does not matter)."""
     if not sc.avoids.any():
         return fits_scenario(sc, deciding=False)
-    return fits_scenario(sc) and batch_fits(step)
+    return fits_scenario(sc) and decides_in_batches(step)
 
 
 @dataclass

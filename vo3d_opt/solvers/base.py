@@ -14,6 +14,7 @@ from typing import Literal
 
 import numpy as np
 
+from vo3d_opt import _core
 from vo3d_opt.solvers.problem import NLP, QP, Result
 from vo3d_opt.status import Status
 
@@ -109,20 +110,25 @@ class Standard:
 
 def _violation(C: np.ndarray, l: np.ndarray, u: np.ndarray, x: np.ndarray, r: float) -> float:  # noqa: E741
     """``Standard.violation`` (r < 0: no radius): each row's C x summed column by column, as
-    the rows are written."""
-    cx = np.zeros(C.shape[0])
-    for j in range(x.shape[0]):
-        cx = cx + C[:, j] * x[j]
-    gaps = np.concatenate([l - cx, cx - u])
-    gaps = gaps[~np.isnan(gaps)]  # a NaN never wins a max
-    worst = float(gaps.max(initial=-np.inf))
-    if r >= 0.0:
-        worst = max(worst, float(np.sqrt(np.sum(x * x))) - r)
+    the rows are written; the radius's |x| as numpy sums it (compiled: ``_core.qp_violation``,
+    for up to 8 variables with a radius; a NaN gap never wins)."""
+    if r < 0.0 or x.shape[0] <= 8:
+        worst = float(_core.qp_violation(C, l, u, x, r))
+    else:
+        worst = max(float(_core.qp_violation(C, l, u, x, -1.0)), float(np.sqrt(np.sum(x * x))) - r)
     if worst <= FEAS_TOL:  # the scale only matters for larger violations
         return worst
     bounds = np.abs(np.concatenate([l, u]))
     scale = max(0.0 if r < 0.0 else r, float(bounds[np.isfinite(bounds)].max(initial=0.0)))
     return worst / (1.0 + scale)
+
+
+@functools.cache
+def _infinite(n: int) -> np.ndarray:
+    """n times +inf, shared (read-only)."""
+    inf = np.full(n, np.inf)
+    inf.setflags(write=False)
+    return inf
 
 
 @functools.cache
@@ -182,9 +188,12 @@ def standardise(qp: QP) -> Standard:
         and qp.h.dtype == float
         and qp.h.shape == (qp.G.shape[0],)
     ):
-        # The formulations' usual problem (inequalities only, float arrays): no conversions.
-        C, l, u = _rows(qp.G, qp.h, _eye(n)[:0], _EMPTY, *_free_bounds(n))  # noqa: E741
-        return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u, r=r, m_ineq=qp.G.shape[0], m_eq=0)
+        # The formulations' usual problem (inequalities only, float arrays): _rows' arrays
+        # without conversions.
+        m = qp.G.shape[0]
+        C, u = np.concatenate((qp.G, _eye(n))), np.concatenate((qp.h, _infinite(n)))
+        l = np.full(m + n, -np.inf)  # noqa: E741
+        return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u, r=r, m_ineq=m, m_eq=0)
     G, A = _matrix(qp.G, n, "G"), _matrix(qp.A, n, "A")
     h = _vector(qp.h, G.shape[0], np.inf, "h")
     b = _vector(qp.b, A.shape[0], 0.0, "b")
@@ -193,25 +202,12 @@ def standardise(qp: QP) -> Standard:
     return Standard(P=0.5 * (P + P.T), q=q, C=C, l=l, u=u, r=r, m_ineq=G.shape[0], m_eq=A.shape[0])
 
 
-_EMPTY = np.zeros(0)
-_EMPTY.setflags(write=False)
-
-
-@functools.cache
-def _free_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """lb = -inf, ub = +inf for n variables (shared, read-only)."""
-    lb, ub = np.full(n, -np.inf), np.full(n, np.inf)
-    lb.setflags(write=False)
-    ub.setflags(write=False)
-    return lb, ub
-
-
 def _rows(
     G: np.ndarray, h: np.ndarray, A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """C = [G; A; I], l = [-inf; b; lb], u = [h; b; ub]."""
     n = lb.shape[0]
-    C = np.vstack([G, A, np.eye(n)])
+    C = np.vstack([G, A, _eye(n)])
     l = np.concatenate([np.full(G.shape[0], -np.inf), b, lb])  # noqa: E741
     u = np.concatenate([h, b, ub])
     return C, l, u
@@ -258,16 +254,10 @@ def _screen(
     m_ineq: int,
     m_eq: int,
 ) -> int:
-    """0: fine; 1: NaN or a misplaced infinity; 2: an infinite b; 3: infeasible bounds."""
-    finite = np.isfinite(P.sum() + q.sum() + C.sum()) and (not has_r or np.isfinite(r))
-    if not finite or np.isnan(l).any() or np.isnan(u).any():
-        return 1
-    bad = not bool(np.all((l <= u) & (l < np.inf) & (u > -np.inf)))
-    if not bad and (not has_r or r >= 0):
-        return 0
-    if np.isinf(l[m_ineq : m_ineq + m_eq]).any():
-        return 2
-    return 3
+    """0: fine; 1: NaN or a misplaced infinity (or data so large that its sum overflows); 2: an
+    infinite b; 3: infeasible bounds (compiled: ``_core.qp_screen``, one pass where numpy
+    would take a dozen reductions)."""
+    return int(_core.qp_screen(P, q, C, l, u, r, has_r, m_ineq, m_eq))
 
 
 def require_no_cone(backend: Backend, qp: QP) -> None:

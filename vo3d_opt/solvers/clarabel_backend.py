@@ -9,6 +9,8 @@ updated in place rather than rebuilt (Clarabel is interior-point: there is no wa
 
 from __future__ import annotations
 
+import functools
+
 import clarabel
 import numpy as np
 
@@ -30,13 +32,39 @@ _STATUS = {
 
 def conic_rows(std: Standard) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
     """(M, b, (zero-cone rows, nonnegative rows, SOC size)) for ``M x + s = b``."""
-    E, e, D, d = std.split()
+    if std.m_eq == 0 and float(std.l.max()) == -np.inf:
+        # inequalities only, no lower bound (the formulations' problems): split's rows without
+        # its masks and stacks
+        finite = np.isfinite(std.u)
+        E, e, D, d = _no_rows(std.n), _NONE, std.C[finite], std.u[finite]
+    else:
+        E, e, D, d = std.split()
     blocks, rhs, soc = [E, D], [e, d], 0
     if std.r is not None:
         soc = std.n + 1
-        blocks.append(np.vstack([np.zeros((1, std.n)), -np.eye(std.n)]))
+        blocks.append(_soc_rows(std.n))
         rhs.append(np.concatenate([[std.r], np.zeros(std.n)]))
-    return np.vstack(blocks), np.concatenate(rhs), (E.shape[0], D.shape[0], soc)
+    return np.concatenate(blocks), np.concatenate(rhs), (E.shape[0], D.shape[0], soc)
+
+
+_NONE = np.zeros(0)
+_NONE.setflags(write=False)
+
+
+@functools.cache
+def _no_rows(n: int) -> np.ndarray:
+    """(0, n), read-only."""
+    rows = np.zeros((0, n))
+    rows.setflags(write=False)
+    return rows
+
+
+@functools.cache
+def _soc_rows(n: int) -> np.ndarray:
+    """``s = [r; x]`` in the second-order cone: the rows [0; -I] of M (read-only)."""
+    rows = np.vstack([np.zeros((1, n)), -np.eye(n)])
+    rows.setflags(write=False)
+    return rows
 
 
 def settings() -> clarabel.DefaultSettings:

@@ -9,6 +9,8 @@ fastest backend here (benchmarks/bench_select.py); an active-set answer is exact
 
 from __future__ import annotations
 
+import functools
+
 import daqp
 import numpy as np
 
@@ -60,9 +62,18 @@ def _daqp_rows(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """DAQP's bounds: the simple bounds (the identity rows, last in Standard) first, clipped to
     its infinity, and the ``sense`` flags marking equalities immutable."""
+    rows, sense = _order(n, m_ineq, m_eq)
+    upper, lower = np.minimum(u[rows], INF), np.maximum(l[rows], -INF)
+    return upper, lower, sense.copy()
+
+
+@functools.lru_cache(maxsize=256)
+def _order(n: int, m_ineq: int, m_eq: int) -> tuple[np.ndarray, np.ndarray]:
+    """The rows in DAQP's order and their ``sense`` flags, for one shape (read-only)."""
     m = m_ineq + m_eq
     rows = np.concatenate([np.arange(m, m + n), np.arange(m)])
-    upper, lower = np.minimum(u[rows], INF), np.maximum(l[rows], -INF)
     sense = np.zeros(n + m, dtype=np.int32)
     sense[n + m_ineq :] = EQUALITY
-    return upper, lower, sense
+    rows.setflags(write=False)
+    sense.setflags(write=False)
+    return rows, sense

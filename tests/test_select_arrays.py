@@ -1,0 +1,163 @@
+"""``VelocitySelector.select_arrays``: ``select``'s answer from numpy arrays, bit for bit, over the
+recorded encounters (crowds with no safe velocity, vehicles inside zones, ceilings, obstacles,
+traffic that does not avoid, acceleration limits), on the compiled path and the Python one; and
+a ValueError naming the argument (row and column for an array) for anything malformed. Also:
+``select`` takes every form of its inputs it took before its fast path, with the same answers."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from golden_cases import encounter, select_kwargs
+from vo3d_opt import AgentState, Cylinder, Limits, Neighbor, VelocitySelector
+from vo3d_opt.geometry.pyramid import prism_rows
+
+SEEDS = range(0, 480, 2)
+
+
+def arrays_of(kw: dict) -> dict:
+    """``select``'s arguments as ``select_arrays`` takes them (writable arrays, as a control loop
+    holds them)."""
+    nbrs = kw["neighbors"]
+    return dict(
+        position=np.array(kw["own"].position),
+        velocity=np.array(kw["own"].velocity),
+        preferred_velocity=np.array(kw["preferred_velocity"], dtype=float),
+        neighbors=np.array([[*nb.position, *nb.velocity, nb.r_pz] for nb in nbrs]).reshape(-1, 7),
+        cooperative=np.array([nb.cooperative for nb in nbrs], dtype=bool),
+        obstacles=prism_rows(kw["obstacles"]),
+        limits=kw["limits"],
+        dt=kw["dt"],
+    )
+
+
+def same(a, b) -> bool:
+    plane_a = math.nan if a.plane is None else a.plane
+    plane_b = math.nan if b.plane is None else b.plane
+    return (
+        np.array_equal(a.velocity, b.velocity)
+        and a.status == b.status
+        and (plane_a == plane_b or (math.isnan(plane_a) and math.isnan(plane_b)))
+        and a.info.keys() == b.info.keys()
+        and all(np.array_equal(a.info[k], b.info[k]) for k in a.info)
+    )
+
+
+@pytest.mark.parametrize("preset", ["safe", "paper", "fast"])
+def test_select_arrays_is_select_bit_for_bit(preset: str) -> None:
+    sel = VelocitySelector(preset=preset)
+    rounds, statuses = set(), set()
+    for seed in SEEDS:
+        kw = select_kwargs(encounter(seed))
+        want = sel.select(**kw)
+        assert same(sel.select_arrays(**arrays_of(kw)), want), seed
+        rounds.add(want.info["round"])
+        statuses.add(str(want.status))
+    # the fallbacks and the hard statuses are among the cases
+    assert {"preferred", "sampled", "least_bad"} <= rounds
+    assert {"optimal", "inside_protected_zone", "infeasible_min_violation"} <= statuses
+
+
+@pytest.mark.parametrize(
+    "formulation,solver,every", [("sampled", None, 40), ("plane_qp", "daqp", 4), ("nlp", None, 40)]
+)
+def test_select_arrays_is_select_on_the_python_path(formulation, solver, every) -> None:
+    sel = VelocitySelector(formulation, solver)
+    for seed in SEEDS[::every]:
+        kw = select_kwargs(encounter(seed))
+        assert same(sel.select_arrays(**arrays_of(kw)), sel.select(**kw)), seed
+
+
+def test_select_arrays_takes_obstacle_objects_and_no_neighbours() -> None:
+    sel = VelocitySelector()
+    kw = select_kwargs(encounter(4))
+    args = arrays_of(kw)
+    assert same(sel.select_arrays(**{**args, "obstacles": kw["obstacles"]}), sel.select(**kw))
+    alone = {**args, "neighbors": None, "cooperative": None}
+    want = sel.select(**{**kw, "neighbors": []})
+    assert same(sel.select_arrays(**alone), want)
+    assert same(sel.select_arrays(**{**alone, "neighbors": []}), want)
+    # all cooperative unless told
+    coop = {**args, "cooperative": None}
+    all_coop = [nb.model_copy(update={"cooperative": True}) for nb in kw["neighbors"]]
+    assert same(sel.select_arrays(**coop), sel.select(**{**kw, "neighbors": all_coop}))
+
+
+def _bad(args: dict) -> list[tuple[str, object, str]]:
+    nbrs, obs = args["neighbors"], args["obstacles"]
+
+    def put(a: np.ndarray, index: tuple, value: float) -> np.ndarray:
+        a = np.array(a, dtype=float)
+        a[index] = value
+        return a
+
+    return [
+        ("position", np.zeros(2), "position: expected shape"),
+        ("position", put(args["position"], (2,), 1e8), r"position\[2\]: must be finite"),
+        ("velocity", put(args["velocity"], (0,), np.nan), r"velocity\[0\]"),
+        ("preferred_velocity", put(args["preferred_velocity"], (1,), np.inf), "preferred_velocity"),
+        ("preferred_velocity", np.array(["a", "b", "c"]), "preferred_velocity: expected real"),
+        ("neighbors", nbrs[:, :6], r"neighbors: expected shape \(N, 7\)"),
+        ("neighbors", put(nbrs, (1, 4), np.nan), r"neighbors\[1, 4\] \(vy\)"),
+        ("neighbors", put(nbrs, (0, 6), 0.0), r"neighbors\[0, 6\] \(r_pz\): must be positive"),
+        ("neighbors", nbrs > 0, "neighbors: expected real numbers"),
+        ("cooperative", np.ones(nbrs.shape[0] + 1, bool), "cooperative: expected shape"),
+        ("cooperative", np.full(nbrs.shape[0], 2), "cooperative: expected booleans"),
+        ("obstacles", obs[:, :3], r"obstacles: expected shape \(N, 4\)"),
+        ("obstacles", put(obs, (0, 2), -1.0), r"obstacles\[0, 2\] \(L_pz\)"),
+        ("obstacles", put(obs, (1, 3), np.inf), r"obstacles\[1, 3\] \(h_pz\)"),
+        ("limits", (0.0, 4.0), "limits: expected Limits"),
+        ("dt", -0.2, "dt"),
+    ]
+
+
+def test_bad_arrays_raise_a_value_error_naming_the_field() -> None:
+    sel = VelocitySelector()
+    args = arrays_of(select_kwargs(encounter(36)))  # obstacles and neighbours
+    assert args["neighbors"].shape[0] >= 2 and args["obstacles"].shape[0] >= 2
+    for name, value, match in _bad(args):
+        with pytest.raises(ValueError, match=match):
+            sel.select_arrays(**{**args, name: value})
+
+
+def test_select_takes_every_form_of_its_inputs_with_the_same_answer() -> None:
+    sel = VelocitySelector()
+    kw = select_kwargs(encounter(10))
+    want = sel.select(**kw)
+    pref = np.array(kw["preferred_velocity"], dtype=float)
+    frozen = pref.copy()
+    frozen.setflags(write=False)
+    for form in (tuple(pref.tolist()), pref.tolist(), pref, frozen, pref[::-1].copy()[::-1]):
+        assert same(sel.select(**{**kw, "preferred_velocity": form}), want)
+    single = pref.astype(np.float32)  # other numbers: the same answer as they are as floats
+    assert same(sel.select(**{**kw, "preferred_velocity": single}),
+                sel.select(**{**kw, "preferred_velocity": tuple(single.tolist())}))
+    assert same(sel.select(**{**kw, "neighbors": iter(kw["neighbors"])}), want)
+    assert same(sel.select(**{**kw, "obstacles": tuple(kw["obstacles"])}), want)
+    ints = sel.select(**{**kw, "preferred_velocity": (1, 0, 0)})
+    assert same(ints, sel.select(**{**kw, "preferred_velocity": (1.0, 0.0, 0.0)}))
+
+
+@pytest.mark.parametrize(
+    "change,match",
+    [
+        ({"preferred_velocity": (1.0, math.nan, 0.0)}, "preferred_velocity: must be finite"),
+        ({"preferred_velocity": (1.0, True, 0.0)}, "preferred_velocity"),
+        ({"preferred_velocity": (1.0, 2.0)}, "preferred_velocity: must be 3 numbers"),
+        ({"preferred_velocity": (1e8, 0.0, 0.0)}, "preferred_velocity: must be at most"),
+        ({"neighbors": [Neighbor(position=(9, 0, 20), r_pz=2.0), (1, 2)]}, r"neighbors\[1\]"),
+        ({"obstacles": [Cylinder(center=(9, 0), radius=1, height=5), "box"]}, r"obstacles\[1\]"),
+        ({"own": (0.0, 0.0, 20.0)}, "own: expected AgentState"),
+        ({"limits": {"speed": (0, 4)}}, "limits: expected Limits"),
+        ({"dt": 0.0}, "dt"),
+        ({"dt": math.inf}, "dt"),
+    ],
+)
+def test_select_names_what_is_malformed(change: dict, match: str) -> None:
+    kw = dict(own=AgentState(position=(0.0, 0.0, 20.0)), preferred_velocity=(1.0, 0.0, 0.0),
+              limits=Limits(), dt=0.2)
+    with pytest.raises(ValueError, match=match):
+        VelocitySelector().select(**{**kw, **change})
