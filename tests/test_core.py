@@ -221,9 +221,10 @@ def test_the_config_is_set_by_name_and_checked_where_the_core_reads_it():
                    least_bad_escape=False, fine_fallback=False, horizon=3.0,
                    corrections=frozenset({"triangle"}), plane_step_deg=30.0, qp_samples=12)
     cfg = opts.config
-    for name in set(KERNEL_OPTIONS) - {"horizon", "corrections"}:
+    for name in set(KERNEL_OPTIONS) - {"horizon", "obstacle_horizon", "corrections"}:
         assert getattr(cfg, name) == getattr(opts, name), name
     assert cfg.horizon == 3.0 and Options().config.horizon < 0  # none: NO_HORIZON
+    assert cfg.obstacle_horizon < 0 and Options(obstacle_horizon=9.0).config.obstacle_horizon == 9.0
     assert cfg.corrections.triangle and not cfg.corrections.tg_range
     assert len(cfg.phi) == len(cfg.cos_phi) == 7 and len(cfg.t) == 12
     assert cfg.heading_step == math.radians(opts.heading_step_deg)

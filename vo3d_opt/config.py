@@ -78,6 +78,11 @@ class VOConfig(Model):
     #: s, (0, 1e6]: meetings further ahead are ignored; None: the paper's unbounded VO;
     #: "sensing": ``sensing_range / (2 v_max)``.
     horizon: Annotated[float | str | None, PlainValidator(_horizon)] = None
+    #: s, (0, 1e6]: how far ahead an obstacle's VO pyramid reaches (RVO2-3D's
+    #: ``timeHorizonObst``); None: without a horizon, whatever ``horizon`` is. A neighbour
+    #: that meets the vehicle late can still turn when it does; a prism does not, and a turn
+    #: left late under actuator lag sinks into it.
+    obstacle_horizon: _number(0.0, 1e6, strict_lo=True) | None = None  # type: ignore[valid-type]
     #: m, (0, 1e7]: what ``horizon: "sensing"`` is computed from (``select_many`` knows its own).
     sensing_range: _number(0.0, 1e7, strict_lo=True) | None = None  # type: ignore[valid-type]
     #: [0, 100]: every neighbour's sphere planned this many steps of flight at the top speed

@@ -42,6 +42,7 @@ NB_MODULE(_core, m) {
         .def(nb::init<>())
         .def_rw("reciprocal", &Config::reciprocal)
         .def_rw("horizon", &Config::horizon)
+        .def_rw("obstacle_horizon", &Config::obstacle_horizon)
         .def_rw("pz_buffer", &Config::pz_buffer)
         .def_rw("margin", &Config::margin)
         .def_rw("corrections", &Config::corrections)
@@ -248,19 +249,22 @@ NB_MODULE(_core, m) {
         for (double x : ph) c.push_back(std::cos(x)), s.push_back(std::sin(x));
         return planes_to_py(build_planes(d, ph, c, s));
     });
-    m.def("in_vos", [](nb::handle cones, nb::handle pyramids, nb::handle v, double horizon, double tol) {
+    m.def("in_vos", [](nb::handle cones, nb::handle pyramids, nb::handle v, double horizon, double tol,
+                       double obstacle_horizon) {
         VOs vos;
         vos.cones = cones_of(cones), vos.pyramids = pyramids_of(pyramids);
+        vos.obstacle_horizon = obstacle_horizon;
+        double reach = pyramid_horizon(vos, horizon);
         Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
         int64_t n = vos.n(), count = vos.count();
         std::vector<uint8_t> out(count * vel.n);
         for (int64_t k = 0; k < vel.n; ++k) {
             double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
             for (int64_t i = 0; i < n; ++i) out[i * vel.n + k] = in_cone(vos.cones[i], x, horizon, tol);
-            for (int64_t j = n; j < count; ++j) out[j * vel.n + k] = in_pyramid(vos.pyramids[j - n], x, horizon);
+            for (int64_t j = n; j < count; ++j) out[j * vel.n + k] = in_pyramid(vos.pyramids[j - n], x, reach);
         }
         return numpy_bool(out, {size_t(count), size_t(vel.n)});
-    });
+    }, "cones"_a, "pyramids"_a, "v"_a, "horizon"_a, "tol"_a, "obstacle_horizon"_a = SAME_HORIZON);
     m.def("cone_penetration", [](nb::handle cones, nb::handle v) {
         std::vector<Cone> c = cones_of(cones);
         Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
@@ -283,9 +287,11 @@ NB_MODULE(_core, m) {
             }
         return numpy(std::move(out), {py.size(), size_t(vel.n)});
     });
-    m.def("clearances", [](nb::handle cones, nb::handle pyramids, nb::handle v, double horizon) {
+    m.def("clearances", [](nb::handle cones, nb::handle pyramids, nb::handle v, double horizon,
+                           double obstacle_horizon) {
         VOs vos;
         vos.cones = cones_of(cones), vos.pyramids = pyramids_of(pyramids);
+        vos.obstacle_horizon = obstacle_horizon;
         Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
         std::vector<double> out;
         for (int64_t k = 0; k < vel.n; ++k) {
@@ -293,7 +299,7 @@ NB_MODULE(_core, m) {
             out.push_back(clearance(vos, x, horizon));
         }
         return numpy(std::move(out), {size_t(vel.n)});
-    });
+    }, "cones"_a, "pyramids"_a, "v"_a, "horizon"_a, "obstacle_horizon"_a = SAME_HORIZON);
     m.def("ball_in_cone", [](nb::handle cones, int64_t k, nb::handle c, double rho) {
         std::vector<Cone> cs = cones_of(cones);
         if (k < 0 || k >= int64_t(cs.size())) throw nb::value_error("k: not a cone");
@@ -393,13 +399,14 @@ NB_MODULE(_core, m) {
         Rows nb_ = rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), pr = rows_of(arr<double>(prisms, "prisms", {ANY, 4}));
         Bounds b = bounds_of(bounds);
         aimed(W, b, pref);
-        return pref_clear(P_, cone_rows(P_, V, nb_, b, cfg), pyramids_in_reach(P_, pr, b, cfg), pref, cfg.horizon);
+        return pref_clear(P_, cone_rows(P_, V, nb_, b, cfg), pyramids_in_reach(P_, pr, b, cfg), pref, cfg.horizon,
+                          cfg.obstacle_horizon);
     });
     m.def("decision_planes", [](nb::handle vos, nb::handle v_now, const Config& cfg_in) {
         const Config& cfg = checked(cfg_in);
         double V[3];
         vec3(v_now, "v_now", V);
-        return planes_to_py(decision_planes(vos_of_py(vos), V, cfg));
+        return planes_to_py(decision_planes(vos_of_py(vos, cfg), V, cfg));
     });
     m.def("limit_rows", [](nb::handle p, nb::handle v_now, nb::handle nbrs, nb::handle bounds, const Config& cfg_in) {
         const Config& cfg = checked(cfg_in);
@@ -481,7 +488,7 @@ NB_MODULE(_core, m) {
     m.def("fallback", [](nb::handle vos, nb::handle planes, nb::handle tried, nb::handle p, nb::handle v_now,
                          nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg_in, bool hazard) {
         const Config& cfg = checked(cfg_in);
-        VOs V = vos_of_py(vos);
+        VOs V = vos_of_py(vos, cfg);
         Planes pl = planes_of(planes);
         if (pl.count() != cfg.planes()) throw nb::value_error("planes: expected cfg's planes");
         Rows tr = rows_of(arr<double>(tried, "tried", {ANY, 3}));
@@ -499,7 +506,7 @@ NB_MODULE(_core, m) {
     m.def("least_bad", [](nb::handle vos, nb::handle planes, nb::handle tried, nb::handle p, nb::handle v_now,
                           nb::handle G3, nb::handle h3, nb::handle bounds, const Config& cfg_in) {
         const Config& cfg = checked(cfg_in);
-        VOs V = vos_of_py(vos);
+        VOs V = vos_of_py(vos, cfg);
         Planes pl = planes_of(planes);
         Rows tr = rows_of(arr<double>(tried, "tried", {ANY, 3}));
         double P_[3], W[3], v[3];
@@ -516,7 +523,7 @@ NB_MODULE(_core, m) {
     m.def("first_safe", [](nb::handle vos, nb::handle v, nb::handle G3, nb::handle h3, nb::handle bounds,
                            const Config& cfg_in) {
         const Config& cfg = checked(cfg_in);
-        VOs V = vos_of_py(vos);
+        VOs V = vos_of_py(vos, cfg);
         Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
         LimitRows L = limits_of(G3, h3);
         Bounds b = bounds_of(bounds);
@@ -568,7 +575,7 @@ NB_MODULE(_core, m) {
                 nb::handle initial, const Config& cfg_in, bool lazy) {
                  const Config& cfg = checked(cfg_in);
                  new (self) PyPlaneQPs();
-                 self->vos = vos_of_py(vos);
+                 self->vos = vos_of_py(vos, cfg);
                  self->planes = planes_of(planes);
                  self->limits = limits_of(G3, h3);
                  self->cfg = cfg;

@@ -275,6 +275,13 @@ VOs vos_of_py(nb::handle h) {
     return vos;
 }
 
+// The VOs of a decision with options cfg: its pyramids plan with cfg's obstacle horizon.
+VOs vos_of_py(nb::handle h, const Config& cfg) {
+    VOs vos = vos_of_py(h);
+    vos.obstacle_horizon = cfg.obstacle_horizon;
+    return vos;
+}
+
 nb::tuple vos_to_py(const VOs& vos) {
     return nb::make_tuple(cones_to_py(vos.cones), pyramids_to_py(vos.pyramids),
                           numpy(std::vector<double>(vos.v_pref, vos.v_pref + 3), {3}));

@@ -112,7 +112,7 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
     std::vector<NeighbourRow> rows = cone_rows(p, v_now, nbrs, b, cfg);
     std::vector<Pyramid> pyramids = pyramids_in_reach(p, prisms, b, cfg);
     LimitRows limits = limit_rows(p, v_now, nbrs, b, cfg);
-    if (pref_clear(p, rows, pyramids, pref, cfg.horizon) && within_limits(pref, limits, b)) {
+    if (pref_clear(p, rows, pyramids, pref, cfg.horizon, cfg.obstacle_horizon) && within_limits(pref, limits, b)) {
         enforce_limits(pref, p, b, out.velocity);  // 2
         return out;
     }

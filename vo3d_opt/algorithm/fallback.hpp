@@ -250,7 +250,8 @@ inline double zone_clearance(const VOs& vos, int64_t k, const double* v, double 
         const double* h = vos.pyramids[k - vos.n()].frame[0];
         return -(h[0] * v[0] + h[1] * v[1] + h[2] * v[2]);
     }
-    double lo = horizon > 0.0 ? 1.0 / horizon : 0.0;
+    double reach_time = cone ? horizon : pyramid_horizon(vos, horizon);
+    double lo = reach_time > 0.0 ? 1.0 / reach_time : 0.0;
     // Beyond hi the zone is farther than at lo: s dist(0, Z) - |v - apex| > f(lo).
     double f_lo = scaled_zone_distance(vos, k, v, lo);
     double reach = zone_reach(vos, k);
@@ -277,9 +278,10 @@ inline double clearance(const VOs& vos, const double* v, double horizon) {
 // velocity checked: in a crowd most candidates fail on the same VO.
 inline bool in_any(const VOs& vos, const double* v, double horizon, int64_t& hint) {
     int64_t n = vos.n(), count = vos.count(), k = hint;
+    double obstacle_horizon = pyramid_horizon(vos, horizon);
     for (int64_t q = 0; q < count; ++q) {
         bool inside = k < n ? in_cone(vos.cones[k], v, horizon, 0.0)
-                            : in_pyramid(vos.pyramids[k - n], v, horizon);
+                            : in_pyramid(vos.pyramids[k - n], v, obstacle_horizon);
         if (inside) {
             hint = k;
             return true;

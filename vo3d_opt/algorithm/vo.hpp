@@ -22,6 +22,9 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kPi = 3.141592653589793;
 //: ``horizon`` meaning "none".
 constexpr double NO_HORIZON = -1.0;
+//: A VOs' ``obstacle_horizon`` meaning "the horizon the caller gives" (VOs built outside a
+//: decision, e.g. from Python's arrays).
+constexpr double SAME_HORIZON = -2.0;
 //: The paper's smallest virtual-sphere factor (section 3.1.6: tau >= 1.5).
 constexpr double TAU_MIN = 1.5;
 //: ``reach`` of build_cones: no virtual sphere (NaN: the paper's rule; >= 0: a speed).
@@ -62,6 +65,10 @@ struct Corrections {
 struct Config {
     bool reciprocal = false;
     double horizon = NO_HORIZON;  // s; NO_HORIZON for none
+    // s, the obstacles' own (RVO2-3D's timeHorizonObst): a pyramid's VO reaches this far;
+    // NO_HORIZON for none. A vehicle that ignores a neighbour's late meeting can still turn
+    // when the neighbour does; a prism does not turn, and a late turn under lag sinks into it.
+    double obstacle_horizon = NO_HORIZON;
     double pz_buffer = 0.0;       // m
     double margin = 1e-3;         // m/s
     Corrections corrections;
@@ -193,6 +200,7 @@ struct VOs {
     std::vector<Cone> cones;
     std::vector<Pyramid> pyramids;
     double v_pref[3];
+    double obstacle_horizon = SAME_HORIZON;  // the pyramids' horizon (Config::obstacle_horizon)
     int64_t n() const { return int64_t(cones.size()); }
     int64_t count() const { return int64_t(cones.size() + pyramids.size()); }
 };
@@ -322,13 +330,19 @@ inline bool in_pyramid(const Pyramid& py, const double* v, double horizon) {
     return horizon < 0.0 ? t < kInf : t <= horizon;
 }
 
+// The horizon the pyramids of vos plan with, given the cones' ``horizon``.
+inline double pyramid_horizon(const VOs& vos, double horizon) {
+    return vos.obstacle_horizon == SAME_HORIZON ? horizon : vos.obstacle_horizon;
+}
+
 // Which VOs (cones first) contain v, by the exact 3D membership, into out; whether any.
 inline bool containing(const VOs& vos, const double* v, double horizon, uint8_t* out) {
     bool any = false;
     int64_t n = vos.n();
+    double obstacle_horizon = pyramid_horizon(vos, horizon);
     for (int64_t i = 0; i < n; ++i) any |= (out[i] = in_cone(vos.cones[i], v, horizon, 0.0));
     for (size_t j = 0; j < vos.pyramids.size(); ++j)
-        any |= (out[n + j] = in_pyramid(vos.pyramids[j], v, horizon));
+        any |= (out[n + j] = in_pyramid(vos.pyramids[j], v, obstacle_horizon));
     return any;
 }
 
@@ -399,14 +413,16 @@ inline std::vector<NeighbourRow> cone_rows(const double* p, const double* v_now,
     return rows;
 }
 
-// The VO pyramids of the prisms (x, y, L_pz, h_pz) within reach (all without a horizon); a
+// The VO pyramids of the prisms (x, y, L_pz, h_pz) within reach (all without an obstacle
+// horizon); a
 // prism whose top reaches the ceiling cannot be flown over: planned as reaching far above.
 inline std::vector<Pyramid> pyramids_in_reach(const double* p, const Rows& prisms, const Bounds& b,
                                               const Config& cfg) {
     std::vector<Pyramid> out;
     for (int64_t j = 0; j < prisms.n; ++j) {
         double dist = std::sqrt(sq(prisms(j, 0) - p[0]) + sq(prisms(j, 1) - p[1]));
-        if (cfg.horizon < 0.0 || dist - prisms(j, 2) / std::sqrt(2.0) <= cfg.horizon * b.v_max) {
+        double reach = cfg.obstacle_horizon;
+        if (reach < 0.0 || dist - prisms(j, 2) / std::sqrt(2.0) <= reach * b.v_max) {
             double H = prisms(j, 3);
             if (H >= b.z_max) H = std::max(H, p[2]) + OVER_THE_CEILING;
             out.push_back(build_pyramid(p, prisms(j, 0), prisms(j, 1), prisms(j, 2), H));
@@ -428,6 +444,7 @@ inline VOs vos_of(const double* p, const double* pref, const std::vector<Neighbo
         if (min_speed(c) <= b.v_max + 1e-6) vos.cones.push_back(c);
     }
     vos.pyramids = std::move(pyramids);
+    vos.obstacle_horizon = cfg.obstacle_horizon;
     for (int k = 0; k < 3; ++k) vos.v_pref[k] = pref[k];
     return vos;
 }
@@ -436,14 +453,15 @@ inline VOs vos_of(const double* p, const double* pref, const std::vector<Neighbo
 // cones' geometry: the same numbers as build_cone's d_oi and in_cone's test, so the same answer
 // as the exact check on the cones (the cones vos_of leaves out hold no velocity within v_max).
 inline bool pref_clear(const double* p, const std::vector<NeighbourRow>& rows,
-                       const std::vector<Pyramid>& pyramids, const double* pref, double horizon) {
+                       const std::vector<Pyramid>& pyramids, const double* pref, double horizon,
+                       double obstacle_horizon) {
     double rel[3];
     for (const auto& r : rows) {
         if (offset(r.p_B, p, rel) <= r.r_pz) return false;  // inside: d_oi <= r_pz
         if (heads_into(r.apex, rel, r.r_pz, pref, horizon, 0.0)) return false;
     }
     for (const auto& py : pyramids)
-        if (py.inside || in_pyramid(py, pref, horizon)) return false;
+        if (py.inside || in_pyramid(py, pref, obstacle_horizon)) return false;
     return true;
 }
 

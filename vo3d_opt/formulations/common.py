@@ -102,6 +102,8 @@ class Options(Model):
     polygon_sides: Annotated[int, Field(ge=3, strict=True)] = 24  # inscribed speed polygon
     reciprocal: StrictBool = False  # RVO-style: apex (V_A + V_B)/2 for cooperative neighbours
     horizon: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None  # s; None: infinite
+    # s, the obstacles' VO pyramids' own horizon (RVO2-3D's timeHorizonObst); None: infinite
+    obstacle_horizon: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
     # Literal of the names in CORRECTIONS, which pydantic reads at runtime and mypy cannot
     corrections: frozenset[Literal[tuple(CORRECTIONS)]] | None = None  # type: ignore[valid-type]
     # generator samples of eq. (12), sampled; the same for plane_qp's tangent points
@@ -141,6 +143,9 @@ class Options(Model):
             setattr(corrections, name, on)
         derived = {
             "horizon": NO_HORIZON if self.horizon is None else self.horizon,
+            "obstacle_horizon": (
+                NO_HORIZON if self.obstacle_horizon is None else self.obstacle_horizon
+            ),
             "corrections": corrections,
             "phi": phi,
             "cos_phi": np.cos(phi),
@@ -336,7 +341,13 @@ class Encounter:
     def containing(self, v: np.ndarray) -> np.ndarray:
         """(n + m, M): which VOs (cones first, then pyramids) contain each velocity, by the
         exact 3D membership."""
-        return in_vos(self.cones, self.pyramids, v, horizon=self.options.horizon)
+        return in_vos(
+            self.cones,
+            self.pyramids,
+            v,
+            horizon=self.options.horizon,
+            obstacle_horizon=self.options.obstacle_horizon,
+        )
 
     @cached_property
     def pref_in(self) -> np.ndarray:

@@ -27,6 +27,8 @@ from .pyramid import VOPyramids
 
 #: ``horizon`` value meaning "no horizon" in compiled code.
 NO_HORIZON = -1.0
+#: The core's "the obstacles plan with the cones' horizon".
+SAME_HORIZON = -2.0
 
 
 def _velocities(v: np.ndarray) -> np.ndarray:
@@ -35,6 +37,10 @@ def _velocities(v: np.ndarray) -> np.ndarray:
 
 def _horizon(horizon: float | None) -> float:
     return NO_HORIZON if horizon is None else float(horizon)
+
+
+def _obstacle_horizon(obstacle_horizon: float | None | str) -> float:
+    return SAME_HORIZON if obstacle_horizon == "same" else _horizon(obstacle_horizon)  # type: ignore[arg-type]
 
 
 def _no_pyramids() -> VOPyramids:
@@ -67,10 +73,23 @@ def _no_cones() -> VOCones:
 
 
 def in_vos(
-    cones: VOCones, pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None
+    cones: VOCones,
+    pyramids: VOPyramids,
+    v: np.ndarray,
+    *,
+    horizon: float | None = None,
+    obstacle_horizon: float | None | str = "same",
 ) -> np.ndarray:
-    """Boolean (n + m, M): velocity k lies in VO cone i (rows 0..n-1) or pyramid j (rows n..)."""
-    return _core.in_vos(cones, pyramids, _velocities(v), _horizon(horizon), 0.0)
+    """Boolean (n + m, M): velocity k lies in VO cone i (rows 0..n-1) or pyramid j (rows n..).
+    ``obstacle_horizon``: the pyramids' own horizon (s; None: none); "same": ``horizon``."""
+    return _core.in_vos(
+        cones,
+        pyramids,
+        _velocities(v),
+        _horizon(horizon),
+        0.0,
+        obstacle_horizon=_obstacle_horizon(obstacle_horizon),
+    )
 
 
 def in_vo_cones(
@@ -100,12 +119,23 @@ def pyramid_entry_time(pyramids: VOPyramids, v: np.ndarray) -> np.ndarray:
 
 
 def clearances(
-    cones: VOCones, pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None
+    cones: VOCones,
+    pyramids: VOPyramids,
+    v: np.ndarray,
+    *,
+    horizon: float | None = None,
+    obstacle_horizon: float | None | str = "same",
 ) -> np.ndarray:
     """(M,) the least distance (m/s) from each velocity to any VO (inf without VOs); <= 0 inside
     one. The VO of a zone is the union over times t in (0, horizon] of the velocities that put
     A in the zone at t; its distance is found by a ternary search over the scale 1/t."""
-    return _core.clearances(cones, pyramids, _velocities(v), _horizon(horizon))
+    return _core.clearances(
+        cones,
+        pyramids,
+        _velocities(v),
+        _horizon(horizon),
+        obstacle_horizon=_obstacle_horizon(obstacle_horizon),
+    )
 
 
 def ball_in_cone(cones: VOCones, i: int, c: np.ndarray, rho: float) -> bool:
