@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from vo3d_opt.extras import needs
 from vo3d_opt.sim.record import RunRecord
 
 log = logging.getLogger(__name__)
@@ -130,7 +131,8 @@ def write_csv(record: RunRecord, path: str | Path) -> Path:
 
 def _table(record: RunRecord, lo: int, hi: int) -> Any:
     """Samples lo <= k < hi as a pyarrow table of :data:`COLUMNS`."""
-    import pyarrow as pa
+    with needs("sim", "Parquet output"):
+        import pyarrow as pa
 
     n, steps = record.n_agents, record.steps
     k = np.arange(lo, hi)
@@ -163,7 +165,8 @@ def _table(record: RunRecord, lo: int, hi: int) -> Any:
 def write_parquet(record: RunRecord, path: str | Path) -> Path:
     """Trajectories as Parquet, one row per (sample, agent), the columns of :data:`COLUMNS`
     (``agent`` and ``status`` dictionary-encoded), a row group per 200 samples."""
-    import pyarrow.parquet as pq
+    with needs("sim", "Parquet output"):
+        import pyarrow.parquet as pq
 
     path = Path(path)
     samples = record.steps + 1

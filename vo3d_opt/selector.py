@@ -21,6 +21,7 @@ import numpy as np
 
 from . import swarm
 from .config import SelectorConfig
+from .extras import MissingExtra
 from .formulations import cone_qp, kernel, nlp, plane_qp, sampled
 from .formulations.common import (
     Bounds,
@@ -194,6 +195,14 @@ def _swarm_decision(
     return out
 
 
+def _backend(name: str, formulation: str) -> Backend:
+    """``get_backend(name)``; a solver library not installed is said with the formulation."""
+    try:
+        return get_backend(name)
+    except MissingExtra as exc:
+        raise exc.within(f"formulation {formulation!r}") from None
+
+
 class VelocitySelector:
     """Chooses a safe velocity for one UAV per control period.
 
@@ -232,10 +241,10 @@ class VelocitySelector:
         self.solver: str | None = None
         if formulation == "sampled":
             if solver is not None:
-                get_backend(solver)  # a wrong name is still an error; sampled needs no solver
+                _backend(solver, formulation)  # a wrong name is still an error; sampled needs none
         elif formulation == "nlp":
             self.solver = solver or DEFAULT_NLP_SOLVER
-            backend = get_backend(self.solver)
+            backend = _backend(self.solver, formulation)
             if backend.kind != "nlp":
                 nlp_solvers = ", ".join(s for s in available_solvers() if s.startswith("casadi"))
                 raise ValueError(
@@ -263,7 +272,7 @@ class VelocitySelector:
 
     @staticmethod
     def _qp_backend(name: str, formulation: str) -> Backend:
-        backend = get_backend(name)
+        backend = _backend(name, formulation)
         if backend.kind != "qp":
             raise ValueError(
                 f"solver: {name!r} does not solve QPs; "

@@ -14,12 +14,15 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from tqdm import tqdm
 
+from vo3d_opt.extras import needs
 from vo3d_opt.generators import FAMILIES, Family, get_family
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, error_line
 from vo3d_opt.sweep.stats import aggregate
+
+with needs("sweep", "vo3d sweep"):
+    from tqdm import tqdm
 
 if TYPE_CHECKING:
     import pandas as pd
