@@ -59,9 +59,10 @@ def _decide(args: list[np.ndarray], cfg) -> np.ndarray:
 
 def test_decide_is_select_and_takes_any_strides_and_read_only_arrays():
     rng = np.random.default_rng(1)
-    sel, cfg = VelocitySelector(), Options().config
+    sel = VelocitySelector()
     for _ in range(20):
         kw = _encounter(rng)
+        cfg = sel.options_for(kw["limits"].v_max, kw["dt"]).config
         args = _arrays(kw)
         want = _decide(args, cfg)
         d = sel.select(**kw)
@@ -148,7 +149,7 @@ def test_a_bad_swarm_raises_a_value_error():
 
     inputs = swarm_module.SwarmInputs.checked(P, V, V, 5.0, [], None, 0.2, 55.0, None, None)
     sw = inputs.arrays(1)
-    cfg = sel.options.config
+    cfg = sel.options_for(5.0, 0.2).config
     out = np.empty((2, _core.MANY_OUT_SIZE))
     _core.decide_many(sw, cfg, 1, out)
     for field, bad in (("nb_idx", np.array([0, 5])), ("who", np.array([0, 9])), ("agents", sw.agents[:, :10])):
@@ -180,7 +181,7 @@ def test_swarm_answers_do_not_depend_on_the_threads(seed: int):
     for threads in (2, 7):  # more threads than cores too: the core takes any number
         sw = _swarm_arrays(kw)
         out = np.empty((sw.who.shape[0], _core.MANY_OUT_SIZE))
-        _core.decide_many(sw, sel.options.config, threads, out)
+        _core.decide_many(sw, sel.options_for(4.0, 0.2).config, threads, out)
         assert np.array_equal(out[:, :3], one.velocities[sw.who])
         assert np.array_equal(out[:, 6], one.solved[sw.who])
     two = sel.select_many(**kw, threads=min(2, __import__("vo3d_opt").swarm.cores()))

@@ -627,3 +627,85 @@ def test_dense_5051_arrives_by_the_detours_in_a_row(monkeypatch):
     monkeypatch.setattr(traffic, "DETOUR_TURNS", 1)
     s = summarize(run_scenario(sc, progress=False))
     assert (s["reached"], s["agents"]) == (23, 24)
+
+
+# ------------------------------------------------ without avoidance, and risk ratios
+
+
+def test_method_none_flies_the_planned_miss_distance_and_replays():
+    from vo3d_opt.sweep.flight import without_avoidance
+
+    for index in range(4):
+        row = run_encounter("pair", 5, index, Method(name="none"))
+        assert row["error"] is None and (row["formulation"], row["solver"]) == ("none", "none")
+        assert row["decisions"] == 0 and row["selector_options"] == "null"
+        enc = make_encounter("pair", 5, index)
+        assert row["min_vehicle_distance"] == pytest.approx(enc.params["miss_distance"], abs=0.01)
+        # the encounter with nobody avoiding, as the failure files hold it, flies the same
+        _, summary = fly(scenario_from_dict(without_avoidance(enc.scenario)), DEFAULT_METHOD)
+        assert summary["min_vehicle_distance"] == row["min_vehicle_distance"]
+        assert summary["pz_intrusions"] == row["pz_intrusions"]
+    with pytest.raises(SweepError, match="not used by --method none"):
+        run_sweep("pair", 2, method=Method(name="none", selector_options=(("margin", 0.1),)))
+
+
+def _koopman_chi2(theta: float, x1: int, n1: int, x2: int, n2: int) -> float:
+    """Koopman's score statistic for H0: p1 = theta p2, its restricted MLE found numerically
+    (brute force, not the closed form statsmodels uses)."""
+    from scipy.optimize import minimize_scalar
+
+    def nll(p2: float) -> float:
+        p1 = theta * p2
+        eps = 1e-300
+        return -(x1 * np.log(p1 + eps) + (n1 - x1) * np.log(1 - p1 + eps)
+                 + x2 * np.log(p2 + eps) + (n2 - x2) * np.log(1 - p2 + eps))
+
+    hi = min(1.0, 1.0 / theta) if theta > 0 else 1.0
+    p2 = minimize_scalar(nll, bounds=(1e-12, hi - 1e-12), method="bounded",
+                         options={"xatol": 1e-14}).x
+    p1 = theta * p2
+    return (x1 - n1 * p1) ** 2 / (n1 * p1 * (1 - p1)) + (x2 - n2 * p2) ** 2 / (n2 * p2 * (1 - p2))
+
+
+def test_risk_ratio_is_koopman_score_interval():
+    from vo3d_opt.sweep.stats import risk_ratio, risk_ratios
+
+    for x1, n1, x2, n2 in [(3, 1000, 150, 1000), (10, 400, 60, 400), (0, 1000, 40, 1000)]:
+        r = risk_ratio(x1, n1, x2, n2)
+        assert r["ratio"] == pytest.approx((x1 / n1) / (x2 / n2))
+        lo, hi = r["ci95"]
+        assert _koopman_chi2(hi, x1, n1, x2, n2) == pytest.approx(3.841459, rel=2e-3)
+        if x1:
+            assert _koopman_chi2(lo, x1, n1, x2, n2) == pytest.approx(3.841459, rel=2e-3)
+        else:
+            assert lo == 0.0 and r["ratio"] == 0.0
+        assert lo <= r["ratio"] <= r["upper95"] < hi  # one-sided bound inside the two-sided
+    assert risk_ratio(0, 10, 0, 10)["ratio"] is None  # nothing to reduce
+    summary = {"family": "pair", "seed": 0, "encounters": 10, "method": "vo3d",
+               "rates": {"collision": {"events": 0, "encounters": 10},
+                         "intrusion": {"events": 1, "encounters": 10}}}
+    without = {**summary, "method": "none",
+               "rates": {"collision": {"events": 2, "encounters": 10},
+                         "intrusion": {"events": 5, "encounters": 10}}}
+    assert risk_ratios(summary, without)["intrusion"]["ratio"] == pytest.approx(0.2)
+    with pytest.raises(ValueError, match="seed: 1 there, 0 here"):
+        risk_ratios(summary, {**without, "seed": 1})
+
+
+def test_sweep_against_a_sweep_without_avoidance(cluster, tmp_path):
+    plain, ours = tmp_path / "none", tmp_path / "vo3d"
+    proc = vo3d("sweep", "pair", "--n", "6", "--scheduler", cluster, "--method", "none",
+                "--out", plain, "--json")
+    assert proc.returncode == 0, proc.stderr
+    base = json.loads(proc.stdout)
+    assert base["method"] == "none" and base["encounters_with_intrusion"] > 0
+    assert len(list((plain / "failures").glob("*.yaml"))) == base["encounters_with_intrusion"]
+    proc = vo3d("sweep", "pair", "--n", "6", "--scheduler", cluster, "--out", ours, "--json",
+                "--against", plain)
+    assert proc.returncode == 0, proc.stderr
+    ratios = json.loads(proc.stdout)["risk_ratios"]
+    assert ratios["intrusion"]["events_without_avoidance"] == base["encounters_with_intrusion"]
+    assert ratios["intrusion"]["ratio"] == 0.0 and ratios["intrusion"]["ci95"][0] == 0.0
+    assert json.loads((ours / "summary.json").read_text())["risk_ratios"] == ratios
+    bad = vo3d("sweep", "pair", "--n", "7", "--scheduler", cluster, "--against", plain)
+    assert bad.returncode == 2 and "--against" in bad.stderr and "encounters 6, not 7" in bad.stderr

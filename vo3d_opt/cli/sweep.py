@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from typing import Any
 from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FORMULATIONS
 from vo3d_opt.sim.scenario import ScenarioError, check_selector_options
 from vo3d_opt.sim.simulator import DEFAULT_FORMULATION
+from vo3d_opt.sweep.store import FLUSH_SECONDS
 
 from .common import (
     EXIT_OK,
@@ -33,6 +35,17 @@ from .common import (
 EXIT_ERRORS = 1
 
 log = logging.getLogger("vo3d_opt.sweep")
+
+
+def positive_float(text: str) -> float:
+    """An argparse ``type``: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
 
 
 def _cpus() -> int:
@@ -74,9 +87,10 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     )
     sw.add_argument(
         "--method",
-        choices=("vo3d", "rvo2"),
+        choices=("vo3d", "rvo2", "none"),
         default="vo3d",
-        help="vo3d (default) or rvo2: RVO2-3D, obstacle-free families only",
+        help="vo3d (default); rvo2: RVO2-3D, obstacle-free families only; none: no avoidance, "
+        "every agent straight to its goal (the unmitigated rates, for risk ratios)",
     )
     sw.add_argument(
         "--formulation",
@@ -95,8 +109,21 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     sw.add_argument(
         "--out",
         metavar="DIR",
-        help="also write encounters.parquet, summary.json, min_distance.png and "
-        "failures/*.yaml (replayable by vo3d run) to DIR (created; checked before the sweep)",
+        help="keep the rows in DIR as they come (resumable), and write encounters.parquet, "
+        "min_distance.png, failures/*.yaml (replayable by vo3d run) and summary.json there "
+        "at the end (created; checked before the sweep)",
+    )
+    sw.add_argument(
+        "--against",
+        metavar="DIR",
+        help="the --out DIR of the same sweep flown with --method none: the summary then "
+        "gives the risk ratios of collisions and intrusions against it",
+    )
+    sw.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the sweep in --out DIR (the same arguments): fly only the encounters "
+        "missing there",
     )
     sw.add_argument(
         "--json",
@@ -108,6 +135,20 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
         type=non_negative_int,
         metavar="M",
         help="encounters submitted at once (default 4 per worker, at least 8)",
+    )
+    sw.add_argument(
+        "--batch",
+        type=non_negative_int,
+        metavar="B",
+        help="encounters per Dask task (default: up to 64 for families flown side by side, else 1)",
+    )
+    sw.add_argument(
+        "--flush-every",
+        type=positive_float,
+        metavar="SECONDS",
+        default=FLUSH_SECONDS,
+        help=f"with --out: write the rows flown to DIR at least this often (default "
+        f"{FLUSH_SECONDS:g} s; what a killed sweep may have to fly again)",
     )
     sw.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     sw.set_defaults(func=cmd_sweep)
@@ -203,15 +244,45 @@ def format_summary(summary: dict[str, Any]) -> str:
                 f"  {event:<16} {r['events']}/{r['encounters']}  {r['rate']:.4g}  "
                 f"[{lo:.4g}, {hi:.4g}]  {r['upper95']:.4g}"
             )
+    for event, r in (summary.get("risk_ratios") or {}).items():
+        if r["ratio"] is None:
+            lines.append(f"  risk ratio {event}: - (no {event} without avoidance)")
+        else:
+            lo, hi = r["ci95"]
+            lines.append(
+                f"  risk ratio {event}: {r['ratio']:.4g} [{lo:.4g}, {hi:.4g}] upper95 "
+                f"{r['upper95']:.4g} ({r['events']}/{r['encounters']} against "
+                f"{r['events_without_avoidance']}/{r['encounters_without_avoidance']} "
+                "without avoidance; Koopman score interval)"
+            )
     for err in summary["errors"]:
         lines.append(f"error in encounter {err['index']}: {err['error']}")
     return "\n".join(lines)
+
+
+def _without_avoidance(folder: str, family: str, n: int, seed: int) -> dict[str, Any]:
+    """The summary of the finished ``--method none`` sweep of ``family``, ``n`` and ``seed``
+    in ``folder`` (for ``--against``), checked before anything flies."""
+    from vo3d_opt.sweep.runner import SweepError
+
+    path = Path(folder) / "summary.json"
+    try:
+        summary = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise SweepError(f"--against {folder}: no finished sweep there ({exc})") from None
+    if not isinstance(summary, dict) or summary.get("method") != "none":
+        raise SweepError(f"--against {folder}: not a --method none sweep")
+    for key, value in (("family", family), ("encounters", n), ("seed", seed)):
+        if summary.get(key) != value:
+            raise SweepError(f"--against {folder}: {key} {summary.get(key)!r}, not {value!r}")
+    return summary
 
 
 def _sweep(args: argparse.Namespace) -> int:
     """Run ``vo3d sweep`` with its parsed ``args``; progress is logged (``vo3d_opt.sweep``
     logger, shown on stderr) and native code's prints are kept off stdout (the JSON's)."""
     from vo3d_opt.sweep.runner import Method, SweepError, run_sweep, validate
+    from vo3d_opt.sweep.stats import risk_ratios
 
     if args.list:
         return _list(args.json)
@@ -219,6 +290,11 @@ def _sweep(args: argparse.Namespace) -> int:
         raise SweepError("family: required (vo3d sweep --list names them)")
     if args.n is None:
         raise SweepError("--n: required (the number of encounters)")
+    if args.resume and args.out is None:
+        raise SweepError("--resume: needs --out DIR (the directory of the sweep to continue)")
+    without = None
+    if args.against is not None:
+        without = _without_avoidance(args.against, args.family, args.n, args.seed)
     try:
         options = check_selector_options(dict(args.selector_options or ()), "--selector-option")
     except ScenarioError as exc:
@@ -244,6 +320,7 @@ def _sweep(args: argparse.Namespace) -> int:
         workers=workers,
         method=method,
         in_flight=args.in_flight,
+        batch=args.batch,
     )
     log.info(
         "sweep %s: %d encounters, seed %d, method %s, %s",
@@ -263,8 +340,17 @@ def _sweep(args: argparse.Namespace) -> int:
             method=method,
             in_flight=args.in_flight,
             progress=not args.no_progress and log.isEnabledFor(logging.INFO),
+            out=args.out,
+            resume=args.resume,
+            batch=args.batch,
+            flush_seconds=args.flush_every,
         )
     s = result.summary
+    if without is not None:
+        try:
+            s["risk_ratios"] = risk_ratios(s, without)
+        except ValueError as exc:
+            raise SweepError(f"--against {args.against}: {exc}") from None
     status = EXIT_ERRORS if s["errors"] else EXIT_OK
     if args.out is not None:
         from vo3d_opt.sweep.output import write_results  # matplotlib only when asked for
@@ -276,11 +362,14 @@ def _sweep(args: argparse.Namespace) -> int:
             log.error("--out %s: writing failed: %s", args.out, exc.strerror or exc)
             status = EXIT_ERRORS
     log.info(
-        "done: %d/%d encounters in %.1f s (+%.1f s cluster and warm-up), %d errors",
-        s["completed"],
-        s["encounters"],
+        "done: %d encounters flown in %.1f s (+%.1f s cluster and warm-up), %d found in --out; "
+        "%d/%d completed, %d errors",
+        result.flown,
         s["wall_time"],
         s["setup_time"],
+        s["encounters"] - result.flown,
+        s["completed"],
+        s["encounters"],
         len(s["errors"]),
     )
     print(json.dumps(s, allow_nan=False) if args.json else format_summary(s))

@@ -65,7 +65,10 @@ class Family:
     can fly it (``--method rvo2``). ``warm_keys``: scenario keys added to the workers' warm-up
     encounter, so that it runs the same code as the family's (e.g. its ``dynamics``).
     ``needs``: the scenario keys (dotted paths) its draws use that not every build's schema
-    defines (contracts §5); the sweep refuses the family while one is missing."""
+    defines (contracts §5); the sweep refuses the family while one is missing. ``batched``:
+    its encounters can fly side by side (``vo3d_opt.sim.lockstep``: kinematic or first-order
+    dynamics, noiseless sensing), so a sweep hands a task many of them; else one each (an
+    encounter of seconds or minutes is a task of its own)."""
 
     name: str
     summary: str
@@ -74,6 +77,7 @@ class Family:
     max_attempts: int = 1000
     warm_keys: dict[str, Any] = field(default_factory=dict)
     needs: tuple[str, ...] = ()
+    batched: bool = True
 
     def missing_keys(self) -> list[str]:
         """The scenario keys of ``needs`` (dotted paths, e.g. ``sensing.latency``) that this
@@ -92,8 +96,12 @@ class SweepEncounter:
     attempts: int
     params: dict[str, float | int | str]
     scenario: dict[str, Any] = field(repr=False)
+    #: The scenario as the validity check loaded it (``load`` returns it: loading is pure).
+    loaded: Scenario | None = field(default=None, repr=False, compare=False)
 
     def load(self) -> Scenario:
+        if self.loaded is not None:
+            return self.loaded
         return scenario_from_dict(self.scenario, source=self.scenario["name"])
 
 
@@ -129,6 +137,7 @@ def register(
     obstacle_free: bool,
     warm_keys: dict[str, Any] | None = None,
     needs: tuple[str, ...] = (),
+    batched: bool = True,
 ) -> Callable[[Generator], Generator]:
     """Decorator: register ``rng -> Draw`` as family ``name`` (``summary``: one line for
     ``vo3d sweep --list``; the rest as in :class:`Family`)."""
@@ -141,6 +150,7 @@ def register(
             obstacle_free=obstacle_free,
             warm_keys=dict(warm_keys or {}),
             needs=tuple(needs),
+            batched=batched,
         )
         return fn
 
@@ -192,7 +202,7 @@ def make_encounter(family: str | Family, seed: int, index: int) -> SweepEncounte
             f"'{fam.name}', {seed}, {index})).",
             **draw.scenario,
         }
-        last = encounter_problems(data, name)
+        sc, last = _checked(data, name)
         if not last:
             return SweepEncounter(
                 family=fam.name,
@@ -201,6 +211,7 @@ def make_encounter(family: str | Family, seed: int, index: int) -> SweepEncounte
                 attempts=attempt,
                 params=dict(draw.params),
                 scenario=data,
+                loaded=sc,
             )
     raise RuntimeError(
         f"{name}: no valid encounter in {fam.max_attempts} draws (last problem: {last[0]})"
@@ -209,10 +220,16 @@ def make_encounter(family: str | Family, seed: int, index: int) -> SweepEncounte
 
 def encounter_problems(data: dict[str, Any], source: str = "<encounter>") -> list[str]:
     """Why ``data`` is not a valid sweep encounter (empty list: it is); see the module doc."""
+    return _checked(data, source)[1]
+
+
+def _checked(data: dict[str, Any], source: str) -> tuple[Scenario | None, list[str]]:
+    """The scenario ``data`` loads to (None when the loader refuses it) and why it is not a
+    valid sweep encounter (empty: it is)."""
     try:
         sc = scenario_from_dict(data, source=source)
     except ScenarioError as exc:
-        return [str(exc)]
+        return None, [str(exc)]
     problems = sc.start_warnings()
     points = np.concatenate([sc.starts, sc.goals])
     owner = np.tile(np.arange(sc.n_agents), 2)
@@ -233,7 +250,7 @@ def encounter_problems(data: dict[str, Any], source: str = "<encounter>") -> lis
                 f"a start or goal is within {PRISM_CLEARANCE:g} m of the protected "
                 f"prism of obstacles[{k}]"
             )
-    return problems
+    return sc, problems
 
 
 # ----------------------------------------------------------------------------- helpers

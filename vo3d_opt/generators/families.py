@@ -412,6 +412,7 @@ ROTORPY_WIND_SPEED = (0.0, 3.0)  # m/s, horizontal (mean) wind, uniform; directi
         "wind": {"type": "dryden", "velocity": [1.0, 0.0, 0.0]},
     },
     needs=("dynamics", "wind"),
+    batched=False,
 )
 def rotorpy(rng: np.random.Generator) -> Draw | None:
     """A ``group`` draw flown by RotorPy's ``hummingbird`` quadrotors (``dynamics: {model:
@@ -455,6 +456,7 @@ NOISY_SEEDS = 2**31  # the sensing seed, uniform in [0, 2^31)
         }
     },
     needs=("sensing.position_noise", "sensing.velocity_noise", "sensing.latency", "sensing.seed"),
+    batched=False,
 )
 def noisy(rng: np.random.Generator) -> Draw | None:
     """A ``group`` draw in which every sensed position and velocity carries Gaussian noise

@@ -257,6 +257,28 @@ class PerAgentSelect(_SelectorStep):
         }
 
 
+class NoAvoidance:
+    """The decision step of a run without avoidance, for scenarios in which no agent avoids
+    (every one ``avoids: false``: each flies its preferred velocity straight to its goal, the
+    simulator's own rule, and none ever decides). Asked anyway, it keeps every velocity."""
+
+    formulation = "none"
+    solver = "none"
+
+    def decide(self, snap: Snapshot) -> StepDecision:
+        n = snap.positions.shape[0]
+        times = np.full(n, np.nan)
+        return StepDecision(
+            commands=np.array(snap.velocities, dtype=float),
+            statuses=np.full(n, "", dtype=object),
+            decision_times=times,
+            solve_times=times,
+        )
+
+    def extra(self) -> dict[str, Any]:
+        return {"decision_step": "none"}
+
+
 def decision_step(
     sc: Scenario,
     selector: Any,

@@ -42,6 +42,9 @@ OBSTACLE_SUBSAMPLES = (0.25, 0.5, 0.75)
 #: a few hundred MB however many vehicles: the arrays grow with the square of their number).
 _CHUNK = 256
 CHUNK_ELEMENTS = 8_000_000
+#: :func:`close_pairs` takes every pair over every segment at once up to this many
+#: (segment, pair) rows (about 50 MB of temporaries), a k-d tree per step beyond.
+ALL_PAIRS_ELEMENTS = 500_000
 
 CONTRACT_KEYS = (
     "scenario",
@@ -127,6 +130,8 @@ def close_pairs(
     empty = np.zeros(0, dtype=np.int64)
     if n < 2:
         return empty, empty, np.zeros(0)
+    if max(S - 1, 1) * n * (n - 1) // 2 <= ALL_PAIRS_ELEMENTS:
+        return _close_pairs_at_once(positions, threshold)
     # An upper bound of the run's smallest distance: the nearest pair at the start (inflated a
     # hair: the tree's distance may differ from numpy's in the last bit).
     bound = float(cKDTree(positions[0]).query(positions[0], k=2)[0][:, 1].min()) * (1 + 1e-9) + 1e-9
@@ -158,6 +163,34 @@ def close_pairs(
     if best_key >= 0 and not np.any(uniq == best_key):
         uniq, dmin = np.concatenate([[best_key], uniq]), np.concatenate([[best], dmin])
     return uniq // n, uniq % n, dmin
+
+
+def _close_pairs_at_once(
+    positions: np.ndarray, threshold: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`close_pairs` of a small run (few vehicles, few steps): every pair over every
+    segment in one :func:`segment_min` call instead of a k-d tree per step. The same answer:
+    the tree's proposals only leave out pair-segments farther than both the threshold and the
+    closest distance found, and the distances are the same arithmetic, row by row. The
+    closest pair is the first (by step, then pair) at the smallest distance."""
+    S, n = positions.shape[0], positions.shape[1]
+    ii, jj = np.triu_indices(n, 1)
+    p0 = positions[:-1] if S > 1 else positions
+    p1 = positions[1:] if S > 1 else positions
+    r0 = (p0[:, ii] - p0[:, jj]).reshape(-1, 3)
+    r1 = (p1[:, ii] - p1[:, jj]).reshape(-1, 3)
+    d = segment_min(r0, r1).reshape(-1, ii.shape[0])  # (segments, pairs)
+    near = d < threshold
+    dmin = np.where(near, d, np.inf).min(axis=0)
+    keep = np.asarray(near.any(axis=0), dtype=bool)
+    first = int(np.argmin(d))  # row-major: the earliest segment, then the lowest pair
+    best = first % ii.shape[0]
+    out_i, out_j, out_d = ii[keep], jj[keep], dmin[keep]
+    if not keep[best]:
+        out_i = np.concatenate([[ii[best]], out_i])
+        out_j = np.concatenate([[jj[best]], out_j])
+        out_d = np.concatenate([[d.flat[first]], out_d])
+    return out_i.astype(np.int64), out_j.astype(np.int64), out_d
 
 
 def _with_subsamples(positions: np.ndarray) -> np.ndarray:

@@ -6,9 +6,11 @@ simulator), the metrics and the RVO2-3D baseline; nothing but the CLI imports it
 * :mod:`.families`: the registry of encounter families (``pair``, ``group``, ``dense`` and the
   group variants ``lagged``, ``intruder``, ``rotorpy``, ``noisy``) and
   :func:`make_encounter`, which regenerates any encounter from (family, seed, index);
-* :mod:`.flight`: :func:`run_encounter`, one encounter flown where it is called;
+* :mod:`.flight`: :func:`run_encounter`, one encounter flown where it is called, and
+  ``run_encounters``, several, side by side where they can;
 * :mod:`.runner`: :func:`run_sweep`, N encounters on Dask (:mod:`.cluster` is the Dask side);
-* :mod:`.stats`: Clopper–Pearson bounds and the sweep's summary;
+* :mod:`.store`: the rows kept in ``--out`` as they come, and ``--resume``;
+* :mod:`.stats`: Clopper–Pearson bounds, risk ratios and the sweep's summary;
 * :mod:`.output`: ``encounters.parquet``, ``summary.json``, plots and replayable failures.
 """
 

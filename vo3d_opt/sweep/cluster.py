@@ -1,11 +1,12 @@
 """The Dask side of a sweep: the client (a local cluster or an existing scheduler), the warm-up
 plugin and the bounded submission loop.
 
-Every encounter is one task (:func:`~vo3d_opt.sweep.flight.run_encounter`); at most
-``in_flight`` are on the cluster at a time, more are submitted as others complete (collected
-with ``as_completed``). A task whose workers died (``KilledWorker`` after the scheduler's
-allowed failures) or that failed in any other way becomes a row with its ``error``: no
-encounter is dropped and the loop goes on.
+A task flies a batch of encounters (:func:`~vo3d_opt.sweep.flight.run_encounters`, side by
+side where it can); at most ``in_flight`` tasks are on the cluster at a time, more are
+submitted as others complete (collected with ``as_completed``). A task whose workers died
+(``KilledWorker`` after the scheduler's allowed failures) or that failed in any other way is
+split into its single encounters, and an encounter that fails alone becomes a row with its
+``error``: no encounter is dropped and the loop goes on.
 """
 
 from __future__ import annotations
@@ -15,13 +16,14 @@ import contextlib
 import logging
 import re
 import signal
-from collections.abc import Iterator
-from itertools import islice
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from typing import Any
 
 from vo3d_opt.extras import needs
 from vo3d_opt.generators import Family
-from vo3d_opt.sweep.flight import Method, error_line, run_encounter, warm
+from vo3d_opt.sweep.flight import Method, error_line, run_encounters, warm
 
 with needs("sweep", "vo3d sweep"):
     from distributed import Client, LocalCluster, WorkerPlugin, as_completed
@@ -133,35 +135,64 @@ def _tally(counts: dict[str, int], row: dict[str, Any]) -> None:
     ) > 0
 
 
+@dataclass(frozen=True)
+class Work:
+    """What to fly: encounters ``indices`` of ``fam`` with ``seed`` and ``method``, ``batch``
+    of them per task, at most ``in_flight`` tasks on the cluster at a time."""
+
+    fam: Family
+    seed: int
+    method: Method
+    indices: list[int]
+    batch: int
+    in_flight: int
+
+
 def submit_all(
-    client: Client, fam: Family, seed: int, n: int, method: Method, in_flight: int, bar: tqdm
+    client: Client,
+    work: Work,
+    bar: tqdm,
+    sink: Callable[[list[dict[str, Any]]], None] | None = None,
 ) -> list[dict[str, Any]]:
-    """Every encounter's row (in completion order), at most ``in_flight`` tasks at a time."""
-    pending = iter(range(n))
-    index_of: dict[Any, int] = {}  # a future's key (a str for client.submit) -> encounter
+    """Every encounter's row (in completion order), handed to ``sink`` as each task ends.
+
+    A task whose worker died as often as the scheduler allows (``KilledWorker``) or that
+    failed in any other way is split into single encounters, flown again: only an encounter
+    that fails alone becomes a row with its ``error``, never one that shared its task."""
+    idx = work.indices
+    queue = deque(idx[i : i + work.batch] for i in range(0, len(idx), work.batch))
+    chunk_of: dict[Any, list[int]] = {}  # a future's key -> its encounters
     done = as_completed()
     rows: list[dict[str, Any]] = []
     counts = {"collisions": 0, "intrusions": 0, "errors": 0}
 
-    def submit(i: int) -> None:
-        fut = client.submit(run_encounter, fam, seed, i, method, pure=False)
-        index_of[fut.key] = i
+    def submit() -> None:
+        chunk = queue.popleft()
+        fut = client.submit(run_encounters, work.fam, work.seed, chunk, work.method, pure=False)
+        chunk_of[fut.key] = chunk
         done.add(fut)
 
-    for i in islice(pending, in_flight):
-        submit(i)
+    for _ in range(min(work.in_flight, len(queue))):
+        submit()
     for fut in done:
-        i = index_of.pop(fut.key)
+        chunk = chunk_of.pop(fut.key)
         try:
-            row = fut.result()
+            got = fut.result()
         except Exception as exc:  # noqa: BLE001 - KilledWorker, lost scheduler, ...
-            row = _error_row(fam, seed, i, method, exc)
+            if len(chunk) > 1:
+                queue.extendleft([i] for i in reversed(chunk))
+                got = []
+            else:
+                got = [_error_row(work.fam, work.seed, chunk[0], work.method, exc)]
         fut.release()
-        rows.append(row)
-        nxt = next(pending, None)
-        if nxt is not None:
-            submit(nxt)
-        _tally(counts, row)
-        bar.set_postfix(counts, refresh=False)
-        bar.update(1)
+        while queue and len(chunk_of) < work.in_flight:
+            submit()
+        if got:
+            rows += got
+            if sink is not None:
+                sink(got)
+            for row in got:
+                _tally(counts, row)
+            bar.set_postfix(counts, refresh=False)
+            bar.update(len(got))
     return rows

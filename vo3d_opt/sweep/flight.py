@@ -1,10 +1,12 @@
-"""One encounter, flown where it is called (a Dask worker, or this process).
+"""Encounters flown where they are called (a Dask worker, or this process).
 
 :func:`run_encounter` regenerates encounter ``index`` of a family from (family, seed, index),
 flies it with the :class:`Method` and returns one row: its parameters and its contract §3
-summary, or the error it raised. It is a pure function of its arguments but for the timing
-columns (:data:`TIMING_COLUMNS`), which is why a sweep's results do not depend on how many
-workers ran it.
+summary, or the error it raised. :func:`run_encounters` does the same for several, flying
+those it can side by side (``vo3d_opt.sim.lockstep``), with the same rows. A row is a pure
+function of (family, seed, index, method) but for the timing columns
+(:data:`TIMING_COLUMNS`), which is why a sweep's results depend neither on how many workers
+ran it nor on how its encounters were batched.
 """
 
 from __future__ import annotations
@@ -12,23 +14,26 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from vo3d_opt.generators import Family, get_family, make_encounter
+from vo3d_opt.sim import lockstep
+from vo3d_opt.sim.deciders import NoAvoidance, decision_step
 from vo3d_opt.sim.metrics import pair_min_distances, summarize
-from vo3d_opt.sim.record import RunRecord
+from vo3d_opt.sim.record import DecisionStep, RunRecord
 from vo3d_opt.sim.scenario import (
     Scenario,
     check_selector_options,
     scenario_from_dict,
     scenario_variant,
 )
-from vo3d_opt.sim.simulator import Simulator, flown_options, scenario_selector
+from vo3d_opt.sim.simulator import flown_options, fly, scenario_selector
 
-METHODS = ("vo3d", "rvo2")
+METHODS = ("vo3d", "rvo2", "none")
 #: Columns that measure time or place, not behaviour: the only ones allowed to differ between
 #: two runs of the same encounters.
 TIMING_COLUMNS = (
@@ -38,15 +43,20 @@ TIMING_COLUMNS = (
     "wall_time",
     "run_time",
     "worker",
+    "compute_time_per_agent_step_us",  # RVO2-3D's own timing (baselines.summarize_rvo2)
 )
+#: Vehicles flown side by side at most (``vo3d_opt.sim.lockstep``): enough that the per-step
+#: overhead is shared by dozens of encounters, few enough that the arrays stay small.
+LOCKSTEP_AGENTS = 512
 
 
 @dataclass(frozen=True)
 class Method:
     """How the encounters are flown: ``vo3d`` (the selector, with ``formulation`` / ``solver``
-    as ``vo3d run`` takes them; None = the defaults) or ``rvo2`` (RVO2-3D,
-    ``vo3d_opt.baselines.run_rvo2``). ``selector_options``: (key, value) pairs merged into
-    every encounter's ``selector_options`` (``vo3d`` only), e.g.
+    as ``vo3d run`` takes them; None = the defaults), ``rvo2`` (RVO2-3D,
+    ``vo3d_opt.baselines.run_rvo2``) or ``none`` (no avoidance: every agent flies straight to
+    its goal, as ``avoids: false`` agents do; the unmitigated risk). ``selector_options``:
+    (key, value) pairs merged into every encounter's ``selector_options`` (``vo3d`` only), e.g.
     ``(("closing_guard", False),)``; kept validated, as a scenario file holds them, sorted by
     key, the last of a repeated key (``ValueError`` naming a bad one)."""
 
@@ -66,9 +76,29 @@ class Method:
 DEFAULT_METHOD = Method()
 
 
+def without_avoidance(data: dict[str, Any]) -> dict[str, Any]:
+    """A scenario dict with every agent ``avoids: false`` (what ``--method none`` flies)."""
+    return {**data, "agents": [{**a, "avoids": False} for a in data["agents"]]}
+
+
+def flown(sc: Scenario, method: Method) -> tuple[Scenario, DecisionStep, Any]:
+    """What a ``vo3d`` or ``none`` method flies for scenario ``sc``: the scenario (with the
+    method's selector options merged in, or nobody avoiding), its decision step (as
+    ``Simulator`` builds it) and the ``selector_options`` its summary reports (None for
+    ``none``)."""
+    if method.name == "none":
+        plain = without_avoidance(sc.model_dump(exclude_none=True))
+        return scenario_from_dict(plain, sc.source), NoAvoidance(), None
+    if method.selector_options:
+        sc = scenario_variant(sc, selector_options=dict(method.selector_options))
+    sel, formulation, solver = scenario_selector(sc, method.formulation, method.solver)
+    return sc, decision_step(sc, sel, formulation=formulation, solver=solver), flown_options(sc)
+
+
 def fly_encounter(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, Any]]:
     """Fly one scenario with the method; its record and its §3 summary, with
-    ``selector_options``: the scenario's, the method's merged in (None for RVO2-3D).
+    ``selector_options``: the scenario's, the method's merged in (None for RVO2-3D and for
+    ``none``).
 
     RVO2-3D keeps two agents ``radius_i + radius_j`` apart, so it flies every agent with the
     radius max(r_pz) / 2: each pair keeps at least its larger r_pz apart, which is what the
@@ -83,11 +113,9 @@ def fly_encounter(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, An
         )
         record = dataclasses.replace(run_rvo2(equal, progress=False), scenario=sc)
         return record, {**summarize_rvo2(record), "selector_options": None}
-    if method.selector_options:
-        sc = scenario_variant(sc, selector_options=dict(method.selector_options))
-    sel, formulation, solver = scenario_selector(sc, method.formulation, method.solver)
-    record = Simulator(sc, sel, formulation=formulation, solver=solver).run(progress=False)
-    return record, {**summarize(record), "selector_options": flown_options(sc)}
+    sc, step, options = flown(sc, method)
+    record = fly(sc, step, progress=False)
+    return record, {**summarize(record), "selector_options": options}
 
 
 def normalised_min_distance(record: RunRecord) -> float | None:
@@ -112,6 +140,37 @@ def _worker_name() -> str:
         return "local"
 
 
+def _new_row(fam: Family, seed: int, index: int, method: Method) -> dict[str, Any]:
+    return {
+        "family": fam.name,
+        "seed": int(seed),
+        "index": int(index),
+        "method": method.name,
+        "error": None,
+    }
+
+
+def _drawn(row: dict[str, Any], fam: Family, seed: int, index: int) -> Scenario:
+    """Draw encounter ``index`` into ``row`` (attempts, ``param_*``); its scenario."""
+    enc = make_encounter(fam, seed, index)
+    row["attempts"] = enc.attempts
+    row.update({f"param_{k}": v for k, v in enc.params.items()})
+    return enc.load()
+
+
+def _summarised(row: dict[str, Any], record: RunRecord, summary: dict[str, Any]) -> None:
+    for key in ("status_counts", "selector_options"):
+        summary[key] = json.dumps(summary[key], sort_keys=True)
+    row.update(summary)
+    row["min_normalised_distance"] = normalised_min_distance(record)
+
+
+def _closed(row: dict[str, Any], seconds: float) -> dict[str, Any]:
+    row["run_time"] = seconds
+    row["worker"] = _worker_name()
+    return row
+
+
 def run_encounter(
     family: str | Family, seed: int, index: int, method: Method = Method()
 ) -> dict[str, Any]:
@@ -121,27 +180,93 @@ def run_encounter(
     and ``worker``. Never raises for a failing encounter: the error is the row's."""
     t0 = time.perf_counter()
     fam = get_family(family)
-    row: dict[str, Any] = {
-        "family": fam.name,
-        "seed": int(seed),
-        "index": int(index),
-        "method": method.name,
-        "error": None,
-    }
+    row = _new_row(fam, seed, index, method)
     try:
-        enc = make_encounter(fam, seed, index)
-        row["attempts"] = enc.attempts
-        row.update({f"param_{k}": v for k, v in enc.params.items()})
-        record, summary = fly_encounter(enc.load(), method)
-        for key in ("status_counts", "selector_options"):
-            summary[key] = json.dumps(summary[key], sort_keys=True)
-        row.update(summary)
-        row["min_normalised_distance"] = normalised_min_distance(record)
+        record, summary = fly_encounter(_drawn(row, fam, seed, index), method)
+        _summarised(row, record, summary)
     except Exception as exc:  # noqa: BLE001 - one bad encounter must not stop the sweep
         row["error"] = error_line(exc)
-    row["run_time"] = time.perf_counter() - t0
-    row["worker"] = _worker_name()
-    return row
+    return _closed(row, time.perf_counter() - t0)
+
+
+@dataclass
+class _Waiting:
+    """An encounter drawn and set up, waiting to be flown side by side with others."""
+
+    row: dict[str, Any]
+    sc: Scenario
+    step: DecisionStep
+    options: Any
+    seconds: float
+
+
+def run_encounters(
+    family: str | Family, seed: int, indices: Sequence[int], method: Method = Method()
+) -> list[dict[str, Any]]:
+    """:func:`run_encounter` of each of ``indices``, the same rows (but the timing columns),
+    in that order: those ``vo3d_opt.sim.lockstep`` can fly are flown side by side, a few
+    hundred vehicles at a time, the others one by one."""
+    fam = get_family(family)
+    rows: list[dict[str, Any]] = []
+    waiting: list[_Waiting] = []
+    for index in indices:
+        t0 = time.perf_counter()
+        row = _new_row(fam, seed, index, method)
+        rows.append(row)
+        try:
+            sc = _drawn(row, fam, seed, index)
+            if method.name != "rvo2":
+                sc, step, options = flown(sc, method)
+                if lockstep.fits(sc, step):
+                    waiting.append(_Waiting(row, sc, step, options, time.perf_counter() - t0))
+                    continue
+            _summarised(row, *fly_encounter(sc, method))
+        except Exception as exc:  # noqa: BLE001 - one bad encounter must not stop the sweep
+            row["error"] = error_line(exc)
+        _closed(row, time.perf_counter() - t0)
+    for group in _lockstep_groups(waiting):
+        _fly_side_by_side(group, fam, method)
+    return rows
+
+
+def _lockstep_groups(waiting: list[_Waiting]) -> list[list[_Waiting]]:
+    """The waiting encounters in groups of one ``dt`` and at most LOCKSTEP_AGENTS vehicles."""
+    groups: list[list[_Waiting]] = []
+    by_dt: dict[float, list[_Waiting]] = {}
+    for w in waiting:
+        by_dt.setdefault(float(w.sc.dt), []).append(w)
+    for same in by_dt.values():
+        group: list[_Waiting] = []
+        for w in same:
+            if group and sum(g.sc.n_agents for g in group) + w.sc.n_agents > LOCKSTEP_AGENTS:
+                groups.append(group)
+                group = []
+            group.append(w)
+        groups.append(group)
+    return groups
+
+
+def _fly_side_by_side(group: list[_Waiting], fam: Family, method: Method) -> None:
+    """Fly a group with ``fly_together`` and fill in its rows; should that raise, each is
+    flown alone (its own error, if any, in its own row)."""
+    t0 = time.perf_counter()
+    try:
+        records = lockstep.fly_together([(w.sc, w.step) for w in group])
+    except Exception:  # noqa: BLE001 - flown one by one below, each with its own outcome
+        records = None
+    share = (time.perf_counter() - t0) / len(group)
+    for k, w in enumerate(group):
+        t1 = time.perf_counter()
+        try:
+            if records is None:
+                record = fly(w.sc, w.step, progress=False)
+            else:
+                record = records[k]
+            _summarised(w.row, record, {**summarize(record), "selector_options": w.options})
+        except Exception as exc:  # noqa: BLE001 - one bad encounter must not stop the sweep
+            w.row["error"] = error_line(exc)
+        spent = w.seconds + time.perf_counter() - t1 + (0.0 if records is None else share)
+        _closed(w.row, spent)
 
 
 _WARM = {

@@ -24,6 +24,8 @@ import numpy as np
 
 from vo3d_opt.extras import needs
 from vo3d_opt.generators import make_encounter
+from vo3d_opt.report import atomic
+from vo3d_opt.sweep.flight import without_avoidance
 from vo3d_opt.sweep.runner import SweepResult
 
 with needs("sweep", "vo3d sweep"):
@@ -57,6 +59,8 @@ def failure_scenario(result: SweepResult, index: int) -> dict[str, Any]:
     solver and selector options (when it named them) so that ``vo3d run`` flies it the same
     way."""
     data = dict(make_encounter(result.family, result.seed, index).scenario)
+    if result.method.name == "none":
+        return without_avoidance(data)
     if result.method.name == "vo3d":
         for key in ("formulation", "solver"):
             value = getattr(result.method, key)
@@ -84,21 +88,31 @@ def _header(result: SweepResult, row: pd.Series) -> str:
             "Flown by RVO2-3D in the sweep: replay with vo3d_opt.baselines.run_rvo2; "
             "`vo3d run` flies it with vo3d instead."
         )
+    elif result.method.name == "none":
+        lines.append(
+            "Flown without avoidance (every agent avoids: false): "
+            "vo3d run THIS_FILE --json replays it."
+        )
     else:
         lines.append("Replay: vo3d run THIS_FILE --json (the same summary but timing).")
     return "".join(f"# {line}\n" for line in lines)
 
 
 def write_failures(result: SweepResult, out: Path) -> list[Path]:
-    """``out/failures/<name>.yaml`` for each encounter of :func:`failed_rows`."""
+    """``out/failures/<name>.yaml`` for each encounter of :func:`failed_rows` (and no other
+    file there: a sweep's failures are exactly its own)."""
     written = []
+    folder = out / "failures"
     for _, row in failed_rows(result.rows).iterrows():
         data = failure_scenario(result, int(row["index"]))
-        path = out / "failures" / f"{data['name']}.yaml"
-        path.parent.mkdir(parents=True, exist_ok=True)
+        path = folder / f"{data['name']}.yaml"
         text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
-        path.write_text(_header(result, row) + text)
+        with atomic(path) as tmp:
+            tmp.write_text(_header(result, row) + text)
         written.append(path)
+    if folder.is_dir():
+        for stale in set(folder.glob("*.yaml")) - set(written):
+            stale.unlink()
     return written
 
 
@@ -129,17 +143,86 @@ def plot_min_distance(rows: pd.DataFrame, path: Path) -> Path:
     ax_cdf.legend(fontsize=8)
     fig.suptitle("Smallest vehicle-vehicle distance per encounter, over the protected-zone radius")
     fig.tight_layout()
-    fig.savefig(path)
+    fig.savefig(path, format="png")
     return path
 
 
 def write_results(result: SweepResult, out: str | Path) -> list[Path]:
-    """encounters.parquet, summary.json, min_distance.png and failures/*.yaml in ``out``."""
+    """encounters.parquet, min_distance.png, failures/*.yaml and, last, summary.json in
+    ``out``, each written whole under a temporary name and renamed (so the directory holds a
+    ``summary.json`` only once everything else is complete); then the sweep's parts, if it
+    kept them there, are removed."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     parquet = out / "encounters.parquet"
-    result.rows.to_parquet(parquet, engine="pyarrow", index=False)
+    with atomic(parquet) as tmp:
+        result.rows.to_parquet(tmp, engine="pyarrow", index=False)
+    figure = out / "min_distance.png"
+    with atomic(figure) as tmp:
+        plot_min_distance(result.rows, tmp)
+    written = [parquet, figure, *write_failures(result, out)]
     summary = out / "summary.json"
-    summary.write_text(json.dumps(result.summary, indent=2, allow_nan=False) + "\n")
-    written = [parquet, summary, plot_min_distance(result.rows, out / "min_distance.png")]
-    return written + write_failures(result, out)
+    with atomic(summary) as tmp:
+        tmp.write_text(json.dumps(result.summary, indent=2, allow_nan=False) + "\n")
+    if result.store is not None and Path(result.store.out).resolve() == out.resolve():
+        result.store.finish()
+    return [*written, summary]
+
+
+#: Okabe–Ito colours (distinct under the common colour-vision deficiencies), with line styles
+#: so that the curves also differ in grey.
+_STYLES = {
+    "vo3d": ("#0072B2", "-"),
+    "rvo2": ("#E69F00", "--"),
+    "none": ("#000000", ":"),
+}
+_LABELS = {"vo3d": "vo3d (ours)", "rvo2": "RVO2-3D", "none": "no avoidance"}
+
+
+def plot_closest_approach(family: str, runs: dict[str, pd.DataFrame], path: Path) -> Path:
+    """One family's closest approach per encounter, d / max(r_pz_i, r_pz_j), per method
+    (``runs``: the rows of each method's sweep of the same encounters): its distribution
+    (ECDF) and, on a log scale, the share of encounters closer than each multiple of r_pz
+    (the tail, where intrusions and collisions are)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10.0, 4.2), dpi=_DPI)
+    FigureCanvasAgg(fig)
+    ax_cdf, ax_tail = fig.subplots(1, 2)
+    for method, rows in runs.items():
+        ok = rows[rows["error"].isna()] if "error" in rows else rows
+        d = np.sort(ok["min_normalised_distance"].dropna().to_numpy(dtype=float))
+        if not d.size:
+            continue
+        colour, style = _STYLES.get(method, ("#009E73", "-."))
+        label = f"{_LABELS.get(method, method)} (n={d.size:,})"
+        share = np.arange(1, d.size + 1) / d.size
+        ax_cdf.step(d, share, where="post", color=colour, ls=style, lw=1.6, label=label)
+        below = d[d <= 1.5]
+        if below.size:
+            ax_tail.step(
+                below,
+                share[: below.size],
+                where="post",
+                color=colour,
+                ls=style,
+                lw=1.6,
+                label=label,
+            )
+    for ax in (ax_cdf, ax_tail):
+        ax.axvline(1.0, color="#D55E00", ls="-.", lw=1.0, label="d = r_pz (intrusion below)")
+        ax.set_xlabel("closest approach d / max(r_pz_i, r_pz_j)")
+        ax.grid(alpha=0.3)
+    ax_cdf.set_ylabel("share of encounters closer (ECDF)")
+    ax_cdf.set_xlim(left=0.0)
+    ax_tail.set_yscale("log")
+    ax_tail.set_xlim(0.0, 1.5)
+    ax_tail.set_ylabel("share of encounters closer (log)")
+    ax_tail.set_title("the tail: d <= 1.5 r_pz", fontsize=9)
+    ax_cdf.legend(fontsize=8, loc="upper left")
+    fig.suptitle(f"'{family}': closest approach per encounter, in protected-zone radii")
+    fig.tight_layout()
+    with atomic(path) as tmp:
+        fig.savefig(tmp, format="png")
+    return path

@@ -8,18 +8,22 @@ submission to the last row; ``setup_time`` the cluster's start and the warm-up b
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from vo3d_opt.config import DEFAULT_PRESET
 from vo3d_opt.extras import needs
 from vo3d_opt.generators import FAMILIES, Family, get_family
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, error_line
 from vo3d_opt.sweep.stats import aggregate
+from vo3d_opt.sweep.store import FLUSH_SECONDS, PartStore, ResumeError, rows_frame
 
 with needs("sweep", "vo3d sweep"):
     from tqdm import tqdm
@@ -47,6 +51,10 @@ class SweepResult:
     method: Method
     rows: pd.DataFrame
     summary: dict[str, Any] = field(default_factory=dict)
+    #: Where its rows were kept as they came (``out``), to be tidied once the outputs are written.
+    store: PartStore | None = field(default=None, repr=False, compare=False)
+    #: Encounters flown by this call (the others were found in ``out``).
+    flown: int = 0
 
 
 def check_method(family: Family, method: Method) -> tuple[str, str]:
@@ -56,6 +64,12 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
         raise SweepError(
             f"--method: unknown {method.name!r} (expected one of {', '.join(METHODS)})"
         )
+    if method.name == "none":
+        if method.formulation or method.solver or method.selector_options:
+            raise SweepError(
+                "--formulation/--solver/--preset/--selector-option: not used by --method none"
+            )
+        return "none", "none"
     if method.name == "rvo2":
         from vo3d_opt.baselines import rvo2
 
@@ -85,9 +99,9 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
 
 
 def _check_counts(**values: int | None) -> None:
-    lows = {"n": 1, "seed": 0, "workers": 1, "in_flight": 1}
+    lows = {"n": 1, "seed": 0, "workers": 1, "in_flight": 1, "batch": 1}
     for key, value in values.items():
-        if value is None and key == "in_flight":
+        if value is None and key in ("in_flight", "batch"):
             continue
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lows[key]:
             raise SweepError(
@@ -103,6 +117,7 @@ def validate(
     workers: int = 1,
     method: Method = DEFAULT_METHOD,
     in_flight: int | None = None,
+    batch: int | None = None,
 ) -> tuple[Family, str, str]:
     """The family and the (formulation, solver) names of a sweep; ``SweepError`` naming the
     option when one is bad. Starts nothing."""
@@ -116,8 +131,39 @@ def validate(
             f"family: {fam.name!r} needs the scenario keys {', '.join(missing)} "
             f"(contracts §5), which this build's scenario loader does not accept"
         )
-    _check_counts(n=n, seed=seed, workers=workers, in_flight=in_flight)
+    _check_counts(n=n, seed=seed, workers=workers, in_flight=in_flight, batch=batch)
     return (fam, *check_method(fam, method))
+
+
+#: Encounters per task at most, for families flown side by side (``sim.lockstep``): enough to
+#: share each step's overhead, few enough that tasks spread over the workers.
+MAX_BATCH = 64
+
+
+def default_batch(fam: Family, method: Method, count: int, threads: int) -> int:
+    """Encounters per task: up to MAX_BATCH (about four tasks per worker thread) when the
+    family's encounters fly side by side (``Family.batched``; RVO2-3D flies one at a time),
+    else one (an encounter of seconds or minutes is its own task: its row comes as soon as it
+    lands)."""
+    if method.name == "rvo2" or not fam.batched:
+        return 1
+    return max(1, min(MAX_BATCH, math.ceil(count / (4 * threads))))
+
+
+def manifest(fam: Family, n: int, seed: int, method: Method, formulation: str, solver: str) -> dict:
+    """What makes a sweep the same sweep (``sweep.json``, compared by ``--resume``)."""
+    options = dict(method.selector_options)
+    if method.name == "vo3d":
+        options = {"preset": DEFAULT_PRESET, **options}
+    return {
+        "family": fam.name,
+        "encounters": int(n),
+        "seed": int(seed),
+        "method": method.name,
+        "formulation": formulation,
+        "solver": solver,
+        "selector_options": options,
+    }
 
 
 def run_sweep(
@@ -131,46 +177,57 @@ def run_sweep(
     in_flight: int | None = None,
     progress: bool = True,
     allowed_failures: int = ALLOWED_FAILURES,
+    out: str | Path | None = None,
+    resume: bool = False,
+    batch: int | None = None,
+    flush_seconds: float = FLUSH_SECONDS,
 ) -> SweepResult:
     """Fly encounters 0..n-1 of ``family`` with ``seed`` on a Dask cluster: a local one of
     ``workers`` processes (one thread each), or the existing one at ``scheduler``.
 
-    ``in_flight``: tasks submitted at once (default 4 per worker thread, at least 8).
-    ``allowed_failures``: Dask's retries of a task whose worker died (local cluster only).
+    ``in_flight``: tasks submitted at once (default 4 per worker thread, at least 8); ``batch``:
+    encounters per task (default :func:`default_batch`); ``allowed_failures``: Dask's retries of
+    a task whose worker died (local cluster only). ``out``: keep the rows in this directory as
+    they come (``vo3d_opt.sweep.store``: a part at least every ``flush_seconds``); ``resume``:
+    fly only the encounters missing there.
     ``SweepError`` for bad options, before any cluster starts, or an unreachable scheduler.
     """
-    import pandas as pd
-
-    from vo3d_opt.sweep import cluster
-
     fam, formulation, solver = validate(
-        family, n, seed=seed, workers=workers, method=method, in_flight=in_flight
+        family, n, seed=seed, workers=workers, method=method, in_flight=in_flight, batch=batch
     )
-    t_setup = time.perf_counter()
+    store = None
+    if out is not None:
+        try:
+            key = manifest(fam, n, seed, method, formulation, solver)
+            store = PartStore(out, key, resume, flush_seconds)
+        except (ResumeError, OSError) as exc:
+            raise SweepError(str(exc)) from None
+    known = dict(store.rows) if store is not None else {}
+    missing = [i for i in range(n) if i not in known]
+    fresh: list[dict[str, Any]] = []
+    flying = {"wall": 0.0, "setup": 0.0, "threads": 0}
     try:
-        with cluster.client_for(workers, scheduler, allowed_failures) as client:
-            try:
-                client.register_plugin(cluster.WarmUp(method, fam.warm_keys))
-            except Exception as exc:  # noqa: BLE001 - e.g. workers without vo3d_opt
-                raise SweepError(f"warm-up failed on the workers: {error_line(exc)}") from None
-            threads = int(sum(client.nthreads().values()))
-            setup_time = time.perf_counter() - t_setup
-            t0 = time.perf_counter()
-            with tqdm(
-                total=n,
-                desc=f"sweep {fam.name}",
-                unit="enc",
-                file=sys.stderr,
-                disable=not progress,
-                smoothing=0.05,
-            ) as bar:
-                rows = cluster.submit_all(
-                    client, fam, int(seed), n, method, in_flight or max(8, 4 * threads), bar
-                )
-            wall = time.perf_counter() - t0
-    except cluster.ConnectError as exc:
-        raise SweepError(f"--scheduler: {exc}") from None
-    df = pd.DataFrame(rows).sort_values("index", kind="stable").reset_index(drop=True)
+        if missing:
+            fresh = _fly(
+                fam,
+                int(seed),
+                missing,
+                method,
+                store,
+                flying,
+                options={
+                    "workers": workers,
+                    "scheduler": scheduler,
+                    "in_flight": in_flight,
+                    "batch": batch,
+                    "progress": progress,
+                    "allowed_failures": allowed_failures,
+                },
+            )
+    finally:
+        if store is not None:
+            store.flush()  # whatever completed is on disk, interrupted or not
+    df = rows_frame([*known.values(), *fresh])
     summary = aggregate(
         df,
         family=fam.name,
@@ -179,17 +236,77 @@ def run_sweep(
         formulation=formulation,
         solver=solver,
     )
+    wall = flying["wall"]
     summary.update(
         {
             "selector_options": dict(method.selector_options),
             "wall_time": round(wall, 3),
-            "setup_time": round(setup_time, 3),
-            "encounters_per_second": round(n / wall, 4) if wall > 0 else None,
-            "workers": threads,
+            "setup_time": round(flying["setup"], 3),
+            "encounters_per_second": round(len(missing) / wall, 4) if wall > 0 else None,
+            "workers": flying["threads"],
             "scheduler": scheduler or "local",
         }
     )
-    return SweepResult(family=fam, seed=int(seed), method=method, rows=df, summary=summary)
+    return SweepResult(
+        family=fam,
+        seed=int(seed),
+        method=method,
+        rows=df,
+        summary=summary,
+        store=store,
+        flown=len(missing),
+    )
+
+
+def _fly(
+    fam: Family,
+    seed: int,
+    missing: list[int],
+    method: Method,
+    store: PartStore | None,
+    flying: dict[str, Any],
+    options: dict[str, Any],
+) -> list[dict[str, Any]]:
+    """Fly ``missing`` on the cluster ``options`` describe; the rows (to ``store`` as they
+    come); the wall time, set-up time and worker threads into ``flying``."""
+    from vo3d_opt.sweep import cluster
+
+    t_setup = time.perf_counter()
+    try:
+        with cluster.client_for(
+            options["workers"], options["scheduler"], options["allowed_failures"]
+        ) as client:
+            try:
+                client.register_plugin(cluster.WarmUp(method, fam.warm_keys))
+            except Exception as exc:  # noqa: BLE001 - e.g. workers without vo3d_opt
+                raise SweepError(f"warm-up failed on the workers: {error_line(exc)}") from None
+            threads = int(sum(client.nthreads().values()))
+            work = cluster.Work(
+                fam=fam,
+                seed=seed,
+                method=method,
+                indices=missing,
+                batch=options["batch"] or default_batch(fam, method, len(missing), threads),
+                in_flight=options["in_flight"] or max(8, 4 * threads),
+            )
+            flying["threads"] = threads
+            flying["setup"] = time.perf_counter() - t_setup
+            t0 = time.perf_counter()
+            with tqdm(
+                total=len(missing),
+                desc=f"sweep {fam.name}",
+                unit="enc",
+                file=sys.stderr,
+                disable=not options["progress"],
+                smoothing=0.05,
+            ) as bar:
+                rows = cluster.submit_all(
+                    client, work, bar, sink=None if store is None else store.add
+                )
+            flying["wall"] = time.perf_counter() - t0
+    except cluster.ConnectError as exc:
+        raise SweepError(f"--scheduler: {exc}") from None
+    return rows
 
 
 def rows_equal(a: pd.DataFrame, b: pd.DataFrame) -> bool:

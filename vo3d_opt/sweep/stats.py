@@ -138,3 +138,74 @@ def aggregate(
             for i, e in zip(errors["index"], errors["error"], strict=False)
         ],
     }
+
+
+#: The events whose rates risk ratios compare (``rates`` keys of the summary).
+RATIO_EVENTS = ("collision", "intrusion")
+
+
+def risk_ratio(k: int, n: int, k_none: int, n_none: int) -> dict[str, Any]:
+    """The ratio of a method's event rate ``k / n`` to the rate ``k_none / n_none`` of the
+    same encounters flown without avoidance, with Koopman's score interval for a ratio of two
+    binomial proportions (statsmodels ``confint_proportions_2indep``, ``method="score"``
+    without the Miettinen–Nurminen correction): ``ci95`` two-sided 95 %, ``upper95`` the
+    one-sided 95 % upper bound. ``ratio`` and the bounds are None when the encounters without
+    avoidance had no event (nothing to reduce).
+
+    Why this interval: it stays defined when the method has no event at all (ratio 0, a finite
+    upper bound), the usual case for a good method, where the Katz log interval is not; and the
+    two samples are the same encounters, so their outcomes are positively correlated and an
+    interval for independent samples is the conservative (wider) one."""
+    _check(k, n)
+    _check(k_none, n_none)
+    out: dict[str, Any] = {
+        "events": int(k),
+        "encounters": int(n),
+        "events_without_avoidance": int(k_none),
+        "encounters_without_avoidance": int(n_none),
+        "ratio": None,
+        "ci95": None,
+        "upper95": None,
+        "interval": "Koopman score (statsmodels confint_proportions_2indep, method=score)",
+    }
+    if k_none == 0:
+        return out
+    lo, hi = _koopman(k, n, k_none, n_none, 1.0 - CONFIDENCE)
+    out.update(
+        ratio=(k / n) / (k_none / n_none),
+        ci95=[lo, hi],
+        upper95=_koopman(k, n, k_none, n_none, 2.0 * (1.0 - CONFIDENCE))[1],
+    )
+    return out
+
+
+def _koopman(k: int, n: int, k0: int, n0: int, alpha: float) -> tuple[float, float]:
+    import numpy as np
+    from statsmodels.stats.proportion import confint_proportions_2indep
+
+    lo, hi = confint_proportions_2indep(
+        k, n, k0, n0, method="score", compare="ratio", alpha=alpha, correction=False
+    )
+    lo, hi = float(np.real(lo)), float(np.real(hi))
+    if k == 0 or not math.isfinite(lo):  # the score equation's root at 0, to rounding
+        lo = 0.0
+    return max(lo, 0.0), hi
+
+
+def risk_ratios(summary: dict[str, Any], without: dict[str, Any]) -> dict[str, Any]:
+    """Each of :data:`RATIO_EVENTS`' :func:`risk_ratio` of a sweep's ``summary`` against the
+    summary ``without`` of the same encounters flown with ``--method none``; ``ValueError``
+    naming the key when ``without`` is not that (another family, seed or count, or a method
+    other than none)."""
+    if without.get("method") != "none":
+        raise ValueError(f"method: {without.get('method')!r}, not 'none'")
+    for key in ("family", "seed", "encounters"):
+        if without.get(key) != summary.get(key):
+            raise ValueError(f"{key}: {without.get(key)!r} there, {summary.get(key)!r} here")
+    out: dict[str, Any] = {}
+    for event in RATIO_EVENTS:
+        mine, theirs = summary["rates"][event], without["rates"][event]
+        out[event] = risk_ratio(
+            mine["events"], mine["encounters"], theirs["events"], theirs["encounters"]
+        )
+    return out

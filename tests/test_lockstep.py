@@ -1,0 +1,97 @@
+"""Encounters flown side by side (``vo3d_opt.sim.lockstep``) fly exactly as ``fly`` flies each
+alone, and the sweep's batched rows are its single rows."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from vo3d_opt.sim import metrics
+from vo3d_opt.sim.lockstep import fits, fly_together
+from vo3d_opt.sim.simulator import fly
+from vo3d_opt.sweep import Method, make_encounter, run_encounter
+from vo3d_opt.sweep.flight import flown, run_encounters
+from vo3d_opt.sweep.runner import rows_equal
+
+TIMING = ("decision_time_median_us", "decision_time_p99_us", "decision_time_max_us", "wall_time")
+
+
+def same_record(a, b) -> bool:
+    return (
+        a.steps == b.steps
+        and a.same_trajectory(b)
+        and np.array_equal(a.preferred, b.preferred)
+        and np.array_equal(a.decided, b.decided)
+        and a.status_names == b.status_names
+        and np.array_equal(a.status_codes, b.status_codes)
+        and a.extra == b.extra
+    )
+
+
+def summary(record) -> dict:
+    return {k: v for k, v in metrics.summarize(record).items() if k not in TIMING}
+
+
+@pytest.mark.parametrize(("family", "count", "method"), [
+    ("pair", 12, "vo3d"), ("group", 6, "vo3d"), ("lagged", 6, "vo3d"),
+    ("intruder", 6, "vo3d"), ("dense", 3, "vo3d"), ("group", 6, "none"),
+])
+def test_flown_together_as_each_alone(family, count, method):
+    runs = [flown(make_encounter(family, 7, i).load(), Method(name=method))[:2]
+            for i in range(count)]
+    assert all(fits(sc, step) for sc, step in runs)
+    together = fly_together(runs)
+    for (sc, _), got in zip(runs, together, strict=True):
+        sc2, step2, _ = flown(make_encounter(family, 7, int(sc.name.rsplit("i", 1)[1])).load(),
+                              Method(name=method))
+        alone = fly(sc2, step2, progress=False)
+        assert same_record(alone, got), sc.name
+        assert summary(alone) == summary(got), sc.name
+
+
+def test_a_landing_and_a_first_order_run_side_by_side_with_others():
+    """dense 1121 lands an agent at its goal's door (sim/landing.py); lagged flies first-order
+    dynamics: with two plain pair encounters in the same batch each is still its own run."""
+    from pathlib import Path
+
+    from vo3d_opt.sim.scenario import load_scenario
+
+    data = Path(__file__).parent / "data" / "sweep-failures"
+    scs = [load_scenario(data / "dense-s0-i1121.yaml"), load_scenario(data / "lagged-s0-i413.yaml"),
+           make_encounter("pair", 1, 0).load(), make_encounter("pair", 1, 1).load()]
+    runs = [flown(sc, Method())[:2] for sc in scs]
+    together = fly_together(runs)
+    assert together[0].extra["landings"] > 0
+    for sc, got in zip(scs, together, strict=True):
+        alone = fly(*flown(sc, Method())[:2], progress=False)
+        assert same_record(alone, got), sc.name
+
+
+def test_runs_that_do_not_fit_are_refused():
+    noisy = flown(make_encounter("noisy", 0, 0).load(), Method())
+    assert not fits(noisy[0], noisy[1])
+    with pytest.raises(ValueError, match="cannot be flown together"):
+        fly_together([noisy[:2]])
+
+
+@pytest.mark.parametrize("method", ["vo3d", "none"])
+def test_batched_rows_are_the_single_rows(method):
+    m = Method(name=method)
+    indices = [3, 0, 5, 1, 2]
+    alone = pd.DataFrame([run_encounter("pair", 2, i, m) for i in indices])
+    batched = pd.DataFrame(run_encounters("pair", 2, indices, m))
+    assert list(batched["index"]) == indices
+    assert rows_equal(alone, batched)
+
+
+def test_close_pairs_at_once_is_the_per_step_search(monkeypatch):
+    rng = np.random.default_rng(3)
+    for n, steps in [(2, 40), (5, 30), (12, 8), (3, 1)]:
+        pos = np.cumsum(rng.normal(size=(steps, n, 3)), axis=0) * 3.0
+        for threshold in (0.5, 4.0, 50.0):
+            fast = metrics.close_pairs(pos, threshold)
+            monkeypatch.setattr(metrics, "ALL_PAIRS_ELEMENTS", 0)
+            slow = metrics.close_pairs(pos, threshold)
+            monkeypatch.undo()
+            for a, b in zip(fast, slow, strict=True):
+                assert a.dtype == b.dtype and np.array_equal(a, b), (n, steps, threshold)
