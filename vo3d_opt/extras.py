@@ -21,7 +21,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "nlp": ("casadi",),
     "sim": ("yaml", "tqdm", "matplotlib", "pyarrow"),
     "rotorpy": ("rotorpy",),
-    "sweep": ("dask", "distributed", "pandas"),
+    "sweep": ("dask", "distributed", "pandas", "statsmodels"),
     "batched": ("torch", "torchdiffeq", "roma"),
     "baselines": ("rvo23d",),
     "link": ("pymavlink", "pyproj"),
@@ -41,7 +41,7 @@ def install_command(extra: str) -> str:
 
 
 def needs_text(extra: str, modules: tuple[str, ...] = ()) -> str:
-    """ "needs the [EXTRA] extra (MODULES not installed): COMMAND", the end of every message."""
+    """``needs the [EXTRA] extra (MODULES not installed): COMMAND``: every message ends so."""
     absent = f" ({', '.join(modules)} not installed)" if modules else ""
     return f"needs the [{extra}] extra{absent}: {install_command(extra)}"
 

@@ -12,8 +12,12 @@ simulator), the metrics and the RVO2-3D baseline; nothing but the CLI imports it
 * :mod:`.store`: the rows kept in ``--out`` as they come, and ``--resume``;
 * :mod:`.stats`: Clopper–Pearson bounds, risk ratios and the sweep's summary;
 * :mod:`.output`: ``encounters.parquet``, ``summary.json``, plots and replayable failures.
+
+Needs the ``[sweep]`` extra (Dask, pandas, statsmodels, with ``[sim]``): importing this package
+without it raises :class:`~vo3d_opt.extras.MissingExtra`, one line naming it.
 """
 
+from vo3d_opt.extras import check
 from vo3d_opt.generators import (
     FAMILIES,
     Draw,
@@ -27,6 +31,8 @@ from vo3d_opt.generators import (
 from vo3d_opt.sweep.flight import TIMING_COLUMNS, Method, run_encounter
 from vo3d_opt.sweep.runner import SweepError, SweepResult, run_sweep
 from vo3d_opt.sweep.stats import clopper_pearson, event_rate, upper_bound
+
+check("sweep", "vo3d sweep")  # its modules import Dask, pandas and statsmodels where used
 
 __all__ = [
     "FAMILIES",
