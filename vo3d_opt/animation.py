@@ -44,7 +44,7 @@ from vo3d_opt.figures.topview import draw_obstacles_2d, label_obstacles
 from vo3d_opt.sim.metrics import closest_obstacle_approach, closest_vehicle_approach
 from vo3d_opt.sim.record import RunRecord
 
-with needs("sim", "animations"):  # matplotlib brings Pillow
+with needs("sim", "animation"):  # matplotlib brings Pillow
     from matplotlib.animation import PillowWriter
     from matplotlib.artist import Artist
     from matplotlib.backends.backend_agg import FigureCanvasAgg

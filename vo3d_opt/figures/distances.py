@@ -47,7 +47,7 @@ from .style import (
     styled,
 )
 
-with needs("sim", "figures"):
+with needs("sim", "plotting"):
     from matplotlib.axes import Axes
     from matplotlib.collections import LineCollection
     from matplotlib.figure import Figure

@@ -12,7 +12,7 @@ from vo3d_opt.sim.record import RunRecord
 from .scene import ZoneSnapshot
 from .style import OBSTACLE_GREY, PRISM_GREY, UNSENSED_GREY, agent_styles
 
-with needs("sim", "figures"):
+with needs("sim", "plotting"):
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D

@@ -19,7 +19,7 @@ import numpy as np
 
 from vo3d_opt.extras import needs
 
-with needs("sim", "figures"):
+with needs("sim", "plotting"):
     from matplotlib.axes import Axes
     from matplotlib.collections import LineCollection, PathCollection, PolyCollection
     from matplotlib.colors import to_rgba

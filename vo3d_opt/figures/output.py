@@ -15,7 +15,7 @@ from .swarm import figure_swarm_top_view
 from .topview import figure_agents_top_view
 from .view3d import figure_trajectories_3d
 
-with needs("sim", "figures"):
+with needs("sim", "plotting"):
     from matplotlib.figure import Figure
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from vo3d_opt.extras import needs
 
-with needs("sim", "figures"):
+with needs("sim", "plotting"):
     from matplotlib import colormaps, rc_context
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.colors import ListedColormap

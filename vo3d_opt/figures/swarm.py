@@ -45,7 +45,7 @@ from .topview import (
     label_obstacles,
 )
 
-with needs("sim", "figures"):
+with needs("sim", "plotting"):
     from matplotlib.axes import Axes
     from matplotlib.collections import LineCollection
     from matplotlib.figure import Figure

@@ -37,7 +37,7 @@ from .style import (
     styled,
 )
 
-with needs("sim", "figures"):
+with needs("sim", "plotting"):
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle, Polygon

@@ -38,7 +38,7 @@ from .style import (
 )
 from .swarm import sample_agents
 
-with needs("sim", "figures"):
+with needs("sim", "plotting"):
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
     from matplotlib.ticker import MaxNLocator

@@ -63,7 +63,7 @@ class GeodeticFrame:
     for points a few kilometres around it, so it cancels."""
 
     def __init__(self, lat: float, lon: float, alt: float) -> None:
-        with needs("link", "geodetic frames"):
+        with needs("link", "geodesy"):
             from pyproj import Transformer
 
         self.origin = (float(lat), float(lon), float(alt))
