@@ -138,7 +138,7 @@ CASES = {
     "rotorpy": lambda: dynamics("RotorPyDynamics"),
     "rotorpy key": scenario_key,
     "batched": lambda: dynamics("BatchedRotorPyDynamics"),
-    "sweep": lambda: importlib.import_module("vo3d_opt.sweep"),
+    "sweep": lambda: importlib.import_module("vo3d_opt.sweep").run_sweep("pair", 1),
     "rvo2": rvo2,
     "mavlink": mavlink,
     "geodesy": geodesy,

@@ -13,11 +13,11 @@ simulator), the metrics and the RVO2-3D baseline; nothing but the CLI imports it
 * :mod:`.stats`: Clopper–Pearson bounds, risk ratios and the sweep's summary;
 * :mod:`.output`: ``encounters.parquet``, ``summary.json``, plots and replayable failures.
 
-Needs the ``[sweep]`` extra (Dask, pandas, statsmodels, with ``[sim]``): importing this package
-without it raises :class:`~vo3d_opt.extras.MissingExtra`, one line naming it.
+A sweep needs the ``[sweep]`` extra (Dask, pandas, statsmodels, with ``[sim]``): without it
+``run_sweep`` and the modules that import them raise :class:`~vo3d_opt.extras.MissingExtra`,
+one line naming it; importing this package does not (the command line reads its defaults).
 """
 
-from vo3d_opt.extras import check
 from vo3d_opt.generators import (
     FAMILIES,
     Draw,
@@ -31,8 +31,6 @@ from vo3d_opt.generators import (
 from vo3d_opt.sweep.flight import TIMING_COLUMNS, Method, run_encounter
 from vo3d_opt.sweep.runner import SweepError, SweepResult, run_sweep
 from vo3d_opt.sweep.stats import clopper_pearson, event_rate, upper_bound
-
-check("sweep", "vo3d sweep")  # its modules import Dask, pandas and statsmodels where used
 
 __all__ = [
     "FAMILIES",

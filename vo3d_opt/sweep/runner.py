@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from vo3d_opt.config import DEFAULT_PRESET
-from vo3d_opt.extras import needs
+from vo3d_opt.extras import check, needs
 from vo3d_opt.generators import FAMILIES, Family, get_family
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, error_line
@@ -190,8 +190,10 @@ def run_sweep(
     a task whose worker died (local cluster only). ``out``: keep the rows in this directory as
     they come (``vo3d_opt.sweep.store``: a part at least every ``flush_seconds``); ``resume``:
     fly only the encounters missing there.
-    ``SweepError`` for bad options, before any cluster starts, or an unreachable scheduler.
+    ``SweepError`` for bad options, before any cluster starts, or an unreachable scheduler;
+    :class:`~vo3d_opt.extras.MissingExtra` without the ``[sweep]`` extra.
     """
+    check("sweep", "vo3d sweep")
     fam, formulation, solver = validate(
         family, n, seed=seed, workers=workers, method=method, in_flight=in_flight, batch=batch
     )
