@@ -52,8 +52,10 @@ install: $(STAMP) $(CORE_STAMP)
 demo: $(SIM_STAMP) $(CORE_STAMP)
 	$(PY) -m vo3d_opt.demo
 
+# PYTEST_ARGS passes options on (e.g. make test PYTEST_ARGS=--durations=20)
+PYTEST_ARGS ?=
 test: $(STAMP) $(CORE_STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider -n 2
+	$(PY) -m pytest -q -p no:cacheprovider -n 2 $(PYTEST_ARGS)
 
 # ruff (lint + format check), mypy and the import layers (import-linter), configured in
 # pyproject.toml. The notebooks' .py
