@@ -4,7 +4,14 @@
 PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
+# What each target installs (pyproject.toml's extras): the demo only [sim] (the simulator, the
+# figures, Parquet); make install, test, lint and the rest every extra and [dev], since the
+# suite exercises them all; make notebooks Jupyter Lab on top.
 STAMP := $(VENV)/.installed
+SIM_STAMP := $(VENV)/.installed-sim
+NOTEBOOKS_STAMP := $(VENV)/.installed-notebooks
+BUILD_STAMP := $(VENV)/.build-requirements
+CORE_STAMP := $(VENV)/.core
 
 .PHONY: demo test install bench lint clean notebooks notebooks-sync notebooks-run figures docs
 
@@ -16,28 +23,40 @@ $(PY):
 # PyPI only where the machine has none), then the package, editable and built without
 # isolation, so that its persistent build directory (build/) stays valid between rebuilds.
 BUILD_REQS := 'scikit-build-core>=0.10' 'nanobind>=2.4'
-$(STAMP): pyproject.toml | $(PY)
+$(BUILD_STAMP): | $(PY)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet $(BUILD_REQS)
 	@command -v cmake >/dev/null 2>&1 || $(PY) -m pip install --quiet 'cmake>=3.18'
 	@command -v ninja >/dev/null 2>&1 || $(PY) -m pip install --quiet ninja
-	$(PY) -m pip install --quiet --no-build-isolation -e '.[dev,baselines,batched,link,docs]'
-	@touch $(STAMP) $(CORE_STAMP)
+	@touch $@
+
+$(SIM_STAMP): pyproject.toml | $(BUILD_STAMP)
+	$(PY) -m pip install --quiet --no-build-isolation -e '.[sim]'
+	@touch $(SIM_STAMP) $(CORE_STAMP)
+
+$(STAMP): pyproject.toml | $(BUILD_STAMP)
+	$(PY) -m pip install --quiet --no-build-isolation -e '.[all,dev,docs]'
+	@touch $(STAMP) $(SIM_STAMP) $(CORE_STAMP)
+
+$(NOTEBOOKS_STAMP): pyproject.toml | $(STAMP)
+	$(PY) -m pip install --quiet --no-build-isolation -e '.[all,dev,docs,notebooks]'
+	@touch $@ $(CORE_STAMP)
 
 # The compiled core (vo3d_opt/algorithm/, CMakeLists.txt), rebuilt when a source changes:
 # incremental, in the same build directory.
-CORE_STAMP := $(VENV)/.core
-$(CORE_STAMP): $(wildcard vo3d_opt/algorithm/*.hpp vo3d_opt/algorithm/*.cpp) CMakeLists.txt | $(STAMP)
+$(CORE_STAMP): $(wildcard vo3d_opt/algorithm/*.hpp vo3d_opt/algorithm/*.cpp) CMakeLists.txt | $(SIM_STAMP)
 	$(PY) -m pip install --quiet --no-build-isolation --no-deps -e .
 	@touch $@
 
 install: $(STAMP) $(CORE_STAMP)
 
-demo: $(STAMP) $(CORE_STAMP)
+demo: $(SIM_STAMP) $(CORE_STAMP)
 	$(PY) -m vo3d_opt.demo
 
+# PYTEST_ARGS passes options on (e.g. make test PYTEST_ARGS=--durations=20)
+PYTEST_ARGS ?=
 test: $(STAMP) $(CORE_STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider -n 2
+	$(PY) -m pytest -q -p no:cacheprovider -n 2 $(PYTEST_ARGS)
 
 # ruff (lint + format check), mypy and the import layers (import-linter), configured in
 # pyproject.toml. The notebooks' .py
@@ -51,12 +70,12 @@ lint: $(STAMP)
 # Jupyter Lab on the notebooks. Each is a pair, NN_name.py (the source) and NN_name.ipynb;
 # jupytext first brings the older file of each pair up to date, and Jupyter saves both.
 JUPYTER_ARGS ?=
-notebooks: $(STAMP)
+notebooks: $(NOTEBOOKS_STAMP)
 	$(VENV)/bin/jupytext --sync notebooks/[0-9]*.py
 	$(VENV)/bin/jupyter lab $(JUPYTER_ARGS) notebooks
 
 # Each NN_name.ipynb rewritten from its NN_name.py and cleared of outputs: what is committed.
-notebooks-sync: $(STAMP)
+notebooks-sync: $(NOTEBOOKS_STAMP)
 	$(VENV)/bin/jupytext --update --to ipynb notebooks/[0-9]*.py
 	$(VENV)/bin/jupyter nbconvert --log-level WARN --clear-output --inplace notebooks/[0-9]*.ipynb
 

@@ -1,4 +1,6 @@
-"""The ``vo3d`` command line, run as a separate process like a user would."""
+"""The ``vo3d`` command line and its JSON summary, run as a separate process like a user would; the
+tests that compare the flights of equivalent options call its ``main`` in this process (the
+``here`` fixture: the same code without a process's start each time)."""
 from __future__ import annotations
 
 import csv
@@ -169,26 +171,26 @@ def _behaviour(res: subprocess.CompletedProcess, options: dict | None = None) ->
     return {k: v for k, v in summary.items() if k not in TIMING_KEYS | {"selector_options"}}
 
 
-def test_selector_options_fly_as_the_scenario_key_and_override_it(small, tmp_path, run_json):
+def test_selector_options_fly_as_the_scenario_key_and_override_it(small, tmp_path, run_json, here):
     unbuffered = {"reciprocal": False, "pz_buffer": 0.0}
     path = tmp_path / "unbuffered.yaml"
     path.write_text(yaml.safe_dump({**SMALL, "selector_options": unbuffered}))
-    in_file = _behaviour(vo3d("run", path, "--json"), {"preset": "safe", **unbuffered})
-    flags = _behaviour(vo3d("run", small, "--json", "-o", "reciprocal=false",
+    in_file = _behaviour(here("run", path, "--json"), {"preset": "safe", **unbuffered})
+    flags = _behaviour(here("run", small, "--json", "-o", "reciprocal=false",
                             "--selector-option", "pz_buffer=0"), {"preset": "safe", **unbuffered})
     assert flags == in_file
     assert in_file != _behaviour(run_json, {"preset": "safe"})  # the options change the flight
     # -o merges into the file's options (not replacing them): one from each
     half = tmp_path / "half.yaml"
     half.write_text(yaml.safe_dump({**SMALL, "selector_options": {"reciprocal": False}}))
-    both = vo3d("run", half, "--json", "-o", "pz_buffer=0")
+    both = here("run", half, "--json", "-o", "pz_buffer=0")
     assert _behaviour(both, {"preset": "safe", **unbuffered}) == in_file
     # the command line's value wins over the file's: the preset's own values again
     buffer = derive_margins(load_scenario(small)).pz_buffer
-    back = vo3d("run", path, "--json", "-o", "reciprocal=true", "-o", f"pz_buffer={buffer!r}")
+    back = here("run", path, "--json", "-o", "reciprocal=true", "-o", f"pz_buffer={buffer!r}")
     back_options = {"preset": "safe", "reciprocal": True, "pz_buffer": buffer}
     assert _behaviour(back, back_options) == _behaviour(run_json)
-    res = vo3d("compare", small, "--json", "-o", "reciprocal=false", "-o", "pz_buffer=0")
+    res = here("compare", small, "--json", "-o", "reciprocal=false", "-o", "pz_buffer=0")
     assert res.returncode == 0, res.stderr
     (row,) = json.loads(res.stdout)
     assert row["selector_options"] == {"preset": "safe", **unbuffered}
@@ -198,28 +200,28 @@ def test_selector_options_fly_as_the_scenario_key_and_override_it(small, tmp_pat
 COARSE = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "speed_levels": 3}
 
 
-def test_fast_is_the_fast_preset_and_fields_override_it(cli, small):
+def test_fast_is_the_fast_preset_and_fields_override_it(cli, small, here):
     """--fast is --preset fast is -o preset=fast: the safe preset's flight with the coarse
     planes, samples and grid given field by field; a field given by -o overrides the preset's
     wherever it stands; sweep takes them too (parsed only: its run is the sweep's -o path)."""
-    fast = _behaviour(vo3d("run", small, "--json", "--fast"), {"preset": "fast"})
-    assert fast == _behaviour(vo3d("run", small, "--json", "--preset", "fast"), {"preset": "fast"})
-    assert fast == _behaviour(vo3d("run", small, "--json", "-o", "preset=fast"))
+    fast = _behaviour(here("run", small, "--json", "--fast"), {"preset": "fast"})
+    assert fast == _behaviour(here("run", small, "--json", "--preset", "fast"), {"preset": "fast"})
+    assert fast == _behaviour(here("run", small, "--json", "-o", "preset=fast"))
     as_o = [arg for k, v in COARSE.items() for arg in ("-o", f"{k}={v}")]
-    assert fast == _behaviour(vo3d("run", small, "--json", *as_o))
+    assert fast == _behaviour(here("run", small, "--json", *as_o))
     for order in (["--fast", "-o", "qp_samples=36"], ["-o", "qp_samples=36", "--fast"]):
-        _behaviour(vo3d("run", small, "--json", *order), {"preset": "fast", "qp_samples": 36})
+        _behaviour(here("run", small, "--json", *order), {"preset": "fast", "qp_samples": 36})
     args = cli.build_parser().parse_args(["sweep", "pair", "--n", "1", "-o", "margin=0.01", "--fast"])
     assert args.selector_options == [("margin", 0.01), ("preset", "fast")]
-    res = vo3d("compare", small, "--json", "--fast")
+    res = here("compare", small, "--json", "--fast")
     assert res.returncode == 0, res.stderr
     (row,) = json.loads(res.stdout)
     assert row["selector_options"] == {"preset": "fast"}
-    paper = _behaviour(vo3d("run", small, "--json", "--preset", "paper"), {"preset": "paper"})
-    assert paper != _behaviour(vo3d("run", small, "--json"))
+    paper = _behaviour(here("run", small, "--json", "--preset", "paper"), {"preset": "paper"})
+    assert paper != _behaviour(here("run", small, "--json"))
 
 
-def test_swarm_is_fast_with_the_scenarios_sensing_horizon(cli, small, tmp_path):
+def test_swarm_is_fast_with_the_scenarios_sensing_horizon(cli, small, tmp_path, here):
     """--swarm is the swarm preset: fast with horizon "sensing", resolved for each decision to
     the scenario's vehicle sensing range over twice the top speed; the same flight as the number
     given by -o, in a file or on the command line; a later -o overrides it."""
@@ -232,19 +234,19 @@ def test_swarm_is_fast_with_the_scenarios_sensing_horizon(cli, small, tmp_path):
         assert sc.sensing_horizon == horizon
         resolved = scenario_selector(scenario_variant(sc, selector_options=swarm_options))[0]
         assert resolved.options_for(4.0, sc.dt).horizon == horizon
-        swarm = _behaviour(vo3d("run", path, "--json", "--swarm"), swarm_options)
-        as_number = vo3d("run", path, "--json", "--fast", "-o", f"horizon={horizon!r}")
+        swarm = _behaviour(here("run", path, "--json", "--swarm"), swarm_options)
+        as_number = here("run", path, "--json", "--fast", "-o", f"horizon={horizon!r}")
         assert swarm == _behaviour(as_number)
     in_file = tmp_path / "in_file.yaml"
     in_file.write_text(yaml.safe_dump({**SMALL, "sensing": {"vehicle_range": 10.0,
                                                              "obstacle_range": 55.0},
                                        "selector_options": swarm_options}))
-    assert _behaviour(vo3d("run", in_file, "--json"), swarm_options) == swarm
+    assert _behaviour(here("run", in_file, "--json"), swarm_options) == swarm
     # the 1.25 s horizon drops the cylinder's pyramid until it is 5 m off: another flight
-    assert swarm != _behaviour(vo3d("run", near, "--json", "--fast"))
-    later = vo3d("run", near, "--json", "--swarm", "-o", "horizon=3")
+    assert swarm != _behaviour(here("run", near, "--json", "--fast"))
+    later = here("run", near, "--json", "--swarm", "-o", "horizon=3")
     _behaviour(later, {"preset": "swarm", "horizon": 3.0})
-    res = vo3d("compare", near, "--json", "--swarm")
+    res = here("compare", near, "--json", "--swarm")
     assert res.returncode == 0, res.stderr
     (row,) = json.loads(res.stdout)
     assert row["selector_options"] == swarm_options
@@ -368,17 +370,33 @@ def test_every_option_of_every_subcommand_is_described():
     (sub,) = [a for a in parser._actions if a.choices and isinstance(a.choices, dict)]
     assert set(sub.choices) >= {"run", "compare", "list"}
     for name, subparser in sub.choices.items():
-        text = vo3d(name, "--help").stdout
+        text = subparser.format_help()  # what `vo3d NAME --help` prints
         for action in subparser._actions:
             assert action.help and action.help.strip(), (name, action.dest)
             for flag in action.option_strings:
                 assert flag in text, (name, flag)
     for name in ("run", "compare"):
-        assert f"else {DEFAULT_QP_SOLVER}" in " ".join(vo3d(name, "--help").stdout.split()), name
+        text = " ".join(vo3d(name, "--help").stdout.split())  # as a process prints it
+        assert text == " ".join(sub.choices[name].format_help().split()), name
+        assert f"else {DEFAULT_QP_SOLVER}" in text, name
 
 
 # ------------------------------------------------------------------ a large swarm's flags
 TIMING = {"decision_time_median_us", "decision_time_p99_us", "decision_time_max_us", "wall_time"}
+
+
+@pytest.fixture
+def here(cli, capsys):
+    """``vo3d ARGS`` through ``main`` in this process, as a finished process (status, stdout,
+    stderr)."""
+
+    def run(*args: str | Path) -> subprocess.CompletedProcess:
+        capsys.readouterr()
+        code = cli.main([str(a) for a in args])
+        out = capsys.readouterr()
+        return subprocess.CompletedProcess(list(args), code, out.out, out.err)
+
+    return run
 
 
 @pytest.fixture

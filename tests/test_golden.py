@@ -8,6 +8,7 @@ backends' own tolerances.
 
 from __future__ import annotations
 
+import functools
 import json
 
 import numpy as np
@@ -70,6 +71,13 @@ def test_presets_resolve_to_the_recorded_options(name: str) -> None:
             assert getattr(got, key) == value, (name, key)
 
 
+@functools.cache
+def _select_kwargs(seed: int) -> dict:
+    """Encounter ``seed``'s arguments of ``select``, built once for every configuration and
+    path that decides it (the inputs are immutable)."""
+    return select_kwargs(encounter(seed))
+
+
 def _rows(path: str) -> np.ndarray:
     return np.flatnonzero(DATA["dec_path"] == path)
 
@@ -85,11 +93,10 @@ def test_recorded_decisions_are_decided_again(path: str) -> None:
     selectors: dict[str, VelocitySelector] = {}
     for k in rows:
         seed, name = int(DATA["dec_seed"][k]), str(DATA["dec_set"][k])
-        e = encounter(seed)
         if name not in selectors:
             selectors[name] = selector(name, form, solver or None)
         key = name
-        d = selectors[key].select(**select_kwargs(e))
+        d = selectors[key].select(**_select_kwargs(seed))
         where = f"{path} {name} encounter {seed}"
         assert str(d.status) == DATA["dec_status"][k], where
         if exact:

@@ -295,23 +295,44 @@ def test_an_interrupted_write_leaves_no_summary_and_no_half_file(tmp_path, monke
     assert not list(out.glob(".*"))
 
 
+#: When to interrupt a run that writes its output, by what its --out directory holds (names
+#: under a temporary name included): as soon as the directory exists (it is made and tried
+#: before the run: the simulation), at the first file (the Parquet table being written), once
+#: the table is in place (the CSV), at the first figure.
+MOMENTS = {
+    "simulating": lambda names: True,
+    "writing the table": lambda names: bool(names),
+    "writing the CSV": lambda names: "trajectories.parquet" in names,
+    "drawing": lambda names: any(".png" in name for name in names),
+}
+
+
+def _interrupt_when(out: Path, proc: subprocess.Popen, moment) -> None:
+    """SIGINT to the run's process group as soon as ``moment`` holds of ``out`` (or never, if
+    the run ends first)."""
+    while proc.poll() is None:
+        if out.is_dir() and moment(set(os.listdir(out))):
+            os.killpg(proc.pid, signal.SIGINT)
+            return
+        time.sleep(0.002)
+
+
 def test_ctrl_c_of_a_run_writing_its_output_leaves_it_complete_or_visibly_not(tmp_path):
     """SIGINT at several moments of a run of 1,000 agents that writes its output: the
     directory then holds either everything with its summary, or no summary and no half
     file under a final name."""
     seen = set()
-    for delay in (2.0, 5.0, 8.0, 11.0):
-        out = tmp_path / f"out-{delay}"
+    for name, moment in MOMENTS.items():
+        out = tmp_path / name.replace(" ", "-")
         proc = subprocess.Popen(
             [str(VO3D), "run", "random-crossing-1000", "--out", str(out), "-q"],
             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
             start_new_session=True,
         )
-        time.sleep(delay)
-        os.killpg(proc.pid, signal.SIGINT)
+        _interrupt_when(out, proc, moment)
         _, err = proc.communicate(timeout=TIMEOUT)
-        assert "Traceback" not in err, err[-2000:]
-        assert proc.returncode in (0, 130), (proc.returncode, err)
+        assert "Traceback" not in err, (name, err[-2000:])
+        assert proc.returncode in (0, 130), (name, proc.returncode, err)
         names = {p.name for p in out.glob("*")} if out.exists() else set()
         assert not any(name.startswith(".") for name in names), names
         if "summary.json" in names:
@@ -325,13 +346,14 @@ def test_ctrl_c_of_a_run_writing_its_output_leaves_it_complete_or_visibly_not(tm
 
 
 def test_ctrl_c_of_a_sweep_exits_130_without_tracebacks(tmp_path):
+    out = tmp_path / "sweep"
     proc = subprocess.Popen(
         [str(VO3D), "sweep", "pair", "--n", "5000", "--workers", "2", "--no-progress",
-         "--out", str(tmp_path / "sweep")],
+         "--out", str(out), "--flush-every", "0.2"],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )
-    time.sleep(15)
-    os.killpg(proc.pid, signal.SIGINT)
+    # once the sweep flies (its first rows kept), not while its cluster starts
+    _interrupt_when(out, proc, lambda names: "parts" in names and bool(os.listdir(out / "parts")))
     _, err = proc.communicate(timeout=TIMEOUT)
     assert proc.returncode == 130, err[-2000:]
     assert "Traceback" not in err and err.strip().splitlines()[-1] == "vo3d: interrupted", err

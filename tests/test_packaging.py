@@ -114,3 +114,68 @@ def test_installed_wheel_runs_bundled_scenarios_outside_the_repo(wheel, tmp_path
         env=env,
     ).stdout
     assert ran.strip() == "2"
+
+
+#: In the fresh venv: the README's one-call example and its 100-vehicle ``select_many``, run from
+#: the README's own code blocks, each first call timed (printed, never asserted).
+FIRST_MINUTES = """
+import json, re, sys, time
+readme = open(sys.argv[1], encoding="utf-8").read()
+blocks = re.findall(r"```python\\n(.*?)```", readme, re.S)
+one_call = next(b for b in blocks if "selector.select(" in b)
+swarm = next(b for b in blocks if ".select_many(" in b)
+t0 = time.perf_counter()
+import vo3d_opt
+t1 = time.perf_counter()
+ns = {}
+exec(one_call, ns)  # the imports, the constructor, the first select() and its print
+t2 = time.perf_counter()
+exec(swarm, ns)  # the first select_many(), 100 vehicles
+t3 = time.perf_counter()
+extras = json.loads(sys.argv[2])
+print(json.dumps({
+    "status": ns["decision"].status, "swarm": list(ns["swarm"].velocities.shape),
+    "loaded": [m for m in extras if m in sys.modules],
+    "times": f"import vo3d_opt {t1 - t0:.3f} s, README one call {t2 - t1:.3f} s "
+             f"(select() itself {ns['decision'].solve_time * 1e3:.2f} ms), 100-vehicle "
+             f"select_many {t3 - t2:.3f} s (the call itself {ns['swarm'].solve_time * 1e3:.1f} ms)",
+}))
+"""
+
+
+@pytest.mark.install
+def test_first_minutes_of_a_plain_install(wheel, tmp_path, record_property):
+    """The wheel with no extra in a fresh venv (its dependencies from the package index), then the
+    README's examples in a fresh process outside the repository; a missing extra is one line."""
+    from vo3d_opt.extras import EXTRAS
+
+    venv = tmp_path / "core"
+    _run([sys.executable, "-m", "venv", "--without-pip", venv])
+    python = venv / "bin" / "python"
+    _run([sys.executable, "-m", "pip", "--python", python, "install", "-q", wheel])
+    listed = _run([sys.executable, "-m", "pip", "--python", python, "list", "--format", "json"])
+    names = {p["name"].lower().replace("_", "-") for p in json.loads(listed.stdout)}
+    assert {"vo3d-opt", "numpy", "scipy", "pydantic"} <= names and len(names) <= 25, names
+    assert not names & {"osqp", "pyyaml", "matplotlib", "pandas", "casadi", "cvxpy", "rotorpy"}
+
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    extra_modules = sorted({m for modules in EXTRAS.values() for m in modules})
+    out = json.loads(
+        _run(
+            [python, "-c", FIRST_MINUTES, ROOT / "README.md", json.dumps(extra_modules)],
+            cwd=tmp_path,
+            env=env,
+        ).stdout.splitlines()[-1]
+    )
+    print(f"first minutes: {len(names)} packages; {out['times']}")
+    record_property("first_minutes", f"{len(names)} packages; {out['times']}")
+    assert out["status"] == "optimal" and out["swarm"] == [100, 3] and out["loaded"] == []
+
+    # without [sim], vo3d says so in one line; a solver of [qp] as well
+    res = subprocess.run([venv / "bin" / "vo3d", "list"], capture_output=True, text=True, env=env)
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
+    assert "[sim]" in res.stderr and "pip install 'vo3d-opt[sim]'" in res.stderr
+    code = "from vo3d_opt import VelocitySelector\ntry:\n    VelocitySelector(solver='osqp')\n"
+    code += "except ImportError as exc:\n    print(exc)"
+    said = _run([python, "-c", code], cwd=tmp_path, env=env).stdout.strip()
+    assert "[qp]" in said and "\n" not in said, said

@@ -375,7 +375,8 @@ def test_batched_without_its_extra_is_refused_at_load_naming_the_key(tmp_path, m
     with pytest.raises(ScenarioError) as err:
         load_scenario(f)
     msg = str(err.value)
-    assert msg.startswith(f"{f}: dynamics.batched: needs torchdiffeq: ") and "\n" not in msg
+    assert msg.startswith(f"{f}: dynamics.batched: needs the [batched] extra (torchdiffeq not ")
+    assert "\n" not in msg
 
 
 def test_rotorpy_commands_stay_within_what_its_velocity_loop_follows_without_flipping():

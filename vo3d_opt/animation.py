@@ -25,15 +25,8 @@ from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
-from matplotlib.animation import PillowWriter
-from matplotlib.artist import Artist
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.collections import EllipseCollection
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
-from matplotlib.patches import Circle, Patch, Polygon, Rectangle
-from PIL import Image
 
+from vo3d_opt.extras import needs
 from vo3d_opt.figures.keys import key_handles
 from vo3d_opt.figures.scene import obstacle_names, prism_square, scene_bounds
 from vo3d_opt.figures.sections import SideSection, side_sections
@@ -50,6 +43,16 @@ from vo3d_opt.figures.style import (
 from vo3d_opt.figures.topview import draw_obstacles_2d, label_obstacles
 from vo3d_opt.sim.metrics import closest_obstacle_approach, closest_vehicle_approach
 from vo3d_opt.sim.record import RunRecord
+
+with needs("sim", "animation"):  # matplotlib brings Pillow
+    from matplotlib.animation import PillowWriter
+    from matplotlib.artist import Artist
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.collections import EllipseCollection
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle, Patch, Polygon, Rectangle
+    from PIL import Image
 
 MAX_FRAMES = 150
 FPS = 10

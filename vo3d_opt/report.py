@@ -27,13 +27,17 @@ import json
 import logging
 import math
 import os
+import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from vo3d_opt.extras import needs
 from vo3d_opt.sim.record import RunRecord
 
 log = logging.getLogger(__name__)
@@ -82,20 +86,59 @@ os.umask(_UMASK)
 
 
 @contextlib.contextmanager
+def _interrupt_held() -> Iterator[None]:
+    """A Ctrl-C (SIGINT) during the block is recorded and raised after it: a temporary file or
+    directory is never created or removed half, nor left behind by an interrupt between its
+    creation and the cleanup that removes it."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[tuple[int, Any]] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append((signum, frame)))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught and callable(previous):
+        previous(*caught[0])
+    elif caught and previous == signal.SIG_DFL:
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
 def atomic(path: str | Path) -> Iterator[Path]:
     """A temporary path beside ``path`` to write; renamed to ``path`` when the block ends
     normally, removed when it raises (an interrupt included)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
-    os.close(fd)
-    tmp = Path(name)
-    os.chmod(tmp, 0o666 & ~_UMASK)  # what open() would give the file, not mkstemp's 0600
+    tmp: Path | None = None
     try:
+        with _interrupt_held():
+            fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
+            tmp = Path(name)
+            os.close(fd)
+        os.chmod(tmp, 0o666 & ~_UMASK)  # what open() would give the file, not mkstemp's 0600
         yield tmp
-        os.replace(tmp, path)
+        with _interrupt_held():
+            os.replace(tmp, path)
     finally:
-        tmp.unlink(missing_ok=True)
+        if tmp is not None:
+            with _interrupt_held():
+                tmp.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def _scratch_dir(parent: Path, prefix: str) -> Iterator[Path]:
+    """A temporary directory in ``parent``, removed whole however the block ends."""
+    path: Path | None = None
+    try:
+        with _interrupt_held():
+            path = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
+        yield path
+    finally:
+        if path is not None:
+            with _interrupt_held():
+                shutil.rmtree(path, ignore_errors=True)
 
 
 def write_summary(summary: dict[str, Any], path: str | Path) -> Path:
@@ -130,7 +173,8 @@ def write_csv(record: RunRecord, path: str | Path) -> Path:
 
 def _table(record: RunRecord, lo: int, hi: int) -> Any:
     """Samples lo <= k < hi as a pyarrow table of :data:`COLUMNS`."""
-    import pyarrow as pa
+    with needs("sim", "Parquet output"):
+        import pyarrow as pa
 
     n, steps = record.n_agents, record.steps
     k = np.arange(lo, hi)
@@ -163,7 +207,8 @@ def _table(record: RunRecord, lo: int, hi: int) -> Any:
 def write_parquet(record: RunRecord, path: str | Path) -> Path:
     """Trajectories as Parquet, one row per (sample, agent), the columns of :data:`COLUMNS`
     (``agent`` and ``status`` dictionary-encoded), a row group per 200 samples."""
-    import pyarrow.parquet as pq
+    with needs("sim", "Parquet output"):
+        import pyarrow.parquet as pq
 
     path = Path(path)
     samples = record.steps + 1
@@ -207,15 +252,16 @@ def write_outputs(
             rows,
             CSV_MAX_ROWS,
         )
-    with tempfile.TemporaryDirectory(prefix=".figures.", dir=out) as scratch:
-        drawn = write_plots(record, Path(scratch), **(plot_options or {}))
+    with _scratch_dir(out, ".figures.") as scratch:
+        drawn = write_plots(record, scratch, **(plot_options or {}))
         if animate:
             from vo3d_opt.animation import write_animation
 
-            drawn.append(write_animation(record, Path(scratch) / "animation.gif"))
+            drawn.append(write_animation(record, scratch / "animation.gif"))
         for path in drawn:
-            os.replace(path, out / path.name)
-            written.append(out / path.name)
+            with _interrupt_held():  # a figure is in place and counted, or not
+                os.replace(path, out / path.name)
+                written.append(out / path.name)
     for name, why in skipped_plots(record).items():
         log.info("not drawn: %s (%s)", name, why)
     written.append(write_summary(summary, out / "summary.json"))  # last: the run is complete

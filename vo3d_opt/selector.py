@@ -23,9 +23,9 @@ import numpy as np
 from .config import SelectorConfig
 from .formulations import inputs, kernel
 from .formulations.common import Bounds, Encounter, Options, py_build_vos
-from .formulations.outside import PythonPath, qp_backend
+from .formulations.outside import PythonPath, backend_for, qp_backend
 from .formulations.sampled import check_grid
-from .solvers import available_solvers, get_backend
+from .solvers import available_solvers
 from .status import DECISION_STATUSES, Status
 from .swarm import SwarmDecision, SwarmInputs, thread_count
 from .swarm.many import options_by_vehicle, select_many_compiled, select_many_loop
@@ -101,10 +101,12 @@ class VelocitySelector:
         if formulation == "sampled":
             check_grid(self.config)
             if solver is not None:
-                get_backend(solver)  # a wrong name is still an error; sampled needs no solver
+                backend_for(
+                    solver, formulation
+                )  # a wrong name is still an error; sampled needs none
         elif formulation == "nlp":
             self.solver = solver or DEFAULT_NLP_SOLVER
-            nlp = get_backend(self.solver)
+            nlp = backend_for(self.solver, formulation)
             if nlp.kind != "nlp":
                 nlp_solvers = ", ".join(s for s in available_solvers() if s.startswith("casadi"))
                 raise ValueError(

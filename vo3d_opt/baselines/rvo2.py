@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from vo3d_opt.extras import installed, needs
 from vo3d_opt.sim import metrics
 from vo3d_opt.sim.record import RunRecord, Snapshot, StepDecision
 from vo3d_opt.sim.scenario import Scenario, load_scenario
@@ -58,22 +59,13 @@ STATUS = "rvo2"
 
 
 def available() -> bool:
-    """Whether the ``rvo23d`` module (package jt-pyrvo23d, extra ``baselines``) is importable."""
-    try:
-        import rvo23d  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    """Whether the ``rvo23d`` module (package jt-pyrvo23d, extra ``baselines``) is installed."""
+    return installed("rvo23d")
 
 
 def _rvo23d():
-    try:
+    with needs("baselines", "the RVO2-3D baseline"):  # package jt-pyrvo23d
         import rvo23d
-    except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError(
-            "RVO2-3D baseline needs the 'rvo23d' module: "
-            "pip install 'vo3d-opt[baselines]' (package jt-pyrvo23d)"
-        ) from exc
     return rvo23d
 
 

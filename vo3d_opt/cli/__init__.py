@@ -1,8 +1,8 @@
 """The ``vo3d`` command line: one module per subcommand.
 
 * ``vo3d run SCENARIO`` (:mod:`.run`), ``vo3d compare`` (:mod:`.compare`), ``vo3d list``
-  (:mod:`.listing`), ``vo3d sweep FAMILY --n N`` (:mod:`.sweep`), ``vo3d schema``
-  (:mod:`.schema`), ``vo3d link`` and ``vo3d sitl`` (``vo3d_opt.link.command``).
+  (:mod:`.listing`), ``vo3d sweep FAMILY --n N`` (:mod:`.sweep`), ``vo3d link`` and
+  ``vo3d sitl`` (``vo3d_opt.link.command``).
 * ``--preset NAME`` (``--fast``, ``--swarm`` its aliases) and ``-o KEY=VALUE`` (run, compare,
   sweep): the selector's configuration, merged over the scenario's ``selector_options`` in the
   order given (the last of a key wins) and checked as the file's are.
@@ -13,69 +13,38 @@ when the runs completed (whatever their safety figures), 2 with a one-line messa
 bad input (an unreadable or invalid scenario, a bad option, an unknown formulation or solver,
 an ``--out`` directory that cannot be written: checked before the run), 1 when writing the
 outputs fails after the run (the summary is still printed), 130 when interrupted.
+
+The command line needs the ``[sim]`` extra (YAML scenarios, progress bars, figures, Parquet):
+without it every ``vo3d`` command prints one line naming it and exits 2, and a feature of
+another extra missing (``vo3d sweep``: ``[sweep]``, ``--solver osqp``: ``[qp]``, ...) does the
+same. The parser is in :mod:`.app`, imported only once the extra is there.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from collections.abc import Sequence
 
-from vo3d_opt import __version__
-from vo3d_opt.console import configure_logging
-from vo3d_opt.link.command import add_parsers as add_link_parsers
-from vo3d_opt.types import one_line
+from vo3d_opt.extras import MissingExtra, check
 
-from .common import EXIT_FAIL, EXIT_USAGE, Parser, UsageError, common_parser, log
-from .compare import add_compare_parser
-from .listing import add_list_parser
-from .run import add_run_parser
-from .schema import add_schema_parser
-from .sweep import add_sweep_parser
-
-#: Each subcommand's parser, in the order ``vo3d --help`` lists them.
-SUBCOMMANDS = (
-    add_run_parser,
-    add_compare_parser,
-    add_list_parser,
-    add_sweep_parser,
-    add_schema_parser,
-    add_link_parsers,
-)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = Parser(prog="vo3d", description="Improved 3D velocity obstacle: multi-UAV simulations.")
-    p.add_argument(
-        "--version",
-        action="version",
-        version=f"vo3d {__version__}",
-        help="print the version and exit",
-    )
-    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
-    common: list[argparse.ArgumentParser] = [common_parser()]
-    for add_parser in SUBCOMMANDS:
-        add_parser(sub, common)
-    return p
+#: Exit status for bad input and for a missing extra (argparse's own).
+EXIT_USAGE = 2
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``vo3d``; returns (and, as a script, exits with) the status."""
-    args = build_parser().parse_args(argv)
-    configure_logging(args.verbosity)
     try:
-        return int(args.func(args))
-    except UsageError as exc:
-        log.error("%s", one_line(exc))
+        check("sim", "the vo3d command line")
+        from .app import main as run_command_line
+    except MissingExtra as exc:
+        print(f"vo3d: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except KeyboardInterrupt:
-        log.error("interrupted")
-        return 130
-    except BrokenPipeError:  # stdout's reader went away (| head): no traceback, no more output
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return EXIT_FAIL
+    return run_command_line(argv)
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+def build_parser() -> argparse.ArgumentParser:
+    """The whole ``vo3d`` parser (needs the ``[sim]`` extra)."""
+    from .app import build_parser as build
+
+    return build()

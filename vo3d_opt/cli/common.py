@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from vo3d_opt.config import PRESETS, describe
+from vo3d_opt.extras import MissingExtra
 from vo3d_opt.report import rounded
 from vo3d_opt.sim.scenario import (
     Scenario,
@@ -190,6 +191,8 @@ def selector(sc: Scenario, formulation: str | None, solver: str | None) -> tuple
     """The scenario's selector (``scenario_selector``); a bad name is a ``UsageError``."""
     try:
         return scenario_selector(sc, formulation, solver)
+    except MissingExtra:  # its own line, naming the extra (exit 2 all the same)
+        raise
     except (ValueError, TypeError) as exc:
         f, s = formulation or sc.formulation, solver or sc.solver
         what = f"formulation {f or 'default'!r}, solver {s or 'default'!r}"

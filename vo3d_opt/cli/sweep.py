@@ -18,6 +18,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from vo3d_opt.extras import check
 from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FORMULATIONS
 from vo3d_opt.sim.scenario import ScenarioError, check_selector_options
 from vo3d_opt.sim.simulator import DEFAULT_FORMULATION
@@ -286,6 +287,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
     if args.list:
         return _list(args.json)
+    check("sweep", "vo3d sweep")  # before anything is said: one line if it is missing
     if not args.family:
         raise SweepError("family: required (vo3d sweep --list names them)")
     if args.n is None:

@@ -20,11 +20,8 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.collections import LineCollection
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
 
+from vo3d_opt.extras import needs
 from vo3d_opt.sim.metrics import (
     Approach,
     closest_obstacle_approach,
@@ -49,6 +46,12 @@ from .style import (
     settle,
     styled,
 )
+
+with needs("sim", "plotting"):
+    from matplotlib.axes import Axes
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
 
 #: Pairs drawn in colour and named (the closest ones); the others are grey.
 PAIR_CURVES = 5

@@ -6,15 +6,17 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from matplotlib.axes import Axes
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
-from matplotlib.patches import Patch
-
+from vo3d_opt.extras import needs
 from vo3d_opt.sim.record import RunRecord
 
 from .scene import ZoneSnapshot
 from .style import OBSTACLE_GREY, PRISM_GREY, UNSENSED_GREY, agent_styles
+
+with needs("sim", "plotting"):
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
 #: Outline of the protected spheres of the k-th snapshot (cycled): tells the times apart.
 ZONE_DASHES = [(0, (4, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)), (0, (8, 3))]

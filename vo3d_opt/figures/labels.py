@@ -16,14 +16,19 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.collections import LineCollection, PathCollection, PolyCollection
-from matplotlib.colors import to_rgba
-from matplotlib.lines import Line2D
-from matplotlib.patches import Patch
-from matplotlib.path import Path as MplPath
-from matplotlib.text import Annotation, Text
-from matplotlib.transforms import Bbox
+
+from vo3d_opt.extras import needs
+
+with needs("sim", "plotting"):
+    from matplotlib.axes import Axes
+    from matplotlib.collections import LineCollection, PathCollection, PolyCollection
+    from matplotlib.colors import to_rgba
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+    from matplotlib.path import Path as MplPath
+    from matplotlib.text import Annotation, Text
+    from matplotlib.transforms import Bbox
+
 
 #: Offsets (points) beyond the anchor's own radius at which a label is tried: finely near it,
 #: so that a label sits as close to what it names as the clutter allows.

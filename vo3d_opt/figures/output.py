@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from matplotlib.figure import Figure
-
+from vo3d_opt.extras import needs
 from vo3d_opt.sim.metrics import closest_obstacle_approach
 from vo3d_opt.sim.record import RunRecord
 
@@ -15,6 +14,9 @@ from .style import DEFAULT_DPI, FORMATS, LEGEND_MAX_AGENTS, check_dpi, save_figu
 from .swarm import figure_swarm_top_view
 from .topview import figure_agents_top_view
 from .view3d import figure_trajectories_3d
+
+with needs("sim", "plotting"):
+    from matplotlib.figure import Figure
 
 
 def _written(fig: Figure | None, path: str | Path, dpi: int) -> Path | None:

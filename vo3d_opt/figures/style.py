@@ -9,12 +9,16 @@ from pathlib import Path
 from typing import Any, Literal, ParamSpec, TypeVar, cast
 
 import numpy as np
-from matplotlib import colormaps, rc_context
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.colors import ListedColormap
-from matplotlib.figure import Figure
-from matplotlib.transforms import Bbox
-from mpl_toolkits.mplot3d import proj3d
+
+from vo3d_opt.extras import needs
+
+with needs("sim", "plotting"):
+    from matplotlib import colormaps, rc_context
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import ListedColormap
+    from matplotlib.figure import Figure
+    from matplotlib.transforms import Bbox
+    from mpl_toolkits.mplot3d import proj3d
 
 #: File formats every figure can be written in (the file's suffix chooses).
 FORMATS = ("png", "pdf", "svg")

@@ -18,13 +18,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.collections import LineCollection
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
-from matplotlib.patches import Patch, Rectangle
-from matplotlib.transforms import ScaledTranslation
 
+from vo3d_opt.extras import needs
 from vo3d_opt.sim.metrics import Approach
 from vo3d_opt.sim.record import RunRecord
 
@@ -49,6 +44,14 @@ from .topview import (
     frame_top_view,
     label_obstacles,
 )
+
+with needs("sim", "plotting"):
+    from matplotlib.axes import Axes
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch, Rectangle
+    from matplotlib.transforms import ScaledTranslation
 
 #: Paths drawn and named.
 SAMPLE_PATHS = 6

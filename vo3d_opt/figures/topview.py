@@ -9,10 +9,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.figure import Figure
-from matplotlib.patches import Circle, Polygon
 
+from vo3d_opt.extras import needs
 from vo3d_opt.sim.record import RunRecord
 from vo3d_opt.types import Cylinder
 
@@ -38,6 +36,11 @@ from .style import (
     settle,
     styled,
 )
+
+with needs("sim", "plotting"):
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle, Polygon
 
 #: Font size (points) of the obstacles' names.
 NAME_SIZE = 8.0

@@ -8,12 +8,8 @@ import math
 from typing import Any, cast
 
 import numpy as np
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
-from matplotlib.ticker import MaxNLocator
-from mpl_toolkits.mplot3d import Axes3D, proj3d
-from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
+from vo3d_opt.extras import needs
 from vo3d_opt.sim.record import RunRecord
 from vo3d_opt.types import Box, Cylinder
 
@@ -41,6 +37,13 @@ from .style import (
     styled,
 )
 from .swarm import sample_agents
+
+with needs("sim", "plotting"):
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import MaxNLocator
+    from mpl_toolkits.mplot3d import Axes3D, proj3d
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 #: The ground of the obstacles' names, which may lie over the translucent obstacles.
 NAME_GROUND = {"boxstyle": "square,pad=0.1", "facecolor": "white", "alpha": 0.75, "linewidth": 0}

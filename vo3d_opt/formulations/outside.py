@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..extras import MissingExtra
 from ..solvers import (
     FEAS_TOL,
     NLP,
@@ -61,9 +62,17 @@ def checked(backend: Backend, method: str) -> Callable[[QP | NLP], Result]:
     return call
 
 
+def backend_for(name: str, formulation: str) -> Backend:
+    """``get_backend(name)``; a solver library not installed is said with the formulation."""
+    try:
+        return get_backend(name)
+    except MissingExtra as exc:
+        raise exc.within(f"formulation {formulation!r}") from None
+
+
 def qp_backend(name: str, formulation: str) -> Backend:
     """The QP backend ``name`` for ``formulation``; ValueError when it cannot serve."""
-    backend = get_backend(name)
+    backend = backend_for(name, formulation)
     if backend.kind != "qp":
         raise ValueError(
             f"solver: {name!r} does not solve QPs; available: {', '.join(available_qp_solvers())}"

@@ -180,7 +180,15 @@ def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
 
 
 def _in_polygon(poly: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """Even-odd crossing test of points (P, M, 2) in polygons (n, P, V, 2) padded with NaN."""
+    """Even-odd crossing test of points (P, M, 2) in polygons (n, P, V, 2) padded with NaN.
+    One section at a time: the (P, V, M) temporaries of one stay in the cache, where those of
+    all at once took 1.7 times the time (the sampled formulation spends most of its time here)."""
+    if len(poly) <= 1:
+        return _crossings_odd(poly, xy)
+    return np.concatenate([_crossings_odd(poly[i : i + 1], xy) for i in range(len(poly))])
+
+
+def _crossings_odd(poly: np.ndarray, xy: np.ndarray) -> np.ndarray:
     a = poly
     b = np.roll(poly, -1, axis=2)
     # Close each polygon: the edge leaving the last real vertex goes back to the first one.

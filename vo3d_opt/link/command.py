@@ -16,8 +16,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from vo3d_opt.extras import MissingExtra, check
 from vo3d_opt.link.frames import parse_origin
-from vo3d_opt.link.messages import AUTOPILOTS, MissingExtra, require_extra
+from vo3d_opt.link.messages import AUTOPILOTS
 
 log = logging.getLogger("vo3d_opt.link.command")
 EXIT_USAGE = 2
@@ -431,10 +432,10 @@ def _guarded(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Nam
 
     def wrapped(args: argparse.Namespace) -> int:
         try:
-            require_extra()
+            check("link", f"vo3d {args.command}")
             return run(args)
         except MissingExtra as exc:
-            return _usage(f"vo3d {args.command} {exc}")
+            return _usage(str(exc))
         except _Usage as exc:
             return _usage(str(exc))
 

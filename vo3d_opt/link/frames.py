@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from vo3d_opt.extras import needs
+
 #: NED <-> ENU is its own inverse: swap the two horizontal axes, flip the vertical one.
 _SWAP = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
@@ -61,7 +63,8 @@ class GeodeticFrame:
     for points a few kilometres around it, so it cancels."""
 
     def __init__(self, lat: float, lon: float, alt: float) -> None:
-        from pyproj import Transformer
+        with needs("link", "geodesy"):
+            from pyproj import Transformer
 
         self.origin = (float(lat), float(lon), float(alt))
         pipeline = (

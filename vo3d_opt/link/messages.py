@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from vo3d_opt.extras import needs
 from vo3d_opt.link.frames import GeodeticFrame, enu_to_ned, ned_to_enu
 
 #: The companion computer's component id (MAV_COMP_ID_ONBOARD_COMPUTER) and the autopilot's.
@@ -40,28 +41,11 @@ AUTOPILOTS = ("px4", "ardupilot")
 DEG_E7, MM, CM = 1e-7, 1e-3, 1e-2
 
 
-class MissingExtra(RuntimeError):
-    """The ``[link]`` extra (pymavlink, pyproj) is not installed."""
-
-
-def require_extra() -> None:
-    """Raise :class:`MissingExtra` (one line naming the extra) unless pymavlink and pyproj
-    import."""
-    import importlib.util
-
-    missing = [m for m in ("pymavlink", "pyproj") if importlib.util.find_spec(m) is None]
-    if missing:
-        raise MissingExtra(
-            f"needs the [link] extra ({', '.join(missing)} not installed): "
-            "pip install 'vo3d-opt[link]'"
-        )
-
-
 def mavlink() -> ModuleType:
     """pymavlink's generated dialect module (MAVLink 2)."""
-    require_extra()
     os.environ.setdefault("MAVLINK20", "1")
-    from pymavlink import mavutil
+    with needs("link", "MAVLink"):
+        from pymavlink import mavutil
 
     return mavutil.mavlink
 

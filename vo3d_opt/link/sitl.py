@@ -29,14 +29,16 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-import yaml
-
+from vo3d_opt.extras import needs
 from vo3d_opt.link.faults import Fault, Injector
 from vo3d_opt.link.frames import GeodeticFrame
 from vo3d_opt.link.messages import load_signing_key
 from vo3d_opt.link.procs import Forked, Proc
 from vo3d_opt.link.vehicle import VehicleConfig, config_json, run_vehicle
 from vo3d_opt.sim.scenario import Scenario
+
+with needs("sim", "vo3d sitl"):
+    import yaml
 
 log = logging.getLogger("vo3d_opt.link.sitl")
 

@@ -4,7 +4,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -13,6 +12,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, StrictBool, model_validator
 
+from vo3d_opt.extras import missing, needs_text
 from vo3d_opt.types import Positive, Vec3, raise_problems
 
 #: Sub-steps per second of the ``rotorpy`` model unless the caller says otherwise: 50 Hz is the
@@ -62,27 +62,6 @@ class WindConfig(_Config):
         return self
 
 
-#: How to get the ``batched`` extra (torch's CPU build first: PyPI's torch is a CUDA build).
-BATCHED_INSTALL = (
-    "pip install torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu, then "
-    "pip install 'vo3d-opt[batched]'"
-)
-
-
-def _missing_batched_extra() -> str:
-    """The modules of the ``batched`` extra that cannot be imported ('' if none), found
-    without importing them (torch takes seconds)."""
-    missing = []
-    for name in ("torch", "torchdiffeq", "roma"):
-        try:
-            found = importlib.util.find_spec(name) is not None
-        except ValueError:  # in sys.modules as None: blocked
-            found = False
-        if not found:
-            missing.append(name)
-    return ", ".join(missing)
-
-
 class DynamicsConfig(_Config):
     """The ``dynamics`` mapping of a scenario; ``substep_rate`` (Hz), ``command_ramp``
     (default true) and ``batched`` (default false: all vehicles in one RotorPy
@@ -105,8 +84,10 @@ class DynamicsConfig(_Config):
         problems: list[tuple[tuple[Any, ...], str, Any]] = []
         if self.model == "first_order" and self.tau is None:
             problems.append((("tau",), "required for model first_order", None))
-        if self.batched and (missing := _missing_batched_extra()):
-            problems.append((("batched",), f"needs {missing}: {BATCHED_INSTALL}", True))
+        if self.model == "rotorpy" and (absent := missing("rotorpy")):
+            problems.append((("model",), needs_text("rotorpy", absent), self.model))
+        if self.batched and (absent := missing("batched")):
+            problems.append((("batched",), needs_text("batched", absent), True))
         # an omitted model is kinematic: say so, the usual slip is forgetting `model: rotorpy`
         model = self.model if "model" in self.model_fields_set else f"{self.model} (no model given)"
         for key, owner in (

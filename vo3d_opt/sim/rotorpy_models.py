@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from vo3d_opt.extras import needs
 from vo3d_opt.sim.dynamics_base import (
-    BATCHED_INSTALL,
     BATCHED_SUBSTEP_RATE,
     DEFAULT_SUBSTEP_RATE,
     VEHICLES,
@@ -27,12 +27,13 @@ from vo3d_opt.sim.dynamics_base import (
 
 def vehicle_params(vehicle: str) -> dict[str, Any]:
     """RotorPy's parameter dictionary of ``vehicle`` (``hummingbird`` or ``crazyflie``)."""
-    if vehicle == "hummingbird":
-        from rotorpy.vehicles.hummingbird_params import quad_params
-    elif vehicle == "crazyflie":
-        from rotorpy.vehicles.crazyflie_params import quad_params
-    else:
+    if vehicle not in VEHICLES:
         raise ValueError(f"vehicle: must be one of {', '.join(VEHICLES)}, got {vehicle!r}")
+    with needs("rotorpy", "dynamics.model: rotorpy"):  # the first import of every RotorPy model
+        if vehicle == "hummingbird":
+            from rotorpy.vehicles.hummingbird_params import quad_params
+        else:
+            from rotorpy.vehicles.crazyflie_params import quad_params
     return dict(quad_params)
 
 
@@ -265,13 +266,12 @@ class RotorPyDynamics(_RotorPyModel):
 
 def _import_torch() -> Any:
     """torch, after checking that the rest of the ``batched`` extra (torchdiffeq, roma, which
-    RotorPy's batched vehicles import) is there too; a ``ValueError`` naming the key if not."""
-    try:
+    RotorPy's batched vehicles import) is there too; a ``MissingExtra`` (a ``ValueError``)
+    naming the key if not."""
+    with needs("batched", "dynamics.batched:"):
         import roma  # noqa: F401 - imported by RotorPy's batched vehicles
         import torch
         import torchdiffeq  # noqa: F401 - the same
-    except ImportError as exc:
-        raise ValueError(f"dynamics.batched: needs {exc.name}: {BATCHED_INSTALL}") from exc
     return torch
 
 

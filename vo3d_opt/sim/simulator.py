@@ -52,9 +52,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from vo3d_opt.config import DEFAULT_PRESET
+from vo3d_opt.extras import needs
 from vo3d_opt.sim.deciders import decision_step
 from vo3d_opt.sim.dynamics import Dynamics, make_dynamics
 from vo3d_opt.sim.record import (
@@ -69,6 +69,9 @@ from vo3d_opt.sim.record import (
 from vo3d_opt.sim.safety import derive_margins, within_reach
 from vo3d_opt.sim.scenario import Scenario, load_scenario
 from vo3d_opt.sim.traffic import GoalWithDetours
+
+with needs("sim", "the simulator"):
+    from tqdm import tqdm
 
 #: Default formulation when neither the caller nor the scenario names one.
 DEFAULT_FORMULATION = "plane_qp"

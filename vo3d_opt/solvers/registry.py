@@ -10,32 +10,34 @@ Accepted names:
 - ``"qpsolvers:<name>"`` for every name in ``qpsolvers.available_solvers``;
 - ``"casadi"`` (plugin ipopt) and ``"casadi:<plugin>"`` for the non-convex NLP.
 
-Backend modules are imported lazily, so importing this package stays cheap.
+Only ``exact2d`` comes with the core install; the others with the extras ``[qp]`` (osqp,
+clarabel, daqp, qpsolvers), ``[cvxpy]`` and ``[nlp]`` (CasADi). The name of a solver whose
+library is not installed raises :class:`~vo3d_opt.extras.MissingExtra`, one line naming the
+extra (an ImportError, and a ValueError as every unavailable name). Backend modules are
+imported lazily, so importing this package stays cheap.
 """
 
 from __future__ import annotations
 
 import functools
-import importlib.util
 
+from vo3d_opt.extras import EXTRAS, MissingExtra, installed
 from vo3d_opt.solvers.base import Backend
 
 #: Plugins of ``casadi.nlpsol`` this package knows how to run quietly (see casadi_backend).
 CASADI_PLUGINS = ("ipopt", "sqpmethod")
 
+#: The extra that brings each solver library (the prefix of its solver names).
+_SOLVER_EXTRAS = {module: extra for extra in ("qp", "cvxpy", "nlp") for module in EXTRAS[extra]}
 
 _CACHE: dict[str, Backend] = {}
 _REGISTERED: dict[str, Backend] = {}
 
 
-def _installed(module: str) -> bool:
-    return importlib.util.find_spec(module) is not None
-
-
 @functools.cache
 def _cvxpy_solvers() -> dict[str, bool]:
     """Installed cvxpy solvers that take a quadratic objective -> whether they take a SOC."""
-    if not _installed("cvxpy"):
+    if not installed("cvxpy"):
         return {}
     import cvxpy as cp
     from cvxpy.constraints import SOC
@@ -52,7 +54,7 @@ def _cvxpy_solvers() -> dict[str, bool]:
 
 @functools.cache
 def _qpsolvers_solvers() -> tuple[str, ...]:
-    if not _installed("qpsolvers"):
+    if not installed("qpsolvers"):
         return ()
     import qpsolvers
 
@@ -61,7 +63,7 @@ def _qpsolvers_solvers() -> tuple[str, ...]:
 
 @functools.cache
 def _casadi_plugins() -> tuple[str, ...]:
-    if not _installed("casadi"):
+    if not installed("casadi"):
         return ()
     import casadi
 
@@ -70,7 +72,7 @@ def _casadi_plugins() -> tuple[str, ...]:
 
 @functools.cache
 def _builtin_names() -> tuple[str, ...]:
-    names = ["exact2d"] + [n for n in ("osqp", "clarabel", "daqp") if _installed(n)]
+    names = ["exact2d"] + [n for n in ("osqp", "clarabel", "daqp") if installed(n)]
     if cvx := _cvxpy_solvers():
         names += ["cvxpy"] + [f"cvxpy:{s}" for s in sorted(cvx)]
     names += [f"qpsolvers:{s}" for s in _qpsolvers_solvers()]
@@ -103,9 +105,14 @@ def _canonical(name: str) -> str:
 
 
 def _unknown(name: str) -> ValueError:
-    return ValueError(
-        f"unknown or uninstalled solver {name!r}; available: " + ", ".join(available_solvers())
-    )
+    """ValueError listing the available names; :class:`MissingExtra` (a ValueError too) naming
+    the extra when the name is one of a solver library that is not installed."""
+    available = ", ".join(available_solvers())
+    module = name.partition(":")[0]
+    if module in _SOLVER_EXTRAS and not installed(module):
+        extra = _SOLVER_EXTRAS[module]
+        return MissingExtra(f"solver {name!r}", extra, (module,), f"; available: {available}")
+    return ValueError(f"unknown or uninstalled solver {name!r}; available: {available}")
 
 
 def _construct(name: str) -> Backend:
@@ -115,15 +122,15 @@ def _construct(name: str) -> Backend:
         from vo3d_opt.solvers.exact2d import Exact2DBackend
 
         return Exact2DBackend()
-    if name == "osqp" and _installed("osqp"):
+    if name == "osqp" and installed("osqp"):
         from vo3d_opt.solvers.osqp_backend import OsqpBackend
 
         return OsqpBackend()
-    if name == "clarabel" and _installed("clarabel"):
+    if name == "clarabel" and installed("clarabel"):
         from vo3d_opt.solvers.clarabel_backend import ClarabelBackend
 
         return ClarabelBackend()
-    if name == "daqp" and _installed("daqp"):
+    if name == "daqp" and installed("daqp"):
         from vo3d_opt.solvers.daqp_backend import DaqpBackend
 
         return DaqpBackend()

@@ -12,6 +12,10 @@ simulator), the metrics and the RVO2-3D baseline; nothing but the CLI imports it
 * :mod:`.store`: the rows kept in ``--out`` as they come, and ``--resume``;
 * :mod:`.stats`: Clopper–Pearson bounds, risk ratios and the sweep's summary;
 * :mod:`.output`: ``encounters.parquet``, ``summary.json``, plots and replayable failures.
+
+A sweep needs the ``[sweep]`` extra (Dask, pandas, statsmodels, with ``[sim]``): without it
+``run_sweep`` and the modules that import them raise :class:`~vo3d_opt.extras.MissingExtra`,
+one line naming it; importing this package does not (the command line reads its defaults).
 """
 
 from vo3d_opt.generators import (

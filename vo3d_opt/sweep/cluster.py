@@ -21,11 +21,13 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from distributed import Client, LocalCluster, WorkerPlugin, as_completed
-from tqdm import tqdm
-
+from vo3d_opt.extras import needs
 from vo3d_opt.generators import Family
 from vo3d_opt.sweep.flight import Method, error_line, run_encounters, warm
+
+with needs("sweep", "vo3d sweep"):
+    from distributed import Client, LocalCluster, WorkerPlugin, as_completed
+    from tqdm import tqdm
 
 CONNECT_TIMEOUT = 20.0  # s, to reach a --scheduler and to see its first worker
 

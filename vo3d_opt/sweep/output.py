@@ -21,13 +21,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
-import yaml
 
+from vo3d_opt.extras import needs
 from vo3d_opt.generators import make_encounter
 from vo3d_opt.report import atomic
 from vo3d_opt.sweep.flight import without_avoidance
 from vo3d_opt.sweep.runner import SweepResult
+
+with needs("sweep", "vo3d sweep"):
+    import pandas as pd
+    import yaml
 
 _DPI = 110
 
@@ -115,8 +118,9 @@ def write_failures(result: SweepResult, out: Path) -> list[Path]:
 
 def plot_min_distance(rows: pd.DataFrame, path: Path) -> Path:
     """ECDF and histogram of ``min_normalised_distance`` per (family, method) against r_pz."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    with needs("sweep", "sweep figures"):
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
 
     fig = Figure(figsize=(10.0, 4.2), dpi=_DPI)
     FigureCanvasAgg(fig)

@@ -16,14 +16,17 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from tqdm import tqdm
 
 from vo3d_opt.config import DEFAULT_PRESET
+from vo3d_opt.extras import check, needs
 from vo3d_opt.generators import FAMILIES, Family, get_family
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, error_line
 from vo3d_opt.sweep.stats import aggregate
 from vo3d_opt.sweep.store import FLUSH_SECONDS, PartStore, ResumeError, rows_frame
+
+with needs("sweep", "vo3d sweep"):
+    from tqdm import tqdm
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -187,8 +190,10 @@ def run_sweep(
     a task whose worker died (local cluster only). ``out``: keep the rows in this directory as
     they come (``vo3d_opt.sweep.store``: a part at least every ``flush_seconds``); ``resume``:
     fly only the encounters missing there.
-    ``SweepError`` for bad options, before any cluster starts, or an unreachable scheduler.
+    ``SweepError`` for bad options, before any cluster starts, or an unreachable scheduler;
+    :class:`~vo3d_opt.extras.MissingExtra` without the ``[sweep]`` extra.
     """
+    check("sweep", "vo3d sweep")
     fam, formulation, solver = validate(
         family, n, seed=seed, workers=workers, method=method, in_flight=in_flight, batch=batch
     )

@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
+from vo3d_opt.extras import needs
+
 if TYPE_CHECKING:
     import pandas as pd
 
@@ -83,7 +85,8 @@ def aggregate(
     Encounters that raised are listed under ``errors`` and left out of every count and rate but
     ``rates.error``.
     """
-    import pandas as pd
+    with needs("sweep", "sweep statistics"):
+        import pandas as pd
 
     ok = df[df["error"].isna()] if "error" in df else df
     n_ok = len(ok)
@@ -181,7 +184,9 @@ def risk_ratio(k: int, n: int, k_none: int, n_none: int) -> dict[str, Any]:
 
 def _koopman(k: int, n: int, k0: int, n0: int, alpha: float) -> tuple[float, float]:
     import numpy as np
-    from statsmodels.stats.proportion import confint_proportions_2indep
+
+    with needs("sweep", "sweep statistics"):
+        from statsmodels.stats.proportion import confint_proportions_2indep
 
     lo, hi = confint_proportions_2indep(
         k, n, k0, n0, method="score", compare="ratio", alpha=alpha, correction=False

@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from vo3d_opt.extras import needs
 from vo3d_opt.report import atomic
 
 if TYPE_CHECKING:
@@ -47,7 +48,8 @@ class ResumeError(ValueError):
 def rows_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
     """One row per encounter, sorted by index, its columns the keys of the rows in the order
     they first appear (a key a row lacks is None there)."""
-    import pandas as pd
+    with needs("sweep", "sweep output"):
+        import pandas as pd
 
     ordered = sorted(rows, key=lambda r: int(r["index"]))
     keys: dict[str, None] = {}
@@ -58,8 +60,9 @@ def rows_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
 
 
 def _write_part(rows: list[dict[str, Any]], path: Path) -> None:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    with needs("sweep", "sweep output"):
+        import pyarrow as pa
+        import pyarrow.parquet as pq
 
     keys: dict[str, None] = {}
     for row in rows:
@@ -70,7 +73,8 @@ def _write_part(rows: list[dict[str, Any]], path: Path) -> None:
 
 
 def _read_rows(path: Path) -> list[dict[str, Any]]:
-    import pyarrow.parquet as pq
+    with needs("sweep", "sweep output"):
+        import pyarrow.parquet as pq
 
     return list(pq.read_table(path).to_pylist())
 

@@ -20,7 +20,11 @@ import re
 from pathlib import Path
 from typing import Any
 
-import yaml
+from vo3d_opt.extras import needs
+
+with needs("sim", "scenario files"):
+    import yaml
+
 
 #: The largest scenario file read (bytes): 10,000 agents take about a megabyte.
 MAX_BYTES = 16 * 1024 * 1024
