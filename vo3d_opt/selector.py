@@ -101,9 +101,8 @@ class VelocitySelector:
         if formulation == "sampled":
             check_grid(self.config)
             if solver is not None:
-                backend_for(
-                    solver, formulation
-                )  # a wrong name is still an error; sampled needs none
+                # a wrong name is still an error; sampled needs no solver
+                backend_for(solver, formulation)
         elif formulation == "nlp":
             self.solver = solver or DEFAULT_NLP_SOLVER
             nlp = backend_for(self.solver, formulation)
