@@ -242,8 +242,10 @@ def test_swarm_is_fast_with_the_scenarios_sensing_horizon(cli, small, tmp_path, 
                                                              "obstacle_range": 55.0},
                                        "selector_options": swarm_options}))
     assert _behaviour(here("run", in_file, "--json"), swarm_options) == swarm
-    # the 1.25 s horizon drops the cylinder's pyramid until it is 5 m off: another flight
-    assert swarm != _behaviour(here("run", near, "--json", "--fast"))
+    # the obstacles keep no horizon; one of 1.25 s drops the cylinder's pyramid until it is
+    # 5 m off: another flight
+    short = here("run", near, "--json", "--swarm", "-o", "obstacle_horizon=1.25")
+    assert swarm != _behaviour(short, {"preset": "swarm", "obstacle_horizon": 1.25})
     later = here("run", near, "--json", "--swarm", "-o", "horizon=3")
     _behaviour(later, {"preset": "swarm", "horizon": 3.0})
     res = here("compare", near, "--json", "--swarm")

@@ -156,7 +156,7 @@ def test_first_minutes_of_a_plain_install(wheel, tmp_path, record_property):
     listed = _run([sys.executable, "-m", "pip", "--python", python, "list", "--format", "json"])
     names = {p["name"].lower().replace("_", "-") for p in json.loads(listed.stdout)}
     assert {"vo3d-opt", "numpy", "scipy", "pydantic"} <= names and len(names) <= 25, names
-    assert not names & {"osqp", "pyyaml", "matplotlib", "pandas", "casadi", "cvxpy", "rotorpy"}
+    assert not names & {"pyyaml", "matplotlib", "pandas", "casadi", "cvxpy", "rotorpy"}
 
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     extra_modules = sorted({m for modules in EXTRAS.values() for m in modules})
@@ -171,11 +171,11 @@ def test_first_minutes_of_a_plain_install(wheel, tmp_path, record_property):
     record_property("first_minutes", f"{len(names)} packages; {out['times']}")
     assert out["status"] == "optimal" and out["swarm"] == [100, 3] and out["loaded"] == []
 
-    # without [sim], vo3d says so in one line; a solver of [qp] as well
+    # without [sim], vo3d says so in one line; the nlp formulation's solver ([nlp]) as well
     res = subprocess.run([venv / "bin" / "vo3d", "list"], capture_output=True, text=True, env=env)
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
     assert "[sim]" in res.stderr and "pip install 'vo3d-opt[sim]'" in res.stderr
-    code = "from vo3d_opt import VelocitySelector\ntry:\n    VelocitySelector(solver='osqp')\n"
+    code = "from vo3d_opt import VelocitySelector\ntry:\n    VelocitySelector('nlp')\n"
     code += "except ImportError as exc:\n    print(exc)"
     said = _run([python, "-c", code], cwd=tmp_path, env=env).stdout.strip()
-    assert "[qp]" in said and "\n" not in said, said
+    assert "[nlp]" in said and "\n" not in said, said

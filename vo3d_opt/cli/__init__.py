@@ -36,7 +36,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``vo3d``; returns (and, as a script, exits with) the status."""
     try:
         check("sim", "the vo3d command line")
-        from .app import main as run_command_line
+        from .app import run_command_line
     except MissingExtra as exc:
         print(f"vo3d: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -45,6 +45,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The whole ``vo3d`` parser (needs the ``[sim]`` extra)."""
-    from .app import build_parser as build
+    from .app import build_vo3d_parser
 
-    return build()
+    return build_vo3d_parser()

@@ -32,7 +32,7 @@ SUBCOMMANDS = (
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_vo3d_parser() -> argparse.ArgumentParser:
     p = Parser(prog="vo3d", description="Improved 3D velocity obstacle: multi-UAV simulations.")
     p.add_argument(
         "--version",
@@ -47,9 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def run_command_line(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``vo3d``; returns (and, as a script, exits with) the status."""
-    args = build_parser().parse_args(argv)
+    args = build_vo3d_parser().parse_args(argv)
     configure_logging(args.verbosity)
     try:
         return int(args.func(args))

@@ -77,7 +77,7 @@ def _preload() -> None:
     mavlink()
 
 
-def check(opts: SitlOptions) -> None:
+def check_sitl_options(opts: SitlOptions) -> None:
     """``ValueError`` (naming the key) for what the harness cannot fly."""
     sc = opts.scenario
     if opts.link_main is None:
@@ -102,7 +102,7 @@ class Sitl:
     :meth:`stop_all` whatever happens."""
 
     def __init__(self, opts: SitlOptions, workdir: Path) -> None:
-        check(opts)
+        check_sitl_options(opts)
         self.o, self.dir = opts, workdir
         sc = opts.scenario
         self.ids = {name: k + 1 for k, name in enumerate(sc.ids)}
@@ -198,7 +198,7 @@ class Sitl:
         ]  # fmt: skip
         if o.signing_key:
             argv += ["--signing-key", o.signing_key]
-        assert self.o.link_main is not None  # check() refuses options without it
+        assert self.o.link_main is not None  # check_sitl_options() refuses options without it
         self.links[name] = self._fork(f"link {name}", partial(self.o.link_main, argv))
 
     def run(self) -> float:
@@ -323,7 +323,7 @@ def run_sitl(opts: SitlOptions) -> Any:
     ``RuntimeError`` when a process failed before the mission started."""
     from vo3d_opt.link.sitl_record import build_result
 
-    check(opts)
+    check_sitl_options(opts)
     previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         with tempfile.TemporaryDirectory(prefix="vo3d-sitl-") as tmp:

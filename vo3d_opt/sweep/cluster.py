@@ -90,7 +90,10 @@ def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> It
             threads_per_worker=1,
             processes=True,
             dashboard_address=None,
-            silence_logs=logging.ERROR,
+            # the local workers' own logs: a worker that outlives its scheduler after a Ctrl-C
+            # logs its failed heartbeats as errors; what matters of a worker reaches the
+            # client as a task's error or a lost worker
+            silence_logs=logging.CRITICAL,
             scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
         )
     try:
