@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -28,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from first_call import CHILD
-from run_sweeps import commit, cpu_model
+from pages import machine_line, write_page  # this folder's: the one machine line
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "results" / "first-minutes.md"
@@ -225,27 +224,19 @@ def measure(runs: int, work: Path) -> list[str]:
     return lines
 
 
-def machine_line() -> str:
-    load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
-    return (f"{cpu_model()}, {os.cpu_count()} cores, {platform.python_implementation()} "
-            f"{platform.python_version()}; load average at the start {load} (other work on "
-            "the machine slows every figure alike)")
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3, help="fresh processes per row (median shown)")
-    ap.add_argument("--out", type=Path, default=OUT, help="the results page (new section on top)")
+    ap.add_argument("--out", type=Path, default=OUT, help="the results page (written whole)")
     args = ap.parse_args()
-    head = [f"# First minutes, {time.strftime('%Y-%m-%d %H:%M')}, commit {commit()}", "",
-            machine_line() + ". `python benchmarks/first_minutes.py`.", ""]
+    head = ["# First minutes: install, import, first calls", "", machine_line(), "",
+            "`python benchmarks/first_minutes.py`; other work on the machine slows every figure "
+            "alike.", ""]
     with tempfile.TemporaryDirectory(prefix="first-minutes-") as tmp:
         body = measure(args.runs, Path(tmp))
-    section = "\n".join(head + body) + "\n"
-    print(section)
-    old = args.out.read_text() if args.out.exists() else ""
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(section + ("\n" + old if old else ""))
+    page = "\n".join(head + body) + "\n"
+    print(page)
+    write_page(args.out, page)
 
 
 if __name__ == "__main__":
