@@ -77,7 +77,7 @@ print(json.dumps([available_solvers(), available_qp_solvers()]))
 MISSING = """
 from vo3d_opt import VelocitySelector
 try:
-    VelocitySelector(solver="osqp")
+    VelocitySelector("nlp")
 except ImportError as exc:
     print(exc)
 """
@@ -195,7 +195,7 @@ def measure(runs: int, work: Path) -> list[str]:
                  f"{imp['bare']:.3f} s for `python -c pass` (medians of {max(runs, 5)})")
     missing = run([python, "-c", MISSING], cwd=work).stdout.strip()
     vo3d = subprocess.run([venv / "bin" / "vo3d", "--version"], capture_output=True, text=True)
-    lines += ["- without the extras: `VelocitySelector(solver=\"osqp\")` raises ImportError "
+    lines += ["- without the extras: `VelocitySelector(\"nlp\")` raises ImportError "
               f"`{missing}`; `vo3d --version` exits {vo3d.returncode} with "
               f"`{vo3d.stderr.strip()}`", ""]
     core_rows = first_calls(python, all_pairs(python, work), runs, work)
