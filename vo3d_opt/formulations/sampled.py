@@ -62,13 +62,13 @@ def check_grid(config: SelectorConfig) -> None:
 
 def _mark_inside(sections: Sections, xy: np.ndarray, inside: np.ndarray) -> None:
     """``inside`` (P, M) |= whether each grid point lies in one of ``sections``, in blocks of
-    grid points small enough for ``BLOCK``."""
-    n, n_planes = sections.kind.shape
-    per_point = max(1, n * n_planes * sections.curve.shape[2])
+    grid points small enough for ``BLOCK`` (the sections' polygons built once)."""
+    polygon = sections.polygon  # (n, P, V, 2)
+    per_point = max(1, polygon.shape[0] * polygon.shape[1] * polygon.shape[2])
     step = max(1, BLOCK // per_point)
     for m0 in range(0, xy.shape[1], step):
         block = np.ascontiguousarray(xy[:, m0 : m0 + step])
-        inside[:, m0 : m0 + step] |= np.any(sections.contains(block), axis=0)
+        inside[:, m0 : m0 + step] |= np.any(sections.contains(block, polygon), axis=0)
 
 
 def select_sampled(enc: Encounter) -> Outcome:

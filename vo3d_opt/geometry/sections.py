@@ -139,10 +139,11 @@ class Sections(NamedTuple):
         poly = _angular_order(*self.vertices)
         return np.where((_polygon_area(poly) > 1e-14)[..., None, None], poly, np.nan)
 
-    def contains(self, xy: np.ndarray) -> np.ndarray:
-        """Whether in-plane points lie inside each section: xy (P, M, 2) -> (n, P, M)."""
+    def contains(self, xy: np.ndarray, polygon: np.ndarray | None = None) -> np.ndarray:
+        """Whether in-plane points lie inside each section: xy (P, M, 2) -> (n, P, M).
+        ``polygon``: :attr:`polygon`, when the caller tests several blocks of points."""
         xy = np.asarray(xy, dtype=float)
-        poly = self.polygon
+        poly = self.polygon if polygon is None else polygon
         inside = _in_polygon(poly, xy)
         if self.corrections.vo_lines:
             inside |= _beyond_chord(poly, self.apex, self.chord, xy)
