@@ -31,9 +31,8 @@ def test_a_short_horizon_does_not_reach_the_obstacles(formulation):
     assert np.array_equal(both.velocity, [4.0, 0.0, 0.0])
     # ... while without one its VO holds it, and the answer turns away
     assert not np.array_equal(short.velocity, [4.0, 0.0, 0.0])
-    sel = VelocitySelector(formulation, horizon=2.0)
-    enc = sel.options_for(4.0, 0.2)
-    assert enc.obstacle_horizon is None and enc.horizon == 2.0
+    options = VelocitySelector(formulation, horizon=2.0).options_for(4.0, 0.2)
+    assert options.obstacle_horizon is None and options.horizon == 2.0
 
 
 def test_the_exact_check_takes_the_obstacle_horizon():
