@@ -583,7 +583,8 @@ NB_MODULE(_core, m) {
                  In<bool> ini = arr<bool>(initial, "initial", {self->vos.count()});
                  std::vector<uint8_t> init(self->vos.count());
                  for (size_t k = 0; k < init.size(); ++k) init[k] = ini.data()[k * ini.stride(0)];
-                 self->qps = std::make_unique<PlaneQPs>(self->vos, self->planes, self->limits, init, self->cfg, lazy);
+                 self->qps = std::make_unique<PlaneQPs>(self->vos, self->planes, self->limits, init, self->cfg, lazy,
+                                                        self->buffers);
              },
              "vos"_a, "planes"_a, "G3"_a, "h3"_a, "initial"_a, "cfg"_a, "lazy"_a)
         .def_prop_ro("key", [](PyPlaneQPs& s) { return view(s, s.qps->key.data(), {ROUNDS, size_t(s.qps->P)}); })

@@ -371,6 +371,7 @@ struct PyPlaneQPs {
     Planes planes;
     LimitRows limits;
     Config cfg;
+    QPBuffers buffers;
     std::unique_ptr<PlaneQPs> qps;
 };
 

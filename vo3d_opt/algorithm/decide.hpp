@@ -24,8 +24,6 @@
 // are never solved, and the rows of a plane are built when one of its QPs first comes up.
 #pragma once
 
-#include <memory>
-
 #include "exact2d.hpp"
 #include "fallback.hpp"
 #include "sections.hpp"
@@ -54,37 +52,51 @@ struct SearchResult {
     int64_t n_tried;  // the QP answers written into tried (for the least-bad fallback)
 };
 
+// The buffers of a decision's plane QPs (PlaneQPs names each), kept from one decision to the
+// next (decide_one keeps one per thread): sized anew per decision, they allocate only while they
+// grow, and a decision costs a few microseconds, of which dozens of allocations would be one.
+struct QPBuffers {
+    std::vector<RoundRows> vo_rows;
+    std::vector<uint8_t> active, computed, based, included, exact, complete, into;
+    std::vector<Base> base;
+    std::vector<int64_t> starts, plane_r, order;
+    std::vector<double> G_lim, key, sol, plane_key, rows, rhs, tried;
+    std::vector<std::vector<int64_t>> orders{KEPT_ORDERS + 1};  // seidel_order(m): m's alone
+    std::vector<std::pair<int64_t, int64_t>> todo;
+    RowWork work{0};
+};
+
 // The (round, plane) QPs of one decision and their rows, filled as VOs join. The rows of VO k on
 // plane p (every round) once a QP on that plane needs them (computed), from the VO's points in
 // the planes' frame (base, once per VO). QP (r, p) constrains the VOs in included(r, p, .) plus
 // the limit rows and the speed disc; its exact optimum is sol at deviation key (inf: infeasible
-// or done), or key is a lower bound while not exact.
+// or done), or key is a lower bound while not exact. Its arrays are those of a QPBuffers.
 struct PlaneQPs {
     PlaneQPs(const VOs& vos, const Planes& planes, const LimitRows& limits,
-             const std::vector<uint8_t>& initial, const Config& cfg, bool lazy);
+             const std::vector<uint8_t>& initial, const Config& cfg, bool lazy, QPBuffers& buf);
     const VOs& vos;
     const Planes& planes;
     const LimitRows& limits;
     const Config& cfg;
     int64_t V, P, L;
-    std::vector<RoundRows> vo_rows;  // (V, P)
-    std::vector<uint8_t> active, computed;  // (V, P): the section constrains; rows built
-    std::vector<Base> base;                 // (V,)
-    std::vector<uint8_t> based;             // (V,)
-    std::vector<uint8_t> included;          // (R, P, V)
-    std::vector<int64_t> starts;            // the VOs every QP starts with
-    std::vector<double> G_lim;              // (P, L, 2): the 3D limit rows on each plane
-    std::vector<double> key, sol;           // (R, P), (R, P, 2)
-    std::vector<uint8_t> exact, complete;   // (R, P); (P,): rows of every starting VO built
-    std::vector<double> plane_key;          // (P,) each plane's least key ...
-    std::vector<int64_t> plane_r;           // ... and the first round that has it
+    std::vector<RoundRows>& vo_rows;  // (V, P)
+    std::vector<uint8_t>&active, &computed;  // (V, P): the section constrains; rows built
+    std::vector<Base>& base;                 // (V,)
+    std::vector<uint8_t>& based;             // (V,)
+    std::vector<uint8_t>& included;          // (R, P, V)
+    std::vector<int64_t>& starts;            // the VOs every QP starts with
+    std::vector<double>& G_lim;              // (P, L, 2): the 3D limit rows on each plane
+    std::vector<double>&key, &sol;           // (R, P), (R, P, 2)
+    std::vector<uint8_t>&exact, &complete;   // (R, P); (P,): rows of every starting VO built
+    std::vector<double>& plane_key;          // (P,) each plane's least key ...
+    std::vector<int64_t>& plane_r;           // ... and the first round that has it
     double w0[2];  // the preferred velocity in plane coordinates (the same on every plane)
-    std::vector<double> rows, rhs;          // (V + L, 2), (V + L,): one QP's rows
-    std::vector<std::vector<int64_t>> orders;  // the solver's row order for m rows, once
-    std::vector<int64_t> order;                // scratch: the order of a QP of many rows
-    std::vector<uint8_t> into;                 // (V,) scratch: the VOs a velocity is in
-    std::vector<std::pair<int64_t, int64_t>> todo;  // the (VO, plane) rows still to build
-    RowWork work;
+    std::vector<double>&rows, &rhs;          // (V + L, 2), (V + L,): one QP's rows
+    std::vector<std::vector<int64_t>>& orders;  // the solver's row order for m rows, once
+    std::vector<int64_t>& order;                // scratch: the order of a QP of many rows
+    std::vector<uint8_t>& into;                 // (V,) scratch: the VOs a velocity is in
+    std::vector<std::pair<int64_t, int64_t>>& todo;  // the (VO, plane) rows still to build
+    RowWork& work;
 
     void add_rows();                        // builds the rows listed in todo, each once
     int64_t gather(int64_t r, int64_t p);   // QP (r, p)'s rows into rows / rhs: how many
@@ -131,10 +143,12 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
         return out;
     }
     Planes planes = decision_planes(vos, v_now, cfg);
-    PlaneQPs qps(vos, planes, limits, initial, cfg, true);
+    thread_local QPBuffers buffers;
+    PlaneQPs qps(vos, planes, limits, initial, cfg, true, buffers);
     // at most every QP once, then once per VO it gains; only the answers written are read
-    std::unique_ptr<double[]> tried(new double[3 * ROUNDS * planes.count() * (V + 1)]);
-    SearchResult s = qps.search(b, tried.get());  // 4
+    buffers.tried.resize(3 * ROUNDS * planes.count() * (V + 1));
+    double* tried = buffers.tried.data();
+    SearchResult s = qps.search(b, tried);  // 4
     out.solved = s.solved;
     double v[3];
     if (s.r >= 0) {
@@ -151,7 +165,7 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
         out.phi = cfg.phi[f.plane], out.round = SAMPLED;
         return out;
     }
-    Rows answers{tried.get(), s.n_tried, 3, 3, 1};
+    Rows answers{tried, s.n_tried, 3, 3, 1};
     least_bad(vos, planes, grid, cover, answers, p, v_now, limits, b, cfg, v);
     enforce_limits(v, p, b, out.velocity);  // 6
     out.status = INFEASIBLE_MIN_VIOLATION, out.phi = kNaN, out.round = LEAST_BAD;
@@ -166,13 +180,23 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
 // completes a plane when one of its QPs first comes up (a lower bound from the probe alone is
 // still a lower bound, so no answer changes; planes that never come up are never built).
 inline PlaneQPs::PlaneQPs(const VOs& vos_, const Planes& planes_, const LimitRows& limits_,
-                          const std::vector<uint8_t>& initial, const Config& cfg_, bool lazy)
+                          const std::vector<uint8_t>& initial, const Config& cfg_, bool lazy,
+                          QPBuffers& buf)
     : vos(vos_), planes(planes_), limits(limits_), cfg(cfg_), V(vos_.count()),
-      P(planes_.count()), L(limits_.count()), vo_rows(V * P), active(V * P, 0),
-      computed(V * P, 0), base(V), based(V, 0), included(ROUNDS * P * V, 0),
-      G_lim(P * L * 2), key(ROUNDS * P, kInf), sol(ROUNDS * P * 2), exact(ROUNDS * P, 0),
-      complete(P, 1), plane_key(P), plane_r(P), rows((V + L) * 2), rhs(V + L),
-      orders(std::min(V + L, KEPT_ORDERS) + 1), order(V + L), into(V), work(cfg_.samples()) {
+      P(planes_.count()), L(limits_.count()), vo_rows(buf.vo_rows), active(buf.active),
+      computed(buf.computed), base(buf.base), based(buf.based), included(buf.included),
+      starts(buf.starts), G_lim(buf.G_lim), key(buf.key), sol(buf.sol), exact(buf.exact),
+      complete(buf.complete), plane_key(buf.plane_key), plane_r(buf.plane_r), rows(buf.rows),
+      rhs(buf.rhs), orders(buf.orders), order(buf.order), into(buf.into), todo(buf.todo),
+      work(buf.work) {
+    // each read only once written (vo_rows once computed, sol once solved...) but for these
+    vo_rows.resize(V * P), active.assign(V * P, 0), computed.assign(V * P, 0);
+    if (int64_t(base.size()) < V) base.resize(V);  // never shrunk: each keeps its capacity
+    based.assign(V, 0), included.assign(ROUNDS * P * V, 0), G_lim.resize(P * L * 2);
+    key.assign(ROUNDS * P, kInf), sol.resize(ROUNDS * P * 2), exact.assign(ROUNDS * P, 0);
+    complete.assign(P, 1), plane_key.resize(P), plane_r.resize(P), rows.resize((V + L) * 2);
+    rhs.resize(V + L), order.resize(V + L), into.resize(V), starts.clear(), todo.clear();
+    work.resize(cfg_.samples());
     for (int64_t p = 0; p < P; ++p) {  // the 3D limit rows G3 v <= h3 on P_phi: G3 [e1, e2(phi)]
         for (int64_t j = 0; j < L; ++j) {
             const double* g = &limits.G[3 * j];

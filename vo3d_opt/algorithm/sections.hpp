@@ -209,15 +209,26 @@ inline double pseudo_angle(double y, double x) {
 constexpr int BOX_EDGES[12][2] = {{0, 1}, {0, 2}, {0, 4}, {1, 3}, {1, 5}, {2, 3},
                                   {2, 6}, {3, 7}, {4, 5}, {4, 6}, {5, 7}, {6, 7}};
 
-// Where box edge e crosses the plane (c, s), if it does.
-inline bool edge_crossing(const Base& base, int e, double c, double s, double& x, double& y) {
+// C_pz's corners turned onto the plane (c, s): in-plane y and height z above it, per corner.
+struct Corners {
+    double y[8], z[8];
+};
+
+inline Corners turned(const Base& base, double c, double s) {
+    Corners out;
+    for (int k = 0; k < 8; ++k)
+        out.y[k] = c * base(1, k) + s * base(2, k), out.z[k] = c * base(2, k) - s * base(1, k);
+    return out;
+}
+
+// Where box edge e crosses the plane, if it does.
+inline bool edge_crossing(const Base& base, const Corners& at, int e, double& x, double& y) {
     int ka = BOX_EDGES[e][0], kb = BOX_EDGES[e][1];
-    double za = c * base(2, ka) - s * base(1, ka), zb = c * base(2, kb) - s * base(1, kb);
+    double za = at.z[ka], zb = at.z[kb];
     if (!(za * zb <= 0 && za != zb)) return false;
     double f = za / (za - zb);
     x = base(0, ka) + f * (base(0, kb) - base(0, ka));
-    double ya = c * base(1, ka) + s * base(2, ka), yb = c * base(1, kb) + s * base(2, kb);
-    y = ya + f * (yb - ya);
+    y = at.y[ka] + f * (at.y[kb] - at.y[ka]);
     return true;
 }
 
@@ -234,11 +245,14 @@ inline int64_t pyramid_section(const Pyramid& py, const Base& base, double c, do
     sec.halfplane[2] = 0.0;
     // C_pz meets the plane in the convex hull of its edges' crossings; the extreme ones seen
     // from the apex bound the section. First pass: the mean direction of the crossings.
-    int64_t n_cross = 0;
+    Corners at = turned(base, c, s);
+    int n_cross = 0;
     bool at_apex = false;
-    double sx = 0.0, sy = 0.0, mx = 0.0, my = 0.0, x, y;
+    double sx = 0.0, sy = 0.0, mx = 0.0, my = 0.0, xs[12], ys[12];
     for (int e = 0; e < 12; ++e) {
-        if (!edge_crossing(base, e, c, s, x, y)) continue;
+        double& x = xs[n_cross];
+        double& y = ys[n_cross];
+        if (!edge_crossing(base, at, e, x, y)) continue;
         double norm = std::sqrt(x * x + y * y);
         n_cross += 1, sx = sx + x, sy = sy + y;
         if (norm > 0) mx = mx + x / norm, my = my + y / norm;
@@ -247,8 +261,8 @@ inline int64_t pyramid_section(const Pyramid& py, const Base& base, double c, do
     if (n_cross == 0) return py.inside ? int64_t(INSIDE_CODE) : int64_t(POINT);
     sec.symmetry[0] = sx / double(n_cross), sec.symmetry[1] = sy / double(n_cross);
     double a_lo = kInf, a_hi = -kInf;
-    for (int e = 0; e < 12; ++e) {  // second pass: the extreme angles about that direction
-        if (!edge_crossing(base, e, c, s, x, y)) continue;
+    for (int q = 0; q < n_cross; ++q) {  // second pass: the extreme angles about that direction
+        double x = xs[q], y = ys[q];
         double ang = pseudo_angle(mx * y - my * x, mx * x + my * y);
         if (ang < a_lo) a_lo = ang, sec.chord[0][0] = x, sec.chord[0][1] = y;
         if (ang > a_hi) a_hi = ang, sec.chord[1][0] = x, sec.chord[1][1] = y;
@@ -364,6 +378,9 @@ struct RowWork {
     Section sec;
     std::vector<double> dist, side_y;  // (K + 2,) the boundary candidates' distances and sides
     explicit RowWork(int64_t K) : sec(K), dist(K + 2), side_y(K + 2) {}
+    void resize(int64_t K) {
+        sec.curve_x.resize(K), sec.curve_y.resize(K), dist.resize(K + 2), side_y.resize(K + 2);
+    }
 };
 
 // VO k's points in the planes' frame (cones first, then pyramids), into base (3, K + 3).

@@ -419,6 +419,7 @@ inline std::vector<NeighbourRow> cone_rows(const double* p, const double* v_now,
 inline std::vector<Pyramid> pyramids_in_reach(const double* p, const Rows& prisms, const Bounds& b,
                                               const Config& cfg) {
     std::vector<Pyramid> out;
+    out.reserve(prisms.n);
     for (int64_t j = 0; j < prisms.n; ++j) {
         double dist = std::sqrt(sq(prisms(j, 0) - p[0]) + sq(prisms(j, 1) - p[1]));
         double reach = cfg.obstacle_horizon;
