@@ -314,11 +314,13 @@ inline void PlaneQPs::least_round(int64_t p) {
 
 // The first (r, p) of the least key: the least key, then the first round, then the first plane.
 inline std::pair<int64_t, int64_t> PlaneQPs::least_key() const {
-    int64_t bp = 0;
+    const double* pk = plane_key.data();
+    const int64_t* pr = plane_r.data();
+    double bk = pk[0];
+    int64_t br = pr[0], bp = 0;
     for (int64_t p = 1; p < P; ++p)
-        if (plane_key[p] < plane_key[bp] || (plane_key[p] == plane_key[bp] && plane_r[p] < plane_r[bp]))
-            bp = p;
-    return {plane_r[bp], bp};
+        if (pk[p] < bk || (pk[p] == bk && pr[p] < br)) bk = pk[p], br = pr[p], bp = p;
+    return {br, bp};
 }
 
 // Best first over the QPs (step 4): each iteration takes the least key; a plane not yet
