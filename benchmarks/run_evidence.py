@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from pages import RESULTS, machine_line, write_page
+from pages import RESULTS, commit, machine_line, write_page
 from run_sweeps import vo3d_cmd, vo3d_sweep  # this folder's
 
 FAMILIES = ("pair", "group", "dense", "lagged", "noisy", "intruder", "rotorpy")
@@ -38,6 +38,8 @@ RVO2 = ("pair", "dense")  # the obstacle-free families: RVO2-3D flies them
 #: The order of the runs of a family: none first (the others' risk ratios need it).
 METHODS = ("none", "vo3d", "rvo2")
 NAMES = {"vo3d": "vo3d (ours, preset safe)", "rvo2": "RVO2-3D", "none": "no avoidance"}
+#: Each sweep directory's list of the commits its sittings flew, one line per sitting.
+COMMITS = "commits.txt"
 #: The preset our method flies (``--preset``; the pages name it).
 PRESET = {"name": "safe"}
 
@@ -56,6 +58,8 @@ def run_one(family: str, method: str, n: int, out_root: Path, where: list[str]) 
         cmd += ["--against", str(out_root / family / "none")]
     if method == "vo3d" and PRESET["name"] != "safe":
         cmd += ["--preset", PRESET["name"]]
+    with (out / COMMITS).open("a") as f:  # the page names the code every sitting flew
+        f.write(commit() + "\n")
     t0 = time.perf_counter()
     summary = vo3d_sweep(cmd, out, f"{family} ({method})", log_mode="a")
     print(f"  {family} {method}: {summary['encounters']} encounters, this sitting "
@@ -92,6 +96,19 @@ def _sittings(out: Path) -> float:
             if line.startswith("done:") and " in " in line:
                 total += float(line.split(" in ", 1)[1].split(" s", 1)[0])
     return total
+
+
+def flown_on(found: dict[str, Path]) -> list[str]:
+    """Which commits each method's sittings flew (recorded by run_one)."""
+    lines = []
+    for method, out in found.items():
+        path = out / COMMITS
+        seen = list(dict.fromkeys(path.read_text().split("\n"))) if path.exists() else []
+        seen = [c for c in seen if c]
+        lines.append(f"- {NAMES[method]}: " + (", ".join(f"`{c}`" for c in seen) if seen
+                     else "not recorded (flown before the sittings recorded their commit)"))
+    return ["Flown on (each sitting's commit; where it is not this page's, the decisions are "
+            "the same bit for bit: tests/test_golden.py holds between them):", "", *lines, ""]
 
 
 def method_rows(family: str, out_root: Path) -> tuple[list[str], dict[str, Path]]:
@@ -174,6 +191,7 @@ def page(family: str, out_root: Path, pages: Path) -> str:
         *table,
         "",
     ]
+    lines += flown_on(found)
     if found:
         figure = pages / f"{family}.png"
         runs = {m: pd.read_parquet(out / "encounters.parquet") for m, out in found.items()}
