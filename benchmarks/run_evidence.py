@@ -87,15 +87,17 @@ def _ratio(r: dict[str, Any] | None) -> str:
     return f"{r['ratio']:.3g} (95 % CI [{lo:.3g}, {hi:.3g}]; upper 95 % {r['upper95']:.3g})"
 
 
-def _sittings(out: Path) -> float:
-    """Seconds of flight over every sitting, from the sweep's log lines."""
-    total = 0.0
+def _sittings(out: Path, encounters: int) -> float | None:
+    """Seconds of flight over every sitting, from the sweep's log lines; None when the logged
+    sittings did not fly every encounter (one was stopped before its last line)."""
+    total, flown = 0.0, 0
     log = out / "sweep.log"
     if log.exists():
-        for line in log.read_text().splitlines():
+        for line in log.read_text(errors="replace").splitlines():
             if line.startswith("done:") and " in " in line:
+                flown += int(line.split()[1])
                 total += float(line.split(" in ", 1)[1].split(" s", 1)[0])
-    return total
+    return total if flown == encounters else None
 
 
 def flown_on(found: dict[str, Path]) -> list[str]:
@@ -115,7 +117,7 @@ def method_rows(family: str, out_root: Path) -> tuple[list[str], dict[str, Path]
     lines = [
         "| method | encounters | errors | collisions | intrusions | not all arrived | "
         "limit violations | min d / r_pz | risk ratio, collisions | risk ratio, intrusions | "
-        "flight s per 1,000 |",
+        "flight s per 1,000 (-: a sitting stopped unlogged) |",
         "|---|---:|---:|---|---|---:|---:|---:|---|---|---:|",
     ]
     found = {}
@@ -127,14 +129,15 @@ def method_rows(family: str, out_root: Path) -> tuple[list[str], dict[str, Path]
         found[method] = out
         s = json.loads((out / "summary.json").read_text())
         r, rr = s["rates"], s.get("risk_ratios", {})
-        per_k = 1000 * _sittings(out) / max(1, s["encounters"])
+        flight = _sittings(out, s["encounters"])
+        per_k = "-" if flight is None else f"{1000 * flight / max(1, s['encounters']):.0f}"
         lines.append(
             f"| {NAMES[method]} | {s['encounters']:,} | {len(s['errors'])} | "
             f"{_rate(r['collision'])} | {_rate(r['intrusion'])} | "
             f"{s['encounters_not_all_arrived']} | {r['limit_violation']['events']} | "
             f"{s['min_normalised_distance']:.3f} | "
             f"{'-' if method == 'none' else _ratio(rr.get('collision'))} | "
-            f"{'-' if method == 'none' else _ratio(rr.get('intrusion'))} | {per_k:.0f} |"
+            f"{'-' if method == 'none' else _ratio(rr.get('intrusion'))} | {per_k} |"
         )
     return lines, found
 
