@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from vo3d_opt.geometry.pyramid import prism_rows
 from vo3d_opt.sim.landing import Landing
 from vo3d_opt.sim.record import SelectorLike, Snapshot, StepDecision
 from vo3d_opt.sim.safety import (
@@ -25,6 +26,7 @@ from vo3d_opt.sim.safety import (
     planning_limits,
 )
 from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
+from vo3d_opt.sim.sensed_batch import Fleet, Observer, decide_sensed
 from vo3d_opt.sim.sensing import Sensor
 from vo3d_opt.types import AgentState, Limits, Neighbor
 
@@ -176,6 +178,12 @@ class PerAgentSelect(_SelectorStep):
         self.sensed_idx = np.flatnonzero(sc.sensed) if sc.obstacles else np.zeros(0, dtype=int)
         self.spheres = sc.sphere_neighbors()
         self.order = sorted(range(sc.n_agents), key=lambda i: sc.ids[i])
+        #: With a sensor and a compiled decision, every vehicle in one call (_decide_sensed).
+        self.one_call = sensor is not None and bool(getattr(selector, "compiled", False))
+        self.sphere_rows = np.array(
+            [[*s.position, s.r_pz] for s in self.spheres], dtype=float
+        ).reshape(-1, 4)
+        self.prism_rows = prism_rows([self.bodies[m] for m in self.sensed_idx])
 
     def _sensed(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Centre distances (N, N), obstacle surface distances (N, M), sphere surface distances
@@ -211,6 +219,15 @@ class PerAgentSelect(_SelectorStep):
             self.sensor.push(p, v)
         u, statuses = np.zeros((n, 3)), np.full(n, "", dtype=object)
         dtimes, stimes = np.full(n, np.nan), np.full(n, np.nan)
+        if self.one_call and snap.deciding.any():
+            t0 = time.perf_counter()
+            who = np.array([i for i in self.order if not done[i]])
+            u[who], statuses[who] = self._decide_sensed(snap, who, obst, sph)
+            dtimes[who] = stimes[who] = (time.perf_counter() - t0) / who.shape[0]
+            step = StepDecision(
+                commands=u, statuses=statuses, decision_times=dtimes, solve_times=stimes
+            )
+            return self._land(snap, step)
         for i in self.order:
             if done[i]:
                 continue
@@ -248,6 +265,41 @@ class PerAgentSelect(_SelectorStep):
             snap,
             StepDecision(commands=u, statuses=statuses, decision_times=dtimes, solve_times=stimes),
         )
+
+    def _decide_sensed(
+        self, snap: Snapshot, who: np.ndarray, obst: np.ndarray, sph: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The compiled decisions of the vehicles ``who``, each from the others as its sensor
+        reports them (``sim.sensed_batch``): what the loop below decides, in one call."""
+        assert self.sensor is not None
+        sc, p = self.scenario, snap.positions
+        vrange, orange = sc.sensing.vehicle_range, sc.sensing.obstacle_range
+        observers = []
+        for i in who:
+            seen_p, seen_v = self.sensor.sensed(int(i))
+            near = np.linalg.norm(seen_p - p[i], axis=1)
+            js = np.array([j for j in np.flatnonzero(near <= vrange) if j != i], dtype=np.int64)
+            observers.append(
+                Observer(
+                    index=int(i),
+                    sensed=js,
+                    positions=seen_p[js],
+                    velocities=seen_v[js],
+                    spheres=np.flatnonzero(sph[i] <= orange),
+                    obstacles=np.flatnonzero(obst[i] <= orange),
+                )
+            )
+        fleet = Fleet(
+            positions=p,
+            velocities=snap.velocities,
+            preferred=snap.preferred,
+            r_pz=np.asarray(sc.r_pz, dtype=float),
+            deciding=snap.deciding,
+            limits=self.own_limits,
+            options=[self.selector.options_for(lim.speed[1], sc.dt) for lim in self.own_limits],
+            dt=sc.dt,
+        )
+        return decide_sensed(fleet, observers, self.sphere_rows, self.prism_rows)
 
     def extra(self) -> dict[str, Any]:
         return {
