@@ -33,6 +33,9 @@ with needs("sweep", "vo3d sweep"):
     import yaml
 
 _DPI = 110
+#: libyaml's emitter where PyYAML has it: the same text as the pure-Python one, about four
+#: times faster (a sweep without avoidance writes tens of thousands of failures).
+_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
 def failed_rows(rows: pd.DataFrame) -> pd.DataFrame:
@@ -106,7 +109,7 @@ def write_failures(result: SweepResult, out: Path) -> list[Path]:
     for _, row in failed_rows(result.rows).iterrows():
         data = failure_scenario(result, int(row["index"]))
         path = folder / f"{data['name']}.yaml"
-        text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
+        text = yaml.dump(data, Dumper=_DUMPER, sort_keys=False, default_flow_style=None, width=100)
         with atomic(path) as tmp:
             tmp.write_text(_header(result, row) + text)
         written.append(path)
