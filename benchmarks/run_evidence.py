@@ -38,7 +38,7 @@ RVO2 = ("pair", "dense")  # the obstacle-free families: RVO2-3D flies them
 #: The order of the runs of a family: none first (the others' risk ratios need it).
 METHODS = ("none", "vo3d", "rvo2")
 NAMES = {"vo3d": "vo3d (ours, preset safe)", "rvo2": "RVO2-3D", "none": "no avoidance"}
-#: Each sweep directory's list of the commits its sittings flew, one line per sitting.
+#: Each sweep directory's record of its sittings: "COMMIT ENCOUNTERS_FLOWN", one line each.
 COMMITS = "commits.txt"
 #: The preset our method flies (``--preset``; the pages name it).
 PRESET = {"name": "safe"}
@@ -58,10 +58,12 @@ def run_one(family: str, method: str, n: int, out_root: Path, where: list[str]) 
         cmd += ["--against", str(out_root / family / "none")]
     if method == "vo3d" and PRESET["name"] != "safe":
         cmd += ["--preset", PRESET["name"]]
-    with (out / COMMITS).open("a") as f:  # the page names the code every sitting flew
-        f.write(commit() + "\n")
-    t0 = time.perf_counter()
+    code, t0 = commit(), time.perf_counter()
     summary = vo3d_sweep(cmd, out, f"{family} ({method})", log_mode="a")
+    flown = _logged(out)[-1][0] if _logged(out) else 0
+    if flown:  # the page names the code of every sitting that flew encounters
+        with (out / COMMITS).open("a") as f:
+            f.write(f"{code} {flown}\n")
     print(f"  {family} {method}: {summary['encounters']} encounters, this sitting "
           f"{time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
     return summary
@@ -87,30 +89,40 @@ def _ratio(r: dict[str, Any] | None) -> str:
     return f"{r['ratio']:.3g} (95 % CI [{lo:.3g}, {hi:.3g}]; upper 95 % {r['upper95']:.3g})"
 
 
+def _logged(out: Path) -> list[tuple[int, float]]:
+    """(encounters flown, seconds) of each sitting that reached its last log line."""
+    log = out / "sweep.log"
+    if not log.exists():
+        return []
+    return [(int(line.split()[1]), float(line.split(" in ", 1)[1].split(" s", 1)[0]))
+            for line in log.read_text(errors="replace").splitlines()
+            if line.startswith("done:") and " in " in line]
+
+
 def _sittings(out: Path, encounters: int) -> float | None:
     """Seconds of flight over every sitting, from the sweep's log lines; None when the logged
     sittings did not fly every encounter (one was stopped before its last line)."""
-    total, flown = 0.0, 0
-    log = out / "sweep.log"
-    if log.exists():
-        for line in log.read_text(errors="replace").splitlines():
-            if line.startswith("done:") and " in " in line:
-                flown += int(line.split()[1])
-                total += float(line.split(" in ", 1)[1].split(" s", 1)[0])
-    return total if flown == encounters else None
+    done = _logged(out)
+    return sum(s for _, s in done) if sum(k for k, _ in done) == encounters else None
 
 
 def flown_on(found: dict[str, Path]) -> list[str]:
-    """Which commits each method's sittings flew (recorded by run_one)."""
-    lines = []
+    """The commit of each method's sittings and how many encounters each flew (run_one's
+    record), and whether the record covers every encounter."""
+    if not found:
+        return []
+    lines = ["Flown on (the commit of each sitting, with the encounters it flew):", ""]
     for method, out in found.items():
         path = out / COMMITS
-        seen = list(dict.fromkeys(path.read_text().split("\n"))) if path.exists() else []
-        seen = [c for c in seen if c]
-        lines.append(f"- {NAMES[method]}: " + (", ".join(f"`{c}`" for c in seen) if seen
-                     else "not recorded (flown before the sittings recorded their commit)"))
-    return ["Flown on (each sitting's commit; where it is not this page's, the decisions are "
-            "the same bit for bit: tests/test_golden.py holds between them):", "", *lines, ""]
+        entries = [line.split() for line in path.read_text().splitlines() if line.strip()] \
+            if path.exists() else []
+        total = json.loads((out / "summary.json").read_text())["encounters"]
+        recorded = sum(int(k) for _, k in entries)
+        text = ", ".join(f"`{c}` ({int(k):,})" for c, k in entries) or "commit not recorded"
+        if entries and recorded != total:
+            text += f"; {total - recorded:,} more in sittings that did not record theirs"
+        lines.append(f"- {NAMES[method]}: {text}")
+    return [*lines, ""]
 
 
 def method_rows(family: str, out_root: Path) -> tuple[list[str], dict[str, Path]]:

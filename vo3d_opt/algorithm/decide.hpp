@@ -35,7 +35,7 @@ namespace vo3d {
 enum Round : int64_t { PREFERRED = 0, SAMPLED = ROUNDS + 1, LEAST_BAD = ROUNDS + 2 };
 //: Decision.status: the order of vo3d_opt.status.DECISION_STATUSES.
 enum DecisionStatus : int64_t { OPTIMAL = 0, INSIDE_PROTECTED_ZONE = 1, INFEASIBLE_MIN_VIOLATION = 2 };
-//: Row counts whose solver order a decision keeps.
+//: Row counts whose solver order each thread keeps (seidel_order: it depends on the count alone).
 constexpr int64_t KEPT_ORDERS = 32;
 
 struct Decision {
@@ -55,6 +55,7 @@ struct SearchResult {
 // The buffers of a decision's plane QPs (PlaneQPs names each), kept from one decision to the
 // next (decide_one keeps one per thread): sized anew per decision, they allocate only while they
 // grow, and a decision costs a few microseconds, of which dozens of allocations would be one.
+// Each thread keeps its largest decision's size for its lifetime (tried: 72 P (V + 1) bytes).
 struct QPBuffers {
     std::vector<RoundRows> vo_rows;
     std::vector<uint8_t> active, computed, based, included, exact, complete, into;
@@ -92,7 +93,7 @@ struct PlaneQPs {
     std::vector<int64_t>& plane_r;           // ... and the first round that has it
     double w0[2];  // the preferred velocity in plane coordinates (the same on every plane)
     std::vector<double>&rows, &rhs;          // (V + L, 2), (V + L,): one QP's rows
-    std::vector<std::vector<int64_t>>& orders;  // the solver's row order for m rows, once
+    std::vector<std::vector<int64_t>>& orders;  // the solver's row order for m rows, kept
     std::vector<int64_t>& order;                // scratch: the order of a QP of many rows
     std::vector<uint8_t>& into;                 // (V,) scratch: the VOs a velocity is in
     std::vector<std::pair<int64_t, int64_t>>& todo;  // the (VO, plane) rows still to build
@@ -270,7 +271,7 @@ inline void PlaneQPs::solve(int64_t r, int64_t p, const Bounds& b) {
     const int64_t* ord = order.data();
     if (m >= int64_t(orders.size())) {  // many rows: the order computed each time
         seidel_order(m, order.data());
-    } else {  // the order depends on m alone: computed once per decision
+    } else {  // the order depends on m alone: computed once per thread
         if (orders[m].empty() && m > 0) {
             orders[m].resize(m);
             seidel_order(m, orders[m].data());

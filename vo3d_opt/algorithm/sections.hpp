@@ -373,7 +373,7 @@ inline void curve_rows(const Cone& cone, const Section& sec, const Config& cfg, 
     }
 }
 
-// Scratch of plane_rows, allocated once per decision.
+// Scratch of plane_rows (a decision's QPBuffers hold one).
 struct RowWork {
     Section sec;
     std::vector<double> dist, side_y;  // (K + 2,) the boundary candidates' distances and sides

@@ -210,24 +210,45 @@ class PerAgentSelect(_SelectorStep):
         return centre, obst, sph
 
     def decide(self, snap: Snapshot) -> StepDecision:
-        sc = self.scenario
-        p, v, done = snap.positions, snap.velocities, ~snap.deciding
-        r_pz, vrange, orange = sc.r_pz, sc.sensing.vehicle_range, sc.sensing.obstacle_range
+        p, v = snap.positions, snap.velocities
         n = p.shape[0]
         centre, obst, sph = self._sensed(p)
         if self.sensor is not None:
             self.sensor.push(p, v)
-        u, statuses = np.zeros((n, 3)), np.full(n, "", dtype=object)
-        dtimes, stimes = np.full(n, np.nan), np.full(n, np.nan)
-        if self.one_call and snap.deciding.any():
-            t0 = time.perf_counter()
-            who = np.array([i for i in self.order if not done[i]])
-            u[who], statuses[who] = self._decide_sensed(snap, who, obst, sph)
-            dtimes[who] = stimes[who] = (time.perf_counter() - t0) / who.shape[0]
-            step = StepDecision(
-                commands=u, statuses=statuses, decision_times=dtimes, solve_times=stimes
-            )
-            return self._land(snap, step)
+        step = StepDecision(
+            commands=np.zeros((n, 3)),
+            statuses=np.full(n, "", dtype=object),
+            decision_times=np.full(n, np.nan),
+            solve_times=np.full(n, np.nan),
+        )
+        if self.one_call:
+            self._decide_at_once(snap, obst, sph, step)
+        else:
+            self._decide_each(snap, (centre, obst, sph), step)
+        return self._land(snap, step)
+
+    def _decide_at_once(
+        self, snap: Snapshot, obst: np.ndarray, sph: np.ndarray, step: StepDecision
+    ) -> None:
+        """Every deciding vehicle in one compiled call (``_decide_sensed``) into ``step``; each
+        one's decision and solve time is the call's time over the vehicles it decided."""
+        who = np.array([i for i in self.order if snap.deciding[i]], dtype=np.int64)
+        if not who.size:
+            return
+        t0 = time.perf_counter()
+        step.commands[who], step.statuses[who] = self._decide_sensed(snap, who, obst, sph)
+        step.decision_times[who] = step.solve_times[who] = (time.perf_counter() - t0) / who.size
+
+    def _decide_each(
+        self, snap: Snapshot, sensed: tuple[np.ndarray, np.ndarray, np.ndarray], step: StepDecision
+    ) -> None:
+        """Each deciding vehicle by its own ``select`` call, in id order, into ``step``."""
+        sc = self.scenario
+        p, v, done = snap.positions, snap.velocities, ~snap.deciding
+        r_pz, vrange, orange = sc.r_pz, sc.sensing.vehicle_range, sc.sensing.obstacle_range
+        centre, obst, sph = sensed
+        u, statuses = step.commands, step.statuses
+        dtimes, stimes = step.decision_times, step.solve_times
         for i in self.order:
             if done[i]:
                 continue
@@ -261,10 +282,6 @@ class PerAgentSelect(_SelectorStep):
             u[i] = out if out.shape == (3,) else np.nan
             statuses[i] = str(d.status)
             stimes[i] = float(getattr(d, "solve_time", np.nan))
-        return self._land(
-            snap,
-            StepDecision(commands=u, statuses=statuses, decision_times=dtimes, solve_times=stimes),
-        )
 
     def _decide_sensed(
         self, snap: Snapshot, who: np.ndarray, obst: np.ndarray, sph: np.ndarray

@@ -64,8 +64,8 @@ def _spans(lists: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     sizes = np.array([len(x) for x in lists], dtype=np.int64)
     ends = np.cumsum(sizes)
     span = np.ascontiguousarray(np.stack([ends - sizes, ends], axis=1).reshape(-1, 2))
-    idx = np.concatenate([np.asarray(x, dtype=np.int64) for x in lists]) if lists else None
-    return span, np.ascontiguousarray(idx if idx is not None else np.zeros(0, dtype=np.int64))
+    idx = np.concatenate([*(np.asarray(x, dtype=np.int64) for x in lists), np.zeros(0, np.int64)])
+    return span, idx
 
 
 def sensed_swarm(
@@ -74,13 +74,13 @@ def sensed_swarm(
     """The kernel's arrays: the vehicles' rows, then each observer's sensed rows (its
     neighbours); ``spheres`` (S, 4) x, y, z, r_pz; ``prisms`` (M, 4)."""
     n = fleet.positions.shape[0]
-    k = [len(o.sensed) for o in observers]
-    rows = n + sum(k)
+    counts = [len(o.sensed) for o in observers]
+    rows = n + sum(counts)
     agents = np.zeros((rows, AGENT_COLUMNS))
     agents[:n, 0:3], agents[:n, 3:6] = fleet.positions, fleet.velocities
     agents[:n, 6:9], agents[:n, 9], agents[:n, 10] = fleet.preferred, fleet.r_pz, fleet.deciding
     nb_lists, start = [], n
-    for o, count in zip(observers, k, strict=True):
+    for o, count in zip(observers, counts, strict=True):
         block = agents[start : start + count]
         block[:, 0:3], block[:, 3:6] = o.positions, o.velocities
         block[:, 9], block[:, 10] = fleet.r_pz[o.sensed], fleet.deciding[o.sensed]
@@ -111,13 +111,15 @@ def decide_sensed(
     fleet: Fleet, observers: Sequence[Observer], spheres: np.ndarray, prisms: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each observer's velocity (D, 3) and status name (D,), in ``observers``' order: one
-    compiled call per set of planning options."""
+    compiled call per set of planning options, on the calling thread (a run's vehicles are
+    few; a sweep runs its encounters in parallel)."""
     sw = sensed_swarm(fleet, observers, spheres, prisms)
     out = np.empty((len(observers), MANY_OUT_SIZE))
-    by_options: dict[int, list[int]] = {}
+    # options_for keys a vehicle's options on its top speed (dt is the run's): one call each
+    by_top_speed: dict[float, list[int]] = {}
     for d, o in enumerate(observers):
-        by_options.setdefault(id(fleet.options[o.index]), []).append(d)
-    for ds in by_options.values():
+        by_top_speed.setdefault(float(fleet.limits[o.index].speed[1]), []).append(d)
+    for ds in by_top_speed.values():
         rows = np.array(ds, dtype=np.int64)
         part = sw._replace(
             who=sw.who[rows],

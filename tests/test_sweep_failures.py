@@ -1,0 +1,86 @@
+"""Encounters the sweeps found failing, each a scenario file in tests/data/sweep-failures/
+flown again: those whose cause was fixed fly clean; those not fixed yet are strict xfails."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from vo3d_opt.sim.metrics import summarize
+from vo3d_opt.sim.scenario import load_scenario
+from vo3d_opt.sim.simulator import run_scenario
+
+FAILURES = Path(__file__).parent / "data" / "sweep-failures"
+
+
+def flies_clean(name: str) -> None:
+    """No collision, no intrusion into a vehicle's or an obstacle's zone, no altitude limit
+    broken, everyone home."""
+    s = summarize(run_scenario(load_scenario(FAILURES / f"{name}.yaml"), progress=False))
+    assert s["collisions"] == 0 and s["pz_intrusions"] == 0
+    assert s["obstacle_pz_intrusions"] == 0
+    assert s["altitude_violations"] == 0 and s["all_reached"]
+
+
+# --- encounters a sweep found failing, flown again: the cause was fixed in the simulator ------
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["lagged-s0-i413", "lagged-s0-i809", "lagged-s0-i647", "dense-s0-i576", "lagged-s0-i317",
+     "lagged-s0-i1893", *(f"dense-s0-i{i}" for i in (1121, 3502, 6534, 7803, 9350)),
+     "dense-s0-i5051"],
+)
+def test_sweep_failures_are_fixed(name):
+    """`lagged` seed 0 before the margins derived from the scenario (sim/safety.py): encounter
+    413 went 0.30 m below the floor and into an obstacle's prism, 809 to 0.77 m from an
+    obstacle. With the margins: no intrusion, no altitude violation, everyone arrives. 647
+    climbed over a box whose prism reached the ceiling and, squeezed, slid down its side to
+    0.17 m from it; a prism reaching the ceiling is now gone round. In `dense` 576 one agent
+    stopped for good 8 m from its goal, wedged among three that had arrived and hover; it now
+    takes the simulator's detour after stalling (sim/traffic.GoalWithDetours) and arrives. In
+    `lagged` 317 (found with the first detour rule) an agent stalled 1-3 m from its goal was
+    sent off again and again; no detour within r_pz of the goal. In `dense` 1121, 3502, 6534,
+    7803 and 9350 (the 10,000-encounter sweep) one agent crept to a stop 1-2 m short of a goal
+    in a nook between hovering vehicles, where every ray of its VO runs on into their zones;
+    the simulator now lands an agent waiting at its goal's door when the straight step is
+    clear (sim/landing.py). In the 10,000-encounter `lagged` sweep 1893 crossed the edge of a
+    box's prism top 5.2 mm deep: its command grazed the flat top and the lag kept it lower;
+    every prism's top is now raised by the tracking error while planning (sim/safety.py,
+    ``prism_rise``). In `dense` 5051, flown with the closing guard (now the simulator's
+    default), one agent hovered 11.8 m from its goal among three hovering vehicles, the 90°
+    detour's nearest safe velocity hovering again; detours in a row now turn further (90°,
+    180°, 270°: ``test_dense_5051_arrives_by_the_detours_in_a_row``)."""
+    flies_clean(name)
+
+
+def test_dense_5051_arrives_by_the_detours_in_a_row(monkeypatch):
+    """Under the guard, the right turn alone (DETOUR_TURNS = 1, the rule before) leaves one
+    agent of `dense` 5051 stalled; the turns in a row bring every agent home."""
+    from vo3d_opt.sim import traffic
+
+    sc = load_scenario(FAILURES / "dense-s0-i5051.yaml")
+    assert summarize(run_scenario(sc, progress=False))["all_reached"]
+    monkeypatch.setattr(traffic, "DETOUR_TURNS", 1)
+    s = summarize(run_scenario(sc, progress=False))
+    assert (s["reached"], s["agents"]) == (23, 24)
+
+
+# --- encounters a sweep found failing whose cause is not fixed yet: each flies as recorded ---
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="a vehicle pinned at the altitude floor between a neighbour alongside and a box's "
+    "prism: not fixed yet (results: sweeps/group)",
+)
+@pytest.mark.parametrize("name", ["group-s0-i38855", "group-s0-i68905"])
+def test_open_sweep_failures(name):
+    """The 100,000-encounter `group` sweep: in 38855 and 68905 a vehicle descends to the floor
+    (z = 0) beside a neighbour flying alongside at the edge of its buffered zone, and next to
+    a box; with the floor below, the neighbour on one side and the box's prism ahead, no
+    velocity is outside every VO (38855: `infeasible_min_violation` twice) and the vehicle's
+    centre enters the prism, at least 2.0 m from the box itself. Strict: once a change clears
+    them, this test fails and moves to ``test_sweep_failures_are_fixed``."""
+    flies_clean(name)
