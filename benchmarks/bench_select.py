@@ -276,8 +276,9 @@ def machine() -> str:
     where = Path(vo3d_opt.__file__).parent  # the package measured: its checkout's commit
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=where).stdout.strip() or "unknown"
-    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
-                           text=True, cwd=where).stdout.strip()
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".",
+                            ":!docs/results"],  # the pages being written are not the code measured
+                           capture_output=True, text=True, cwd=where.parent).stdout.strip()
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "unknown"
     return (f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, "
             f"CPython {platform.python_version()}, numpy {np.__version__}; "
