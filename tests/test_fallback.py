@@ -459,9 +459,11 @@ def test_fine_fallback_changes_nothing_with_the_default_grid():
 
 
 def test_fast_options_keep_an_obstacle_zone_clear_in_a_lagged_encounter():
-    """Encounter 5573 of the lagged sweep (seed 0): with the fast preset's coarse grid everywhere a
-    vehicle pinned to the altitude floor drifted into a box's protected prism on least-bad
-    velocities; with the default grid near obstacles (``fine_fallback``) it stays out."""
+    """Encounter 5573 of the lagged sweep (seed 0): a vehicle pinned to the altitude floor beside
+    a box. While a ray under the floor counted as a way past the box (the prism's bottom at the
+    ground), it drifted into the prism on the fast preset's coarse grid and stayed out only
+    with the default grid near obstacles (``fine_fallback``); with the prism reaching below the
+    ground, it stays out with either grid."""
     from vo3d_opt.sim.scenario import scenario_variant
     from vo3d_opt.sim.simulator import run_scenario
     from vo3d_opt.sim.metrics import summarize
@@ -473,4 +475,4 @@ def test_fast_options_keep_an_obstacle_zone_clear_in_a_lagged_encounter():
         s = summarize(run_scenario(fast, progress=False))
         intrusions[fine] = s["obstacle_pz_intrusions"]
         assert s["collisions"] == 0
-    assert intrusions[False] >= 1 and intrusions[True] == 0, intrusions
+    assert intrusions == {False: 0, True: 0}, intrusions

@@ -846,6 +846,21 @@ def test_pyramid_horizon():
     assert not in_vo_pyramids(pyr, over)[0, 0]
 
 
+def test_a_ray_under_the_floor_is_no_way_past_an_obstacle():
+    """An obstacle stands on the ground: a velocity whose ray would reach its footprint only
+    below the ground enters C_pz (the vehicle levels off at the floor and flies into it), at the
+    time its horizontal path reaches the prism's near face; over the prism it still passes."""
+    ob = Cylinder(center=(23.0, 0.0), radius=3.0, height=30.0)  # L_pz = 10: near face at x = 18
+    pyr = vo_pyramids(np.array([0.0, 0.0, 0.5]), [ob])
+    down = np.array([[2.0, 0.0, -0.5], [2.0, 0.0, -4.0], [0.5, 0.0, -3.0]])  # under ground by x = 18
+    assert np.all(in_vo_pyramids(pyr, down)[0])
+    assert np.allclose(pyramid_entry_time(pyr, down)[0], 18.0 / down[:, 0])
+    beside = np.array([[2.0, 2.0, -0.5]])  # its horizontal path misses the footprint
+    assert not in_vo_pyramids(pyr, beside)[0, 0]
+    over = np.array([[2.0, 0.0, 4.0]])  # climbs over the 32 m prism before reaching it
+    assert not in_vo_pyramids(pyr, over)[0, 0]
+
+
 def test_base_circle_crossings_lie_on_plane_and_circle():
     """Eqs (14)-(16): the chord angles of cone_sections are where B_vo meets the plane."""
     rng = np.random.default_rng(11)

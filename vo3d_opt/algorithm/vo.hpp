@@ -175,6 +175,12 @@ struct Pyramid {
 };
 
 // Section 4.1 for a prism (x, y, L_pz, h_pz).
+//: How far C_pz reaches below the ground (m). An obstacle stands on the ground: a velocity
+//: whose ray would pass under it, below the floor, does not pass it (the vehicle levels off at
+//: the floor and flies into it), so the prism's bottom is taken far below any ray that reaches
+//: its footprint within the sensing range.
+constexpr double UNDERGROUND = 1e4;
+
 inline Pyramid build_pyramid(const double* p_A, double x, double y, double L, double H) {
     Pyramid py{};
     double dx = x - p_A[0], dy = y - p_A[1];
@@ -184,7 +190,7 @@ inline Pyramid build_pyramid(const double* p_A, double x, double y, double L, do
     py.frame[0][0] = hx, py.frame[0][1] = hy;   // h: horizontal, towards the obstacle
     py.frame[1][0] = -hy, py.frame[1][1] = hx;  // s: horizontal, left
     py.frame[2][2] = 1.0;                       // z: up
-    py.lo[0] = dist - L / 2, py.lo[1] = -L / 2, py.lo[2] = -p_A[2];
+    py.lo[0] = dist - L / 2, py.lo[1] = -L / 2, py.lo[2] = -p_A[2] - UNDERGROUND;
     py.hi[0] = dist + L / 2, py.hi[1] = L / 2, py.hi[2] = H - p_A[2];
     py.L_pz = L, py.h_pz = H;
     // Turned to face A, the square contains A exactly when A is within its apothem L/2.
