@@ -316,15 +316,16 @@ def test_paper_case1_under_noise_and_latency_is_collision_free():
 
 
 def test_the_derived_margins_keep_a_lagging_swarm_off_the_altitude_limits_and_the_boxes():
-    # paper case 4 with a 1 s velocity lag: planning to the real altitude limits (margin off)
-    # dips below the floor and into a box; the derived margin keeps every sample inside.
-    base = scenario_variant(load_scenario("paper-case4-five-uav-six-square-obstacles"),
-                            dynamics={"model": "first_order", "tau": 1.0})
+    # encounter 734 of the lagged sweep (first-order lag, boxes): planning to the real altitude
+    # limits (margin off) dips below the floor; the derived margin keeps every sample inside.
+    base = load_scenario(Path(__file__).parent / "data" / "sweep-failures" / "lagged-s0-i734.yaml")
+    assert base.vehicle_dynamics.model == "first_order"
     off = summarize(run_scenario(scenario_variant(base, safety={"altitude_margin": 0.0}),
                                  progress=False))
     on = summarize(run_scenario(base, progress=False))
     assert off["altitude_violations"] > 0
     assert on["altitude_violations"] == 0 and on["collisions"] == 0 and on["all_reached"]
+    assert on["obstacle_pz_intrusions"] == 0
 
 
 def test_rotorpy_in_a_wind_in_the_loop_judged_on_its_sub_steps():
