@@ -458,7 +458,7 @@ def test_fine_fallback_changes_nothing_with_the_default_grid():
     assert fell_back > 0
 
 
-def test_fast_options_keep_an_obstacle_zone_clear_in_a_lagged_encounter():
+def test_a_lagged_vehicle_at_the_floor_stays_out_of_a_box_with_either_grid():
     """Encounter 5573 of the lagged sweep (seed 0): a vehicle pinned to the altitude floor beside
     a box. While a ray under the floor counted as a way past the box (the prism's bottom at the
     ground), it drifted into the prism on the fast preset's coarse grid and stayed out only

@@ -2,9 +2,11 @@
 
 Each cylinder or box gets a tall square protected prism C_pz of side L_pz and height h_pz standing
 on the ground, centred on the obstacle and turned so that one face is square to the horizontal
-line of sight from A (section 4.1). With V_B = 0 the VO pyramid equals the collision pyramid: the
-set of velocities whose ray from p_A enters C_pz. Its apex is the velocity origin (eq. 19); the
-paper's base B_vo is the near face (eqs 20–22, lines L1–L4). We span the pyramid by all eight
+line of sight from A (section 4.1); its bottom lies 10 km below the ground (``UNDERGROUND`` in
+algorithm/vo.hpp), so that a ray under the floor is no way past the obstacle. With V_B = 0 the VO
+pyramid equals the collision pyramid: the set of velocities whose ray from p_A enters C_pz. Its
+apex is the velocity origin (eq. 19); the paper's base B_vo is the near face (eqs 20–22, lines
+L1–L4). We span the pyramid by all eight
 corners of C_pz: for a vehicle below h_pz this is exactly the near-face pyramid; above h_pz the top
 face is seen too and belongs to the obstacle's shadow (see formulations/geometry.md).
 """
