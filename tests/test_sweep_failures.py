@@ -86,8 +86,9 @@ def _open(name: str, reason: str) -> object:
         _open("intruder-s0-i29918", "an arrived vehicle hovers without avoiding"),
         _open("lagged-s0-i76920", "lag, the altitude ceiling and a prism's top"),
         *(
-            _open(f"lagged-s0-i{i}", "one vehicle short of its goal at the end")
-            for i in (14945, 51181, 92409)
+            _open(name, "one vehicle short of its goal at the end")
+            for name in ("lagged-s0-i14945", "lagged-s0-i51181", "lagged-s0-i92409",
+                         "dense-s0-i82432", "dense-s0-i82705", "dense-s0-i95048")
         ),
     ],
 )
@@ -98,7 +99,7 @@ def test_open_sweep_failures(name):
     0.7 % inside the pair's 9.90 m zone; no vehicle was deciding. `lagged` 76920: a vehicle
     under a 1 s lag climbing over a prism whose top lies near the altitude ceiling finds no
     velocity outside every VO for several steps and enters the prism (2.8 m from the box).
-    `lagged` 14945, 51181, 92409: one vehicle has not reached its goal when the run ends; no
-    zone is entered. Strict: once a change clears one, this test fails and the encounter moves
-    to ``test_sweep_failures_are_fixed``."""
+    `lagged` 14945, 51181, 92409 and `dense` 82432, 82705, 95048: one vehicle has not reached
+    its goal when the run ends; no zone is entered. Strict: once a change clears one, this
+    test fails and the encounter moves to ``test_sweep_failures_are_fixed``."""
     flies_clean(name)
