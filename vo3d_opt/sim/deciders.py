@@ -287,7 +287,7 @@ class PerAgentSelect(_SelectorStep):
         self, snap: Snapshot, who: np.ndarray, obst: np.ndarray, sph: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """The compiled decisions of the vehicles ``who``, each from the others as its sensor
-        reports them (``sim.sensed_batch``): what the loop below decides, in one call."""
+        reports them (``sim.sensed_batch``): what ``_decide_each`` decides, in one call."""
         assert self.sensor is not None
         sc, p = self.scenario, snap.positions
         vrange, orange = sc.sensing.vehicle_range, sc.sensing.obstacle_range
