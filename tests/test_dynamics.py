@@ -185,6 +185,25 @@ def test_rotorpy_hold_stops_a_vehicle_where_it_is():
     assert np.all(out.velocities[0] == 0) and out.positions[1, 0] > here[1, 0] + 0.2
 
 
+@pytest.mark.parametrize("spec", [{"model": "kinematic"}, {"model": "first_order", "tau": 0.5},
+                                  {"model": "rotorpy"}, {"model": "rotorpy", "batched": True}])
+def test_a_released_vehicle_flies_its_commands_again_from_where_it_was_held(spec):
+    dyn = make_dynamics(spec, None, seed=0)
+    dyn.reset(np.array([[0.0, 0.0, 10.0], [5.0, 0.0, 10.0]]))
+    forward = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    fly(dyn, forward, 2)
+    dyn.hold([True, False])
+    here = dyn.positions[0]
+    fly(dyn, forward, 2)
+    assert np.array_equal(dyn.positions[0], here) and dyn.held[0]
+    dyn.release([True, False])
+    assert not dyn.held.any()
+    out = fly(dyn, forward, 5)[-1]
+    assert np.all(np.isfinite(out.sample_positions)) and np.all(np.isfinite(out.velocities))
+    assert out.positions[0, 0] > here[0] + 0.5 and abs(out.positions[0, 2] - 10.0) < 0.1
+    assert out.velocities[0, 0] > 0.3
+
+
 def dryden_run(seed: int) -> np.ndarray:
     dyn = make_dynamics({"model": "rotorpy", "vehicle": "crazyflie", "substep_rate": 50},
                         {"type": "dryden", "velocity": [1.0, 0.0, 0.0]}, seed=seed)

@@ -67,6 +67,26 @@ def test_a_landing_and_a_first_order_run_side_by_side_with_others():
         assert same_record(alone, got), sc.name
 
 
+def test_arrived_agents_keeping_watch_side_by_side_with_others():
+    """intruder 29918: an arrived vehicle decides again while the intruder is in range
+    (traffic.keep_watch); side by side with another intruder run and two pair runs, each
+    vehicle still sees only its own run's."""
+    from pathlib import Path
+
+    from vo3d_opt.sim.scenario import load_scenario
+
+    data = Path(__file__).parent / "data" / "sweep-failures"
+    scs = [load_scenario(data / "intruder-s0-i29918.yaml"), make_encounter("pair", 1, 0).load(),
+           load_scenario(data / "intruder-s0-i63083.yaml"), make_encounter("pair", 1, 1).load()]
+    runs = [flown(sc, Method())[:2] for sc in scs]
+    together = fly_together(runs)
+    watched = together[0].decided & together[0].arrived[:-1]
+    assert watched.any()
+    for sc, got in zip(scs, together, strict=True):
+        alone = fly(*flown(sc, Method())[:2], progress=False)
+        assert same_record(alone, got), sc.name
+
+
 def test_runs_that_do_not_fit_are_refused():
     noisy = flown(make_encounter("noisy", 0, 0).load(), Method())
     assert not fits(noisy[0], noisy[1])

@@ -233,6 +233,7 @@ def test_prism_tops_are_raised_by_the_tracking_error_but_not_over_a_goal():
     assert derive_margins(given).prism_rise == 0.0
 
 
+
 # ---------------------------------------------------------------------------- traffic
 
 
@@ -253,6 +254,27 @@ def test_an_agent_that_does_not_avoid_flies_straight_and_the_others_take_the_avo
     # the avoider took all of the avoidance: more than it does when both avoid
     both = summarize(run_scenario(small(), progress=False))
     assert s["path_length_ratio"] > both["path_length_ratio"]
+
+
+@pytest.mark.parametrize("dynamics", ["kinematic", "first_order"])
+def test_an_arrived_agent_steps_out_of_an_intruders_way_and_comes_home(dynamics):
+    """``a`` hovers at its goal from the start; ``b`` does not avoid and flies straight through
+    it. ``a`` decides again while ``b`` is in range, keeps both zones apart and is home at the
+    end (hovering without deciding, it would be hit)."""
+    data = copy.deepcopy(SMALL)
+    data["agents"][0].update(start=[0.0, 0.0, 10.0], goal=[0.0, 0.0, 10.0])
+    data["agents"][1].update(avoids=False, start=[30.0, 0.5, 10.0], goal=[-30.0, 0.5, 10.0])
+    data["max_time"] = 25.0
+    if dynamics == "first_order":
+        data["dynamics"] = {"model": "first_order", "tau": 0.5}
+    sc = scenario_from_dict(data, "watch.yaml")
+    rec = run_scenario(sc, progress=False)
+    assert rec.arrived[0, 0] and rec.decided[:, 0].any() and not rec.decided[:, 1].any()
+    assert np.linalg.norm(rec.positions[:, 0] - [0.0, 0.0, 10.0], axis=1).max() > 1.0  # it moved
+    s = summarize(rec)
+    assert s["collisions"] == 0 and s["pz_intrusions"] == 0 and s["all_reached"]
+    assert np.linalg.norm(rec.positions[-1, 0] - sc.goals[0]) <= sc.goal_tolerance
+    assert rec.steps < sc.n_steps  # the run ended with everyone home, before max_time
 
 
 def test_the_bundled_intruder_does_not_avoid_and_nobody_collides():

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vo3d_opt.sim.traffic import STALL_TIME, GoalWithDetours, goal_velocity
+from vo3d_opt.sim.traffic import STALL_TIME, GoalWithDetours, goal_velocity, keep_watch
 
 DT = 0.2
 GOALS = np.array([[100.0, 0.0, 20.0], [0.0, 100.0, 10.0]])
@@ -162,3 +162,37 @@ def test_an_agent_pushed_off_its_goals_door_is_no_longer_waiting():
     pushed = p - np.array([[0.0, 0.0, 0.0], [20.0, 0.0, 0.0]])
     fly_rule(rule, [pushed])
     np.testing.assert_array_equal(rule.waiting, [True, False])
+
+
+# ---------------------------------------------------------------- arrived agents keep watch
+
+
+def brute_watch(p, goals, done, straight, watching, tol, vrange, run):
+    out = np.zeros(len(p), dtype=bool)
+    for i in range(len(p)):
+        if not done[i] or straight[i]:
+            continue
+        near = any(straight[j] and not done[j] and run[j] == run[i]
+                   and np.linalg.norm(p[i] - p[j]) <= vrange[i] for j in range(len(p)))
+        away = np.linalg.norm(p[i] - goals[i]) > tol[i]
+        out[i] = near or (watching[i] and away)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_keep_watch_is_the_pairwise_rule_within_each_run(seed):
+    rng = np.random.default_rng(seed)
+    n = 40
+    p = rng.uniform(-60.0, 60.0, (n, 3))
+    goals = p + rng.normal(0.0, 1.0, (n, 3))
+    kw = dict(done=rng.random(n) < 0.6, straight=rng.random(n) < 0.2,
+              watching=rng.random(n) < 0.3, tolerance=np.full(n, 1.0),
+              vehicle_range=rng.choice([20.0, 45.0, np.inf], n), run=rng.integers(0, 4, n))
+    got = keep_watch(p, goals, **kw)
+    want = brute_watch(p, goals, kw["done"], kw["straight"], kw["watching"], kw["tolerance"],
+                       kw["vehicle_range"], kw["run"])
+    assert np.array_equal(got, want) and got.any() and not got.all()
+    alone = dict(kw, run=None)
+    want = brute_watch(p, goals, kw["done"], kw["straight"], kw["watching"], kw["tolerance"],
+                       kw["vehicle_range"], np.zeros(n))
+    assert np.array_equal(keep_watch(p, goals, **alone), want)

@@ -138,6 +138,9 @@ class RVO2Step:
         for a in np.flatnonzero(~snap.deciding & ~self.frozen):  # arrived: hover, still seen
             sim.setAgentMaxSpeed(int(a), 0.0)
             self.frozen[a] = True
+        for a in np.flatnonzero(snap.deciding & self.frozen):  # arrived, keeping watch again
+            sim.setAgentMaxSpeed(int(a), float(self.vmax[a]))
+            self.frozen[a] = False
         p, v, w = snap.positions.tolist(), snap.velocities.tolist(), snap.preferred.tolist()
         for i in range(n):
             sim.setAgentPosition(i, tuple(p[i]))

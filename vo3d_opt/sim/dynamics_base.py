@@ -184,6 +184,17 @@ class Dynamics(ABC):
         self._v[m] = 0.0
         self._hold_model(m)
 
+    def release(self, mask: Any) -> None:
+        """Held vehicles where ``mask`` (N,) is true follow their commands again, starting from
+        hover where they are (the simulator's arrived agents that must avoid a vehicle that does
+        not: ``vo3d_opt.sim.traffic.keep_watch``)."""
+        m = np.asarray(mask, dtype=bool)
+        if m.shape != (self.n,):
+            raise ValueError(f"mask: must have shape ({self.n},), got {m.shape}")
+        m = m & self._held
+        self._held &= ~m
+        self._release_model(m)
+
     def step(self, commands: Any, dt: float) -> StepResult:
         """Fly every vehicle for ``dt`` seconds with its command (N, 3) m/s held constant."""
         u = _check_array(commands, "commands", self.n)
@@ -194,6 +205,9 @@ class Dynamics(ABC):
 
     def _hold_model(self, mask: np.ndarray) -> None:  # noqa: B027 - a hook, like _reset_model
         """Stop the model state of the vehicles in ``mask`` (nothing more by default)."""
+
+    def _release_model(self, mask: np.ndarray) -> None:  # noqa: B027 - a hook, like _hold_model
+        """Restart the model state of the vehicles in ``mask`` at hover (nothing by default)."""
 
     @abstractmethod
     def _step(self, u: np.ndarray, dt: float) -> StepResult: ...

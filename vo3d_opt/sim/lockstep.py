@@ -31,7 +31,7 @@ from vo3d_opt.sim.record import DecisionStep, RunRecord, Snapshot, StepDecision,
 from vo3d_opt.sim.safety import derive_margins
 from vo3d_opt.sim.scenario import Scenario
 from vo3d_opt.sim.simulator import INVALID
-from vo3d_opt.sim.traffic import GoalWithDetours
+from vo3d_opt.sim.traffic import GoalWithDetours, keep_watch
 
 
 def fits_scenario(sc: Scenario, deciding: bool = True) -> bool:
@@ -122,6 +122,9 @@ class _Batch:
         self.goals = cat([r.sc.goals for r in runs])
         self.tol = cat([np.full(r.sc.n_agents, r.sc.goal_tolerance) for r in runs])
         self.straight = cat([~r.sc.avoids for r in runs])
+        self.vrange = cat([np.full(r.sc.n_agents, r.sc.sensing.vehicle_range) for r in runs])
+        self.run = cat([np.full(r.sc.n_agents, i) for i, r in enumerate(runs)])
+        self.watching = np.zeros(n, dtype=bool)
         self.lagged = cat([np.full(r.sc.n_agents, _tau(r.sc) is not None) for r in runs])
         self.alpha = cat([np.full(r.sc.n_agents, _alpha(r.sc, dt)) for r in runs])
         self.prefer = GoalWithDetours(
@@ -146,8 +149,19 @@ class _Batch:
             r.flying = not done[r.lo : r.hi].all()
         for k in range(self.hist.vel.shape[0]):
             active = np.zeros(self.n, dtype=bool)
-            for r in self.runs:
-                r.flying = r.flying and k < r.total
+            self.watching = keep_watch(
+                p,
+                self.goals,
+                done=done,
+                straight=self.straight,
+                watching=self.watching,
+                tolerance=self.tol,
+                vehicle_range=self.vrange,
+                run=self.run,
+            )
+            for r in self.runs:  # a run ends when everyone is home and nobody keeps watch
+                home = done[r.lo : r.hi].all() and not self.watching[r.lo : r.hi].any()
+                r.flying = r.flying and k < r.total and not home
                 active[r.lo : r.hi] = r.flying
             if not active.any():
                 break
@@ -155,7 +169,6 @@ class _Batch:
             for r in self.runs:
                 if r.flying:
                     r.steps = k + 1
-                    r.flying = not done[r.lo : r.hi].all()
             self._retire()
         share = (time.perf_counter() - t_start) / len(self.runs)
         return [self._record(r, share) for r in self.runs]
@@ -179,10 +192,13 @@ class _Batch:
         """Step k of every run still flying (``fly``'s loop body); updates ``done`` and
         ``held`` in place, returns the new positions and velocities."""
         h, dt = self.hist, self.dt
+        watching = self.watching
+        held &= ~watching  # back to deciding, from hover (v is 0 since it was held)
+        held |= done & ~watching  # home again, nothing in range: hover
         w = np.asarray(self.prefer(p), dtype=float)
-        w[done] = 0.0
-        deciding = ~done & ~self.straight & active
-        waiting = self.prefer.waiting & deciding
+        w[done & ~watching] = 0.0
+        deciding = (~done | watching) & ~self.straight & active
+        waiting = self.prefer.waiting & deciding & ~done
         if self.select is not None:
             u, codes, took = self.select.decide(p, v, w, deciding)
         else:

@@ -335,6 +335,15 @@ class BatchedRotorPyDynamics(_RotorPyModel):
     def _hold_model(self, mask: np.ndarray) -> None:
         self.setpoints[mask] = 0.0
 
+    def _release_model(self, mask: np.ndarray) -> None:
+        # held rows are NaN (never stepped): each starts again level, at hover, where it stopped
+        idx = np.flatnonzero(mask)
+        if idx.size:
+            rows = self._hover_state(self._p[idx], np.zeros((idx.size, 3)))
+            at = self.torch.from_numpy(idx)
+            for key, a in rows.items():
+                self.state[key][at] = self.torch.from_numpy(a).to(self.state[key].dtype)
+
     def _substep(
         self, t: float, h: float, cmd_v: np.ndarray, active: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:

@@ -37,9 +37,12 @@ neighbours; its limits: speed ``(limits.speed[0], min(limits.speed[1], max_speed
 altitude range.
 
 An agent within ``goal_tolerance`` of its goal has arrived: it stops (velocity 0 from that
-sample on, which is what the others sense next), hovers there for the rest of the run, still
-seen by the others, and no longer decides. The run stops when all agents have arrived or after
-``max_time``. The loop never clips a decision: the metrics report any limit it breaks (a
+sample on, which is what the others sense next), hovers there, still seen by the others, and no
+longer decides, but while an agent that does not avoid, not yet arrived, is within its
+``sensing.vehicle_range``: then it decides again with its goal as preferred velocity until that
+agent is out of range and it is back within ``goal_tolerance`` (``traffic.keep_watch``; nobody
+else would steer round it). The run stops when all agents have arrived and none keeps watch, or
+after ``max_time``. The loop never clips a decision: the metrics report any limit it breaks (a
 non-finite command becomes 0 with the status ``invalid_velocity (...)``).
 """
 
@@ -68,7 +71,7 @@ from vo3d_opt.sim.record import (
 )
 from vo3d_opt.sim.safety import derive_margins, within_reach
 from vo3d_opt.sim.scenario import Scenario, load_scenario
-from vo3d_opt.sim.traffic import GoalWithDetours
+from vo3d_opt.sim.traffic import GoalWithDetours, keep_watch
 
 with needs("sim", "the simulator"):
     from tqdm import tqdm
@@ -158,18 +161,23 @@ def fly(
     last = v  # the commands before: rate-limited models change them gradually from these
     done = np.linalg.norm(p - sc.goals, axis=1) <= tol
     dyn.hold(done)
+    watching = np.zeros(n, dtype=bool)
     buf.pos[0], buf.arrived[0] = p, done
     steps = 0
     t_start = time.perf_counter()
     bar = _progress_bar(sc, total, progress)
     try:
         for k in range(total):
-            if done.all():
+            watching = _watch(sc, p, done, watching)
+            if done.all() and not watching.any():
                 break
             steps = k + 1
+            dyn.release(watching)  # back to deciding, from hover
+            dyn.hold(done & ~watching & ~dyn.held)  # home again, nothing in range: hover
+            v = dyn.velocities
             w = np.asarray(prefer(p), dtype=float)
-            w[done] = 0.0
-            deciding = ~done & ~straight
+            w[done & ~watching] = 0.0
+            deciding = (~done | watching) & ~straight
             waiting = getattr(prefer, "waiting", None)
             snap = Snapshot(
                 k=k,
@@ -178,14 +186,14 @@ def fly(
                 velocities=v,
                 preferred=w,
                 deciding=deciding,
-                waiting=None if waiting is None else waiting & deciding,
+                waiting=None if waiting is None else waiting & deciding & ~done,
             )
             out = step.decide(snap)
             u, statuses = _checked_commands(out, deciding)
             u[straight] = w[straight]
             if rate is not None:  # the vehicle's command interface, whoever decided: RotorPy's
                 u = within_reach(u, last, rate, dt, sc.max_speed)  # velocity loop (safety.py)
-                u[done] = 0.0  # held in hover
+                u[done & ~watching] = 0.0  # held in hover
                 last = u
             buf.pref[k], buf.cmd[k], buf.decided[k] = w, u, deciding
             buf.put_statuses(k, statuses, deciding)
@@ -211,6 +219,20 @@ def fly(
         bar.close()
     wall = time.perf_counter() - t_start
     return buf.record(sc, step.formulation, step.solver, steps, wall, step.extra())
+
+
+def _watch(sc: Scenario, p: np.ndarray, done: np.ndarray, watching: np.ndarray) -> np.ndarray:
+    """The arrived agents that decide this step (``traffic.keep_watch``)."""
+    n = sc.n_agents
+    return keep_watch(
+        p,
+        sc.goals,
+        done=done,
+        straight=~sc.avoids,
+        watching=watching,
+        tolerance=np.full(n, sc.goal_tolerance),
+        vehicle_range=np.full(n, sc.sensing.vehicle_range),
+    )
 
 
 def make_selector(

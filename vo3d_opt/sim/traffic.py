@@ -1,11 +1,13 @@
 """Non-cooperative traffic (a scenario agent's ``avoids: false``): agents that fly straight
-to their goal and never avoid. Their command is the goal-seeking velocity every agent prefers."""
+to their goal and never avoid. Their command is the goal-seeking velocity every agent prefers;
+the arrived agents they come near decide again (:func:`keep_watch`)."""
 
 from __future__ import annotations
 
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 
 def goal_velocity(positions: Any, goals: Any, max_speed: Any, dt: float) -> np.ndarray:
@@ -33,6 +35,42 @@ def goal_velocity(positions: Any, goals: Any, max_speed: Any, dt: float) -> np.n
     with np.errstate(invalid="ignore", divide="ignore"):
         unit = np.where(dist[:, None] > 0, to_goal / dist[:, None], 0.0)
     return unit * speed[:, None]
+
+
+#: Runs flown side by side are told apart by one more coordinate, ``run * RUN_APART`` m: no two
+#: vehicles of different runs come within any sensing range of each other.
+RUN_APART = 1e9
+
+
+def keep_watch(
+    positions: np.ndarray,
+    goals: np.ndarray,
+    *,
+    done: np.ndarray,
+    straight: np.ndarray,
+    watching: np.ndarray,
+    tolerance: np.ndarray,
+    vehicle_range: np.ndarray,
+    run: np.ndarray | None = None,
+) -> np.ndarray:
+    """Which arrived agents decide again (N,): a vehicle that does not avoid (``straight``),
+    still flying, within their ``vehicle_range`` of them, or one was (``watching``) and they are
+    not back within ``tolerance`` of their goal. A hovering agent that nobody steers round would
+    otherwise be hit where it waits. ``run`` (N,): the run of each vehicle when runs are flown
+    side by side (vehicles see only their own run's); all arrays (N,) but the (N, 3) ones."""
+    kept = done & ~straight
+    threat = straight & ~done
+    if not (kept.any() and (threat.any() or watching.any())):
+        return np.zeros(done.shape, dtype=bool)
+    near = np.zeros(done.shape, dtype=bool)
+    if threat.any():
+        runs = np.zeros(len(positions)) if run is None else np.asarray(run, dtype=float)
+        points = np.column_stack([positions, runs * RUN_APART])
+        d, j = cKDTree(points[threat]).query(points[kept], k=1)
+        same = runs[threat][j] == runs[kept]  # the nearest is another run's: none in this one
+        near[kept] = same & (d <= vehicle_range[kept])
+    away = np.linalg.norm(positions - goals, axis=1) > tolerance
+    return kept & (near | (watching & away))
 
 
 #: An agent is stalled when, over ``STALL_TIME`` s, it got closer to its goal by less than
