@@ -233,6 +233,31 @@ def test_prism_tops_are_raised_by_the_tracking_error_but_not_over_a_goal():
     assert derive_margins(given).prism_rise == 0.0
 
 
+def test_a_top_raised_to_within_the_tracking_error_of_the_ceiling_goes_up_to_it():
+    """Over a raised top just under the planning ceiling a lagging vehicle cannot keep above
+    the one and below the other (sweep `lagged` 76920 entered such a prism): the top goes up to
+    the ceiling, which the selector plans round; a top with room to spare, or under a goal,
+    stays where it was."""
+    lagged = {"dynamics": {"model": "first_order", "tau": 1.0}}
+    m = derive_margins(small(**lagged))
+    ceiling = SMALL["limits"]["altitude"][1] - m.altitude_margin
+    assert m.tracking > 0.2
+
+    def cylinder(y: float, gap: float) -> dict:  # its raised top gap below the ceiling
+        height = ceiling - gap - m.tracking - 2.0  # the prism's own 2 m above the body
+        return {"type": "cylinder", "center": [0.0, y], "radius": 1.0, "height": height}
+
+    thin, roomy = cylinder(-30.0, 0.5 * m.tracking), cylinder(30.0, 2.0 * m.tracking)
+    sc = small(**lagged, obstacles=[thin, roomy])
+    assert derive_margins(sc) == m
+    plan = planning_bodies(sc, m)
+    assert plan[0].prism_height == pytest.approx(ceiling + ALTITUDE_CLEARANCE)
+    assert plan[1].prism_height == pytest.approx(ceiling - 2.0 * m.tracking)
+    goal_above = copy.deepcopy(SMALL["agents"])
+    goal_above[0]["goal"] = [0.5, -30.0, ceiling - 0.1 * m.tracking]
+    plan = planning_bodies(small(**lagged, obstacles=[thin, roomy], agents=goal_above), m)
+    assert plan[0].prism_height == pytest.approx(ceiling - 0.5 * m.tracking)
+
 
 # ---------------------------------------------------------------------------- traffic
 

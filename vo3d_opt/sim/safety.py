@@ -32,7 +32,8 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
   (:func:`planning_bodies`; not over a start or goal above the prism): the top is flat, so a
   ray grazing it has no room for a lagging vehicle to fall below it, while the sides are
   planned as the square turned to face the vehicle, which leaves room around the protected
-  disc; 0 when the scenario gives ``safety.obstacle_margin``;
+  disc; 0 when the scenario gives ``safety.obstacle_margin``; a top left within ``tracking``
+  of the planning ceiling goes up to it (the prism is then gone round);
 * ``altitude_margin`` (m): ``max(v_max tau_eff, tracking)``: room to stop from full vertical
   speed, and the altitude a manoeuvre may cost; with rate-limited commands (RotorPy) the
   braking distance ``v_max tau_eff + v_max² / (2 command_rate)``; at most what keeps every
@@ -273,13 +274,21 @@ def inflated(body: Cylinder | Box, clearance: float, rise: float = 0.0) -> Cylin
 def planning_bodies(sc: Scenario, m: Margins) -> list[Cylinder | Box]:
     """The scenario's obstacles as the selector plans with them: :func:`inflated` by
     ``m.obstacle_margin`` and ``m.prism_rise``, the rise stopping :data:`ALTITUDE_CLEARANCE`
-    short of any start or goal above a prism (so that it stays reachable)."""
+    short of any start or goal above a prism (so that it stays reachable). A raised top that
+    leaves less than ``m.tracking`` below the planning ceiling goes up to the ceiling (the
+    selector then plans round the prism, never over it): in so thin a layer a lagging vehicle
+    cannot keep above the top and below the ceiling at once."""
     ends = np.concatenate([sc.starts, sc.goals])
+    ceiling = sc.limits.altitude[1] - m.altitude_margin
     out = []
     for body in sc.bodies:
         wide = inflated(body, m.obstacle_margin)
         over = np.linalg.norm(ends[:, :2] - np.asarray(wide.center), axis=1) < wide.side / 2
         above = ends[over, 2] - wide.prism_height
         room = float(np.min(above[above >= 0], initial=math.inf)) - ALTITUDE_CLEARANCE
-        out.append(inflated(body, m.obstacle_margin, min(m.prism_rise, room)))
+        raised = inflated(body, m.obstacle_margin, min(m.prism_rise, room))
+        if math.isinf(room) and 0.0 < ceiling - raised.prism_height < m.tracking:
+            up = ceiling - body.prism_height + ALTITUDE_CLEARANCE
+            raised = inflated(body, m.obstacle_margin, up)
+        out.append(raised)
     return out
