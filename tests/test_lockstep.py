@@ -87,6 +87,29 @@ def test_arrived_agents_keeping_watch_side_by_side_with_others():
         assert same_record(alone, got), sc.name
 
 
+@pytest.mark.parametrize("tau", [0.5, 1.0])
+def test_a_watcher_back_home_stops_in_both_loops(tau):
+    """``a`` keeps watch while ``b`` (avoids: false) passes and is still moving when it is back
+    home: both loops stop it there, so ``c`` senses it hovering at the next step."""
+    from vo3d_opt.sim.scenario import scenario_from_dict
+
+    data = {"name": "watch", "dt": 0.2, "max_time": 40.0, "sensing": {"vehicle_range": 20.0},
+            "limits": {"speed": [0.0, 4.0], "altitude": [0.0, 20.0]},
+            "defaults": {"r_pz": 5.0, "radius": 0.5, "max_speed": 4.0},
+            "agents": [{"id": "a", "start": [0.0, 0.0, 10.0], "goal": [0.0, 0.0, 10.0]},
+                       {"id": "b", "start": [30.0, 0.5, 10.0], "goal": [-30.0, 0.5, 10.0],
+                        "avoids": False},
+                       {"id": "c", "start": [-60.0, 8.0, 10.0], "goal": [60.0, 8.0, 10.0]}]}
+    data["dynamics"] = {"model": "first_order", "tau": tau}  # still moving when home
+    sc = scenario_from_dict(data, "watch.yaml")
+    alone = fly(*flown(sc, Method())[:2], progress=False)
+    watched = np.flatnonzero(alone.decided[:, 0])
+    assert watched.size and np.abs(alone.velocities[watched[-1], 0]).max() > 0.01
+    together = fly_together([flown(sc, Method())[:2], flown(make_encounter("pair", 1, 0).load(),
+                                                             Method())[:2]])
+    assert same_record(alone, together[0])
+
+
 def test_runs_that_do_not_fit_are_refused():
     noisy = flown(make_encounter("noisy", 0, 0).load(), Method())
     assert not fits(noisy[0], noisy[1])

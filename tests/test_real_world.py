@@ -257,6 +257,10 @@ def test_a_top_raised_to_within_the_tracking_error_of_the_ceiling_goes_up_to_it(
     goal_above[0]["goal"] = [0.5, -30.0, ceiling - 0.1 * m.tracking]
     plan = planning_bodies(small(**lagged, obstacles=[thin, roomy], agents=goal_above), m)
     assert plan[0].prism_height == pytest.approx(ceiling - 0.5 * m.tracking)
+    sized = small(**lagged, obstacles=[thin], safety={"obstacle_margin": 2.0 + m.tracking})
+    given = derive_margins(sized)  # the scenario sizes its obstacles alone: no rise
+    assert given.prism_rise == 0.0 and given.tracking == m.tracking
+    assert planning_bodies(sized, given)[0].prism_height == pytest.approx(ceiling - 0.5 * m.tracking)
 
 
 # ---------------------------------------------------------------------------- traffic
@@ -300,6 +304,19 @@ def test_an_arrived_agent_steps_out_of_an_intruders_way_and_comes_home(dynamics)
     assert s["collisions"] == 0 and s["pz_intrusions"] == 0 and s["all_reached"]
     assert np.linalg.norm(rec.positions[-1, 0] - sc.goals[0]) <= sc.goal_tolerance
     assert rec.steps < sc.n_steps  # the run ended with everyone home, before max_time
+
+
+def test_a_watcher_that_cannot_get_home_is_not_counted_arrived():
+    """The intruder stops 3 m from ``a``'s goal, inside its zone: ``a`` stays away to the end,
+    and the run does not count it as arrived."""
+    data = copy.deepcopy(SMALL)
+    data["agents"][0].update(start=[0.0, 0.0, 10.0], goal=[0.0, 0.0, 10.0])
+    data["agents"][1].update(avoids=False, start=[30.0, 0.5, 10.0], goal=[-3.0, 0.5, 10.0])
+    sc = scenario_from_dict(data, "blocked.yaml")
+    rec = run_scenario(sc, progress=False)
+    assert rec.steps == sc.n_steps and rec.arrived[0, 0] and not rec.arrived[-1, 0]
+    s = summarize(rec)
+    assert s["collisions"] == 0 and not s["all_reached"]
 
 
 def test_the_bundled_intruder_does_not_avoid_and_nobody_collides():

@@ -196,3 +196,8 @@ def test_keep_watch_is_the_pairwise_rule_within_each_run(seed):
     want = brute_watch(p, goals, kw["done"], kw["straight"], kw["watching"], kw["tolerance"],
                        kw["vehicle_range"], np.zeros(n))
     assert np.array_equal(keep_watch(p, goals, **alone), want)
+    lost = p.copy()
+    lost[np.flatnonzero(kw["straight"] & ~kw["done"])] = np.nan  # no threat flies on
+    assert np.array_equal(keep_watch(lost, goals, **kw),
+                          kw["watching"] & kw["done"] & ~kw["straight"]
+                          & (np.linalg.norm(p - goals, axis=1) > 1.0))

@@ -11,7 +11,8 @@ same metrics (:func:`vo3d_opt.sim.metrics.summarize`) judge both:
   loop's dynamics move the vehicles, ``p += v dt`` under the default kinematic model, or with
   the scenario's ``velocity_response_tau``);
 * an arrived agent's RVO2 max speed is set to 0 so it hovers there, still seen by the others (as
-  in our simulator); the run stops when all arrived or after ``max_time``.
+  in our simulator; one keeping watch for an agent that does not avoid gets its max speed
+  back); the run stops when all are home or after ``max_time``.
 
 Parameter choices (the honest comparison gives both methods the same protected distance):
 

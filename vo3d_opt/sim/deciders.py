@@ -1,8 +1,8 @@
 """The decision steps of the simulation loop (``simulator.fly``) that run a selector.
 
-* :class:`SwarmSelect`: ``VelocitySelector.select_many`` decides for every agent that has not
-  arrived in one call per step (compiled for the default formulation and backend; a loop of
-  ``select`` otherwise, inside the selector);
+* :class:`SwarmSelect`: ``VelocitySelector.select_many`` decides for every deciding agent (not
+  arrived, or keeping watch) in one call per step (compiled for the default formulation and
+  backend; a loop of ``select`` otherwise, inside the selector);
 * :class:`PerAgentSelect`: any ``SelectorLike`` called once per agent per step, in id order,
   with ``Neighbor`` objects built here (stand-ins, other libraries' selectors).
 
@@ -262,7 +262,7 @@ class PerAgentSelect(_SelectorStep):
                     velocity=seen_v[j],
                     r_pz=float(max(r_pz[i], r_pz[j])),
                     cooperative=not done[j],
-                )  # an arrived agent hovers: it does not avoid
+                )  # one that does not decide (hovering, or avoids: false) does not avoid
                 for j in np.flatnonzero(near <= vrange)
                 if j != i
             ]

@@ -8,7 +8,8 @@ Every model integrates N vehicles at once and keeps their state between control 
     out = dyn.step(commands, dt)               # (N, 3) commanded velocities for the period
     out.positions, out.velocities              # (N, 3) each: the real state at the period's end
     out.sample_positions                       # (S, N, 3): the state at each sub-step end
-    dyn.hold(arrived)                          # these stop dead where they are from now on
+    dyn.hold(arrived)                          # these stop dead where they are, until
+    dyn.release(watching)                      # these fly their commands again, from hover
 
 Models (the vehicle, its velocity controller and the wind are kept apart as in RotorPy):
 

@@ -1,6 +1,6 @@
 """The template every vehicle model follows (:class:`Dynamics`: N vehicles, ``reset``,
-``step``, ``hold``), what a step returns, and the scenario keys ``dynamics`` and ``wind``
-(:mod:`vo3d_opt.sim.dynamics` has the models and ``make_dynamics``)."""
+``step``, ``hold``, ``release``), what a step returns, and the scenario keys ``dynamics`` and
+``wind`` (:mod:`vo3d_opt.sim.dynamics` has the models and ``make_dynamics``)."""
 
 from __future__ import annotations
 
@@ -176,7 +176,8 @@ class Dynamics(ABC):
 
     def hold(self, mask: Any) -> None:
         """Vehicles where ``mask`` (N,) is true stop dead where they are and stay there (the
-        simulator's arrived agents hover at their goal); their commands are ignored from now on."""
+        simulator's arrived agents hover at their goal); their commands are ignored until
+        ``release``."""
         m = np.asarray(mask, dtype=bool)
         if m.shape != (self.n,):
             raise ValueError(f"mask: must have shape ({self.n},), got {m.shape}")

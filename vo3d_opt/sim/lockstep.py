@@ -127,9 +127,8 @@ class _Batch:
         self.watching = np.zeros(n, dtype=bool)
         self.lagged = cat([np.full(r.sc.n_agents, _tau(r.sc) is not None) for r in runs])
         self.alpha = cat([np.full(r.sc.n_agents, _alpha(r.sc, dt)) for r in runs])
-        self.prefer = GoalWithDetours(
-            self.goals, cat([r.sc.max_speed for r in runs]), dt, near=cat([r.sc.r_pz for r in runs])
-        )
+        speeds = cat([r.sc.cruise_speed for r in runs])  # fly's rule: scenario_goal_velocity
+        self.prefer = GoalWithDetours(self.goals, speeds, dt, near=cat([r.sc.r_pz for r in runs]))
         self.deciders = [r for r in runs if r.sc.avoids.any()]
         members = [Member(r.sc, r.step, r.lo, r.hi) for r in self.deciders]  # type: ignore[arg-type]
         self.select = BatchSelect(members, n) if members else None
@@ -193,8 +192,10 @@ class _Batch:
         ``held`` in place, returns the new positions and velocities."""
         h, dt = self.hist, self.dt
         watching = self.watching
+        home = done & ~watching & ~held  # home again, nothing in range: it stops and hovers
         held &= ~watching  # back to deciding, from hover (v is 0 since it was held)
-        held |= done & ~watching  # home again, nothing in range: hover
+        held |= home
+        v = np.where(home[:, None], 0.0, v)
         w = np.asarray(self.prefer(p), dtype=float)
         w[done & ~watching] = 0.0
         deciding = (~done | watching) & ~self.straight & active
@@ -219,12 +220,13 @@ class _Batch:
         flown[held] = 0.0
         p = p + flown * dt
         h.vel[k] = flown
-        arrived = ~done & (np.linalg.norm(p - self.goals, axis=1) <= self.tol)
+        at_goal = np.linalg.norm(p - self.goals, axis=1) <= self.tol
+        arrived = ~done & at_goal
         done |= arrived
         held |= arrived
         v = flown.copy()
         v[arrived] = 0.0
-        h.pos[k + 1], h.arrived[k + 1] = p, done
+        h.pos[k + 1], h.arrived[k + 1] = p, done & (at_goal | ~watching)
         return p, v
 
     def _land(

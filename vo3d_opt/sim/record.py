@@ -50,9 +50,10 @@ class SelectorLike(Protocol):
 @dataclass(frozen=True)
 class Snapshot:
     """What the agents sense at step ``k`` (time ``t``): everyone's ``positions`` and
-    ``velocities`` (N, 3), their ``preferred`` velocities (N, 3; 0 for arrived agents) and which
-    of them decide (``deciding`` (N,): those that have not arrived); ``waiting`` (N,) the
-    deciding agents that stalled at their goal's door, when the preferred-velocity rule says
+    ``velocities`` (N, 3), their ``preferred`` velocities (N, 3; 0 for arrived agents that hover)
+    and which of them decide (``deciding`` (N,): those that have not arrived, and arrived ones
+    keeping watch, ``traffic.keep_watch``); ``waiting`` (N,) the agents not yet arrived that
+    stalled at their goal's door, when the preferred-velocity rule says
     (``GoalWithDetours.waiting``; None otherwise)."""
 
     k: int
@@ -92,16 +93,17 @@ class DecisionStep(Protocol):
 class RunRecord:
     """Everything a run produced; arrays indexed [step, agent, ...] in the scenario's agent order.
 
-    ``positions[k]`` is the state at ``times[k]`` (k = 0..T); ``commands[k]`` the decision taken
-    at ``times[k]`` and ``velocities[k]`` the velocity flown over [t_k, t_k+1] (under kinematic
+    ``positions[k]`` is the state at ``times[k]`` (k = 0..T); ``commands[k]`` the decision taken at
+    ``times[k]`` and ``velocities[k]`` the velocity flown over [t_k, t_k+1] (under kinematic
     dynamics the command itself: then ``commands`` is the same array as ``velocities``; 0 for
-    arrived agents). ``decided[k, i]`` says whether agent i decided at step k; ``statuses``,
-    ``decision_times`` (wall time of its decision, s: the ``select()`` call, or its equal share
-    of the step's ``select_many()`` or ``doStep()`` call) and ``solve_times`` (the decision's
-    own ``solve_time``; the same array as ``decision_times`` when every step said the same)
-    are "" / NaN where it did not. The statuses are kept as ``status_codes`` (T, N) into
-    ``status_names`` (whose first is "", no decision); ``statuses`` spells them out (an object
-    array, built at each call).
+    arrived agents that hover). ``arrived[k, i]``: agent i has reached its goal by ``times[k]`` and,
+    if it keeps watch, is within ``goal_tolerance`` of it. ``decided[k, i]`` says whether agent i
+    decided at step k; ``statuses``, ``decision_times`` (wall time of its decision, s: the
+    ``select()`` call, or its equal share of the step's ``select_many()`` or ``doStep()`` call) and
+    ``solve_times`` (the decision's own ``solve_time``; the same array as ``decision_times`` when
+    every step said the same) are "" / NaN where it did not. The statuses are kept as
+    ``status_codes`` (T, N) into ``status_names`` (whose first is "", no decision); ``statuses``
+    spells them out (an object array, built at each call).
 
     A long run of a large swarm keeps its arrays in a temporary file (``spill``,
     :mod:`vo3d_opt.sim.spill`): they read as any array; :meth:`drop_resident` lets go of the

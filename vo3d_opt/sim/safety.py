@@ -277,7 +277,8 @@ def planning_bodies(sc: Scenario, m: Margins) -> list[Cylinder | Box]:
     short of any start or goal above a prism (so that it stays reachable). A raised top that
     leaves less than ``m.tracking`` below the planning ceiling goes up to the ceiling (the
     selector then plans round the prism, never over it): in so thin a layer a lagging vehicle
-    cannot keep above the top and below the ceiling at once."""
+    cannot keep above the top and below the ceiling at once. A given ``safety.obstacle_margin``
+    (no rise) sizes the obstacles alone."""
     ends = np.concatenate([sc.starts, sc.goals])
     ceiling = sc.limits.altitude[1] - m.altitude_margin
     out = []
@@ -287,7 +288,8 @@ def planning_bodies(sc: Scenario, m: Margins) -> list[Cylinder | Box]:
         above = ends[over, 2] - wide.prism_height
         room = float(np.min(above[above >= 0], initial=math.inf)) - ALTITUDE_CLEARANCE
         raised = inflated(body, m.obstacle_margin, min(m.prism_rise, room))
-        if math.isinf(room) and 0.0 < ceiling - raised.prism_height < m.tracking:
+        thin = 0.0 < ceiling - raised.prism_height < m.tracking
+        if m.prism_rise > 0.0 and math.isinf(room) and thin:
             up = ceiling - body.prism_height + ALTITUDE_CLEARANCE
             raised = inflated(body, m.obstacle_margin, up)
         out.append(raised)

@@ -8,12 +8,13 @@ time step." Here, every ``dt`` (:func:`fly`):
    so the order of the decisions does not matter; each agent's preferred velocity comes from a
    function of the positions (default :class:`vo3d_opt.sim.traffic.GoalWithDetours`: towards
    the goal at ``min(v_max, distance / dt)``, turned right for a while after an agent has
-   stalled for 4 s; 0 for arrived agents);
+   stalled for 4 s; 0 for arrived agents but those keeping watch, below);
 2. **decide**: a pluggable :class:`DecisionStep` turns the snapshot into one command per agent
-   that has not arrived: our selector for the whole swarm in one ``select_many`` call
-   (:class:`vo3d_opt.sim.deciders.SwarmSelect`, what ``run_scenario`` and ``vo3d run`` use),
-   any ``SelectorLike`` called once per agent (:class:`~vo3d_opt.sim.deciders.PerAgentSelect`),
-   or RVO2-3D (:class:`vo3d_opt.baselines.rvo2.RVO2Step`);
+   that decides (not arrived, or keeping watch): our selector for the whole swarm in one
+   ``select_many`` call (:class:`vo3d_opt.sim.deciders.SwarmSelect`, what ``run_scenario`` and
+   ``vo3d run`` use), any ``SelectorLike`` called once per agent
+   (:class:`~vo3d_opt.sim.deciders.PerAgentSelect`), or RVO2-3D
+   (:class:`vo3d_opt.baselines.rvo2.RVO2Step`);
 3. **integrate**: ``vo3d_opt.sim.dynamics``, the scenario's ``dynamics`` and ``wind``
    (``kinematic``: ``p += v_cmd dt``; ``first_order`` (or ``velocity_response_tau``):
    ``v += (v_cmd - v) min(1, dt / tau)``, ``p += v dt``; ``rotorpy``: RotorPy multirotors,
@@ -21,7 +22,7 @@ time step." Here, every ``dt`` (:func:`fly`):
    their commands, whoever gave them, change at most ``safety.command_rate`` per period).
 
 Agents with ``avoids: false`` never decide: they fly their preferred (straight-to-goal)
-velocity and the others see them as non-cooperative, as arrived ones. With sensing noise or
+velocity and the others see them as non-cooperative, as hovering ones. With sensing noise or
 latency each agent decides from its own view of the others (``deciders.decision_step``). The
 selector plans with the margins ``vo3d_opt.sim.safety`` derives from the scenario (acceleration
 bound, pz_buffer, altitude margin, obstacle prisms; ``formulations/real_world.md``).
@@ -29,8 +30,9 @@ bound, pz_buffer, altitude margin, obstacle prisms; ``formulations/real_world.md
 What an agent senses (both selector steps apply the same rules; ``vo3d_opt.swarm`` documents
 them): the other vehicles within ``sensing.vehicle_range`` (centre distance), as neighbours with
 their current velocity and ``r_pz = max(own r_pz, their r_pz)`` (so each side keeps the larger
-zone, which is what the metrics count); arrived ones as non-cooperative (they hover and no
-longer avoid, so a ``reciprocal`` selector takes all of the avoidance, not half); the obstacles
+zone, which is what the metrics count); those that do not decide (arrived ones hovering, and
+``avoids: false``) as non-cooperative (they do not avoid, so a ``reciprocal`` selector takes all
+of the avoidance, not half); the obstacles
 within ``sensing.obstacle_range`` of their nearest point (those with ``sensed: false`` are never
 seen), and the scenario's static spheres within that range as zero-velocity, non-cooperative
 neighbours; its limits: speed ``(limits.speed[0], min(limits.speed[1], max_speed))`` and the
@@ -140,7 +142,8 @@ def fly(
     spill_dir: str | Path | None = None,
 ) -> RunRecord:
     """The one simulation loop (the module docstring): sense → ``step.decide`` → integrate,
-    until every agent arrived or ``max_time`` (or ``max_steps``). ``preferred_velocity``:
+    until every agent arrived and none keeps watch, or ``max_time`` (or ``max_steps``); a
+    watcher away from its goal is recorded as not arrived. ``preferred_velocity``:
     positions (N, 3) → preferred velocities (N, 3), default the scenario's goal rule;
     ``dynamics``: default :func:`scenario_dynamics`; ``progress`` None = a bar only on a TTY;
     ``spill``: keep the record in a temporary file in ``spill_dir`` (:class:`RunBuffers`; None:
@@ -172,8 +175,7 @@ def fly(
             if done.all() and not watching.any():
                 break
             steps = k + 1
-            dyn.release(watching)  # back to deciding, from hover
-            dyn.hold(done & ~watching & ~dyn.held)  # home again, nothing in range: hover
+            _hover_or_decide(dyn, done, watching)
             v = dyn.velocities
             w = np.asarray(prefer(p), dtype=float)
             w[done & ~watching] = 0.0
@@ -202,11 +204,13 @@ def fly(
             p = flown.positions
             buf.vel[k] = flown.velocities
             buf.put_samples(k, flown.sample_positions, flown.sample_velocities)
-            arrived = ~done & (np.linalg.norm(p - sc.goals, axis=1) <= tol)
+            at_goal = np.linalg.norm(p - sc.goals, axis=1) <= tol
+            arrived = ~done & at_goal
             done = done | arrived
-            dyn.hold(arrived)  # an arrived agent hovers from now on: the others see it still
+            dyn.hold(arrived)  # an arrived agent hovers: the others see it still
             v = dyn.velocities
-            buf.pos[k + 1], buf.arrived[k + 1] = p, done
+            # a watcher away from its goal is not there: a run ending so has not all arrived
+            buf.pos[k + 1], buf.arrived[k + 1] = p, done & (at_goal | ~watching)
             buf.release(k)
             bar.update(1)
             bar.set_postfix_str(f"arrived {int(done.sum())}/{n}", refresh=False)
@@ -219,6 +223,13 @@ def fly(
         bar.close()
     wall = time.perf_counter() - t_start
     return buf.record(sc, step.formulation, step.solver, steps, wall, step.extra())
+
+
+def _hover_or_decide(dyn: Dynamics, done: np.ndarray, watching: np.ndarray) -> None:
+    """Watchers decide again, from hover; arrived agents home again with nothing in range
+    stop and hover."""
+    dyn.release(watching)
+    dyn.hold(done & ~watching & ~dyn.held)
 
 
 def _watch(sc: Scenario, p: np.ndarray, done: np.ndarray, watching: np.ndarray) -> np.ndarray:
@@ -295,8 +306,8 @@ class Simulator:
         spill: bool | None = None,
         spill_dir: str | Path | None = None,
     ) -> RunRecord:
-        """Simulate until every agent arrived or ``max_time``; ``progress`` None = only on a
-        TTY; ``spill``, ``spill_dir``: where the record lives (:func:`fly`)."""
+        """Simulate until every agent is home or ``max_time`` (``fly``); ``progress`` None =
+        only on a TTY; ``spill``, ``spill_dir``: where the record lives (:func:`fly`)."""
         return fly(
             self.scenario,
             self.step,

@@ -37,8 +37,8 @@ def goal_velocity(positions: Any, goals: Any, max_speed: Any, dt: float) -> np.n
     return unit * speed[:, None]
 
 
-#: Runs flown side by side are told apart by one more coordinate, ``run * RUN_APART`` m: no two
-#: vehicles of different runs come within any sensing range of each other.
+#: Runs flown side by side are told apart by one more coordinate, ``run * RUN_APART`` m, so that
+#: a vehicle's nearest threat is one of its own run's whenever its run has any.
 RUN_APART = 1e9
 
 
@@ -58,8 +58,9 @@ def keep_watch(
     not back within ``tolerance`` of their goal. A hovering agent that nobody steers round would
     otherwise be hit where it waits. ``run`` (N,): the run of each vehicle when runs are flown
     side by side (vehicles see only their own run's); all arrays (N,) but the (N, 3) ones."""
-    kept = done & ~straight
-    threat = straight & ~done
+    finite = np.isfinite(positions).all(axis=1)  # a vehicle gone astray threatens nobody
+    kept = done & ~straight & finite
+    threat = straight & ~done & finite
     if not (kept.any() and (threat.any() or watching.any())):
         return np.zeros(done.shape, dtype=bool)
     near = np.zeros(done.shape, dtype=bool)

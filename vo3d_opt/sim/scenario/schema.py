@@ -5,7 +5,7 @@ A scenario file is a YAML mapping::
     name: paper-case1-ten-uav-crossing     # required, unique among the bundled files
     description: free text                 # optional
     dt: 0.2                                # required: control and integration period, s
-    max_time: 150.0                        # required: s; the run stops earlier when all arrived
+    max_time: 150.0                        # required: s; earlier when all are home
     goal_tolerance: 1.0                    # m (default 1.0)
     limits:                                # required; the keys of vo3d_opt.types.Limits
       speed: [0.0, 4.0]                    # m/s: [v_min, v_max], v_min <= v_max, v_max > 0
