@@ -332,8 +332,10 @@ def test_ctrl_c_of_a_run_writing_its_output_leaves_it_complete_or_visibly_not(tm
         _interrupt_when(out, proc, moment)
         _, err = proc.communicate(timeout=TIMEOUT)
         assert "Traceback" not in err, (name, err[-2000:])
-        assert proc.returncode in (0, 130), (name, proc.returncode, err)
         names = {p.name for p in out.glob("*")} if out.exists() else set()
+        # a SIGINT while the interpreter shuts down, everything written, ends it by the signal
+        late = "summary.json" in names and proc.returncode == -signal.SIGINT
+        assert proc.returncode in (0, 130) or late, (name, proc.returncode, err)
         assert not any(name.startswith(".") for name in names), names
         if "summary.json" in names:
             import pandas as pd
