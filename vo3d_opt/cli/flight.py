@@ -26,10 +26,10 @@ def fly_and_summarize(
     """Fly the scenario (``args``: ``vo3d run``'s --threads, --max-neighbors, --spill,
     --spill-dir; None: the defaults); its record and summary."""
     log.info(
-        "running %s (%d agents, %d obstacles) with %s / %s",
+        "running %s (%s, %s) with %s / %s",
         sc.name,
-        sc.n_agents,
-        len(sc.obstacles),
+        _count(sc.n_agents, "agent"),
+        _count(len(sc.obstacles), "obstacle"),
         formulation,
         solver,
     )
@@ -99,3 +99,8 @@ def print_table(rows: list[dict[str, Any]], keys: list[str]) -> None:
     print("  ".join(k.ljust(w) for k, w in zip(keys, widths, strict=True)).rstrip())
     for c in cells:
         print("  ".join(v.ljust(w) for v, w in zip(c, widths, strict=True)).rstrip())
+
+
+def _count(n: int, noun: str) -> str:
+    """``1 agent``, ``2 agents``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
