@@ -150,9 +150,10 @@ def scenario_from_dict(data: Any, source: str = "<scenario>") -> Scenario:
     return sc
 
 
-def load_scenario(path: str | Path) -> Scenario:
+def load_scenario(path: str | Path, *, warn: bool = True) -> Scenario:
     """Read and validate a scenario file, or a bundled scenario by name (see :func:`resolve`);
-    raise :class:`ScenarioError` (one line) if unreadable or invalid."""
+    raise :class:`ScenarioError` (one line) if unreadable or invalid. ``warn``: log what
+    :meth:`Scenario.warnings` finds (starts inside a zone...)."""
     path = resolve(path)
     source = str(path)
     if _is_name(path):
@@ -164,7 +165,7 @@ def load_scenario(path: str | Path) -> Scenario:
     except OSError as exc:
         raise ScenarioError(f"{source}: cannot read: {exc.strerror or exc}") from None
     sc = scenario_from_dict(_parse(text, source), source)
-    for warning in sc.warnings():
+    for warning in sc.warnings() if warn else ():
         log.warning("%s: %s", sc.name, warning)
     return sc
 
