@@ -178,11 +178,12 @@ def failures_section(family: str, found: dict[str, Path], pages: Path) -> list[s
     shutil.rmtree(folder, ignore_errors=True)
     files = sorted((found["vo3d"] / "failures").glob("*.yaml"))
     if not files:
-        return lines + ["None: no collision, intrusion, agent short of its goal or limit "
-                        "broken in any encounter.", ""]
-    folder.mkdir(parents=True)
-    lines += [f"{len(files)} encounter{'s' if len(files) > 1 else ''}; each replays with "
-              "`vo3d run FILE --json`:", ""]
+        lines.append("None: no collision, intrusion, agent short of its goal or limit broken in "
+                     "any encounter.")
+    else:
+        folder.mkdir(parents=True)
+        lines += [f"{len(files)} encounter{'s' if len(files) > 1 else ''}; each replays with "
+                  "`vo3d run FILE --json`:", ""]
     for path in files:
         shutil.copy(path, folder / path.name)
         why = path.read_text().splitlines()[0].lstrip("# ")
