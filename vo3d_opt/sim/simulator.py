@@ -207,8 +207,7 @@ def fly(
             at_goal = np.linalg.norm(p - sc.goals, axis=1) <= tol
             arrived = ~done & at_goal
             done = done | arrived
-            dyn.hold(arrived)  # an arrived agent hovers: the others see it still
-            v = dyn.velocities
+            dyn.hold(arrived)  # an arrived agent hovers: the others see it still (v: next step)
             # a watcher away from its goal is not there: a run ending so has not all arrived
             buf.pos[k + 1], buf.arrived[k + 1] = p, done & (at_goal | ~watching)
             buf.release(k)

@@ -58,11 +58,11 @@ def keep_watch(
     not back within ``tolerance`` of their goal. A hovering agent that nobody steers round would
     otherwise be hit where it waits. ``run`` (N,): the run of each vehicle when runs are flown
     side by side (vehicles see only their own run's); all arrays (N,) but the (N, 3) ones."""
-    finite = np.isfinite(positions).all(axis=1)  # a vehicle gone astray threatens nobody
-    kept = done & ~straight & finite
-    threat = straight & ~done & finite
-    if not (kept.any() and (threat.any() or watching.any())):
+    kept, threat = done & ~straight, straight & ~done
+    if not (kept.any() and (threat.any() or watching.any())):  # most steps of most runs
         return np.zeros(done.shape, dtype=bool)
+    finite = np.isfinite(positions).all(axis=1)  # a vehicle gone astray threatens nobody
+    kept, threat = kept & finite, threat & finite
     near = np.zeros(done.shape, dtype=bool)
     if threat.any():
         runs = np.zeros(len(positions)) if run is None else np.asarray(run, dtype=float)
