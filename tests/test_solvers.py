@@ -353,3 +353,78 @@ def test_read_only_problem_data_is_accepted(name):
     res = backend.solve(qp)
     assert res.status == "optimal", res.info
     assert np.allclose(res.x, get_backend(REFERENCE).solve(qp).x, atol=1e-4)
+
+
+# ----------------------------------------------------------------- (f) DAQP's short path
+
+
+def _plane_like_qps(count: int) -> list[QP]:
+    """Plane-QP-shaped problems: P = 2 I, half-planes around the origin, some infeasible."""
+    rng = np.random.default_rng(7)
+    qps = []
+    for _ in range(count):
+        m = int(rng.integers(1, 30))
+        G = rng.normal(size=(m, 2))
+        h = rng.uniform(-2.0, 3.0, size=m)
+        qps.append(QP(P=2.0 * np.eye(2), q=rng.uniform(-8.0, 8.0, 2), G=G, h=h))
+    return qps
+
+
+def test_daqp_short_path_answers_as_the_standard_form() -> None:
+    """``G x <= h`` alone goes to DAQP as it is: the same status and answer (to rounding) as
+    through the standard form, feasible or not, and the caller's arrays untouched."""
+    daqp_backend = get_backend("daqp")
+    statuses = set()
+    for qp in _plane_like_qps(300):
+        kept = [a.copy() for a in (qp.P, qp.q, qp.G, qp.h)]
+        short, standard = daqp_backend.solve(qp), Backend.solve(daqp_backend, qp)
+        assert short.status == standard.status, (short, standard)
+        statuses.add(short.status)
+        if standard.x is not None:
+            assert np.allclose(short.x, standard.x, atol=1e-9)
+        assert all(np.array_equal(a, b) for a, b in zip((qp.P, qp.q, qp.G, qp.h), kept))
+    assert statuses == {"optimal", "infeasible"}  # both kinds were met
+
+
+def test_daqp_short_path_only_for_arrays_it_can_take() -> None:
+    """The compiled check sends only C-contiguous, finite float arrays with a symmetric P
+    as they are (2: copies for read-only ones); everything else takes the standard form,
+    whose answers it still matches."""
+    from vo3d_opt import _core
+
+    qp = _plane_like_qps(1)[0]
+    P, q, G, h = qp.P, qp.q, qp.G, qp.h
+    assert _core.qp_rows_form(P, q, G, h) == 0
+    ro = G.copy()
+    ro.setflags(write=False)
+    assert _core.qp_rows_form(P, q, ro, h) == 2
+    skew = P.copy()
+    skew[0, 1] += 1.0
+    h_inf = h.copy()
+    h_inf[0] = np.inf
+    others = [
+        (skew, q, G, h), (P, q, np.asfortranarray(np.c_[G, G])[:, :2], h), (P, q, G, h_inf),
+        (P, q, G.astype(np.float32), h), (P, q, None, None), (P, q, G[:, :1], h), (P, q[:1], G, h),
+    ]
+    for args in others:
+        assert _core.qp_rows_form(*args) == 1, args
+    backend = get_backend("daqp")
+    for args in [(P, q, ro, h), (skew, q, G, h), (P, q, G, h_inf)]:
+        case = QP(P=args[0], q=args[1], G=args[2], h=args[3])
+        short, standard = backend.solve(case), Backend.solve(backend, case)
+        assert short.status == standard.status
+        assert short.x is None or np.allclose(short.x, standard.x, atol=1e-9)
+
+
+def test_daqp_short_path_shares_its_bounds_unchanged() -> None:
+    """The short path's lower bounds and flags are shared between solves: DAQP must leave them
+    as they are."""
+    from vo3d_opt.solvers import daqp_backend
+
+    backend = get_backend("daqp")
+    qps = _plane_like_qps(100)
+    for qp in qps:
+        backend.solve(qp)
+    for m in {qp.h.shape[0] for qp in qps}:
+        lower, sense = daqp_backend._open_rows(m)
+        assert np.all(lower == -daqp_backend.INF) and not sense.any()

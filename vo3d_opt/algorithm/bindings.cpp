@@ -685,4 +685,13 @@ NB_MODULE(_core, m) {
           },
           "C"_a, "l"_a, "u"_a, "x"_a, "r"_a,
           "The largest of l - C x, C x - u and (r >= 0) |x| - r; a NaN never wins; -inf for none.");
+    m.def("qp_rows_form", &qp_rows_form, "P"_a.none(), "q"_a.none(), "G"_a.none(), "h"_a.none(),
+          "0: P, q, G, h fit a solver as they are (float64, C-contiguous, finite, P symmetric);\n"
+          "2: the same but some array read-only; 1: anything else.");
+    m.def("qp_rows_gap",
+          [](nb::handle G, nb::handle h, nb::handle x) {
+              In<double> g = arr<double>(G, "G", {ANY, ANY});
+              return qp_rows_gap(g, arr<double>(h, "h", {int64_t(g.shape(0))}), x);
+          },
+          "G"_a, "h"_a, "x"_a, "max(G x - h); +inf when x is not a finite array of G's width.");
 }

@@ -446,6 +446,52 @@ double qp_violation(const In<double>& C, const In<double>& l, const In<double>& 
     return worst;
 }
 
+// Whether a QP min ½xᵀPx + qᵀx, G x <= h can go to a solver as it is, without the standard
+// form (daqp_backend's short path): 0 when P (n, n), q (n,), G (m, n), h (m,) are C-contiguous
+// float64 arrays, every entry finite (their sum too, as qp_screen judges it) and P exactly
+// symmetric (so that ½(P + Pᵀ) is P itself); 2 the same but some array read-only (the solver
+// wants writable buffers: copies); 1 anything else (the standard form decides what it is).
+int qp_rows_form(nb::handle P_, nb::handle q_, nb::handle G_, nb::handle h_) {
+    In<double> P, q, G, h;
+    if (!nb::try_cast(P_, P, false) || !nb::try_cast(q_, q, false) || !nb::try_cast(G_, G, false) ||
+        !nb::try_cast(h_, h, false))
+        return 1;
+    if (q.ndim() != 1 || P.ndim() != 2 || G.ndim() != 2 || h.ndim() != 1) return 1;
+    int64_t n = q.shape(0), m = h.shape(0);
+    if (n < 1 || int64_t(P.shape(0)) != n || int64_t(P.shape(1)) != n || int64_t(G.shape(0)) != m ||
+        int64_t(G.shape(1)) != n || !c_contig(P) || !c_contig(q) || !c_contig(G) || !c_contig(h))
+        return 1;
+    double sum = 0.0;
+    bool finite = true;
+    for (const In<double>* a : {&P, &q, &G, &h})
+        for (size_t i = 0; i < a->size(); ++i) finite = finite && std::isfinite(a->data()[i]), sum += a->data()[i];
+    if (!finite || !std::isfinite(sum)) return 1;
+    for (int64_t i = 0; i < n; ++i)
+        for (int64_t j = 0; j < i; ++j)
+            if (P.data()[i * n + j] != P.data()[j * n + i]) return 1;
+    Out<double> w;
+    for (nb::handle a : {P_, q_, G_, h_})
+        if (!nb::try_cast(a, w, false)) return 2;
+    return 0;
+}
+
+// max(G x - h) over the rows, each G x summed as qp_violation sums it; +inf when x is not a
+// finite array of G's width (the caller then takes the standard form's longer check).
+double qp_rows_gap(const In<double>& G, const In<double>& h, nb::handle x_) {
+    In<double> x;
+    int64_t n = G.shape(1);
+    if (!nb::try_cast(x_, x, false) || x.ndim() != 1 || int64_t(x.shape(0)) != n) return kInf;
+    for (int64_t j = 0; j < n; ++j)
+        if (!std::isfinite(at(x, j))) return kInf;
+    double worst = -kInf;
+    for (int64_t i = 0; i < int64_t(G.shape(0)); ++i) {
+        double gx = 0.0;
+        for (int64_t j = 0; j < n; ++j) gx = gx + G.data()[i * G.stride(0) + j * G.stride(1)] * at(x, j);
+        if (gx - at(h, i) > worst) worst = gx - at(h, i);
+    }
+    return worst;
+}
+
 // ------------------------------------------------------------------------------ array checks
 
 // select_arrays' check of a table of numbers in one pass (formulations/inputs.py words the

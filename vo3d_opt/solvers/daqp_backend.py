@@ -5,6 +5,12 @@ n rows (the identity) as DAQP's simple bounds, the others as general rows, equal
 immutable. DAQP has no cones: the formulation substitutes a polygon for ``soc_radius``. On the
 plane QPs (2 variables, about 30 rows) a solve takes a few microseconds, which makes it the
 fastest backend here (benchmarks/bench_select.py); an active-set answer is exact to rounding.
+
+A solve of a few microseconds is less than the standard form costs in Python, so a QP of the
+formulations' usual kind (``G x <= h`` alone, float arrays, finite, P symmetric: one compiled
+check) goes to DAQP as it is, its rows as DAQP's general rows with no simple bounds, and its
+answer is checked against ``G x <= h`` in one compiled call; anything else, and any answer that
+check does not pass at once, takes the standard form.
 """
 
 from __future__ import annotations
@@ -14,7 +20,8 @@ import functools
 import daqp
 import numpy as np
 
-from vo3d_opt.solvers.base import Backend, Standard, make_result
+from vo3d_opt import _core
+from vo3d_opt.solvers.base import FEAS_TOL, Backend, Standard, failure, make_result, standardise
 from vo3d_opt.solvers.problem import QP, Result
 from vo3d_opt.status import Status
 
@@ -43,6 +50,28 @@ class DaqpBackend(Backend):
     kind = "qp"
     checks_answers = True
 
+    def solve(self, qp: QP) -> Result:
+        """The short path for ``G x <= h`` alone (the module's docstring), else the standard
+        form's (:meth:`Backend.solve`)."""
+        plain = qp.A is None and qp.b is None and qp.lb is None and qp.ub is None
+        form = _core.qp_rows_form(qp.P, qp.q, qp.G, qp.h) if plain and qp.soc_radius is None else 1
+        P, q, G, h = qp.P, qp.q, qp.G, qp.h
+        if form == 1 or G is None or h is None:
+            return super().solve(qp)
+        if form == 2:  # DAQP's Python API takes no read-only buffer
+            P, q, G, h = np.array(P), np.array(q), np.array(G), np.array(h)
+        lower, sense = _open_rows(h.shape[0])
+        try:
+            x, _, flag, _ = daqp.solve(P, q, G, h, lower, sense)
+        except Exception as exc:  # noqa: BLE001 - a backend never raises on a well-formed QP
+            return failure(self.name, exc)
+        if flag == -1:
+            return Result(None, Status.INFEASIBLE, self.name, _CODES[-1])
+        if flag in (1, 2) and _core.qp_rows_gap(G, h, x) <= FEAS_TOL:
+            return Result(x, Status.OPTIMAL, self.name, _CODES[flag])
+        status = _STATUS.get(flag, Status.FAILED)
+        return make_result(self.name, standardise(qp), x, status, _CODES.get(flag, str(flag)))
+
     def _solve(self, qp: QP, std: Standard) -> Result:
         upper, lower, sense = _daqp_rows(std.l, std.u, std.n, std.m_ineq, std.m_eq)
         x, _, flag, _ = daqp.solve(
@@ -65,6 +94,14 @@ def _daqp_rows(
     rows, sense = _order(n, m_ineq, m_eq)
     upper, lower = np.minimum(u[rows], INF), np.maximum(l[rows], -INF)
     return upper, lower, sense.copy()
+
+
+@functools.lru_cache(maxsize=256)
+def _open_rows(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """DAQP's lower bounds (its minus infinity) and ``sense`` flags (inequalities) of m general
+    rows with no simple bounds, for the short path. Shared, so writable only because DAQP's
+    Python API takes no read-only buffer; DAQP reads them and never writes."""
+    return np.full(m, -INF), np.zeros(m, dtype=np.int32)
 
 
 @functools.lru_cache(maxsize=256)
