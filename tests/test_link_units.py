@@ -334,6 +334,44 @@ def test_link_bad_arguments_exit_2_with_one_line_naming_them(capsys, args, named
     assert len(lines) == 1 and named in lines[0], err
 
 
+def _parse_error(capsys, *argv: str) -> tuple[int | None, list[str]]:
+    """Parse ``vo3d ARGV`` only (nothing is opened or flown): (exit status, stderr lines)."""
+    from vo3d_opt.cli.app import build_vo3d_parser
+
+    try:
+        build_vo3d_parser().parse_args(list(argv))
+    except SystemExit as exc:
+        return int(exc.code or 0), capsys.readouterr().err.strip().splitlines()
+    return None, []
+
+
+LINK_ARGS = ("link", "--connect", "udpin:127.0.0.1:0", "--scenario", "x.yaml", "--agent", "a0")
+
+
+@pytest.mark.parametrize("flag, value", [
+    ("--epoch", "nan"),  # a NaN clock never times out: the link would wait for ever
+    ("--epoch", "inf"),
+    ("--rate", "1e-300"),  # a period beyond what select() can wait
+    ("--rate", "1e300"),
+    ("--time-scale", "1e-300"),
+    ("--time-scale", "1e300"),
+    ("--baud", "-5"),
+    ("--baud", "0"),
+])
+def test_link_timing_arguments_out_of_range_exit_2_naming_them(capsys, flag, value):
+    code, err = _parse_error(capsys, *LINK_ARGS, flag, value)
+    assert code == 2 and len(err) == 1 and flag in err[0], err
+
+
+@pytest.mark.parametrize("flag, value", [
+    ("--rate", "1e-300"), ("--time-scale", "1e-300"), ("--physics-rate", "1e-300"),
+    ("--physics-rate", "1e300"), ("--telemetry-rate", "1e-300"),
+])
+def test_sitl_timing_arguments_out_of_range_exit_2_naming_them(capsys, flag, value):
+    code, err = _parse_error(capsys, "sitl", "x.yaml", flag, value)
+    assert code == 2 and len(err) == 1 and flag in err[0], err
+
+
 def test_sitl_bad_arguments_exit_2_with_one_line(capsys, tmp_path):
     for args, named in [(["/no/such.yaml"], "FILE"),
                         ([str(DATA / "link-three.yaml"), "--fault", "kill:zz:1"], "zz"),

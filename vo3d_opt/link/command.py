@@ -60,6 +60,40 @@ def _positive(text: str) -> float:
     return value
 
 
+def _number_in(low: float, high: float, unit: str) -> Callable[[str], float]:
+    """An ``argparse`` type: a number from ``low`` to ``high``. Rates and time scales are
+    bounded so that every period the loops wait stays one ``select()`` can wait and one that
+    ends (a NaN or infinite clock never times out)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(
+                f"{text!r} is not a number from {low:g} to {high:g}{unit}"
+            )
+        return value
+
+    return parse
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+_rate = _number_in(0.01, 1000.0, " Hz")
+_time_scale = _number_in(0.001, 1000.0, "")
+_sim_rate = _number_in(0.01, 10000.0, " Hz")
+
+
 def _int_in(low: int, high: int, what: str) -> Callable[[str], int]:
     """An ``argparse`` type: an integer from ``low`` to ``high``."""
 
@@ -77,6 +111,7 @@ def _int_in(low: int, high: int, what: str) -> Callable[[str], int]:
 
 _system_id = _int_in(1, 255, "a system id")
 _component = _int_in(0, 255, "a component id")
+_baud = _int_in(1, 100_000_000, "a baud rate")
 
 
 def _origin(text: str) -> tuple[float, float, float]:
@@ -139,10 +174,11 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--rate",
-        type=_positive,
+        type=_rate,
         default=10.0,
         metavar="HZ",
-        help="decisions and set-points per second (default 10; PX4 needs more than 2)",
+        help="decisions and set-points per second, 0.01 to 1000 (default 10; PX4 needs more "
+        "than 2)",
     )
     _add(
         p,
@@ -223,7 +259,7 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
         action="store_true",
         help="arm the vehicle before switching mode (default: it must be armed and flying)",
     )
-    _add(p, "--baud", type=int, default=57600, help="serial baud rate (default 57600)")
+    _add(p, "--baud", type=_baud, default=57600, help="serial baud rate (default 57600)")
     _add_timeouts(p)
     _add(
         p,
@@ -244,15 +280,16 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--time-scale",
-        type=_positive,
+        type=_time_scale,
         default=1.0,
         metavar="K",
-        help="the link's clock runs K times real time (vo3d sitl only; 1 on a real vehicle)",
+        help="the link's clock runs K times real time, 0.001 to 1000 (vo3d sitl only; 1 on a "
+        "real vehicle)",
     )
     _add(
         p,
         "--epoch",
-        type=float,
+        type=_finite,
         metavar="T",
         help="the link's clock starts at this time.monotonic() reading (vo3d sitl only: one "
         "clock for every process; default: when the link starts)",
@@ -342,18 +379,18 @@ def _add_sitl(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--rate",
-        type=_positive,
+        type=_rate,
         default=10.0,
         metavar="HZ",
-        help="each link's decisions per second (default 10)",
+        help="each link's decisions per second, 0.01 to 1000 (default 10)",
     )
     _add(
         p,
         "--time-scale",
-        type=_positive,
+        type=_time_scale,
         default=1.0,
         metavar="K",
-        help="run K times faster than real time (default 1)",
+        help="run K times faster than real time, 0.001 to 1000 (default 1)",
     )
     _add(
         p,
@@ -374,18 +411,18 @@ def _add_sitl(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--physics-rate",
-        type=_positive,
+        type=_sim_rate,
         default=50.0,
         metavar="HZ",
-        help="dynamics steps per second of each vehicle (default 50)",
+        help="dynamics steps per second of each vehicle, 0.01 to 10000 (default 50)",
     )
     _add(
         p,
         "--telemetry-rate",
-        type=_positive,
+        type=_sim_rate,
         default=25.0,
         metavar="HZ",
-        help="state messages per second of each vehicle (default 25)",
+        help="state messages per second of each vehicle, 0.01 to 10000 (default 25)",
     )
     _add(
         p,
