@@ -322,6 +322,7 @@ def _vo3d(capsys, *args: str) -> tuple[int, str, str]:
     (["--signing-key", "/no/such/key"], "--signing-key"),
     (["--scenario", "/no/such.yaml"], "--scenario"),
     (["--connect", "/dev/no-such-serial-port"], "--connect"),
+    (["--log", "/no/such/dir/link.npz", "--connect-timeout", "0.2"], "--log"),
 ])
 def test_link_bad_arguments_exit_2_with_one_line_naming_them(capsys, args, named):
     base = {"--connect": "udpin:127.0.0.1:0", "--scenario": str(DATA / "link-three.yaml"),
@@ -332,6 +333,20 @@ def test_link_bad_arguments_exit_2_with_one_line_naming_them(capsys, args, named
     assert code == 2 and out == ""
     lines = err.strip().splitlines()
     assert len(lines) == 1 and named in lines[0], err
+
+
+def test_a_log_that_cannot_be_written_still_prints_the_summary(monkeypatch, capsys, tmp_path):
+    from vo3d_opt.link.report import LinkLog
+
+    def full(self, path):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(LinkLog, "save", full)
+    code, out, err = _vo3d(capsys, "link", "--connect", "udpin:127.0.0.1:0", "--scenario",
+                           str(DATA / "link-three.yaml"), "--agent", "a0", "--connect-timeout",
+                           "0.2", "--log", str(tmp_path / "link.npz"))
+    assert code == 1 and json.loads(out)["end"] == "no autopilot heartbeat"
+    assert "--log" in err and "No space left on device" in err
 
 
 def _parse_error(capsys, *argv: str) -> tuple[int | None, list[str]]:

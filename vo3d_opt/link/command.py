@@ -12,6 +12,7 @@ import json
 import logging
 import math
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -543,8 +544,22 @@ def link_options(args: argparse.Namespace) -> Any:
         time_scale=args.time_scale,
         epoch=args.epoch,
         baud=args.baud,
-        log_file=Path(args.log) if args.log else None,
+        log_file=_log_file(args.log) if args.log else None,
     )
+
+
+def _log_file(arg: str) -> Path:
+    """The ``--log`` file, its directory tried now: a log that cannot be written fails
+    before the flight, not after it."""
+    path = Path(arg)
+    if path.is_dir():
+        raise _Usage(f"--log {arg}: is a directory")
+    try:
+        with tempfile.TemporaryFile(dir=path.parent):
+            pass
+    except OSError as exc:
+        raise _Usage(f"--log {arg}: cannot write there: {exc.strerror or exc}") from None
+    return path
 
 
 @_guarded
@@ -559,7 +574,7 @@ def cmd_link(args: argparse.Namespace) -> int:
     summary = link.run()
     print(json.dumps(summary, allow_nan=False, default=_plain))
     sys.stdout.flush()
-    return 0
+    return 1 if link.log_failed else 0
 
 
 def _plain(value: Any) -> Any:

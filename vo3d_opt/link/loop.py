@@ -135,6 +135,7 @@ class Link:
         self.stop_reason: str | None = None
         self.engaged_at: float | None = None
         self.said: str | None = None
+        self.log_failed = False
         self.port = MavlinkPort(
             opts.connect,
             source_system=opts.source_system or opts.target_system,
@@ -392,9 +393,19 @@ class Link:
             log.warning("vo3d link %s: could not ask for hold: %s", self.o.agent, exc)
         finally:
             self.ended_at = self.clock()
-            if self.o.log_file is not None:
-                self.record.save(self.o.log_file)
+            self._save_log()
             self.port.close()
+
+    def _save_log(self) -> None:
+        """Write ``--log``; a failure (a full disk) is said and kept in ``log_failed``: the
+        flight is over, and its summary must still be printed."""
+        if self.o.log_file is None:
+            return
+        try:
+            self.record.save(self.o.log_file)
+        except OSError as exc:
+            log.error("vo3d link %s: --log %s: %s", self.o.agent, self.o.log_file, exc)
+            self.log_failed = True
 
     def _await_hold(self) -> None:
         """Up to a second (link time), re-asking every 0.25 s, until the heartbeat shows the
