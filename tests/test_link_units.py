@@ -349,6 +349,22 @@ def test_a_log_that_cannot_be_written_still_prints_the_summary(monkeypatch, caps
     assert "--log" in err and "No space left on device" in err
 
 
+def test_a_second_ctrl_c_while_stopping_still_ends_with_the_summary(monkeypatch, capsys, tmp_path):
+    import signal
+
+    from vo3d_opt.link.report import LinkLog
+
+    def interrupted(self, path):  # Ctrl-C again while the link brakes, asks for hold, saves
+        os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(LinkLog, "save", interrupted)
+    code, out, _ = _vo3d(capsys, "link", "--connect", "udpin:127.0.0.1:0", "--scenario",
+                         str(DATA / "link-three.yaml"), "--agent", "a0", "--connect-timeout",
+                         "0.2", "--log", str(tmp_path / "link.npz"))
+    assert code == 0 and json.loads(out)["end"] == "no autopilot heartbeat"
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def _parse_error(capsys, *argv: str) -> tuple[int | None, list[str]]:
     """Parse ``vo3d ARGV`` only (nothing is opened or flown): (exit status, stderr lines)."""
     from vo3d_opt.cli.app import build_vo3d_parser

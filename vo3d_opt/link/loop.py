@@ -13,9 +13,10 @@ Every ``1 / rate`` s (:meth:`Link.run`), between which it reads the connection:
    autopilot heartbeat for ``link_timeout``: a zero set-point instead (brake to a hover),
    said on stderr and counted as a status;
 4. **stop** on arrival (within the goal tolerance), ``max_time``, SIGINT or SIGTERM: brake,
-   ask the autopilot to hold (PX4 hold / ArduCopter loiter), print the summary. If the
-   autopilot leaves offboard / guided by itself (a pilot took over, a failsafe), the link
-   stops commanding at once and ends.
+   ask the autopilot to hold (PX4 hold / ArduCopter loiter), print the summary (a second
+   signal meanwhile only cuts short the wait for the hold). If the autopilot leaves
+   offboard / guided by itself (a pilot took over, a failsafe), the link stops commanding at
+   once and ends.
 
 Times are the link's clock: wall time since ``epoch`` times ``time_scale`` (1 on a real
 vehicle; ``vo3d sitl`` runs faster than real time with a shared epoch).
@@ -136,6 +137,7 @@ class Link:
         self.engaged_at: float | None = None
         self.said: str | None = None
         self.log_failed = False
+        self.signals = 0  # SIGINT / SIGTERM received
         self.port = MavlinkPort(
             opts.connect,
             source_system=opts.source_system or opts.target_system,
@@ -275,15 +277,18 @@ class Link:
         for s in previous:
             signal.signal(s, self._on_signal)
         try:
-            self._session()
-        finally:
+            try:
+                self._session()
+            finally:
+                self._finish()
+        finally:  # only now: a signal while stopping must not cut the hold, log or summary
             for s, handler in previous.items():
                 signal.signal(s, handler)
-            self._finish()
         return link_summary(self)
 
     def _on_signal(self, signum: int, frame: Any) -> None:
-        self.stop_reason = "signal"
+        self.signals += 1
+        self.stop_reason = self.stop_reason or "signal"
 
     def _session(self) -> None:
         wall_period = self.period / self.o.time_scale
@@ -409,11 +414,12 @@ class Link:
 
     def _await_hold(self) -> None:
         """Up to a second (link time), re-asking every 0.25 s, until the heartbeat shows the
-        autopilot out of offboard / guided."""
+        autopilot out of offboard / guided; a signal meanwhile (Ctrl-C again) ends the wait."""
         deadline = self.clock() + 1.0
         retry = self.clock() + 0.25
         self.stop_reason = self.stop_reason or "stopped"
-        while self.clock() < deadline and self.pilot.external:
+        signals = self.signals
+        while self.clock() < deadline and self.pilot.external and self.signals == signals:
             wall = time.monotonic() + 0.01 / self.o.time_scale
             self.port.wait(max(wall - time.monotonic(), 0.0))
             for msg in self.port.receive():
