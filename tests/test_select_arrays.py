@@ -161,3 +161,20 @@ def test_select_names_what_is_malformed(change: dict, match: str) -> None:
               limits=Limits(), dt=0.2)
     with pytest.raises(ValueError, match=match):
         VelocitySelector().select(**{**kw, **change})
+
+
+@pytest.mark.parametrize("bad", [math.nan, -1.0, 0.0, 1e300, "40", True])
+@pytest.mark.parametrize("formulation", ["plane_qp", "cone_qp"])
+def test_a_bad_sensing_range_is_a_value_error_naming_it(bad, formulation):
+    """The swarm preset derives its horizon from ``sensing_range``: a NaN one gave no horizon
+    at all, a negative one an error about ``horizon``."""
+    sel = VelocitySelector(formulation=formulation, preset="swarm")
+    own = AgentState(position=(0.0, 0.0, 20.0), velocity=(1.0, 0.0, 0.0))
+    nb = Neighbor(position=(12.0, 0.0, 20.0), velocity=(-1.0, 0.0, 0.0), r_pz=3.0)
+    with pytest.raises(ValueError, match="sensing_range"):
+        sel.select(own, (1.0, 0.0, 0.0), [nb], sensing_range=bad)
+    with pytest.raises(ValueError, match="sensing_range"):
+        sel.select_arrays(np.array(own.position), np.array(own.velocity), np.array([1.0, 0, 0]),
+                          np.array([[12.0, 0, 20, -1, 0, 0, 3]]), sensing_range=bad)
+    far = sel.select(own, (1.0, 0.0, 0.0), [nb], sensing_range=math.inf)
+    assert far.velocity.shape == (3,) and np.all(np.isfinite(far.velocity))

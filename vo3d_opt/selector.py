@@ -28,6 +28,7 @@ from .formulations.sampled import check_grid
 from .solvers import available_solvers
 from .status import DECISION_STATUSES, Status
 from .swarm import SwarmDecision, SwarmInputs, thread_count
+from .swarm.checks import distance
 from .swarm.many import options_by_vehicle, select_many_compiled, select_many_loop
 from .types import AgentState, Box, Cylinder, Limits, Neighbor
 
@@ -44,6 +45,12 @@ DEFAULT_NLP_SOLVER = DEFAULT_SOLVERS["nlp"]
 _STATUS_OF = {float(code): status for code, status in enumerate(DECISION_STATUSES)}
 _ROUND_OF = {float(code): name for code, name in enumerate(kernel.ROUND_NAMES)}
 _clock = time.perf_counter
+
+
+def _sensing_range(value: Any) -> float | None:
+    """None, or a positive number of metres (inf: no horizon): a horizon derived from a NaN
+    or negative range would be none at all, or an error naming ``horizon``."""
+    return None if value is None else distance(value, "sensing_range", allow_inf=True)
 
 
 @dataclass(slots=True)
@@ -148,7 +155,8 @@ class VelocitySelector:
     ) -> Decision:
         """The velocity nearest ``preferred_velocity`` outside every VO within the limits.
         ``sensing_range`` (m): the range the neighbours were sensed within, which a horizon
-        ``"sensing"`` (preset ``swarm``) is derived from when the configuration holds none."""
+        ``"sensing"`` (preset ``swarm``) is derived from when the configuration holds none;
+        positive, at most 1e7 or inf (no horizon), else a ``ValueError`` naming it."""
         t0 = _clock()
         own = inputs.agent(own)
         v_pref = inputs.vector3(preferred_velocity, "preferred_velocity")
@@ -156,6 +164,7 @@ class VelocitySelector:
         prisms = inputs.prism_tuples(obstacles)
         limits = inputs.limits_of(limits)
         dt = inputs.period(dt)
+        sensing_range = _sensing_range(sensing_range)
         if self._python is None:
             p, v_now = own.position, own.velocity
             return self._compiled(p, v_now, v_pref, nbrs, prisms, limits, dt, sensing_range, t0)
@@ -206,6 +215,7 @@ class VelocitySelector:
         prisms = inputs.prism_array(obstacles)
         limits = inputs.limits_of(limits)
         dt = inputs.period(dt)
+        sensing_range = _sensing_range(sensing_range)
         if self._python is None:
             return self._compiled(p, v_now, v_pref, nbrs, prisms, limits, dt, sensing_range, t0)
         return self._select_python(p, v_now, v_pref, nbrs, prisms, limits, dt, sensing_range, t0)
