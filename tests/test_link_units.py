@@ -209,6 +209,42 @@ def test_every_rejected_packet_is_counted_by_reason(signed):
     assert kinds.count("GLOBAL_POSITION_INT") == 3 + 3 + (0 if signed else 9)
 
 
+def _closing_server() -> tuple[socket.socket, int]:
+    """A TCP listener on 127.0.0.1 (and its port) that will close the connection it accepts."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    return srv, srv.getsockname()[1]
+
+
+def test_a_tcp_connection_closed_by_the_autopilot_is_seen_as_closed(capfd):
+    srv, number = _closing_server()
+    port = MavlinkPort(f"tcp:127.0.0.1:{number}", source_system=1, source_component=191)
+    conn, _ = srv.accept()
+    conn.close()
+    for _ in range(50):
+        port.wait(0.1)
+        assert port.receive() == []
+        if port.closed:
+            break
+    closed = port.closed
+    port.close()
+    srv.close()
+    assert closed and capfd.readouterr().out == ""
+
+
+def test_link_ends_when_its_tcp_connection_closes(capsys):
+    import threading
+
+    srv, number = _closing_server()
+    threading.Thread(target=lambda: srv.accept()[0].close(), daemon=True).start()
+    code, out, _ = _vo3d(capsys, "link", "--connect", f"tcp:127.0.0.1:{number}", "--scenario",
+                         str(DATA / "link-three.yaml"), "--agent", "a0", "--connect-timeout", "5")
+    srv.close()
+    assert code == 0 and len(out.splitlines()) == 1
+    assert json.loads(out)["end"] == "connection closed"
+
+
 # --- neighbour table ---------------------------------------------------------------------------
 
 def _tracks() -> Tracks:

@@ -16,7 +16,7 @@ Every ``1 / rate`` s (:meth:`Link.run`), between which it reads the connection:
    ask the autopilot to hold (PX4 hold / ArduCopter loiter), print the summary (a second
    signal meanwhile only cuts short the wait for the hold). If the autopilot leaves
    offboard / guided by itself (a pilot took over, a failsafe), the link stops commanding at
-   once and ends.
+   once and ends; so it does when the other end closes a TCP connection.
 
 Times are the link's clock: wall time since ``epoch`` times ``time_scale`` (1 on a real
 vehicle; ``vo3d sitl`` runs faster than real time with a shared epoch).
@@ -185,6 +185,8 @@ class Link:
             self.port.wait(left)
             for msg in self.port.receive():
                 self._take(msg)
+            if self.port.closed:
+                self.stop_reason = "connection closed"
 
     def _take(self, msg: Any) -> None:
         src, kind = msg.get_srcSystem(), msg.get_type()

@@ -3,7 +3,8 @@
 Summary keys (``vo3d link`` prints them as one JSON object on stdout when it stops):
 
 * ``agent``, ``system_id``, ``autopilot``: who flew, and the autopilot's flavour;
-* ``end``: why it stopped (``arrived``, ``max_time``, ``signal``, ``mode refused``, ...);
+* ``end``: why it stopped (``arrived``, ``max_time``, ``signal``, ``mode refused``,
+  ``connection closed``, ...);
 * ``arrived``: whether the own state was within the goal tolerance at the end;
 * ``engaged_at``, ``time``: link time (s) when offboard / guided began, and at the end;
 * ``decisions``: ``select()`` calls; ``status_counts``: ticks by status (the selector's, or

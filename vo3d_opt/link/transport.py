@@ -76,6 +76,14 @@ class MavlinkPort:
             )
         self.rejected: Counter[str] = Counter()
         self.received = 0
+        #: A stream (TCP) the other end closed: pymavlink's own handlers would print on stdout
+        #: and, without autoreconnect, leave a socket that reads as ready for ever.
+        self.closed = False
+        if hasattr(self.conn, "handle_eof"):
+            self.conn.handle_eof = self.conn.handle_disconnect = self._on_closed
+
+    def _on_closed(self) -> None:
+        self.closed = True
 
     def fileno(self) -> int | None:
         fd = getattr(self.conn, "fd", None)
@@ -84,6 +92,9 @@ class MavlinkPort:
     def wait(self, timeout: float) -> None:
         """Block until data may be there, at most ``timeout`` s."""
         fd = self.fileno()
+        if self.closed:  # a closed stream is always "ready": wait the time out instead
+            time.sleep(max(timeout, 0.0))
+            return
         if fd is None:
             time.sleep(min(max(timeout, 0.0), 0.001))
             return
@@ -94,6 +105,8 @@ class MavlinkPort:
         counted in ``rejected``)."""
         out: list[Any] = []
         for _ in range(MAX_READS):
+            if self.closed:
+                break
             data = self.conn.recv(65535) if not self.datagrams else self.conn.recv()
             if not data:
                 break
