@@ -217,10 +217,15 @@ def _closing_server() -> tuple[socket.socket, int]:
     return srv, srv.getsockname()[1]
 
 
-def test_a_tcp_connection_closed_by_the_autopilot_is_seen_as_closed(capfd):
+@pytest.mark.parametrize("reset", [False, True])
+def test_a_tcp_connection_closed_by_the_autopilot_is_seen_as_closed(capfd, reset):
+    import struct
+
     srv, number = _closing_server()
     port = MavlinkPort(f"tcp:127.0.0.1:{number}", source_system=1, source_component=191)
     conn, _ = srv.accept()
+    if reset:  # closed with a RST, not a FIN: pymavlink's recv raises
+        conn.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
     conn.close()
     for _ in range(50):
         port.wait(0.1)

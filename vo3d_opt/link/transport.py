@@ -107,7 +107,11 @@ class MavlinkPort:
         for _ in range(MAX_READS):
             if self.closed:
                 break
-            data = self.conn.recv(65535) if not self.datagrams else self.conn.recv()
+            try:
+                data = self.conn.recv(65535) if not self.datagrams else self.conn.recv()
+            except ConnectionError:  # a stream reset by its other end (pymavlink re-raises)
+                self.closed = True
+                break
             if not data:
                 break
             out += self._parse(bytes(data) if isinstance(data, bytes | bytearray) else data)
