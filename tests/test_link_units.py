@@ -238,6 +238,15 @@ def test_a_tcp_connection_closed_by_the_autopilot_is_seen_as_closed(capfd, reset
     assert closed and capfd.readouterr().out == ""
 
 
+def test_a_refused_tcp_connection_is_one_line_on_stderr_and_nothing_on_stdout(capsys):
+    srv, number = _closing_server()
+    srv.close()  # nothing listens there now
+    code, out, err = _vo3d(capsys, "link", "--connect", f"tcp:127.0.0.1:{number}", "--scenario",
+                           str(DATA / "link-three.yaml"), "--agent", "a0")
+    lines = err.strip().splitlines()
+    assert code == 2 and out == "" and len(lines) == 1 and "--connect tcp:" in lines[0], err
+
+
 def test_link_ends_when_its_tcp_connection_closes(capsys):
     import threading
 

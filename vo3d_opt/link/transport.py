@@ -15,12 +15,17 @@ timestamp); none is let through unsigned.
 
 from __future__ import annotations
 
+import contextlib
+import io
+import logging
 import select
 import time
 from collections import Counter
 from typing import Any
 
 from vo3d_opt.link.messages import mavlink
+
+log = logging.getLogger("vo3d_opt.link")
 
 #: Most reads in one :meth:`MavlinkPort.receive` call (a flood cannot starve the loop).
 MAX_READS = 2000
@@ -60,9 +65,15 @@ class MavlinkPort:
         mavlink()
         from pymavlink import mavutil
 
-        self.conn = mavutil.mavlink_connection(
-            url, baud=baud, source_system=source_system, source_component=source_component
-        )
+        said = io.StringIO()
+        try:  # pymavlink prints its connection retries on stdout, which carries the summary
+            with contextlib.redirect_stdout(said):
+                self.conn = mavutil.mavlink_connection(
+                    url, baud=baud, source_system=source_system, source_component=source_component
+                )
+        finally:
+            for line in said.getvalue().splitlines():
+                log.debug("pymavlink: %s", line)
         self.mav = self.conn.mav
         self.mav.robust_parsing = True
         self.datagrams = isinstance(self.conn, mavutil.mavudp | mavutil.mavmcast)
