@@ -271,6 +271,10 @@ def test_bad_options_are_refused_before_any_cluster_starts():
         run_sweep("nope", 2)
     with pytest.raises(SweepError, match="--n"):
         run_sweep("pair", 0)
+    # the rows keep the seed in an int64 Parquet column: a larger one failed only when the
+    # first rows were written, after they had flown
+    with pytest.raises(SweepError, match="--seed"):
+        run_sweep("pair", 2, seed=2**63)
     with pytest.raises(SweepError, match="solver 'bogus'"):
         run_sweep("pair", 2, method=Method(solver="bogus"))
     with pytest.raises(ValueError, match="selector_options.closing_guard: .*boolean"):

@@ -71,7 +71,7 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
         type=non_negative_int,
         default=0,
         metavar="S",
-        help="sweep seed (>= 0, default 0); encounter i is drawn from (S, i)",
+        help="sweep seed (0 to 2**63 - 1, default 0); encounter i is drawn from (S, i)",
     )
     where = sw.add_mutually_exclusive_group()
     where.add_argument(

@@ -98,15 +98,20 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
     return formulation, solver
 
 
+#: The largest seed: the rows keep it in an int64 Parquet column.
+MAX_SEED = 2**63 - 1
+
+
 def _check_counts(**values: int | None) -> None:
     lows = {"n": 1, "seed": 0, "workers": 1, "in_flight": 1, "batch": 1}
     for key, value in values.items():
         if value is None and key in ("in_flight", "batch"):
             continue
+        flag = f"--{key.replace('_', '-')}"
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lows[key]:
-            raise SweepError(
-                f"--{key.replace('_', '-')}: must be an integer >= {lows[key]}, got {value!r}"
-            )
+            raise SweepError(f"{flag}: must be an integer >= {lows[key]}, got {value!r}")
+        if key == "seed" and value > MAX_SEED:
+            raise SweepError(f"{flag}: must be at most {MAX_SEED} (2**63 - 1), got {value!r}")
 
 
 def validate(
