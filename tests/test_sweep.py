@@ -275,6 +275,9 @@ def test_bad_options_are_refused_before_any_cluster_starts():
     # first rows were written, after they had flown
     with pytest.raises(SweepError, match="--seed"):
         run_sweep("pair", 2, seed=2**63)
+    # a list of every index is made before anything flies: 10**30 of them never end
+    with pytest.raises(SweepError, match="--n: must be at most"):
+        run_sweep("pair", 10**30)
     with pytest.raises(SweepError, match="solver 'bogus'"):
         run_sweep("pair", 2, method=Method(solver="bogus"))
     with pytest.raises(ValueError, match="selector_options.closing_guard: .*boolean"):

@@ -65,7 +65,9 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     )
     sw.add_argument("family", nargs="?", help="encounter family (vo3d sweep --list names them)")
     sw.add_argument("--list", action="store_true", help="list the families, one line each")
-    sw.add_argument("--n", type=non_negative_int, metavar="N", help="number of encounters (>= 1)")
+    sw.add_argument(
+        "--n", type=non_negative_int, metavar="N", help="number of encounters (1 to 10,000,000)"
+    )
     sw.add_argument(
         "--seed",
         type=non_negative_int,

@@ -100,6 +100,8 @@ def check_method(family: Family, method: Method) -> tuple[str, str]:
 
 #: The largest seed: the rows keep it in an int64 Parquet column.
 MAX_SEED = 2**63 - 1
+#: The most encounters of one sweep: their indices and rows are held in memory.
+MAX_ENCOUNTERS = 10_000_000
 
 
 def _check_counts(**values: int | None) -> None:
@@ -112,6 +114,8 @@ def _check_counts(**values: int | None) -> None:
             raise SweepError(f"{flag}: must be an integer >= {lows[key]}, got {value!r}")
         if key == "seed" and value > MAX_SEED:
             raise SweepError(f"{flag}: must be at most {MAX_SEED} (2**63 - 1), got {value!r}")
+        if key == "n" and value > MAX_ENCOUNTERS:
+            raise SweepError(f"{flag}: must be at most {MAX_ENCOUNTERS:,}, got {value!r}")
 
 
 def validate(
