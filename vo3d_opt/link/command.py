@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import sys
 import tempfile
 from collections.abc import Callable, Sequence
@@ -18,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from vo3d_opt.extras import MissingExtra, check
+from vo3d_opt.link import arguments as arg
 from vo3d_opt.link.frames import parse_origin
 from vo3d_opt.link.messages import AUTOPILOTS
 
@@ -51,99 +51,6 @@ Prints the summary of `vo3d run` (and writes its files with --out) from the vehi
 states; every process is stopped on exit, on error and on Ctrl-C."""
 
 
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number")
-    return value
-
-
-def _number_in(low: float, high: float, unit: str) -> Callable[[str], float]:
-    """An ``argparse`` type: a number from ``low`` to ``high``. Rates and time scales are
-    bounded so that every period the loops wait stays one ``select()`` can wait and one that
-    ends (a NaN or infinite clock never times out)."""
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(
-                f"{text!r} is not a number from {low:g} to {high:g}{unit}"
-            )
-        return value
-
-    return parse
-
-
-def _finite(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    return value
-
-
-_rate = _number_in(0.01, 1000.0, " Hz")
-_time_scale = _number_in(0.001, 1000.0, "")
-_sim_rate = _number_in(0.01, 10000.0, " Hz")
-
-
-def _int_in(low: int, high: int, what: str) -> Callable[[str], int]:
-    """An ``argparse`` type: an integer from ``low`` to ``high``."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            value = low - 1
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"{text!r} is not {what} ({low} to {high})")
-        return value
-
-    return parse
-
-
-_system_id = _int_in(1, 255, "a system id")
-_component = _int_in(0, 255, "a component id")
-_baud = _int_in(1, 100_000_000, "a baud rate")
-
-
-def _origin(text: str) -> tuple[float, float, float]:
-    try:
-        return parse_origin(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _triple(text: str) -> tuple[float, float, float]:
-    try:
-        values = tuple(float(p) for p in text.split(","))
-    except ValueError:
-        values = ()
-    if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected X,Y,Z in metres")
-    return values
-
-
-def _system_ids(text: str) -> dict[str, int]:
-    out: dict[str, int] = {}
-    for item in filter(None, (p.strip() for p in text.split(","))):
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip():
-            raise argparse.ArgumentTypeError(f"{item!r}: expected AGENT=SYSID")
-        out[name.strip()] = _system_id(value.strip())
-    if len(set(out.values())) != len(out):
-        raise argparse.ArgumentTypeError(f"{text!r}: two agents share a system id")
-    return out
-
-
 def _add(p: argparse.ArgumentParser, *flags: str, **kw: Any) -> None:
     p.add_argument(*flags, **kw)
 
@@ -175,7 +82,7 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--rate",
-        type=_rate,
+        type=arg.rate,
         default=10.0,
         metavar="HZ",
         help="decisions and set-points per second, 0.01 to 1000 (default 10; PX4 needs more "
@@ -191,7 +98,7 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--origin",
-        type=_origin,
+        type=arg.origin,
         metavar="LAT,LON,ALT",
         help="geodetic position (deg, deg, m above mean sea level) of the scenario's (0, 0, 0): "
         "states then come from GLOBAL_POSITION_INT; needed for ADS-B traffic (default: "
@@ -200,7 +107,7 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--local-origin",
-        type=_triple,
+        type=arg.triple,
         default=(0.0, 0.0, 0.0),
         metavar="X,Y,Z",
         help="world position (m, ENU) of the autopilots' local NED origin, without --origin "
@@ -216,7 +123,7 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--system-ids",
-        type=_system_ids,
+        type=arg.system_ids,
         metavar="ID=SYSID,...",
         help="the MAVLink system id of each agent's autopilot (default: the k-th agent of the "
         "scenario is system k + 1); packets from other systems are ignored and counted",
@@ -224,7 +131,7 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--allow-system",
-        type=_system_id,
+        type=arg.system_id,
         action="append",
         default=[],
         metavar="SYSID",
@@ -234,7 +141,7 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--target-component",
-        type=_component,
+        type=arg.component,
         default=1,
         metavar="N",
         help="the autopilot's component id (default 1, MAV_COMP_ID_AUTOPILOT1)",
@@ -242,14 +149,14 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--source-system",
-        type=_system_id,
+        type=arg.system_id,
         metavar="N",
         help="the link's own system id (default: its autopilot's, as a companion computer)",
     )
     _add(
         p,
         "--source-component",
-        type=_component,
+        type=arg.component,
         default=191,
         metavar="N",
         help="the link's own component id (default 191, MAV_COMP_ID_ONBOARD_COMPUTER)",
@@ -260,12 +167,12 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
         action="store_true",
         help="arm the vehicle before switching mode (default: it must be armed and flying)",
     )
-    _add(p, "--baud", type=_baud, default=57600, help="serial baud rate (default 57600)")
+    _add(p, "--baud", type=arg.baud, default=57600, help="serial baud rate (default 57600)")
     _add_timeouts(p)
     _add(
         p,
         "--traffic-r-pz",
-        type=_positive,
+        type=arg.positive,
         metavar="M",
         help="protected-zone radius of ADS-B traffic (default: the largest r_pz of the "
         "scenario's avoids: false agents, else of all)",
@@ -273,7 +180,7 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--traffic-speed",
-        type=_positive,
+        type=arg.positive,
         metavar="M/S",
         help="top speed of ADS-B traffic, for growing the zone of late reports (default: the "
         "fastest avoids: false agent's max_speed, else the scenario's)",
@@ -281,7 +188,7 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--time-scale",
-        type=_time_scale,
+        type=arg.time_scale,
         default=1.0,
         metavar="K",
         help="the link's clock runs K times real time, 0.001 to 1000 (vo3d sitl only; 1 on a "
@@ -290,7 +197,7 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--epoch",
-        type=_finite,
+        type=arg.finite,
         metavar="T",
         help="the link's clock starts at this time.monotonic() reading (vo3d sitl only: one "
         "clock for every process; default: when the link starts)",
@@ -303,7 +210,7 @@ def _add_timeouts(p: argparse.ArgumentParser) -> None:
     _add(
         p,
         "--prestream",
-        type=_positive,
+        type=arg.positive,
         default=1.0,
         metavar="S",
         help="seconds of zero set-points before asking for offboard/guided (default 1)",
@@ -311,7 +218,7 @@ def _add_timeouts(p: argparse.ArgumentParser) -> None:
     _add(
         p,
         "--state-timeout",
-        type=_positive,
+        type=arg.positive,
         default=0.5,
         metavar="S",
         help="own state older than this: brake to a hover; a neighbour's: counted late "
@@ -320,7 +227,7 @@ def _add_timeouts(p: argparse.ArgumentParser) -> None:
     _add(
         p,
         "--link-timeout",
-        type=_positive,
+        type=arg.positive,
         default=3.0,
         metavar="S",
         help="no autopilot heartbeat for this long: link lost, brake to a hover (default 3)",
@@ -328,7 +235,7 @@ def _add_timeouts(p: argparse.ArgumentParser) -> None:
     _add(
         p,
         "--neighbor-timeout",
-        type=_positive,
+        type=arg.positive,
         default=1.5,
         metavar="S",
         help="a neighbour silent for this long is dropped (default 1.5)",
@@ -336,7 +243,7 @@ def _add_timeouts(p: argparse.ArgumentParser) -> None:
     _add(
         p,
         "--connect-timeout",
-        type=_positive,
+        type=arg.positive,
         default=30.0,
         metavar="S",
         help="give up when no autopilot heartbeat came within this (default 30)",
@@ -344,7 +251,7 @@ def _add_timeouts(p: argparse.ArgumentParser) -> None:
     _add(
         p,
         "--mode-timeout",
-        type=_positive,
+        type=arg.positive,
         default=15.0,
         metavar="S",
         help="give up when the autopilot did not enter offboard/guided within this (default 15)",
@@ -352,7 +259,7 @@ def _add_timeouts(p: argparse.ArgumentParser) -> None:
     _add(
         p,
         "--max-time",
-        type=_positive,
+        type=arg.positive,
         metavar="S",
         help="stop (brake and hold) this long after entering offboard/guided (default: the "
         "scenario's max_time)",
@@ -380,7 +287,7 @@ def _add_sitl(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--rate",
-        type=_rate,
+        type=arg.rate,
         default=10.0,
         metavar="HZ",
         help="each link's decisions per second, 0.01 to 1000 (default 10)",
@@ -388,7 +295,7 @@ def _add_sitl(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--time-scale",
-        type=_time_scale,
+        type=arg.time_scale,
         default=1.0,
         metavar="K",
         help="run K times faster than real time, 0.001 to 1000 (default 1)",
@@ -404,7 +311,7 @@ def _add_sitl(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--origin",
-        type=_origin,
+        type=arg.origin,
         default=parse_origin(SITL_ORIGIN),
         metavar="LAT,LON,ALT",
         help=f"geodetic position of the world's origin (default {SITL_ORIGIN})",
@@ -412,7 +319,7 @@ def _add_sitl(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--physics-rate",
-        type=_sim_rate,
+        type=arg.sim_rate,
         default=50.0,
         metavar="HZ",
         help="dynamics steps per second of each vehicle, 0.01 to 10000 (default 50)",
@@ -420,7 +327,7 @@ def _add_sitl(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--telemetry-rate",
-        type=_sim_rate,
+        type=arg.sim_rate,
         default=25.0,
         metavar="HZ",
         help="state messages per second of each vehicle, 0.01 to 10000 (default 25)",
@@ -428,7 +335,7 @@ def _add_sitl(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--setpoint-timeout",
-        type=_positive,
+        type=arg.positive,
         default=0.5,
         metavar="S",
         help="a vehicle without set-points this long holds (default 0.5)",
