@@ -104,6 +104,17 @@ def lethal_family() -> Family:
     return Family(name="lethal", summary="test", obstacle_free=True, generate=generate)
 
 
+def transient_family(flag: Path) -> Family:
+    """Kills its worker in about a third of the encounters while ``flag`` exists: a cluster
+    that fails for a time, not an encounter that does."""
+    def generate(rng: np.random.Generator) -> Draw:
+        if rng.random() < 0.3 and flag.exists():
+            os._exit(3)
+        return _crossing(rng, vehicle_range=55.0)
+
+    return Family(name="transient", summary="test", obstacle_free=True, generate=generate)
+
+
 @pytest.fixture(scope="module")
 def cluster():
     """Two local workers; a task whose worker dies is given up at once (no retry)."""
@@ -262,6 +273,26 @@ def test_a_worker_that_dies_is_reported_and_the_sweep_finishes(cluster):
     assert set(lethal) <= set(errors)
     assert all(msg.startswith("KilledWorker") for msg in errors.values())
     assert result.rows.loc[~result.rows["index"].isin(errors), "all_reached"].all()
+
+
+def test_resume_flies_again_what_a_lost_worker_left_as_errors(cluster, tmp_path):
+    """Rows a lost worker left as errors are flown again by --resume, which then ends with the
+    rows of a sweep that lost none."""
+    from distributed import Client
+
+    n, flag, out = 4, tmp_path / "failing", tmp_path / "out"
+    flag.touch()
+    lost = run_sweep(transient_family(flag), n, seed=0, scheduler=cluster, in_flight=2,
+                     progress=False, out=out)
+    with Client(cluster) as client:  # the nanny restarts the worker: leave the cluster whole
+        client.wait_for_workers(2, timeout=120)
+    assert lost.summary["errors"]  # some encounters lost their worker
+    flag.unlink()
+    resumed = run_sweep(transient_family(flag), n, seed=0, scheduler=cluster, progress=False,
+                        out=out, resume=True)
+    whole = run_sweep(transient_family(flag), n, seed=0, scheduler=cluster, progress=False)
+    assert not resumed.summary["errors"]
+    assert rows_equal(resumed.rows, whole.rows)
 
 
 def test_bad_options_are_refused_before_any_cluster_starts():

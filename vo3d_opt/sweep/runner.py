@@ -23,7 +23,7 @@ from vo3d_opt.generators import FAMILIES, Family, get_family
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, error_line
 from vo3d_opt.sweep.stats import aggregate
-from vo3d_opt.sweep.store import FLUSH_SECONDS, PartStore, ResumeError, rows_frame
+from vo3d_opt.sweep.store import FLUSH_SECONDS, PartStore, ResumeError, failed, rows_frame
 
 with needs("sweep", "vo3d sweep"):
     from tqdm import tqdm
@@ -198,7 +198,7 @@ def run_sweep(
     encounters per task (default :func:`default_batch`); ``allowed_failures``: Dask's retries of
     a task whose worker died (local cluster only). ``out``: keep the rows in this directory as
     they come (``vo3d_opt.sweep.store``: a part at least every ``flush_seconds``); ``resume``:
-    fly only the encounters missing there.
+    fly only the encounters missing there, or whose row there is an error.
     ``SweepError`` for bad options, before any cluster starts, or an unreachable scheduler;
     :class:`~vo3d_opt.extras.MissingExtra` without the ``[sweep]`` extra.
     """
@@ -213,7 +213,8 @@ def run_sweep(
             store = PartStore(out, key, resume, flush_seconds)
         except (ResumeError, OSError) as exc:
             raise SweepError(str(exc)) from None
-    known = dict(store.rows) if store is not None else {}
+    # an error row is flown again: a worker or scheduler lost is no result of the encounter's
+    known = {} if store is None else {i: r for i, r in store.rows.items() if not failed(r)}
     missing = [i for i in range(n) if i not in known]
     fresh: list[dict[str, Any]] = []
     flying = {"wall": 0.0, "setup": 0.0, "threads": 0}

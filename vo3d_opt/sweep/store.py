@@ -45,6 +45,20 @@ class ResumeError(ValueError):
     """``--out DIR`` holds another sweep, or an unfinished one without ``--resume``."""
 
 
+def failed(row: dict[str, Any]) -> bool:
+    """Whether ``row`` holds an error where a flight's results would be."""
+    return row.get("error") is not None
+
+
+def _keep(rows: dict[int, dict[str, Any]], row: dict[str, Any]) -> None:
+    """Keep ``row`` under its index unless a row is there already; an error gives way to a row
+    flown again (it may have been the cluster's, a worker or scheduler lost, not the
+    encounter's)."""
+    index = int(row["index"])
+    if index not in rows or failed(rows[index]):
+        rows[index] = row
+
+
 def rows_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
     """One row per encounter, sorted by index, its columns the keys of the rows in the order
     they first appear (a key a row lacks is None there)."""
@@ -146,7 +160,8 @@ class PartStore:
 
     def _read(self) -> dict[int, dict[str, Any]]:
         """The rows already on disk: a finished sweep's table, then the parts (the first row
-        of an index kept); a temporary file a killed writer left behind is removed."""
+        of an index kept, unless it is an error and a later one is not); a temporary file a
+        killed writer left behind is removed."""
         rows: dict[int, dict[str, Any]] = {}
         sources = [self.out / "encounters.parquet"] if (self.out / "summary.json").exists() else []
         if self.parts.is_dir():
@@ -156,13 +171,13 @@ class PartStore:
         for path in sources:
             if path.exists():
                 for row in _read_rows(path):
-                    rows.setdefault(int(row["index"]), row)
+                    _keep(rows, row)
         return rows
 
     def add(self, rows: list[dict[str, Any]]) -> None:
         """Keep ``rows``; write a part when enough are waiting or enough time has passed."""
         for row in rows:
-            self.rows.setdefault(int(row["index"]), row)
+            _keep(self.rows, row)
         self.pending += rows
         waited = time.monotonic() - self.last_flush
         if len(self.pending) >= FLUSH_ROWS or (self.pending and waited >= self.flush_seconds):
