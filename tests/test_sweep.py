@@ -309,6 +309,9 @@ def test_bad_options_are_refused_before_any_cluster_starts():
     # a list of every index is made before anything flies: 10**30 of them never end
     with pytest.raises(SweepError, match="--n: must be at most"):
         run_sweep("pair", 10**30)
+    # a local worker is a process of its own: a huge count would exhaust memory first
+    with pytest.raises(SweepError, match="--workers: must be at most"):
+        run_sweep("pair", 2, workers=10**6)
     with pytest.raises(SweepError, match="solver 'bogus'"):
         run_sweep("pair", 2, method=Method(solver="bogus"))
     with pytest.raises(ValueError, match="selector_options.closing_guard: .*boolean"):

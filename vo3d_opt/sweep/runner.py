@@ -9,6 +9,7 @@ submission to the last row; ``setup_time`` the cluster's start and the warm-up b
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -104,18 +105,24 @@ MAX_SEED = 2**63 - 1
 MAX_ENCOUNTERS = 10_000_000
 
 
+def max_workers() -> int:
+    """The most local worker processes: four per core, at least 8 (each is a Python process
+    of its own; beyond the cores they only share them, and a huge count would exhaust memory
+    before it flew anything)."""
+    return max(8, 4 * (os.cpu_count() or 1))
+
+
 def _check_counts(**values: int | None) -> None:
     lows = {"n": 1, "seed": 0, "workers": 1, "in_flight": 1, "batch": 1}
+    highs = {"n": MAX_ENCOUNTERS, "seed": MAX_SEED, "workers": max_workers()}
     for key, value in values.items():
         if value is None and key in ("in_flight", "batch"):
             continue
         flag = f"--{key.replace('_', '-')}"
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lows[key]:
             raise SweepError(f"{flag}: must be an integer >= {lows[key]}, got {value!r}")
-        if key == "seed" and value > MAX_SEED:
-            raise SweepError(f"{flag}: must be at most {MAX_SEED} (2**63 - 1), got {value!r}")
-        if key == "n" and value > MAX_ENCOUNTERS:
-            raise SweepError(f"{flag}: must be at most {MAX_ENCOUNTERS:,}, got {value!r}")
+        if key in highs and value > highs[key]:
+            raise SweepError(f"{flag}: must be at most {highs[key]:,}, got {value!r}")
 
 
 def validate(
