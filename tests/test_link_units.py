@@ -238,6 +238,26 @@ def test_a_tcp_connection_closed_by_the_autopilot_is_seen_as_closed(capfd, reset
     assert closed and capfd.readouterr().out == ""
 
 
+def test_a_listening_tcp_connection_whose_peer_closes_is_seen_as_closed(capfd):
+    """``tcpin:``: once the autopilot that connected closes, the socket reads as ready for
+    ever; the port calls it closed instead of spinning."""
+    srv, number = _closing_server()
+    srv.close()  # a free port for the link to listen on
+    port = MavlinkPort(f"tcpin:127.0.0.1:{number}", source_system=1, source_component=191)
+    peer = socket.create_connection(("127.0.0.1", number))
+    calls = 0
+    for calls in range(1, 201):
+        port.wait(0.05)
+        assert port.receive() == []
+        if calls == 2:
+            peer.close()
+        if port.closed:
+            break
+    closed = port.closed
+    port.close()
+    assert closed and calls < 200 and capfd.readouterr().out == ""
+
+
 def test_a_refused_tcp_connection_is_one_line_on_stderr_and_nothing_on_stdout(capsys):
     srv, number = _closing_server()
     srv.close()  # nothing listens there now
@@ -432,6 +452,7 @@ LINK_ARGS = ("link", "--connect", "udpin:127.0.0.1:0", "--scenario", "x.yaml", "
 @pytest.mark.parametrize("flag, value", [
     ("--epoch", "nan"),  # a NaN clock never times out: the link would wait for ever
     ("--epoch", "inf"),
+    ("--epoch", "1e300"),  # finite, but monotonic() - epoch no longer moves
     ("--rate", "1e-300"),  # a period beyond what select() can wait
     ("--rate", "1e300"),
     ("--time-scale", "1e-300"),

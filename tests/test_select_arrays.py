@@ -166,8 +166,8 @@ def test_select_names_what_is_malformed(change: dict, match: str) -> None:
 @pytest.mark.parametrize("bad", [math.nan, -1.0, 0.0, 1e300, "40", True])
 @pytest.mark.parametrize("formulation", ["plane_qp", "cone_qp"])
 def test_a_bad_sensing_range_is_a_value_error_naming_it(bad, formulation):
-    """The swarm preset derives its horizon from ``sensing_range``: a NaN one gave no horizon
-    at all, a negative one an error about ``horizon``."""
+    """The swarm preset derives its horizon from ``sensing_range``: the error names it, not
+    the horizon derived from it."""
     sel = VelocitySelector(formulation=formulation, preset="swarm")
     own = AgentState(position=(0.0, 0.0, 20.0), velocity=(1.0, 0.0, 0.0))
     nb = Neighbor(position=(12.0, 0.0, 20.0), velocity=(-1.0, 0.0, 0.0), r_pz=3.0)

@@ -302,8 +302,7 @@ def test_bad_options_are_refused_before_any_cluster_starts():
         run_sweep("nope", 2)
     with pytest.raises(SweepError, match="--n"):
         run_sweep("pair", 0)
-    # the rows keep the seed in an int64 Parquet column: a larger one failed only when the
-    # first rows were written, after they had flown
+    # the rows keep the seed in an int64 Parquet column: refused before anything flies
     with pytest.raises(SweepError, match="--seed"):
         run_sweep("pair", 2, seed=2**63)
     # a list of every index is made before anything flies: 10**30 of them never end

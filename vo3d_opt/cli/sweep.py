@@ -81,7 +81,8 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
         type=non_negative_int,
         metavar="K",
         default=_cpus(),
-        help="local Dask worker processes, one thread each (default: the CPUs)",
+        help="local Dask worker processes, one thread each (default: the CPUs; at most four "
+        "per CPU, or 8)",
     )
     where.add_argument(
         "--scheduler",

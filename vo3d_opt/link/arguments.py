@@ -41,14 +41,22 @@ def number_in(low: float, high: float, unit: str) -> Callable[[str], float]:
     return parse
 
 
-def finite(text: str) -> float:
-    """Any finite number (``--epoch``, a ``time.monotonic()`` reading)."""
+#: The largest ``--epoch`` (s): a ``time.monotonic()`` reading, seconds since boot; beyond about
+#: 1e16 a clock of monotonic() - epoch no longer moves, and the link would never time out.
+EPOCH_LIMIT = 1e9
+
+
+def epoch(text: str) -> float:
+    """A ``time.monotonic()`` reading (``--epoch``): finite, at most ``EPOCH_LIMIT`` s from 0."""
     try:
         value = float(text)
     except ValueError:
         value = math.nan
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    if not abs(value) <= EPOCH_LIMIT:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a time.monotonic() reading (a number from {-EPOCH_LIMIT:g} to "
+            f"{EPOCH_LIMIT:g} s)"
+        )
     return value
 
 

@@ -197,7 +197,7 @@ def _add_link(sub: Any, parents: Sequence[argparse.ArgumentParser]) -> None:
     _add(
         p,
         "--epoch",
-        type=arg.finite,
+        type=arg.epoch,
         metavar="T",
         help="the link's clock starts at this time.monotonic() reading (vo3d sitl only: one "
         "clock for every process; default: when the link starts)",
@@ -478,10 +478,13 @@ def cmd_link(args: argparse.Namespace) -> int:
         link = Link(opts)
     except (OSError, ValueError, ImportError) as exc:  # a connection that cannot be opened
         raise _Usage(f"--connect {args.connect}: {exc}") from None
-    summary = link.run()
+    link.run(report=_print_summary)
+    return 1 if link.log_failed else 0
+
+
+def _print_summary(summary: dict[str, Any]) -> None:
     print(json.dumps(summary, allow_nan=False, default=_plain))
     sys.stdout.flush()
-    return 1 if link.log_failed else 0
 
 
 def _plain(value: Any) -> Any:

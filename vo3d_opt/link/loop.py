@@ -28,6 +28,7 @@ import logging
 import signal
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -273,8 +274,10 @@ class Link:
 
     # --- the session --------------------------------------------------------------------------
 
-    def run(self) -> dict[str, Any]:
-        """Fly until a stop; the summary (``vo3d_opt.link.report.link_summary``)."""
+    def run(self, report: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
+        """Fly until a stop; the summary (``vo3d_opt.link.report.link_summary``), handed to
+        ``report`` (e.g. printed) before SIGINT / SIGTERM are the caller's again: a signal
+        while stopping must not cut the hold, the log or the summary."""
         previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
         for s in previous:
             signal.signal(s, self._on_signal)
@@ -283,10 +286,13 @@ class Link:
                 self._session()
             finally:
                 self._finish()
-        finally:  # only now: a signal while stopping must not cut the hold, log or summary
+            summary = link_summary(self)
+            if report is not None:
+                report(summary)
+        finally:
             for s, handler in previous.items():
                 signal.signal(s, handler)
-        return link_summary(self)
+        return summary
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         self.signals += 1
@@ -388,10 +394,11 @@ class Link:
         return time.monotonic() - self.own_wall
 
     def _finish(self) -> None:
-        """Brake and ask for hold (unless the autopilot left offboard by itself); write the
-        log; close."""
+        """Brake and ask for hold (unless the autopilot left offboard by itself or the
+        connection is closed); write the log; close."""
         try:
-            if self.engaged_at is not None and self.stop_reason != "autopilot left offboard/guided":
+            told = self.engaged_at is not None and not self.port.closed  # else no one listens
+            if told and self.stop_reason != "autopilot left offboard/guided":
                 for _ in range(3):
                     self._send_setpoint(np.zeros(3))
                 self._set_mode(*hold_mode(self.pilot.flavour or "px4"))

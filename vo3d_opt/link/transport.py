@@ -66,7 +66,10 @@ class MavlinkPort:
         from pymavlink import mavutil
 
         said = io.StringIO()
-        try:  # pymavlink prints its connection retries on stdout, which carries the summary
+        # pymavlink prints its connection retries on stdout, which carries the summary; the
+        # redirect is the process's while the connection is made (a thread of the caller's
+        # that prints meanwhile goes to the debug log too)
+        try:
             with contextlib.redirect_stdout(said):
                 self.conn = mavutil.mavlink_connection(
                     url, baud=baud, source_system=source_system, source_component=source_component
@@ -77,6 +80,8 @@ class MavlinkPort:
         self.mav = self.conn.mav
         self.mav.robust_parsing = True
         self.datagrams = isinstance(self.conn, mavutil.mavudp | mavutil.mavmcast)
+        # a listening stream's recv gives b"" once its peer closed ("" while nothing is there)
+        self.listening = isinstance(self.conn, mavutil.mavtcpin)
         self.signed = signing_key is not None
         if signing_key is not None:
             self.conn.setup_signing(
@@ -120,10 +125,12 @@ class MavlinkPort:
                 break
             try:
                 data = self.conn.recv(65535) if not self.datagrams else self.conn.recv()
-            except ConnectionError:  # a stream reset by its other end (pymavlink re-raises)
+            except OSError as exc:  # reset by the other end (pymavlink re-raises), unplugged...
+                log.warning("connection lost: %s", exc)
                 self.closed = True
                 break
             if not data:
+                self.closed = self.closed or (self.listening and isinstance(data, bytes))
                 break
             out += self._parse(bytes(data) if isinstance(data, bytes | bytearray) else data)
             if self.datagrams:
