@@ -96,12 +96,16 @@ def _open(name: str, reason: str) -> object:
                          "lagged-s0-i92409", "dense-s0-i82432", "dense-s0-i82705",
                          "dense-s0-i95048")
         ),
+        _open("noisy-s0-i66134", "two vehicles side by side inside the buffer, sensed with noise"),
     ],
 )
 def test_open_sweep_failures(name):
     """The 100,000-encounter sweeps' failures whose cause is not fixed yet (each family's
     results page lists them). `lagged` 14945, 16783, 51181, 92409 and `dense` 82432, 82705,
-    95048: one vehicle has not reached its goal when the run ends; no zone is entered. Strict:
+    95048: one vehicle has not reached its goal when the run ends; no zone is entered.
+    `noisy` 66134: two vehicles fly side by side for seconds inside their buffered planning
+    zone (which shrinks to the gap left) and, with the noise in what each senses of the
+    other, come 2.6 % inside the larger zone. Strict:
     once a change clears one, this test fails and the encounter moves to
     ``test_sweep_failures_are_fixed``."""
     flies_clean(name)
