@@ -164,9 +164,11 @@ class SolverClock:
         clock = self
 
         class Timed:
-            def __getattr__(self, name):
+            def __getattr__(self, name):  # once per name: kept, later lookups are plain
                 attr = getattr(obj, name)
-                return clock.timed(attr) if name in methods else attr
+                attr = clock.timed(attr) if name in methods else attr
+                setattr(self, name, attr)
+                return attr
         return Timed()
 
     @contextlib.contextmanager

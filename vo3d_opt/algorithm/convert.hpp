@@ -453,9 +453,14 @@ double qp_violation(const In<double>& C, const In<double>& l, const In<double>& 
 // wants writable buffers: copies); 1 anything else (the standard form decides what it is).
 int qp_rows_form(nb::handle P_, nb::handle q_, nb::handle G_, nb::handle h_) {
     In<double> P, q, G, h;
-    if (!nb::try_cast(P_, P, false) || !nb::try_cast(q_, q, false) || !nb::try_cast(G_, G, false) ||
-        !nb::try_cast(h_, h, false))
-        return 1;
+    bool read_only = false;
+    auto take = [&](nb::handle a, In<double>& into) {  // writable first: the usual case, one cast
+        Out<double> w;
+        if (nb::try_cast(a, w, false)) return into = In<double>(w), true;
+        read_only = true;
+        return nb::try_cast(a, into, false);
+    };
+    if (!take(P_, P) || !take(q_, q) || !take(G_, G) || !take(h_, h)) return 1;
     if (q.ndim() != 1 || P.ndim() != 2 || G.ndim() != 2 || h.ndim() != 1) return 1;
     int64_t n = q.shape(0), m = h.shape(0);
     if (n < 1 || int64_t(P.shape(0)) != n || int64_t(P.shape(1)) != n || int64_t(G.shape(0)) != m ||
@@ -469,10 +474,7 @@ int qp_rows_form(nb::handle P_, nb::handle q_, nb::handle G_, nb::handle h_) {
     for (int64_t i = 0; i < n; ++i)
         for (int64_t j = 0; j < i; ++j)
             if (P.data()[i * n + j] != P.data()[j * n + i]) return 1;
-    Out<double> w;
-    for (nb::handle a : {P_, q_, G_, h_})
-        if (!nb::try_cast(a, w, false)) return 2;
-    return 0;
+    return read_only ? 2 : 0;
 }
 
 // max(G x - h) over the rows, each G x summed as qp_violation sums it; +inf when x is not a
