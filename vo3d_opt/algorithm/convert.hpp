@@ -423,6 +423,15 @@ int qp_screen(const In<double>& P, const In<double>& q, const In<double>& C, con
     return 3;
 }
 
+// Row i of C x, summed column by column as the rows are written (as numpy's column-wise sums
+// do).
+double row_times(const In<double>& C, const In<double>& x, int64_t i) {
+    double cx = 0.0;
+    for (int64_t j = 0; j < int64_t(C.shape(1)); ++j)
+        cx = cx + C.data()[i * C.stride(0) + j * C.stride(1)] * at(x, j);
+    return cx;
+}
+
 // The largest of l - C x and C x - u over the rows, each C x summed column by column as the
 // rows are written (as numpy's column-wise sums do), and, for r >= 0, of |x| - r (|x|² summed
 // left to right, as numpy sums up to 8 entries); a NaN never wins; -inf for nothing.
@@ -436,9 +445,7 @@ double qp_violation(const In<double>& C, const In<double>& l, const In<double>& 
         if (std::isnan(worst)) worst = -kInf;
     }
     for (int64_t i = 0; i < int64_t(C.shape(0)); ++i) {
-        double cx = 0.0;
-        for (int64_t j = 0; j < int64_t(C.shape(1)); ++j)
-            cx = cx + C.data()[i * C.stride(0) + j * C.stride(1)] * at(x, j);
+        double cx = row_times(C, x, i);
         double lo = at(l, i) - cx, hi = cx - at(u, i);
         if (lo > worst) worst = lo;
         if (hi > worst) worst = hi;
@@ -477,7 +484,7 @@ int qp_rows_form(nb::handle P_, nb::handle q_, nb::handle G_, nb::handle h_) {
     return read_only ? 2 : 0;
 }
 
-// max(G x - h) over the rows, each G x summed as qp_violation sums it; +inf when x is not a
+// max(G x - h) over the rows (row_times, as qp_violation); +inf when x is not a
 // finite array of G's width (the caller then takes the standard form's longer check).
 double qp_rows_gap(const In<double>& G, const In<double>& h, nb::handle x_) {
     In<double> x;
@@ -486,11 +493,7 @@ double qp_rows_gap(const In<double>& G, const In<double>& h, nb::handle x_) {
     for (int64_t j = 0; j < n; ++j)
         if (!std::isfinite(at(x, j))) return kInf;
     double worst = -kInf;
-    for (int64_t i = 0; i < int64_t(G.shape(0)); ++i) {
-        double gx = 0.0;
-        for (int64_t j = 0; j < n; ++j) gx = gx + G.data()[i * G.stride(0) + j * G.stride(1)] * at(x, j);
-        if (gx - at(h, i) > worst) worst = gx - at(h, i);
-    }
+    for (int64_t i = 0; i < int64_t(G.shape(0)); ++i) worst = std::max(worst, row_times(G, x, i) - at(h, i));
     return worst;
 }
 

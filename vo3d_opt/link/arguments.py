@@ -45,21 +45,7 @@ def number_in(low: float, high: float, unit: str) -> Callable[[str], float]:
 #: 1e16 a clock of monotonic() - epoch no longer moves, and the link would never time out.
 EPOCH_LIMIT = 1e9
 
-
-def epoch(text: str) -> float:
-    """A ``time.monotonic()`` reading (``--epoch``): finite, at most ``EPOCH_LIMIT`` s from 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not abs(value) <= EPOCH_LIMIT:
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not a time.monotonic() reading (a number from {-EPOCH_LIMIT:g} to "
-            f"{EPOCH_LIMIT:g} s)"
-        )
-    return value
-
-
+epoch = number_in(-EPOCH_LIMIT, EPOCH_LIMIT, " s (a time.monotonic() reading)")
 rate = number_in(0.01, 1000.0, " Hz")
 time_scale = number_in(0.001, 1000.0, "")
 sim_rate = number_in(0.01, 10000.0, " Hz")
