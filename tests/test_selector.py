@@ -223,6 +223,34 @@ def test_reciprocal_takes_half_the_avoidance():
     assert dev(own_all.velocity)[0] == pytest.approx(dev(full.velocity)[0], abs=1e-3)
 
 
+@pytest.mark.parametrize("depth_share", [0.25, 0.5, 0.9])
+@pytest.mark.parametrize("cooperative", [True, False])
+def test_inside_the_buffer_the_answer_opens_the_gap(depth_share, cooperative):
+    """Two vehicles side by side, same velocity, the neighbour ``depth_share`` of the buffer
+    inside it (the default preset: buffer 2 v_max dt = 1.6 m): the answer moves away from it,
+    by more the deeper it is, and stays outside the real VO. Just outside the buffer, the
+    preferred velocity (holding the gap) stands."""
+    sel, limits, dt, r_pz = VelocitySelector(), Limits(speed=(0, 4), altitude=(0, 40)), 0.2, 8.0
+    buffer = sel.options_for(limits.v_max, dt).pz_buffer
+
+    def answer(gap: float) -> np.ndarray:
+        nb = Neighbor(position=(0.0, r_pz + gap, 20.0), velocity=(2.0, 0.0, 0.0), r_pz=r_pz,
+                      cooperative=cooperative)
+        kw = dict(own=AgentState(position=(0.0, 0.0, 20.0), velocity=(2.0, 0.0, 0.0)),
+                  preferred_velocity=(2.0, 0.0, 0.0), neighbors=[nb], obstacles=[],
+                  limits=limits, dt=dt)
+        d = sel.select(**kw)
+        assert d.status == "optimal" and safe(kw, d.velocity, sel)
+        assert_within_limits(kw, d.velocity)
+        return d.velocity
+
+    assert buffer == pytest.approx(2 * limits.v_max * dt)
+    assert np.allclose(answer(1.01 * buffer), [2.0, 0.0, 0.0])
+    opening = -answer((1.0 - depth_share) * buffer)[1]  # away from the neighbour: -y
+    deeper = -answer((1.0 - min(1.0, depth_share + 0.05)) * buffer)[1]
+    assert 0.0 < opening < deeper
+
+
 @pytest.mark.parametrize("formulation", ["sampled", "plane_qp"])
 def test_answer_keeps_the_margin_off_the_cone(formulation):
     """Issue 9 §4: a neighbour at rest 20 m ahead on the line of flight (r_pz 10 m): the VO is

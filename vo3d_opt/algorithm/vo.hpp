@@ -31,6 +31,9 @@ constexpr double TAU_MIN = 1.5;
 constexpr double NO_VIRTUAL_SPHERE = -1.0;
 //: With pz_buffer, the planning sphere grows by at most this share of the gap left.
 constexpr double BUFFER_GAP_SHARE = 0.9;
+//: Inside a neighbour's buffer, the share of the depth A asks to open per buffer time
+//: (pz_buffer / v_max): its apex moves this much of depth / buffer time away from B.
+constexpr double BUFFER_OPENING = 0.5;
 //: A prism reaching the ceiling is planned this much (m) above the vehicle and the ceiling.
 constexpr double OVER_THE_CEILING = 1e3;
 
@@ -392,6 +395,17 @@ inline void aimed(const double* v_pref, const Bounds& b, double* pref) {
     for (int k = 0; k < 3; ++k) pref[k] = speed > b.v_max ? v_pref[k] * (b.v_max / speed) : v_pref[k];
 }
 
+// Inside the buffer by ``depth`` (m) at distance d: the apex moves away from B by
+// BUFFER_OPENING * depth / (pz_buffer / v_max), so that a velocity outside the cone opens the
+// gap rather than holds it. Holding it lets noise in the sensed positions ratchet the distance
+// down step by step; the cone so moved holds the one before, so the real zone stays clear.
+inline void opened(NeighbourRow& row, const double* p_A, double d, double depth, double v_max,
+                   double pz_buffer) {
+    if (!(depth > 0.0) || !(depth < pz_buffer)) return;  // outside the buffer, or inside the zone
+    double s = BUFFER_OPENING * depth * v_max / pz_buffer;
+    for (int k = 0; k < 3; ++k) row.apex[k] -= s * (row.p_B[k] - p_A[k]) / d;
+}
+
 // Each neighbour's row (nbrs: position, velocity, r_pz, cooperative 1/0). With a horizon, zones
 // that cannot be reached in time are dropped; reciprocal (RVO): the apex at (V_A + V_B)/2 for
 // a cooperative neighbour; pz_buffer: a larger planning sphere, never so large that A is
@@ -414,6 +428,7 @@ inline std::vector<NeighbourRow> cone_rows(const double* p, const double* v_now,
         row.r_pz = cfg.pz_buffer > 0.0 && d > r_pz
                        ? r_pz + std::min(cfg.pz_buffer, BUFFER_GAP_SHARE * (d - r_pz))
                        : r_pz;
+        opened(row, p, d, r_pz + cfg.pz_buffer - d, b.v_max, cfg.pz_buffer);
         rows.push_back(row);
     }
     return rows;
