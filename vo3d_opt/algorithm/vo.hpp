@@ -395,10 +395,12 @@ inline void aimed(const double* v_pref, const Bounds& b, double* pref) {
     for (int k = 0; k < 3; ++k) pref[k] = speed > b.v_max ? v_pref[k] * (b.v_max / speed) : v_pref[k];
 }
 
-// Inside the buffer by ``depth`` (m) at distance d: the apex moves away from B by
-// BUFFER_OPENING * depth / (pz_buffer / v_max), so that a velocity outside the cone opens the
-// gap rather than holds it. Holding it lets noise in the sensed positions ratchet the distance
-// down step by step; the cone so moved holds the one before, so the real zone stays clear.
+// Inside a cooperative neighbour's buffer by ``depth`` (m) at distance d: the apex moves away
+// from B by BUFFER_OPENING * depth / (pz_buffer / v_max), so that a velocity outside the cone
+// opens the gap rather than holds it. Holding it lets two vehicles fly side by side while noise
+// in the sensed positions ratchets the distance down; the cone so moved holds the one before,
+// so the real zone stays clear. A vehicle that does not decide (hovering at its goal, or not
+// avoiding) is only kept off, as before: a goal may lie within another's buffer.
 inline void opened(NeighbourRow& row, const double* p_A, double d, double depth, double v_max,
                    double pz_buffer) {
     if (!(depth > 0.0) || !(depth < pz_buffer)) return;  // outside the buffer, or inside the zone
@@ -428,7 +430,7 @@ inline std::vector<NeighbourRow> cone_rows(const double* p, const double* v_now,
         row.r_pz = cfg.pz_buffer > 0.0 && d > r_pz
                        ? r_pz + std::min(cfg.pz_buffer, BUFFER_GAP_SHARE * (d - r_pz))
                        : r_pz;
-        opened(row, p, d, r_pz + cfg.pz_buffer - d, b.v_max, cfg.pz_buffer);
+        if (nbrs(i, 7) > 0.0) opened(row, p, d, r_pz + cfg.pz_buffer - d, b.v_max, cfg.pz_buffer);
         rows.push_back(row);
     }
     return rows;
