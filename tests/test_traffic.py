@@ -167,12 +167,13 @@ def test_an_agent_pushed_off_its_goals_door_is_no_longer_waiting():
 # ---------------------------------------------------------------- arrived agents keep watch
 
 
-def brute_watch(p, goals, done, straight, watching, tol, vrange, run):
+def brute_watch(p, goals, done, straight, watching, tol, vrange, run, stuck=None):
+    stuck = np.zeros(len(p), dtype=bool) if stuck is None else stuck
     out = np.zeros(len(p), dtype=bool)
     for i in range(len(p)):
         if not done[i] or straight[i]:
             continue
-        near = any(straight[j] and not done[j] and run[j] == run[i]
+        near = any((straight[j] or stuck[j]) and not done[j] and run[j] == run[i]
                    and np.linalg.norm(p[i] - p[j]) <= vrange[i] for j in range(len(p)))
         away = np.linalg.norm(p[i] - goals[i]) > tol[i]
         out[i] = near or (watching[i] and away)
@@ -196,6 +197,17 @@ def test_keep_watch_is_the_pairwise_rule_within_each_run(seed):
     want = brute_watch(p, goals, kw["done"], kw["straight"], kw["watching"], kw["tolerance"],
                        kw["vehicle_range"], np.zeros(n))
     assert np.array_equal(keep_watch(p, goals, **alone), want)
+    # a cooperative agent on a detour from a stall wakes the arrived ones near it too
+    stuck = rng.random(n) < 0.3
+    want = brute_watch(p, goals, kw["done"], kw["straight"], kw["watching"], kw["tolerance"],
+                       kw["vehicle_range"], kw["run"], stuck)
+    assert np.array_equal(keep_watch(p, goals, **kw, stuck=stuck), want)
+    calm = dict(kw, straight=np.zeros(n, dtype=bool), watching=np.zeros(n, dtype=bool))
+    got = keep_watch(p, goals, **calm, stuck=stuck)
+    assert got.any() and not keep_watch(p, goals, **calm).any()
+    assert np.array_equal(got, brute_watch(p, goals, calm["done"], calm["straight"],
+                                           calm["watching"], kw["tolerance"],
+                                           kw["vehicle_range"], kw["run"], stuck))
     lost = p.copy()
     lost[np.flatnonzero(kw["straight"] & ~kw["done"])] = np.nan  # no threat flies on
     assert np.array_equal(keep_watch(lost, goals, **kw),

@@ -157,6 +157,7 @@ class _Batch:
                 tolerance=self.tol,
                 vehicle_range=self.vrange,
                 run=self.run,
+                stuck=self.prefer.stuck,
             )
             for r in self.runs:  # a run ends when everyone is home and nobody keeps watch
                 home = done[r.lo : r.hi].all() and not self.watching[r.lo : r.hi].any()

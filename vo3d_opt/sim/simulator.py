@@ -171,7 +171,7 @@ def fly(
     bar = _progress_bar(sc, total, progress)
     try:
         for k in range(total):
-            watching = _watch(sc, p, done, watching)
+            watching = _watch(sc, p, done, watching, getattr(prefer, "stuck", None))
             if done.all() and not watching.any():
                 break
             steps = k + 1
@@ -231,7 +231,9 @@ def _hover_or_decide(dyn: Dynamics, done: np.ndarray, watching: np.ndarray) -> N
     dyn.hold(done & ~watching & ~dyn.held)
 
 
-def _watch(sc: Scenario, p: np.ndarray, done: np.ndarray, watching: np.ndarray) -> np.ndarray:
+def _watch(
+    sc: Scenario, p: np.ndarray, done: np.ndarray, watching: np.ndarray, stuck: Any
+) -> np.ndarray:
     """The arrived agents that decide this step (``traffic.keep_watch``)."""
     n = sc.n_agents
     return keep_watch(
@@ -242,6 +244,7 @@ def _watch(sc: Scenario, p: np.ndarray, done: np.ndarray, watching: np.ndarray) 
         watching=watching,
         tolerance=np.full(n, sc.goal_tolerance),
         vehicle_range=np.full(n, sc.sensing.vehicle_range),
+        stuck=stuck,
     )
 
 

@@ -52,13 +52,18 @@ def keep_watch(
     tolerance: np.ndarray,
     vehicle_range: np.ndarray,
     run: np.ndarray | None = None,
+    stuck: np.ndarray | None = None,
 ) -> np.ndarray:
     """Which arrived agents decide again (N,): a vehicle that does not avoid (``straight``),
-    still flying, within their ``vehicle_range`` of them, or one was (``watching``) and they are
-    not back within ``tolerance`` of their goal. A hovering agent that nobody steers round would
-    otherwise be hit where it waits. ``run`` (N,): the run of each vehicle when runs are flown
-    side by side (vehicles see only their own run's); all arrays (N,) but the (N, 3) ones."""
-    kept, threat = done & ~straight, straight & ~done
+    or one on a detour from a stall (``stuck``), still flying, within their ``vehicle_range``
+    of them, or one was (``watching``) and they are not back within ``tolerance`` of their goal.
+    A hovering agent that nobody steers round would otherwise be hit where it waits, and
+    hovering agents can wall a stalled one off from its goal: deciding again, they take their
+    half of the avoidance and make room. ``run`` (N,): the run of each vehicle when runs are
+    flown side by side (vehicles see only their own run's); all arrays (N,) but the (N, 3)
+    ones."""
+    moving = straight if stuck is None else straight | stuck
+    kept, threat = done & ~straight, moving & ~done
     if not (kept.any() and (threat.any() or watching.any())):  # most steps of most runs
         return np.zeros(done.shape, dtype=bool)
     finite = np.isfinite(positions).all(axis=1)  # a vehicle gone astray threatens nobody
@@ -138,6 +143,11 @@ class GoalWithDetours:
         self.detour_until = np.full(n, -np.inf)
         self.in_row = np.zeros(n, dtype=np.int64)  # detours in a row: the last one's turn
         self.waiting = np.zeros(n, dtype=bool)
+
+    @property
+    def stuck(self) -> np.ndarray:
+        """(N,) the agents on a detour from a stall at the next call (``keep_watch``'s)."""
+        return self.t < self.detour_until
 
     def __call__(self, positions: Any) -> np.ndarray:
         p = np.asarray(positions, dtype=float)
