@@ -224,16 +224,16 @@ def test_reciprocal_takes_half_the_avoidance():
 
 
 @pytest.mark.parametrize("depth_share", [0.25, 0.5, 0.9])
-@pytest.mark.parametrize("cooperative", [True, False])
-def test_inside_the_buffer_the_answer_opens_the_gap(depth_share, cooperative):
+def test_inside_a_cooperative_buffer_the_answer_opens_the_gap(depth_share):
     """Two vehicles side by side, same velocity, the neighbour ``depth_share`` of the buffer
     inside it (the default preset: buffer 2 v_max dt = 1.6 m): the answer moves away from it,
-    by more the deeper it is, and stays outside the real VO. Just outside the buffer, the
-    preferred velocity (holding the gap) stands."""
+    by more the deeper it is, and stays outside the real VO. Just outside the buffer, or beside
+    a neighbour that does not avoid (it will not move aside, and a goal may lie within its
+    buffer), the preferred velocity (holding the gap) stands."""
     sel, limits, dt, r_pz = VelocitySelector(), Limits(speed=(0, 4), altitude=(0, 40)), 0.2, 8.0
     buffer = sel.options_for(limits.v_max, dt).pz_buffer
 
-    def answer(gap: float) -> np.ndarray:
+    def answer(gap: float, cooperative: bool = True) -> np.ndarray:
         nb = Neighbor(position=(0.0, r_pz + gap, 20.0), velocity=(2.0, 0.0, 0.0), r_pz=r_pz,
                       cooperative=cooperative)
         kw = dict(own=AgentState(position=(0.0, 0.0, 20.0), velocity=(2.0, 0.0, 0.0)),
@@ -244,9 +244,11 @@ def test_inside_the_buffer_the_answer_opens_the_gap(depth_share, cooperative):
         assert_within_limits(kw, d.velocity)
         return d.velocity
 
+    gap = (1.0 - depth_share) * buffer
     assert buffer == pytest.approx(2 * limits.v_max * dt)
     assert np.allclose(answer(1.01 * buffer), [2.0, 0.0, 0.0])
-    opening = -answer((1.0 - depth_share) * buffer)[1]  # away from the neighbour: -y
+    assert np.allclose(answer(gap, cooperative=False), [2.0, 0.0, 0.0])
+    opening = -answer(gap)[1]  # away from the neighbour: -y
     deeper = -answer((1.0 - min(1.0, depth_share + 0.05)) * buffer)[1]
     assert 0.0 < opening < deeper
 

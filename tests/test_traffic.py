@@ -42,6 +42,25 @@ def test_a_stalled_agent_turns_right_at_full_speed_then_seeks_its_goal_again():
     np.testing.assert_allclose(still[after], np.broadcast_to(straight, (after.sum(), 2, 3)))
 
 
+def test_an_agent_is_stuck_while_on_a_detour_and_only_then():
+    """``stuck`` (read before each call, as the simulator's keep_watch does) is the agents whose
+    detour, begun at an earlier call, goes on at this one."""
+    rule = GoalWithDetours(GOALS, 4.0, DT)
+    p = np.array([[0.0, 0.0, 20.0], [0.0, 0.0, 10.0]])
+    straight = goal_velocity(p, GOALS, 4.0, DT)
+    was, seen = np.zeros(2, dtype=bool), np.zeros(2, dtype=bool)
+    for _ in range(int(3 * STALL_TIME / DT + 1)):
+        stuck = rule.stuck.copy()
+        detour = ~np.all(np.isclose(rule(p), straight), axis=1)
+        assert np.array_equal(stuck, detour & was)
+        was, seen = detour, seen | stuck
+    assert seen.all()
+    moving = GoalWithDetours(GOALS, 4.0, DT)
+    for k in range(int(3 * STALL_TIME / DT)):
+        assert not moving.stuck.any()
+        moving(p + straight * DT * k)
+
+
 def _turned_right(w: np.ndarray, deg: float) -> np.ndarray:
     c, s = np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))
     return np.stack([c * w[:, 0] + s * w[:, 1], -s * w[:, 0] + c * w[:, 1], w[:, 2]], axis=1)
