@@ -31,8 +31,8 @@ constexpr double TAU_MIN = 1.5;
 constexpr double NO_VIRTUAL_SPHERE = -1.0;
 //: With pz_buffer, the planning sphere grows by at most this share of the gap left.
 constexpr double BUFFER_GAP_SHARE = 0.9;
-//: Inside a neighbour's buffer, the share of the depth A asks to open per buffer time
-//: (pz_buffer / v_max): its apex moves this much of depth / buffer time away from B.
+//: Inside the inner half of a cooperative neighbour's buffer, the apex moves away from it by
+//: this share of v_max at the zone's edge, in proportion to the depth into that half.
 constexpr double BUFFER_OPENING = 0.5;
 //: A prism reaching the ceiling is planned this much (m) above the vehicle and the ceiling.
 constexpr double OVER_THE_CEILING = 1e3;
@@ -395,23 +395,28 @@ inline void aimed(const double* v_pref, const Bounds& b, double* pref) {
     for (int k = 0; k < 3; ++k) pref[k] = speed > b.v_max ? v_pref[k] * (b.v_max / speed) : v_pref[k];
 }
 
-// Inside a cooperative neighbour's buffer by ``depth`` (m) at distance d: the apex moves away
-// from B by BUFFER_OPENING * depth / (pz_buffer / v_max), so that a velocity outside the cone
-// opens the gap rather than holds it. Holding it lets two vehicles fly side by side while noise
-// in the sensed positions ratchets the distance down; the cone so moved holds the one before,
-// so the real zone stays clear. A vehicle that does not decide (hovering at its goal, or not
-// avoiding) is only kept off, as before: a goal may lie within another's buffer.
+// Inside the inner half of a cooperative neighbour's buffer (``depth`` m into the buffer, at
+// distance d): the apex moves away from B by BUFFER_OPENING * v_max * (depth - pz_buffer / 2) /
+// (pz_buffer / 2), so that holding the gap there is inside the cone: holding it lets two
+// vehicles fly side by side while noise in the sensed positions ratchets the distance down.
+// The moved cone contains the unmoved one, so no velocity it allows enters the real zone. The
+// outer half of the buffer still lets a pair hold its gap: two vehicles whose goals lie within
+// each other's buffer can both be home. Inside the zone itself (depth >= pz_buffer) the cone is
+// an escape cone and the row is left as it is. A vehicle that does not decide (hovering at its
+// goal, or not avoiding) gets no push: it will not move aside.
 inline void opened(NeighbourRow& row, const double* p_A, double d, double depth, double v_max,
                    double pz_buffer) {
-    if (!(depth > 0.0) || !(depth < pz_buffer)) return;  // outside the buffer, or inside the zone
-    double s = BUFFER_OPENING * depth * v_max / pz_buffer;
+    double half = 0.5 * pz_buffer;
+    if (!(depth > half) || !(depth < pz_buffer)) return;  // outer half, or inside the zone
+    double s = BUFFER_OPENING * v_max * (depth - half) / half;
     for (int k = 0; k < 3; ++k) row.apex[k] -= s * (row.p_B[k] - p_A[k]) / d;
 }
 
 // Each neighbour's row (nbrs: position, velocity, r_pz, cooperative 1/0). With a horizon, zones
 // that cannot be reached in time are dropped; reciprocal (RVO): the apex at (V_A + V_B)/2 for
 // a cooperative neighbour; pz_buffer: a larger planning sphere, never so large that A is
-// 'inside' it while outside the real one (at most 90 % of the gap left).
+// 'inside' it while outside the real one (at most 90 % of the gap left), and deep inside a
+// cooperative neighbour's buffer an apex moved away from it (opened).
 inline std::vector<NeighbourRow> cone_rows(const double* p, const double* v_now, const Rows& nbrs,
                                            const Bounds& b, const Config& cfg) {
     std::vector<NeighbourRow> rows;

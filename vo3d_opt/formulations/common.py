@@ -197,7 +197,9 @@ def py_build_vos(
     - With a horizon, zones that cannot be reached in time have an empty VO: dropped.
     - ``pz_buffer``: a buffer against the discretisation and the neighbours' own manoeuvres, a
       larger planning sphere, but never so large that A is 'inside' it while outside the real
-      one (the VO would degenerate to a half-space): at most 90 % of the gap left.
+      one (the VO would degenerate to a half-space): at most 90 % of the gap left. In the
+      inner half of a cooperative neighbour's buffer the apex moves away from it, so that
+      holding the gap is inside the VO (``BUFFER_OPENING`` in algorithm/vo.hpp).
     - Reciprocal (RVO): the apex at (V_A + V_B)/2, each of two cooperative vehicles taking half
       the avoidance; a neighbour that does not avoid keeps the apex V_B.
     - The virtual sphere (3.1.6) is sized for every speed up to v_max.

@@ -40,10 +40,11 @@ altitude range.
 
 An agent within ``goal_tolerance`` of its goal has arrived: it stops (velocity 0 from that
 sample on, which is what the others sense next), hovers there, still seen by the others, and no
-longer decides, but while an agent that does not avoid, not yet arrived, is within its
-``sensing.vehicle_range``: then it decides again with its goal as preferred velocity until that
-agent is out of range and it is back within ``goal_tolerance`` (``traffic.keep_watch``; nobody
-else would steer round it). The run stops when all agents have arrived and none keeps watch, or
+longer decides, but while an agent that does not avoid, or one on a detour from a stall, not
+yet arrived, is within its ``sensing.vehicle_range``: then it decides again with its goal as
+preferred velocity until no such agent is in range and it is back within ``goal_tolerance``
+(``traffic.keep_watch``; nobody else would steer round it, and hovering vehicles may wall a
+stalled one off from its goal). The run stops when all agents have arrived and none keeps watch, or
 after ``max_time``. The loop never clips a decision: the metrics report any limit it breaks (a
 non-finite command becomes 0 with the status ``invalid_velocity (...)``).
 """
@@ -232,7 +233,7 @@ def _hover_or_decide(dyn: Dynamics, done: np.ndarray, watching: np.ndarray) -> N
 
 
 def _watch(
-    sc: Scenario, p: np.ndarray, done: np.ndarray, watching: np.ndarray, stuck: Any
+    sc: Scenario, p: np.ndarray, done: np.ndarray, watching: np.ndarray, stuck: np.ndarray | None
 ) -> np.ndarray:
     """The arrived agents that decide this step (``traffic.keep_watch``)."""
     n = sc.n_agents

@@ -87,9 +87,8 @@ STALL_TIME = 4.0
 STALL_PROGRESS = 0.05
 STALL_MOTION = 0.25
 #: Detours in a row turn ``detour_deg`` times 1, 2, ..., DETOUR_TURNS, then 1 again (90°, 180°,
-#: 270°: right, back, left): one side may be walled (``dense`` encounter 5051 under the closing
-#: guard stalled among hovering vehicles, where the right turn's nearest safe velocity was
-#: hovering again; the back and left turns freed it).
+#: 270°: right, back, left): one side may be walled, where the right turn's nearest safe
+#: velocity is hovering again.
 DETOUR_TURNS = 3
 
 
