@@ -87,6 +87,25 @@ def test_arrived_agents_keeping_watch_side_by_side_with_others():
         assert same_record(alone, got), sc.name
 
 
+def test_arrived_agents_making_room_for_a_stuck_one_side_by_side_with_others():
+    """dense 95048: vehicles hovering at their goals decide again while an agent on a detour
+    from a stall is in range (``GoalWithDetours.stuck``); side by side with two pair runs, each
+    run is still its own, and the batch's detour rule wakes only the stuck run's vehicles."""
+    from pathlib import Path
+
+    from vo3d_opt.sim.scenario import load_scenario
+
+    data = Path(__file__).parent / "data" / "sweep-failures"
+    scs = [make_encounter("pair", 1, 0).load(), load_scenario(data / "dense-s0-i95048.yaml"),
+           make_encounter("pair", 1, 1).load()]
+    together = fly_together([flown(sc, Method())[:2] for sc in scs])
+    woken = together[1].decided & together[1].arrived[:-1]
+    assert woken.any()
+    for sc, got in zip(scs, together, strict=True):
+        alone = fly(*flown(sc, Method())[:2], progress=False)
+        assert same_record(alone, got), sc.name
+
+
 @pytest.mark.parametrize("tau", [0.5, 1.0])
 def test_a_watcher_back_home_stops_in_both_loops(tau):
     """``a`` keeps watch while ``b`` (avoids: false) passes and is still moving when it is back

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
-
 from encounters import encounters
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
 from vo3d_opt import (
     AgentState,
     Box,
@@ -16,8 +17,15 @@ from vo3d_opt import (
     VelocitySelector,
 )
 from vo3d_opt.formulations.common import Options, prepare
-from vo3d_opt.solvers import Result
-from vo3d_opt.solvers import Backend, available_qp_solvers, register_backend, unregister_backend
+from vo3d_opt.geometry import build_cones
+from vo3d_opt.geometry.membership import in_vo_cones
+from vo3d_opt.solvers import (
+    Backend,
+    Result,
+    available_qp_solvers,
+    register_backend,
+    unregister_backend,
+)
 
 QP_SOLVERS = available_qp_solvers()
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
@@ -223,19 +231,21 @@ def test_reciprocal_takes_half_the_avoidance():
     assert dev(own_all.velocity)[0] == pytest.approx(dev(full.velocity)[0], abs=1e-3)
 
 
-@pytest.mark.parametrize("depth_share", [0.25, 0.5, 0.9])
-def test_inside_a_cooperative_buffer_the_answer_opens_the_gap(depth_share):
+@pytest.mark.parametrize("depth_share", [0.6, 0.75, 0.9])
+def test_deep_in_a_cooperative_buffer_the_answer_opens_the_gap(depth_share):
     """Two vehicles side by side, same velocity, the neighbour ``depth_share`` of the buffer
-    inside it (the default preset: buffer 2 v_max dt = 1.6 m): the answer moves away from it,
-    by more the deeper it is, and stays outside the real VO. Just outside the buffer, or beside
-    a neighbour that does not avoid (it will not move aside, and a goal may lie within its
-    buffer), the preferred velocity (holding the gap) stands."""
-    sel, limits, dt, r_pz = VelocitySelector(), Limits(speed=(0, 4), altitude=(0, 40)), 0.2, 8.0
+    inside it (the default preset: buffer 2 v_max dt = 1.6 m): past half the buffer the answer
+    moves away from it, by more the deeper it is, and stays outside the VO. In the outer half,
+    or beside a neighbour that does not avoid (it will not move aside), the preferred velocity
+    (holding the gap) stands: two vehicles whose goals lie within each other's buffer can both
+    be home."""
+    sel, dt, r_pz = VelocitySelector(), 0.2, 8.0
+    limits = Limits(speed=(0, 4), altitude=(0, 40))
     buffer = sel.options_for(limits.v_max, dt).pz_buffer
 
-    def answer(gap: float, cooperative: bool = True) -> np.ndarray:
-        nb = Neighbor(position=(0.0, r_pz + gap, 20.0), velocity=(2.0, 0.0, 0.0), r_pz=r_pz,
-                      cooperative=cooperative)
+    def answer(depth: float, cooperative: bool = True) -> np.ndarray:
+        nb = Neighbor(position=(0.0, r_pz + (1.0 - depth) * buffer, 20.0),
+                      velocity=(2.0, 0.0, 0.0), r_pz=r_pz, cooperative=cooperative)
         kw = dict(own=AgentState(position=(0.0, 0.0, 20.0), velocity=(2.0, 0.0, 0.0)),
                   preferred_velocity=(2.0, 0.0, 0.0), neighbors=[nb], obstacles=[],
                   limits=limits, dt=dt)
@@ -244,13 +254,46 @@ def test_inside_a_cooperative_buffer_the_answer_opens_the_gap(depth_share):
         assert_within_limits(kw, d.velocity)
         return d.velocity
 
-    gap = (1.0 - depth_share) * buffer
     assert buffer == pytest.approx(2 * limits.v_max * dt)
-    assert np.allclose(answer(1.01 * buffer), [2.0, 0.0, 0.0])
-    assert np.allclose(answer(gap, cooperative=False), [2.0, 0.0, 0.0])
-    opening = -answer(gap)[1]  # away from the neighbour: -y
-    deeper = -answer((1.0 - min(1.0, depth_share + 0.05)) * buffer)[1]
+    for holds in (-0.01, 0.25, 0.49):
+        assert np.allclose(answer(holds), [2.0, 0.0, 0.0])
+    assert np.allclose(answer(depth_share, cooperative=False), [2.0, 0.0, 0.0])
+    opening = -answer(depth_share)[1]  # away from the neighbour: -y
+    deeper = -answer(min(0.99, depth_share + 0.05))[1]
     assert 0.0 < opening < deeper
+
+
+@settings(max_examples=200, **SETTINGS)
+@given(
+    gap=st.floats(0.0, 1.0),
+    direction=st.tuples(*[st.floats(-1.0, 1.0)] * 3).filter(lambda u: np.linalg.norm(u) > 0.1),
+    v_a=st.tuples(*[st.floats(-4.0, 4.0)] * 3),
+    v_b=st.tuples(*[st.floats(-4.0, 4.0)] * 3),
+    horizon=st.sampled_from([None, 0.5, 3.0]),
+)
+def test_the_opened_vo_holds_the_vo_of_the_real_apex(gap, direction, v_a, v_b, horizon):
+    """Deep in a cooperative neighbour's buffer the cone's apex moves away from it; the moved
+    cone must contain the cone at the reciprocal apex (V_A + V_B)/2 with the same planning
+    sphere: no velocity within v_max outside the one is inside the other."""
+    sel, dt, r_pz = VelocitySelector(horizon=horizon), 0.2, 6.0
+    limits = Limits(speed=(0, 4), altitude=(0, 100))
+    options = sel.options_for(limits.v_max, dt)
+    buffer = options.pz_buffer
+    u = np.asarray(direction) / np.linalg.norm(direction)
+    p_a, d = np.array([0.0, 0.0, 50.0]), r_pz + gap * buffer
+    nb = Neighbor(position=p_a + d * u, velocity=v_b, r_pz=r_pz)
+    enc = prepare(AgentState(position=p_a, velocity=v_a), np.zeros(3), [nb], [], limits, dt,
+                  options)
+    planned = r_pz + min(buffer, 0.9 * (d - r_pz))
+    apex = 0.5 * (np.asarray(v_a) + np.asarray(v_b))
+    real = build_cones(p_a, (p_a + d * u)[None], apex[None], np.array([planned]), limits.v_max,
+                       1.5)
+    vs = np.random.default_rng(0).uniform(-4.0, 4.0, size=(400, 3))
+    vs = vs[np.linalg.norm(vs, axis=1) <= limits.v_max]
+    inside_real = in_vo_cones(real, vs, horizon=horizon)[0]
+    inside_opened = (in_vo_cones(enc.cones, vs, horizon=horizon)[0] if len(enc.cones.apex)
+                     else np.zeros(len(vs), dtype=bool))
+    assert not (inside_real & ~inside_opened).any()
 
 
 @pytest.mark.parametrize("formulation", ["sampled", "plane_qp"])
