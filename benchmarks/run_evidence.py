@@ -129,8 +129,9 @@ def flown_on(found: dict[str, Path]) -> list[str]:
     lines = ["Flown on (the commit of each sitting, with the encounters it flew):", ""]
     for method, out in found.items():
         path = out / COMMITS
-        entries = [line.split() for line in path.read_text().splitlines() if line.strip()] \
-            if path.exists() else []
+        # "<commit> <encounters>", the commit possibly "<hash> + uncommitted changes"
+        entries = [line.rsplit(maxsplit=1) for line in path.read_text().splitlines()
+                   if line.strip()] if path.exists() else []
         total = json.loads((out / "summary.json").read_text())["encounters"]
         recorded = sum(int(k) for _, k in entries)
         text = ", ".join(f"`{c}` ({int(k):,})" for c, k in entries) or "commit not recorded"
