@@ -45,7 +45,8 @@ KINDS = ("random", "crowd", "inside", "ceiling", "obstacles", "noncoop", "accel"
 
 
 def option_set(name: str, v_max: float, dt: float) -> dict[str, Any]:
-    """The keyword options configuration ``name`` stood for at recording time."""
+    """The keyword options configuration ``name`` stood for at recording time, over the
+    ``paper`` preset's values (the defaults then): the recorder asks for them so."""
     safe = {"reciprocal": True, "closing_guard": True, "pz_buffer": 2.0 * v_max * dt}
     return {
         "paper": {},
@@ -256,14 +257,15 @@ def _record() -> None:
         kw = select_kwargs(e)
         v_max, dt = float(e["limits"][1]), float(e["dt"])
         for name in OPTION_SETS:
-            sel = VelocitySelector(**option_set(name, v_max, dt))
+            sel = VelocitySelector(preset="paper", **option_set(name, v_max, dt))
             d = sel.select(**kw)
             rows.append(("plane_qp", "exact2d", name, seed, d))
         for form, solver, names, every in PY_PATHS:
             if seed % every:
                 continue
             for name in names:
-                sel = VelocitySelector(form, solver, **option_set(name, v_max, dt))
+                sel = VelocitySelector(form, solver, preset="paper",
+                                       **option_set(name, v_max, dt))
                 rows.append((form, solver or "", name, seed, sel.select(**kw)))
     out["dec_path"] = np.array([f"{f}/{s}" for f, s, *_ in rows])
     out["dec_set"] = np.array([r[2] for r in rows])
@@ -276,7 +278,7 @@ def _record() -> None:
         s = swarm(seed)
         kw = many_kwargs(s, limits_of(SWARM_LIMITS))
         for name in SWARM_SETS:
-            sel = VelocitySelector(**option_set(name, 4.0, 0.2))
+            sel = VelocitySelector(preset="paper", **option_set(name, 4.0, 0.2))
             res = sel.select_many(**kw)
             out[f"swarm{seed}_{name}_velocities"] = res.velocities
             out[f"swarm{seed}_{name}_statuses"] = np.asarray(res.statuses, dtype=str)

@@ -50,14 +50,14 @@ def test_flown_together_as_each_alone(family, count, method):
 
 
 def test_a_landing_and_a_first_order_run_side_by_side_with_others():
-    """dense 1121 lands an agent at its goal's door (sim/landing.py); lagged flies first-order
+    """dense 3502 lands an agent at its goal's door (sim/landing.py); lagged flies first-order
     dynamics: with two plain pair encounters in the same batch each is still its own run."""
     from pathlib import Path
 
     from vo3d_opt.sim.scenario import load_scenario
 
     data = Path(__file__).parent / "data" / "sweep-failures"
-    scs = [load_scenario(data / "dense-s0-i1121.yaml"), load_scenario(data / "lagged-s0-i413.yaml"),
+    scs = [load_scenario(data / "dense-s0-i3502.yaml"), load_scenario(data / "lagged-s0-i413.yaml"),
            make_encounter("pair", 1, 0).load(), make_encounter("pair", 1, 1).load()]
     runs = [flown(sc, Method())[:2] for sc in scs]
     together = fly_together(runs)
