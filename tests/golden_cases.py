@@ -61,6 +61,16 @@ def option_set(name: str, v_max: float, dt: float) -> dict[str, Any]:
     }[name]
 
 
+def recorded_selector(
+    name: str, v_max: float, dt: float, formulation: str = "plane_qp", solver: str | None = None
+) -> Any:
+    """The selector the recorder decides configuration ``name`` with: ``option_set`` over the
+    ``paper`` preset."""
+    from vo3d_opt import VelocitySelector
+
+    return VelocitySelector(formulation, solver, preset="paper", **option_set(name, v_max, dt))
+
+
 OPTION_SETS = (
     "paper",
     "safe",
@@ -248,7 +258,6 @@ SWARM_SETS = ("paper", "safe", "fast", "swarm")
 
 
 def _record() -> None:
-    from vo3d_opt import VelocitySelector
 
     out: dict[str, np.ndarray] = {}
     rows = []
@@ -257,15 +266,14 @@ def _record() -> None:
         kw = select_kwargs(e)
         v_max, dt = float(e["limits"][1]), float(e["dt"])
         for name in OPTION_SETS:
-            sel = VelocitySelector(preset="paper", **option_set(name, v_max, dt))
+            sel = recorded_selector(name, v_max, dt)
             d = sel.select(**kw)
             rows.append(("plane_qp", "exact2d", name, seed, d))
         for form, solver, names, every in PY_PATHS:
             if seed % every:
                 continue
             for name in names:
-                sel = VelocitySelector(form, solver, preset="paper",
-                                       **option_set(name, v_max, dt))
+                sel = recorded_selector(name, v_max, dt, form, solver)
                 rows.append((form, solver or "", name, seed, sel.select(**kw)))
     out["dec_path"] = np.array([f"{f}/{s}" for f, s, *_ in rows])
     out["dec_set"] = np.array([r[2] for r in rows])
@@ -278,7 +286,7 @@ def _record() -> None:
         s = swarm(seed)
         kw = many_kwargs(s, limits_of(SWARM_LIMITS))
         for name in SWARM_SETS:
-            sel = VelocitySelector(preset="paper", **option_set(name, 4.0, 0.2))
+            sel = recorded_selector(name, 4.0, 0.2)
             res = sel.select_many(**kw)
             out[f"swarm{seed}_{name}_velocities"] = res.velocities
             out[f"swarm{seed}_{name}_statuses"] = np.asarray(res.statuses, dtype=str)

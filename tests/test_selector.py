@@ -237,8 +237,8 @@ def test_deep_in_a_cooperative_buffer_the_answer_opens_the_gap(depth_share):
     inside it (the default preset: buffer 2 v_max dt = 1.6 m): past half the buffer the answer
     moves away from it, by more the deeper it is, and stays outside the VO. In the outer half,
     or beside a neighbour that does not avoid (it will not move aside), the preferred velocity
-    (holding the gap) stands: two vehicles whose goals lie within each other's buffer can both
-    be home."""
+    (holding the gap) stands: two vehicles whose goals lie within each other's buffer, but
+    outside its inner half, can both be home."""
     sel, dt, r_pz = VelocitySelector(), 0.2, 8.0
     limits = Limits(speed=(0, 4), altitude=(0, 40))
     buffer = sel.options_for(limits.v_max, dt).pz_buffer

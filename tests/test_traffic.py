@@ -42,6 +42,28 @@ def test_a_stalled_agent_turns_right_at_full_speed_then_seeks_its_goal_again():
     np.testing.assert_allclose(still[after], np.broadcast_to(straight, (after.sum(), 2, 3)))
 
 
+def test_two_watchers_with_goals_in_each_others_buffer_both_get_home():
+    """Two vehicles hovering at goals 1.05 r_pz apart (inside each other's buffer, outside its
+    inner half) decide again while traffic that does not avoid passes: neither pushes the other
+    off its goal for good, and both are home at the end."""
+    from vo3d_opt.sim.metrics import summarize
+    from vo3d_opt.sim.scenario import scenario_from_dict
+    from vo3d_opt.sim.simulator import run_scenario
+
+    data = {"name": "two-watchers", "dt": 0.2, "max_time": 60.0, "goal_tolerance": 0.3,
+            "sensing": {"vehicle_range": 40.0},
+            "limits": {"speed": [0.0, 4.0], "altitude": [0.0, 40.0]},
+            "defaults": {"r_pz": 10.0, "radius": 0.5, "max_speed": 4.0},
+            "agents": [{"id": "a", "start": [0.0, 0.0, 20.0], "goal": [0.0, 0.0, 20.0]},
+                       {"id": "b", "start": [10.5, 0.0, 20.0], "goal": [10.5, 0.0, 20.0]},
+                       {"id": "c", "start": [-60.0, 30.0, 20.0], "goal": [60.0, 30.0, 20.0],
+                        "avoids": False}]}
+    record = run_scenario(scenario_from_dict(data, "two-watchers.yaml"), progress=False)
+    s = summarize(record)
+    assert (record.decided[:, :2] & record.arrived[:-1, :2]).any()  # they kept watch
+    assert s["all_reached"] and s["collisions"] == 0
+
+
 def test_an_agent_is_stuck_while_on_a_detour_and_only_then():
     """``stuck`` (read before each call, as the simulator's keep_watch does) is the agents whose
     detour, begun at an earlier call, goes on at this one."""

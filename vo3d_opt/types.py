@@ -272,8 +272,8 @@ class Neighbor(Model):
     #: Whether B avoids A too (another vehicle running a selector). With the ``reciprocal``
     #: option A takes only half the avoidance of a cooperative neighbour, and all of it for one
     #: that keeps its velocity whatever A does (a hovering vehicle, a static sphere). With a
-    #: buffer (``pz_buffer``), deep inside a cooperative neighbour's A moves away from it,
-    #: whether reciprocal or not; one that does not avoid is only kept off.
+    #: buffer (``pz_buffer``), in the inner half of a cooperative neighbour's buffer the VO's
+    #: apex moves away from it, reciprocal or not; one that does not avoid is only kept off.
     cooperative: StrictBool = True
 
     @cached_property

@@ -1,8 +1,8 @@
 // The decision of one vehicle: plane_qp on the exact per-plane solver (formulations/plane_qp.md).
 // Read top to bottom, decide_one is the whole algorithm, the way RVO2-3D's Agent.cc reads:
 //
-// 1. the VOs' inputs: each neighbour's row (cone_rows: the horizon, the buffer and reciprocity
-//    applied), the pyramids of section 4 in reach, and the limits as rows (altitude,
+// 1. the VOs' inputs: each neighbour's row (cone_rows: the horizon, the buffer, its opening and
+//    reciprocity applied), the pyramids of section 4 in reach, and the limits as rows (altitude,
 //    acceleration, the closing guard);
 // 2. the preferred velocity itself, when within the limits and outside every VO (the exact 3D
 //    check), is the optimum of every formulation: returned at once;
