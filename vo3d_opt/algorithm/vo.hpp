@@ -401,9 +401,9 @@ inline void aimed(const double* v_pref, const Bounds& b, double* pref) {
 // vehicles fly side by side while noise in the sensed positions ratchets the distance down.
 // The moved cone contains the unmoved one, so no velocity it allows enters the real zone. The
 // outer half of the buffer still lets a pair hold its gap: two vehicles whose goals lie within
-// each other's buffer, but outside its inner half, can both be home. Inside the zone itself (depth >= pz_buffer) the cone is
-// an escape cone and the row is left as it is. A vehicle that does not decide (hovering at its
-// goal, or not avoiding) gets no push: it will not move aside.
+// each other's buffer, but outside its inner half, can both be home. Inside the zone itself
+// (depth >= pz_buffer) the cone is an escape cone and the row is left as it is. A vehicle that
+// does not decide (hovering at its goal, or not avoiding) gets no push: it will not move aside.
 inline void opened(NeighbourRow& row, const double* p_A, double d, double depth, double v_max,
                    double pz_buffer) {
     double half = 0.5 * pz_buffer;
