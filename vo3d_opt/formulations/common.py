@@ -207,7 +207,7 @@ def py_build_vos(
       constrain one: left out of every formulation (and of the exact check, equivalently).
     - A prism whose top h_pz reaches the ceiling z_max cannot be flown over: it is planned as
       reaching far above (else a climb 'over' it, allowed one step at a time by the altitude
-      rows, ends squeezed between the ceiling and the prism: sweep 'lagged' encounter 647).
+      rows, ends squeezed between the ceiling and the prism, with no way on or back).
     """
     cones, pyramids, pref = _core.build_vos(p, v_now, v_pref, nbrs, prisms, bounds, cfg)
     return VOs(VOCones(*cones), VOPyramids(*pyramids), pref)

@@ -1,10 +1,10 @@
-"""The last step onto a goal that the VO cannot see into (sweep ``dense`` encounter 1121).
+"""The last step onto a goal that the VO cannot see into.
 
 A velocity obstacle forbids every velocity whose ray meets a zone at any time, even after the
-goal, where the agent stops. A goal in a nook between vehicles that arrived before (1121: 7.6 m
-and 7.8 m from two hovering ones, their planning spheres 7.6 m) is then out of reach: every
-ray into the nook runs on into a sphere, the selector answers 0.05 m/s, and the agent creeps
-to 1.03 m of its goal (tolerance 1 m) and no further for 60 s.
+goal, where the agent stops. A goal in a nook between vehicles that arrived before (say 7.6 m
+and 7.8 m from two hovering ones whose planning spheres are 7.6 m) is then out of reach: every
+ray into the nook runs on into a sphere, the selector answers a crawl, and the agent creeps
+to just outside its goal's tolerance and no further.
 
 Yet the agent stops on arrival: the selector's infinite rays ask too much of its last metres.
 An agent that stalled at its goal's door (``GoalWithDetours.waiting``: within ``r_pz`` of its

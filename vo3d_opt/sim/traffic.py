@@ -94,18 +94,17 @@ DETOUR_TURNS = 3
 
 class GoalWithDetours:
     """:func:`goal_velocity`, with a way out of the VO method's deadlocks (a local rule cannot
-    see round a wall of hovering or waiting vehicles: ``dense`` sweep encounter 576): an agent
-    that has stalled (``STALL_PROGRESS``) over ``stall_time`` s prefers, for the next
-    ``stall_time`` s, its goal direction turned ``detour_deg`` to the right about the vertical,
-    at full speed (all turn the same way, as traffic keeps right); then the goal again. An agent
-    stalled again right after a detour turns further each time (``DETOUR_TURNS``: 90°, 180°,
-    270°, then 90° again), until a window without a stall starts the count afresh. The
-    selector still keeps every zone clear: a detour changes only what the agent would like.
-    Within ``near`` (m, per agent; the simulator passes its r_pz) of its goal an agent never
-    detours: what blocks it is at the goal, and a detour there would only send it off again
-    and again (``lagged`` encounter 317 never arrived so). Such an agent is ``waiting`` (N,)
-    from then on while it stays within ``near``: the simulator may land it
-    (``vo3d_opt.sim.landing``).
+    see round a wall of hovering or waiting vehicles): an agent that has stalled
+    (``STALL_PROGRESS``) over ``stall_time`` s prefers, for the next ``stall_time`` s, its goal
+    direction turned ``detour_deg`` to the right about the vertical, at full speed (all turn the
+    same way, as traffic keeps right); then the goal again. An agent stalled again right after a
+    detour turns further each time (``DETOUR_TURNS``: 90°, 180°, 270°, then 90° again), until a
+    window without a stall starts the count afresh. The selector still keeps every zone clear: a
+    detour changes only what the agent would like. Within ``near`` (m, per agent; the simulator
+    passes its r_pz) of its goal an agent never detours: what blocks it is at the goal, and a
+    detour there would only send it off again and again, and it would never arrive. Such an
+    agent is ``waiting`` (N,) from then on while it stays within ``near``: the simulator may
+    land it (``vo3d_opt.sim.landing``).
 
     Called once per control step with the positions (N, 3), as the simulator does; stateful
     (one instance per run)."""
