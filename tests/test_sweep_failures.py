@@ -110,14 +110,14 @@ def _open(name: str, reason: str) -> object:
     ],
 )
 def test_open_sweep_failures(name):
-    """The 100,000-encounter sweeps' failures whose cause is not fixed yet (each family's
+    """The sweeps' failures whose cause is not fixed yet (each family's
     results page lists them). `lagged` 14945, 51181, 14347 and 91377: one vehicle has not
     reached its goal when the run ends; no zone is entered. In 14945 it ends 18-25 m from its
     goal among six obstacles, a vehicle hovering at a goal 12.3 m from its own; in 51181 it
     waits about 11 m from its goal, in 14347 4.8 m (within r_pz: waiting at its goal's door,
     never landed), each among vehicles hovering at goals 11-13 m from its own; in 91377 about 30
     m from it, beyond a box that reaches over the ceiling. `lagged` 1077 of the swarm preset's
-    10,000-encounter sweep: one of three vehicles is 2.2 m from its goal (within r_pz) when the
-    run ends. Strict: once a change clears one, this test fails and the encounter moves to
+    10,000-encounter sweep: one of three vehicles is 2.2 m from its goal (within r_pz, never
+    landed) when the run ends. Strict: once a change clears one, this test fails and the encounter moves to
     ``test_sweep_failures_are_fixed``."""
     flies_clean(name)

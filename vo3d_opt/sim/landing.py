@@ -1,7 +1,7 @@
 """The last step onto a goal that the VO cannot see into.
 
 A velocity obstacle forbids every velocity whose ray meets a zone at any time, even after the
-goal, where the agent stops. A goal in a nook between vehicles that arrived before (say 7.6 m
+goal, where the agent stops. A goal in a nook between vehicles that arrived before (say 7.7 m
 and 7.8 m from two hovering ones whose planning spheres are 7.6 m) is then out of reach: every
 ray into the nook runs on into a sphere, the selector answers a crawl, and the agent creeps
 to just outside its goal's tolerance and no further.
