@@ -476,3 +476,111 @@ def test_a_lagged_vehicle_at_the_floor_stays_out_of_a_box_with_either_grid():
         intrusions[fine] = s["obstacle_pz_intrusions"]
         assert s["collisions"] == 0
     assert intrusions == {False: 0, True: 0}, intrusions
+
+
+
+def _near_surfaces(rng: np.random.Generator, cones, m: int) -> np.ndarray:
+    """m velocities about the cones' surfaces: each a generator's direction (tangent to the
+    zone) turned a little in or out, at 0.1-8 m/s from that cone's apex; and m behind the
+    cones' apexes, h = 1e-9 to 1 m/s behind (where a cone next to its zone is almost flat)."""
+    out = np.empty((2 * m, 3))
+    for j in range(2 * m):
+        k = int(rng.integers(cones.d_oi.shape[0]))
+        axis = cones.rel[k] / cones.d_oi[k]
+        side = np.cross(axis, rng.normal(size=3))
+        side /= np.linalg.norm(side)
+        if j < m:
+            half = np.arcsin(min(cones.sin_alpha[k], 1.0)) * rng.uniform(0.0, 2.5)
+            turn = np.cos(half) * axis + np.sin(half) * side
+            out[j] = cones.apex[k] + turn * rng.uniform(0.1, 8)
+        else:
+            behind = 10.0 ** rng.uniform(-9, 0)
+            out[j] = cones.apex[k] + side * rng.uniform(0, 4) - axis * behind
+    return out
+
+
+#: How far outside its zone (r_pz 5 m) the neighbour next to it is: one ulp, 1e-12 m, 1e-6 and
+#: 1e-5 of the distance, and 0.3 m (with a buffer of 1.6 m it then takes 90 % of the gap, and
+#: the answer is asked to open it: the apex moves).
+EDGES = (float(np.nextafter(5.0, np.inf)), 5.0 + 1e-12, 5.0 * (1 + 1e-6), 5.0 * (1 + 1e-5), 5.3)
+
+
+def _next_to_zone(seed: int, d: float) -> dict:
+    """A crowd of four with a fifth neighbour d m away (its zone r_pz 5 m)."""
+    kw = _crowd(seed, n=4)
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=3)
+    u /= np.linalg.norm(u)
+    kw["neighbors"].append(Neighbor(position=np.asarray(kw["own"].position) + d * u,
+                                    velocity=rng.normal(size=3), r_pz=5.0))
+    return kw
+
+
+@pytest.mark.parametrize("seed", range(4 + len(EDGES)))
+def test_clearance_floor_bounds_each_cones_clearance(seed):
+    """The margin check skips clearance's search for a cone whose closed-form floor already
+    clears the margin; the floor must then lie below that cone's clearance as computed, with
+    or without a horizon, next to a zone too, and be close to it often enough to skip
+    something."""
+    from vo3d_opt.geometry.membership import _no_pyramids, clearance_floors, clearances
+
+    rng = np.random.default_rng(seed)
+    kw = (_next_to_zone(seed, EDGES[seed - 4]) if seed >= 4
+          else _crowd(seed, n=10, inside=seed == 3, closing=2.0 * (seed % 2)))
+    enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
+                  kw["limits"], kw["dt"], Options(reciprocal=True, pz_buffer=1.6))
+    cones = enc.vos.cones
+    v = np.vstack([_near_surfaces(rng, cones, 200), rng.uniform(-4, 4, (100, 3))])
+    floors = clearance_floors(cones, v)
+    close = 0
+    for k in range(cones.d_oi.shape[0]):
+        if cones.inside[k]:
+            assert (floors[k] == -np.inf).all()
+            continue
+        one = cones.subset(np.array([k]))
+        for horizon in (None, 1.0, 6.0):
+            exact = clearances(one, _no_pyramids(), v, horizon=horizon)
+            assert (floors[k] <= exact).all()
+            close += int(((floors[k] >= 0.5 * exact) & (exact > 1e-3)).sum())
+    assert close > 100
+
+
+def _margins_about(c: float) -> tuple[float, float]:
+    """The largest margin the check must accept at clearance c (margin (1 - 1e-9) <= c) and
+    the next float above it, which it must refuse."""
+    m = c / (1 - 1e-9)
+    while m * (1 - 1e-9) > c:
+        m = np.nextafter(m, 0.0)
+    while np.nextafter(m, np.inf) * (1 - 1e-9) <= c:
+        m = np.nextafter(m, np.inf)
+    return float(m), float(np.nextafter(m, np.inf))
+
+
+@pytest.mark.parametrize("seed", range(3 + len(EDGES)))
+def test_the_margin_check_is_clearance_against_the_margin(seed):
+    """A candidate is safe by margin exactly when it is within the limits, outside every VO and
+    clearance(v) >= margin (1 - 1e-9): at each velocity's own clearance, the largest margin
+    that clearance allows accepts it and the next float above refuses it; in crowds and next
+    to zones."""
+    from vo3d_opt.geometry.membership import clearances, in_vos
+
+    rng = np.random.default_rng(10 + seed)
+    kw = _next_to_zone(20 + seed, EDGES[seed - 3]) if seed >= 3 else _crowd(20 + seed, n=8)
+    options = dict(reciprocal=True, pz_buffer=1.6) if seed == 2 + len(EDGES) else {}
+    accepted = refused = 0
+    for horizon in (None, 3.0):
+        base = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
+                       kw["limits"], kw["dt"], Options(horizon=horizon, **options))
+        v = np.vstack([_near_surfaces(rng, base.vos.cones, 100), rng.normal(size=(200, 3))])
+        free = base.within_limits(v) & ~in_vos(base.vos.cones, base.vos.pyramids, v,
+                                               horizon=horizon).any(axis=0)
+        c = clearances(base.vos.cones, base.vos.pyramids, v, horizon=horizon)
+        for j in np.flatnonzero(free & (c > 1e-9) & (c <= 0.99)):
+            for margin, expect in zip(_margins_about(float(c[j])), (True, False)):
+                enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"],
+                              [], kw["limits"], kw["dt"],
+                              Options(horizon=horizon, margin=margin, **options))
+                assert (first_safe(enc, v[j:j + 1]) == 0) == expect, (j, margin, c[j])
+                accepted += expect
+                refused += not expect
+    assert accepted > 5 and refused > 5

@@ -300,6 +300,17 @@ NB_MODULE(_core, m) {
         }
         return numpy(std::move(out), {size_t(vel.n)});
     }, "cones"_a, "pyramids"_a, "v"_a, "horizon"_a, "obstacle_horizon"_a = SAME_HORIZON);
+    m.def("clearance_floors", [](nb::handle cones, nb::handle v) {
+        std::vector<Cone> cs = cones_of(cones);
+        Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
+        std::vector<double> out;
+        for (const Cone& c : cs)
+            for (int64_t k = 0; k < vel.n; ++k) {
+                double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
+                out.push_back(c.inside ? -kInf : cone_clearance_floor(c, x));
+            }
+        return numpy(std::move(out), {cs.size(), size_t(vel.n)});
+    }, "cones"_a, "v"_a);
     m.def("ball_in_cone", [](nb::handle cones, int64_t k, nb::handle c, double rho) {
         std::vector<Cone> cs = cones_of(cones);
         if (k < 0 || k >= int64_t(cs.size())) throw nb::value_error("k: not a cone");

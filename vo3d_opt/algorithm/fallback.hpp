@@ -274,6 +274,42 @@ inline double clearance(const VOs& vos, const double* v, double horizon) {
     return best;
 }
 
+// A lower bound on zone_clearance of a cone (A outside its zone): the distance from v to the
+// whole cone apex + s B(rel, r_pz), s >= 0, which holds the VO whatever the horizon. With u =
+// v - apex at angle beta off the axis and alpha = asin(r_pz / d_oi) it is at least
+// |u| sin(beta - alpha); lowered by far more than either computation's rounding. None (-inf)
+// when A is within 1e-6 d_oi of the zone: the cone is then nearly a half-space, cos alpha
+// cancels and zone_clearance's search is off by more than that.
+inline double cone_clearance_floor(const Cone& c, const double* v) {
+    if (!(c.d_oi - c.r_pz > 1e-6 * c.d_oi)) return -kInf;
+    const double *a = c.apex, *rel = c.rel;
+    double u0 = v[0] - a[0], u1 = v[1] - a[1], u2 = v[2] - a[2];
+    double along = (u0 * rel[0] + u1 * rel[1] + u2 * rel[2]) / c.d_oi;
+    double x0 = u1 * rel[2] - u2 * rel[1], x1 = u2 * rel[0] - u0 * rel[2],
+           x2 = u0 * rel[1] - u1 * rel[0];
+    double across = std::sqrt(x0 * x0 + x1 * x1 + x2 * x2) / c.d_oi;
+    double sin_a = c.r_pz / c.d_oi, cos_a = std::sqrt(std::max(1.0 - sin_a * sin_a, 0.0));
+    double scale = 1.0 + std::sqrt(u0 * u0 + u1 * u1 + u2 * u2) +
+                   std::sqrt(sq(a[0]) + sq(a[1]) + sq(a[2])) +
+                   std::sqrt(sq(v[0]) + sq(v[1]) + sq(v[2]));
+    double floor = across * cos_a - along * sin_a - 1e-9 * scale;
+    return floor == floor ? floor : -kInf;  // NaN: no bound
+}
+
+// clearance(v) >= least, without clearance's search for a cone whose floor already clears
+// least (most of a crowd's cones).
+inline bool clear_by(const VOs& vos, const double* v, double horizon, double least) {
+    if (!(least == least)) return false;  // nothing is at least NaN away
+    for (int64_t k = 0; k < vos.count(); ++k) {
+        bool cone = k < vos.n();
+        bool floor_clears = cone && !vos.cones[k].inside &&
+                            cone_clearance_floor(vos.cones[k], v) >= least;
+        // NaN is skipped, as clearance's min skips it
+        if (!floor_clears && zone_clearance(vos, k, v, horizon) < least) return false;
+    }
+    return true;
+}
+
 // Whether some VO holds v (the exact check), starting with hint, the VO that held the last
 // velocity checked: in a crowd most candidates fail on the same VO.
 inline bool in_any(const VOs& vos, const double* v, double horizon, int64_t& hint) {
@@ -296,7 +332,7 @@ inline bool in_any(const VOs& vos, const double* v, double horizon, int64_t& hin
 inline bool safe_by_margin(const VOs& vos, const double* v, const LimitRows& L, const Bounds& b,
                            const Config& cfg, int64_t& hint) {
     if (!within_limits(v, L, b) || in_any(vos, v, cfg.horizon, hint)) return false;
-    return clearance(vos, v, cfg.horizon) >= cfg.margin * (1.0 - 1e-9);
+    return clear_by(vos, v, cfg.horizon, cfg.margin * (1.0 - 1e-9));
 }
 
 // ------------------------------------------------------------------------------ the grid

@@ -5,6 +5,7 @@ NamedTuples of arrays, read by name in Python and in compiled code alike."""
 from .cone import TAU_MIN, VOCones, build_cones, vo_cones
 from .frames import AvoidancePlanes, avoidance_frame, avoidance_planes, build_planes, default_phis
 from .membership import (
+    clearance_floors,
     clearances,
     cone_penetration,
     in_vo_cones,
@@ -33,6 +34,7 @@ __all__ = [
     "avoidance_planes",
     "build_planes",
     "default_phis",
+    "clearance_floors",
     "clearances",
     "cone_penetration",
     "in_vo_cones",

@@ -138,6 +138,13 @@ def clearances(
     )
 
 
+def clearance_floors(cones: VOCones, v: np.ndarray) -> np.ndarray:
+    """(n, M) a lower bound on each cone's part of :func:`clearances` at each velocity, in
+    closed form: the distance to the whole cone, which holds the VO whatever the horizon (-inf
+    inside the zone). The fallbacks' margin check skips the search for a cone it clears."""
+    return _core.clearance_floors(cones, _velocities(v))
+
+
 def ball_in_cone(cones: VOCones, i: int, c: np.ndarray, rho: float) -> bool:
     """Whether every velocity within ``rho`` of ``c`` lies in VO cone i without a horizon, with
     a margin that outlasts rounding (the exact check then holds for each of them as computed).
