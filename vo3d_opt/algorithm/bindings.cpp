@@ -18,6 +18,21 @@ using namespace nb::literals;
 using namespace vo3d;
 using namespace vo3d::glue;
 
+// f(item, velocity) for every item (cone, pyramid) and every row of v (M, 3): an (items, M)
+// float64 array.
+template <class T, class F>
+nb::object per_velocity(const std::vector<T>& items, nb::handle v, F f) {
+    Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
+    std::vector<double> out;
+    out.reserve(items.size() * size_t(vel.n));
+    for (const T& item : items)
+        for (int64_t k = 0; k < vel.n; ++k) {
+            double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
+            out.push_back(f(item, x));
+        }
+    return numpy(std::move(out), {items.size(), size_t(vel.n)});
+}
+
 NB_MODULE(_core, m) {
     m.doc() = "vo3d-opt's compiled core: the decision of vo3d_opt/algorithm/decide.hpp and its parts";
     m.attr("OUT_SIZE") = OUT_SIZE;
@@ -266,26 +281,13 @@ NB_MODULE(_core, m) {
         return numpy_bool(out, {size_t(count), size_t(vel.n)});
     }, "cones"_a, "pyramids"_a, "v"_a, "horizon"_a, "tol"_a, "obstacle_horizon"_a = SAME_HORIZON);
     m.def("cone_penetration", [](nb::handle cones, nb::handle v) {
-        std::vector<Cone> c = cones_of(cones);
-        Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
-        std::vector<double> out;
-        for (const Cone& cone : c)
-            for (int64_t k = 0; k < vel.n; ++k) {
-                double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
-                out.push_back(cone.r_pz - approach(cone.apex, cone.rel, x, NO_HORIZON).closest);
-            }
-        return numpy(std::move(out), {c.size(), size_t(vel.n)});
+        return per_velocity(cones_of(cones), v, [](const Cone& c, const double* x) {
+            return c.r_pz - approach(c.apex, c.rel, x, NO_HORIZON).closest;
+        });
     });
     m.def("entry_times", [](nb::handle pyramids, nb::handle v) {
-        std::vector<Pyramid> py = pyramids_of(pyramids);
-        Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
-        std::vector<double> out;
-        for (const Pyramid& pyr : py)
-            for (int64_t k = 0; k < vel.n; ++k) {
-                double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
-                out.push_back(entry_time(pyr, x));
-            }
-        return numpy(std::move(out), {py.size(), size_t(vel.n)});
+        return per_velocity(pyramids_of(pyramids), v,
+                            [](const Pyramid& py, const double* x) { return entry_time(py, x); });
     });
     m.def("clearances", [](nb::handle cones, nb::handle pyramids, nb::handle v, double horizon,
                            double obstacle_horizon) {
@@ -301,15 +303,9 @@ NB_MODULE(_core, m) {
         return numpy(std::move(out), {size_t(vel.n)});
     }, "cones"_a, "pyramids"_a, "v"_a, "horizon"_a, "obstacle_horizon"_a = SAME_HORIZON);
     m.def("clearance_floors", [](nb::handle cones, nb::handle v) {
-        std::vector<Cone> cs = cones_of(cones);
-        Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
-        std::vector<double> out;
-        for (const Cone& c : cs)
-            for (int64_t k = 0; k < vel.n; ++k) {
-                double x[3] = {vel(k, 0), vel(k, 1), vel(k, 2)};
-                out.push_back(c.inside ? -kInf : cone_clearance_floor(c, x));
-            }
-        return numpy(std::move(out), {cs.size(), size_t(vel.n)});
+        return per_velocity(cones_of(cones), v, [](const Cone& c, const double* x) {
+            return c.inside ? -kInf : cone_clearance_floor(c, x);
+        });
     }, "cones"_a, "v"_a);
     m.def("ball_in_cone", [](nb::handle cones, int64_t k, nb::handle c, double rho) {
         std::vector<Cone> cs = cones_of(cones);
