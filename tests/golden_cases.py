@@ -258,7 +258,6 @@ SWARM_SETS = ("paper", "safe", "fast", "swarm")
 
 
 def _record() -> None:
-
     out: dict[str, np.ndarray] = {}
     rows = []
     for seed in range(N_ENCOUNTERS):

@@ -303,9 +303,7 @@ NB_MODULE(_core, m) {
         return numpy(std::move(out), {size_t(vel.n)});
     }, "cones"_a, "pyramids"_a, "v"_a, "horizon"_a, "obstacle_horizon"_a = SAME_HORIZON);
     m.def("clearance_floors", [](nb::handle cones, nb::handle v) {
-        return per_velocity(cones_of(cones), v, [](const Cone& c, const double* x) {
-            return c.inside ? -kInf : cone_clearance_floor(c, x);
-        });
+        return per_velocity(cones_of(cones), v, cone_clearance_floor);
     }, "cones"_a, "v"_a);
     m.def("ball_in_cone", [](nb::handle cones, int64_t k, nb::handle c, double rho) {
         std::vector<Cone> cs = cones_of(cones);

@@ -274,12 +274,12 @@ inline double clearance(const VOs& vos, const double* v, double horizon) {
     return best;
 }
 
-// A lower bound on zone_clearance of a cone (A outside its zone): the distance from v to the
-// whole cone apex + s B(rel, r_pz), s >= 0, which holds the VO whatever the horizon. With u =
-// v - apex at angle beta off the axis and alpha = asin(r_pz / d_oi) it is at least
-// |u| sin(beta - alpha); lowered by far more than either computation's rounding. None (-inf)
-// when A is within 1e-6 d_oi of the zone: the cone is then nearly a half-space, cos alpha
-// cancels and zone_clearance's search is off by more than that.
+// A lower bound on zone_clearance of a cone: the distance from v to the whole cone apex +
+// s B(rel, r_pz), s >= 0, which holds the VO whatever the horizon. With u = v - apex at angle
+// beta off the axis and alpha = asin(r_pz / d_oi) it is at least |u| sin(beta - alpha); lowered
+// by far more than either computation's rounding. None (-inf) when A is inside the zone or
+// within 1e-6 d_oi of it: the cone is then nearly a half-space, cos alpha cancels and
+// zone_clearance's search is off by more than that.
 inline double cone_clearance_floor(const Cone& c, const double* v) {
     if (!(c.d_oi - c.r_pz > 1e-6 * c.d_oi)) return -kInf;
     const double *a = c.apex, *rel = c.rel;
@@ -301,9 +301,7 @@ inline double cone_clearance_floor(const Cone& c, const double* v) {
 inline bool clear_by(const VOs& vos, const double* v, double horizon, double least) {
     if (!(least == least)) return false;  // nothing is at least NaN away
     for (int64_t k = 0; k < vos.count(); ++k) {
-        bool cone = k < vos.n();
-        bool floor_clears = cone && !vos.cones[k].inside &&
-                            cone_clearance_floor(vos.cones[k], v) >= least;
+        bool floor_clears = k < vos.n() && cone_clearance_floor(vos.cones[k], v) >= least;
         // NaN is skipped, as clearance's min skips it
         if (!floor_clears && zone_clearance(vos, k, v, horizon) < least) return false;
     }
