@@ -41,20 +41,23 @@ RUN_FLAGS = (
 #: The sensing range the swarm configuration's horizon was derived from (m).
 SWARM_RANGE = 55.0
 FAST = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "speed_levels": 3}
+SAFE_GRID = {"plane_step_deg": 30.0, "qp_samples": 24, "fallback_heading_step_deg": 45.0,
+             "fallback_speed_levels": 3}
 KINDS = ("random", "crowd", "inside", "ceiling", "obstacles", "noncoop", "accel", "coplanar")
 
 
 def option_set(name: str, v_max: float, dt: float) -> dict[str, Any]:
     """The keyword options configuration ``name`` stood for at recording time, over the
     ``paper`` preset's values (the defaults then): the recorder asks for them so."""
-    safe = {"reciprocal": True, "closing_guard": True, "pz_buffer": 2.0 * v_max * dt}
+    shared = {"reciprocal": True, "closing_guard": True, "pz_buffer": 2.0 * v_max * dt}
+    safe = {**shared, **SAFE_GRID}
     return {
         "paper": {},
         "safe": safe,
-        "fast": {**safe, **FAST},
-        "swarm": {**safe, **FAST, "horizon": float(SWARM_RANGE) / (2.0 * float(v_max))},
+        "fast": {**shared, **FAST},
+        "swarm": {**shared, **FAST, "horizon": float(SWARM_RANGE) / (2.0 * float(v_max))},
         "safe_no_escape": {**safe, "least_bad_escape": False},
-        "fast_coarse": {**safe, **FAST, "fine_fallback": False},
+        "fast_coarse": {**shared, **FAST, "fine_fallback": False},
         "paper_planes20": {"plane_step_deg": 20.0, "qp_samples": 24, "margin": 1e-2},
         "paper_corr": {"corrections": frozenset({"tg_range", "triangle", "base_chord"})},
         "safe_horizon": {**safe, "horizon": 4.0},

@@ -221,15 +221,22 @@ def test_the_config_is_set_by_name_and_checked_where_the_core_reads_it():
                    least_bad_escape=False, fine_fallback=False, horizon=3.0,
                    corrections=frozenset({"triangle"}), plane_step_deg=30.0, qp_samples=12)
     cfg = opts.config
-    for name in set(KERNEL_OPTIONS) - {"horizon", "obstacle_horizon", "corrections"}:
+    derived = {"horizon", "obstacle_horizon", "corrections", "fallback_speed_levels"}
+    for name in set(KERNEL_OPTIONS) - derived:
         assert getattr(cfg, name) == getattr(opts, name), name
+    # the fallbacks' grid is the sampled one's unless it is given its own
+    assert (cfg.fallback_speed_levels, cfg.fallback_heading_step) == (5, cfg.heading_step)
+    own = Options(speed_levels=5, fallback_speed_levels=3, fallback_heading_step_deg=45.0).config
+    assert (own.speed_levels, own.fallback_speed_levels) == (5, 3)
+    assert own.fallback_heading_step == math.radians(45.0) != own.heading_step
     assert cfg.horizon == 3.0 and Options().config.horizon < 0  # none: NO_HORIZON
     assert cfg.obstacle_horizon < 0 and Options(obstacle_horizon=9.0).config.obstacle_horizon == 9.0
     assert cfg.corrections.triangle and not cfg.corrections.tg_range
     assert len(cfg.phi) == len(cfg.cos_phi) == 7 and len(cfg.t) == 12
     assert cfg.heading_step == math.radians(opts.heading_step_deg)
     args = _arrays(_encounter(np.random.default_rng(4)))
-    for field, bad in (("cos_phi", [1.0]), ("t", []), ("speed_levels", 1), ("heading_step", 0.0)):
+    for field, bad in (("cos_phi", [1.0]), ("t", []), ("speed_levels", 1), ("heading_step", 0.0),
+                       ("fallback_speed_levels", 1), ("fallback_heading_step", 0.0)):
         partial = _core.Config()
         for name, value in opts.kernel_fields().items():
             setattr(partial, name, value)

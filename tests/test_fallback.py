@@ -14,6 +14,7 @@ from encounters import COARSE, encounters
 from vo3d_opt import AgentState, Limits, Neighbor
 from vo3d_opt.formulations.common import (
     NEVER,
+    Bounds,
     Options,
     _zone_time,
     prepare,
@@ -447,9 +448,12 @@ def test_fine_fallback_is_the_default_grid_where_something_does_not_avoid(solver
 
 
 def test_fine_fallback_changes_nothing_with_the_default_grid():
-    """The default grid is the fine one: ``fine_fallback`` off gives the same answers."""
+    """The default grid is the fine one: ``fine_fallback`` off gives the same answers (the
+    safe preset's rules, the fallbacks on the sampled grid's defaults)."""
     from vo3d_opt import VelocitySelector
-    on, off = VelocitySelector(), VelocitySelector(fine_fallback=False)
+    default_grid = {"fallback_heading_step_deg": None, "fallback_speed_levels": None}
+    on = VelocitySelector(**default_grid)
+    off = VelocitySelector(**default_grid, fine_fallback=False)
     fell_back = 0
     for _, kw in _hazard_decisions(60):
         got = on.select(**kw)
@@ -584,3 +588,31 @@ def test_the_margin_check_is_clearance_against_the_margin(seed):
                 accepted += expect
                 refused += not expect
     assert accepted > 5 and refused > 5
+
+
+def test_the_fallbacks_grid_of_their_own_leaves_the_sampled_grid_alone():
+    """``fallback_heading_step_deg`` and ``fallback_speed_levels`` set the grid the fallbacks
+    search (the sampled grid's own when none), not the sampled selection's grid: plane_qp
+    answers with them as with the same values on the sampled grid, fallbacks included, and
+    the safe preset's sampled grid is the default one while its fallbacks' is 8 x 3."""
+    from vo3d_opt import VelocitySelector
+    coarse = {"plane_step_deg": 45.0, "qp_samples": 12}
+    own = VelocitySelector(**coarse, fallback_heading_step_deg=45.0, fallback_speed_levels=3,
+                           fine_fallback=False)
+    shared = VelocitySelector(**coarse, heading_step_deg=45.0, speed_levels=3,
+                              fallback_heading_step_deg=None, fallback_speed_levels=None,
+                              fine_fallback=False)
+    fine = VelocitySelector(**coarse, fallback_heading_step_deg=None, fallback_speed_levels=None,
+                            fine_fallback=False)
+    fell_back = differ = 0
+    for _, kw in _hazard_decisions(60):
+        got = own.select(**kw)
+        np.testing.assert_array_equal(got.velocity, shared.select(**kw).velocity)
+        fell_back += got.info.get("round") in ("sampled", "least_bad")
+        differ += not np.array_equal(got.velocity, fine.select(**kw).velocity)
+    assert fell_back > 0 and differ > 0
+    bounds = Bounds(v_min=0.0, v_max=5.0, z_min=0.0, z_max=40.0, acceleration=float("nan"), dt=0.2)
+    cfg = Options(fallback_heading_step_deg=45.0, fallback_speed_levels=3).config
+    assert len(py_polar_grid(bounds, cfg)) == 36 * 8 + 1  # 10 degrees by 9 speeds, 0 once
+    assert len(grid_of(bounds, cfg, False).points) == 8 * 2 + 1  # 45 degrees by 3 speeds
+    assert len(grid_of(bounds, cfg, True).points) == 36 * 8 + 1  # near a hazard: the fine one

@@ -48,8 +48,9 @@ def test_a_plain_select_per_agent_decides_as_the_simulator(name: str) -> None:
     decisions = 0
     for k in range(record.commands.shape[0]):
         p = record.positions[k]
-        v = record.velocities[k - 1] if k else np.zeros_like(p)
+        v = record.velocities[k - 1].copy() if k else np.zeros_like(p)
         deciding = record.decided[k]
+        v[record.arrived[k] & ~deciding] = 0.0  # a vehicle that has arrived hovers from then on
         for i in np.flatnonzero(deciding):
             d = selector.select(
                 own=AgentState(position=p[i], velocity=v[i]),

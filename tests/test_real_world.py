@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
+from encounters import PAPER_GRID
 from vo3d_opt.sim.dynamics import make_dynamics
 from vo3d_opt.sim.deciders import PerAgentSelect, decision_step
 from vo3d_opt.sim.metrics import CONTRACT_KEYS, summarize
@@ -379,10 +380,14 @@ def test_paper_case1_under_noise_and_latency_is_collision_free():
 # ---------------------------------------------------------------------------- dynamics
 
 
+
+
 def test_the_derived_margins_keep_a_lagging_swarm_off_the_altitude_limits_and_the_boxes():
-    # encounter 734 of the lagged sweep (first-order lag, boxes): planning to the real altitude
-    # limits (margin off) dips below the floor; the derived margin keeps every sample inside.
-    base = load_scenario(Path(__file__).parent / "data" / "sweep-failures" / "lagged-s0-i734.yaml")
+    # encounter 734 of the lagged sweep (first-order lag, boxes), on the paper's planes and
+    # grid: planning to the real altitude limits (margin off) dips below the floor; the derived
+    # margin keeps every sample inside.
+    shipped = load_scenario(Path(__file__).parent / "data" / "sweep-failures" / "lagged-s0-i734.yaml")
+    base = scenario_variant(shipped, selector_options={**shipped.selector_options, **PAPER_GRID})
     assert base.vehicle_dynamics.model == "first_order"
     off = summarize(run_scenario(scenario_variant(base, safety={"altitude_margin": 0.0}),
                                  progress=False))
@@ -390,6 +395,8 @@ def test_the_derived_margins_keep_a_lagging_swarm_off_the_altitude_limits_and_th
     assert off["altitude_violations"] > 0
     assert on["altitude_violations"] == 0 and on["collisions"] == 0 and on["all_reached"]
     assert on["obstacle_pz_intrusions"] == 0
+    as_shipped = summarize(run_scenario(shipped, progress=False))  # the preset's own planes
+    assert as_shipped["altitude_violations"] == 0 and as_shipped["all_reached"]
 
 
 def test_rotorpy_in_a_wind_in_the_loop_judged_on_its_sub_steps():

@@ -47,6 +47,8 @@ class Config:
     sin_t: Sequence[float]
     speed_levels: int
     heading_step: float
+    fallback_speed_levels: int
+    fallback_heading_step: float
     closing_guard: bool
     least_bad_escape: bool
     fine_fallback: bool

@@ -109,6 +109,11 @@ class SafetyConfig(Model):
     #: With an obstacle in reach or a neighbour that does not avoid, the fallbacks' grid takes
     #: at least the default grid's speeds and headings, however coarse ``sampled`` is.
     fine_fallback: StrictBool = True
+    #: degrees, [1, 180]: headings of the fallbacks' grid (tried when no QP answer is safe);
+    #: None: the sampled grid's, ``heading_step_deg``.
+    fallback_heading_step_deg: _number(1.0, 180.0) | None = None  # type: ignore[valid-type]
+    #: [2, 50]: speeds of the fallbacks' grid; None: the sampled grid's, ``speed_levels``.
+    fallback_speed_levels: _count(2, 50) | None = None  # type: ignore[valid-type]
 
 
 class PlaneConfig(Model):
@@ -151,7 +156,14 @@ FIELD_GROUP: Final[dict[str, str]] = {
     name: group for group, model in GROUPS.items() for name in model.model_fields
 }
 
-_SAFE: Final[dict[str, Any]] = {"reciprocal": True, "buffer_steps": 2.0, "closing_guard": True}
+_SHARED: Final[dict[str, Any]] = {"reciprocal": True, "buffer_steps": 2.0, "closing_guard": True}
+_SAFE: Final[dict[str, Any]] = {
+    **_SHARED,
+    "plane_step_deg": 30.0,
+    "qp_samples": 24,
+    "fallback_heading_step_deg": 45.0,
+    "fallback_speed_levels": 3,
+}
 _COARSE: Final[dict[str, Any]] = {
     "plane_step_deg": 45.0,
     "qp_samples": 12,
@@ -163,16 +175,19 @@ _COARSE: Final[dict[str, Any]] = {
 #: - ``safe`` (the default): what the simulator flies; every vehicle runs the same selector,
 #:   so each takes half of a pairwise avoidance (reciprocal), plans every sphere two steps of
 #:   flight larger (both move before the next decision), and caps its speed towards a close
-#:   neighbour (closing guard);
+#:   neighbour (closing guard); planes every 30 degrees with 24 tangent samples and a fallback
+#:   grid of 8 headings by 3 speeds (the default grid near an obstacle or a vehicle that does
+#:   not avoid: ``fine_fallback``), which keep its decision within RVO2-3D's time per agent;
 #: - ``paper``: the selection as published, the VO unbounded and unshared;
-#: - ``fast``: ``safe`` with planes every 45 degrees, 12 tangent samples and a fallback grid of
-#:   8 headings by 3 speeds: for swarms where time matters more than the shortest detour;
+#: - ``fast``: the shared rules of ``safe`` with planes every 45 degrees, 12 tangent samples
+#:   and a sampled grid (the fallbacks' too) of 8 headings by 3 speeds: for swarms where time
+#:   matters more than the shortest detour;
 #: - ``swarm``: ``fast`` with RVO2-3D's time horizon, ``sensing_range / (2 v_max)``.
 PRESET_VALUES: Final[dict[str, Mapping[str, Any]]] = {
     "safe": _SAFE,
     "paper": {},
-    "fast": {**_SAFE, **_COARSE},
-    "swarm": {**_SAFE, **_COARSE, "horizon": SENSING},
+    "fast": {**_SHARED, **_COARSE},
+    "swarm": {**_SHARED, **_COARSE, "horizon": SENSING},
 }
 #: The preset names.
 PRESETS: Final = tuple(PRESET_VALUES)

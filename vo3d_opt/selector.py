@@ -80,7 +80,9 @@ class VelocitySelector:
     by default: the least-bad fallback, when every velocity enters a zone at once, takes the
     one closing slowest on the zones the vehicle is inside; False: the one nearest the
     preferred velocity), fine_fallback (on by default: the fallbacks' grid at least the
-    default one in a decision with an obstacle in reach or a non-cooperative neighbour).
+    default one in a decision with an obstacle in reach or a non-cooperative neighbour),
+    fallback_heading_step_deg and fallback_speed_levels (the fallbacks' grid; None: the
+    sampled grid's). The preset (``safe`` by default) sets some of them: ``SelectorConfig``.
     """
 
     def __init__(

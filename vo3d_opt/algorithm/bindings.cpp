@@ -69,6 +69,8 @@ NB_MODULE(_core, m) {
         .def_rw("sin_t", &Config::sin_t)
         .def_rw("speed_levels", &Config::speed_levels)
         .def_rw("heading_step", &Config::heading_step)
+        .def_rw("fallback_speed_levels", &Config::fallback_speed_levels)
+        .def_rw("fallback_heading_step", &Config::fallback_heading_step)
         .def_rw("closing_guard", &Config::closing_guard)
         .def_rw("least_bad_escape", &Config::least_bad_escape)
         .def_rw("fine_fallback", &Config::fine_fallback);

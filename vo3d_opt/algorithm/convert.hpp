@@ -359,6 +359,10 @@ const Config& checked(const Config& c) {
         throw nb::value_error("cfg.t, cfg.cos_t, cfg.sin_t: expected arrays of one length, at least 1");
     if (c.speed_levels < 2) throw nb::value_error("cfg.speed_levels: expected at least 2");
     if (!(c.heading_step > 0.0)) throw nb::value_error("cfg.heading_step: expected a positive angle");
+    if (c.fallback_speed_levels < 2)
+        throw nb::value_error("cfg.fallback_speed_levels: expected at least 2");
+    if (!(c.fallback_heading_step > 0.0))
+        throw nb::value_error("cfg.fallback_heading_step: expected a positive angle");
     return c;
 }
 

@@ -335,10 +335,11 @@ inline bool safe_by_margin(const VOs& vos, const double* v, const LimitRows& L, 
 
 // ------------------------------------------------------------------------------ the grid
 
-// The fallbacks' polar grid on the planes (speed_levels speeds v_min..v_max, a heading every
-// heading_step; speed 0 once, repeated speeds once), in blocks of BLOCK x BLOCK neighbouring
-// points, each with a disc holding them: a VO cone that holds a block's disc holds each of its
-// points (ball_in_cone), so the fallbacks skip them without checking them one by one.
+// A polar grid on the planes (L speeds v_min..v_max, a heading every heading_step; speed 0
+// once, repeated speeds once): the sampled selection's, and the fallbacks' (grid_of) in blocks
+// of BLOCK x BLOCK neighbouring points, each with a disc holding them: a VO cone that holds a
+// block's disc holds each of its points (ball_in_cone), so the fallbacks skip them without
+// checking them one by one.
 struct Grid {
     std::vector<double> points;  // (M, 2) the in-plane candidates
     std::vector<int64_t> where;  // (M, 2) each point's speed level and heading index
@@ -377,11 +378,11 @@ inline bool has_hazard(const VOs& vos, const Rows& nbrs) {
     return false;
 }
 
-// The decision's grid: cfg's, but with fine_fallback and a hazard at least the default grid's
+// The fallbacks' grid: cfg's, but with fine_fallback and a hazard at least the default grid's
 // speeds and headings (denser, not a superset: 45 degree headings are not on a 10 degree grid).
 inline Grid grid_of(const Bounds& b, const Config& cfg, bool hazard) {
-    int64_t L = cfg.speed_levels;
-    double step = cfg.heading_step;
+    int64_t L = cfg.fallback_speed_levels;
+    double step = cfg.fallback_heading_step;
     if (hazard && cfg.fine_fallback)
         L = std::max(L, FINE_SPEED_LEVELS), step = std::min(step, FINE_HEADING_STEP);
     Grid g = polar(b, L, step);

@@ -77,8 +77,10 @@ struct Config {
     Corrections corrections;
     std::vector<double> phi, cos_phi, sin_phi;  // the avoidance planes' angles (eq. 8)
     std::vector<double> t, cos_t, sin_t;        // the generator angles rows linearise at (eq. 12)
-    int64_t speed_levels = 9;                   // the fallbacks' grid: speeds v_min..v_max ...
+    int64_t speed_levels = 9;                   // the sampled grid: speeds v_min..v_max ...
     double heading_step = 0.0;                  // ... every this many rad on each plane
+    int64_t fallback_speed_levels = 9;          // the fallbacks' grid, likewise (grid_of)
+    double fallback_heading_step = 0.0;
     bool closing_guard = false, least_bad_escape = true, fine_fallback = true;
     int64_t planes() const { return int64_t(phi.size()); }
     int64_t samples() const { return int64_t(t.size()); }

@@ -130,13 +130,16 @@ class Options(Model):
     # obstacles' zones clear: under an acceleration limit few points of an 8 x 3 grid can be
     # reached, and an obstacle does not take its share of the avoidance
     fine_fallback: StrictBool = True
+    # the fallbacks' grid's headings (degrees) and speeds; None: the sampled grid's
+    fallback_heading_step_deg: _Deg | None = None
+    fallback_speed_levels: Annotated[int, Field(ge=2, strict=True)] | None = None
 
     def kernel_fields(self) -> dict[str, object]:
         """The compiled core's ``Config`` fields by name: every option the core has a field of
         the same name for, as it is, save those it reads in another form (the horizon,
         NO_HORIZON for none; the corrections' flags); and those derived from options (the
-        planes' and the generators' angles with numpy's cosines and sines; the fallbacks'
-        heading step in rad)."""
+        planes' and the generators' angles with numpy's cosines and sines; the grids' heading
+        steps in rad; the fallbacks' grid as the sampled one where it has none of its own)."""
         t, phi = generator_angles(self.qp_samples), default_phis(self.plane_step_deg)
         corrections = _core.Corrections()
         for name, on in Corrections.of(self.corrections)._asdict().items():
@@ -154,6 +157,16 @@ class Options(Model):
             "cos_t": np.cos(t),
             "sin_t": np.sin(t),
             "heading_step": math.radians(self.heading_step_deg),
+            "fallback_heading_step": math.radians(
+                self.heading_step_deg
+                if self.fallback_heading_step_deg is None
+                else self.fallback_heading_step_deg
+            ),
+            "fallback_speed_levels": (
+                self.speed_levels
+                if self.fallback_speed_levels is None
+                else self.fallback_speed_levels
+            ),
         }
         same = {name: getattr(self, name) for name in KERNEL_OPTIONS if name not in derived}
         return {**same, **derived}
