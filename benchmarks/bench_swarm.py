@@ -2,8 +2,9 @@
 
 ``ours-1`` and ``ours-all`` fly the ``safe`` preset (the default) on one thread and on every
 thread; ``ours-paper``, ``ours-fast`` and ``ours-swarm`` the other presets on every thread
-(``--preset NAME`` on the command line); ``ours-noguard``, ``ours-coarse`` and
-``ours-nearest`` the safe preset with ``closing_guard`` off, planes every 30 degrees, and
+(``--preset NAME`` on the command line); ``ours-noguard``, ``ours-fine`` and
+``ours-nearest`` the safe preset with ``closing_guard`` off, on the paper's 19 planes and 36
+tangent samples with the sampled grid as the fallbacks' (10 degrees by 9 speeds), and with
 ``least_bad_escape`` off. The swarm preset plans with RVO2-3D's own time horizon (the sensing
 range over twice the top speed): a velocity that would meet a zone only later is allowed, as
 RVO2-3D allows it; the other presets, like the paper's VO, have no horizon.
@@ -33,7 +34,7 @@ process, so "peak MB" is that run's peak resident memory (the run, its record an
 (``--profile-steps K``: the first K, default 100; 0: the whole run).
 
     python benchmarks/bench_swarm.py [--sizes 100 1000 10000] [--cases swap crossing]
-        [--methods ours-1 ours-all ours-noguard ours-coarse ours-nearest ours-fast ours-swarm rvo2]
+        [--methods ours-1 ours-all ours-noguard ours-fine ours-nearest ours-fast ours-swarm rvo2]
         [--max-neighbors 10]
         [--max-steps N=K ...]
         [--profile [--profile-steps K]]
@@ -62,14 +63,15 @@ from typing import Any
 from pages import RESULTS, command_line, commit, machine_line, read_rows, write_page, write_rows
 from swarm_page import PAGES, table_row
 
-METHODS = ("ours-1", "ours-all", "ours-paper", "ours-noguard", "ours-coarse", "ours-nearest",
+METHODS = ("ours-1", "ours-all", "ours-paper", "ours-noguard", "ours-fine", "ours-nearest",
            "ours-fast", "ours-swarm", "rvo2")
 PRESET_METHODS = ("ours-paper", "ours-fast", "ours-swarm")
 #: Options each ``ours-*`` method adds to the scenario's (ours-1 and ours-all add none; the
 #: preset methods their preset: ``extra_options``).
 EXTRA_OPTIONS = {
     "ours-noguard": {"closing_guard": False},
-    "ours-coarse": {"plane_step_deg": 30.0},
+    "ours-fine": {"plane_step_deg": 10.0, "qp_samples": 36, "fallback_heading_step_deg": None,
+                  "fallback_speed_levels": None},
     "ours-nearest": {"least_bad_escape": False},
 }
 

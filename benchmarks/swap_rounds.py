@@ -5,7 +5,7 @@ Flies the sphere swap of ``bench_swarm.py`` with ``select_many`` (both cores), k
 arguments of every ``--every``-th call (shifted by one every other time, so that odd and even
 steps are both kept), then replays each kept call one vehicle at a time
 (``decide_range`` on one vehicle, one thread) and groups the decisions by their round: the
-preferred velocity, a QP round (near / left / right), the sampled grid, the least-bad fallback.
+preferred velocity, a QP round (near / left / right), the fallbacks' grid, the least-bad fallback.
 
 Each of ``--runs`` (``N[:STEPS][:fast]``: the swap's size, the steps flown, the fast preset)
 is a section of the page.
@@ -137,7 +137,7 @@ def page(runs: list[dict[str, Any]], every: int, machine: str, command: str) -> 
              f"cores); one call in {every} (shifted by one every other time, so that odd and "
              "even steps are both kept) replayed one vehicle per compiled call on one "
              "thread, each decision counted by the round that found its velocity: the preferred "
-             "velocity, a QP round (near / left / right), the sampled grid, the least-bad "
+             "velocity, a QP round (near / left / right), the fallbacks' grid, the least-bad "
              "fallback. In the swap's first steps the swarm can alternate between steps where "
              "most decisions keep the preferred velocity and steps where almost none do "
              "([swarms](swarm.md)), hence both kinds of step are replayed.", ""]

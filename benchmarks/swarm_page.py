@@ -17,7 +17,7 @@ import numpy as np
 #: The method column, and the preset each ``ours-*`` method flies (for the findings).
 PRESET = {"ours-1": "safe", "ours-all": "safe", "ours-paper": "paper", "ours-fast": "fast",
           "ours-swarm": "swarm", "ours-noguard": "safe without the closing guard",
-          "ours-coarse": "safe, coarser planes", "ours-nearest": "safe, nearest fallback"}
+          "ours-fine": "safe on the paper's planes", "ours-nearest": "safe, nearest fallback"}
 
 
 def _fmt(x: Any, spec: str = ".1f") -> str:
@@ -30,8 +30,7 @@ def method_name(r: dict[str, Any]) -> str:
     return {"ours-1": "vo3d_opt select_many, 1 thread",
             "ours-all": f"vo3d_opt select_many, {t} threads",
             "ours-noguard": f"vo3d_opt select_many, closing_guard off, {t} threads",
-            "ours-coarse": f"vo3d_opt select_many, plane_step_deg "
-                           f"{options.get('plane_step_deg', 0):g}, {t} threads",
+            "ours-fine": f"vo3d_opt select_many, safe on 19 planes, {t} threads",
             "ours-nearest": f"vo3d_opt select_many, least_bad_escape off, {t} threads",
             "ours-paper": f"vo3d_opt select_many, preset paper, {t} threads",
             "ours-fast": f"vo3d_opt select_many, preset fast, {t} threads",

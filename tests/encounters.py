@@ -56,3 +56,25 @@ def encounters(draw, max_neighbors: int = 12, max_obstacles: int = 6):
         limits=Limits(speed=(0.0, v_max), altitude=(z_min, z_max)),
         dt=dt,
     )
+
+
+def crowd(seed: int, n: int = 30, inside: bool = False, closing: float = 0.0):
+    """A vehicle amid n neighbours 6–30 m away (r_pz 5) closing in from all sides: most of the
+    grid lies in some VO, so the fallbacks' blocks decide most points. ``inside``: one
+    neighbour's zone already holds the vehicle (its VO is then a half-space, no block's).
+    ``closing``: each neighbour's least speed towards it (then, as in the sphere swap's
+    centre, every velocity enters some zone and the least-bad search is by time)."""
+    rng = np.random.default_rng(seed)
+    p = np.array([0.0, 0.0, 30.0])
+    nbs = []
+    for k in range(n):
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        dist = 3.0 if (inside and k == 0) else rng.uniform(6.0, 30.0)
+        vel = -d * rng.uniform(closing, 4.0) + rng.normal(size=3) * 0.5
+        nbs.append(Neighbor(position=p + dist * d, velocity=vel, r_pz=5.0))
+    v_pref = rng.normal(size=3)
+    v_pref *= rng.uniform(1.0, 4.0) / np.linalg.norm(v_pref)
+    return dict(own=AgentState(position=p, velocity=v_pref), preferred_velocity=v_pref,
+                neighbors=nbs, obstacles=[], limits=Limits(speed=(0.0, 4.0), altitude=(0.0, 60.0)),
+                dt=0.2)

@@ -10,11 +10,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from encounters import COARSE, encounters
+from encounters import crowd, encounters
 from vo3d_opt import AgentState, Limits, Neighbor
 from vo3d_opt.formulations.common import (
     NEVER,
-    Bounds,
     Options,
     _zone_time,
     prepare,
@@ -92,28 +91,6 @@ def test_least_bad_is_the_latest_intrusion(kw, accel, n_tried, seed, escape):
 
 # ------------------------------------------------------------- the grid's blocks, in a crowd
 
-def _crowd(seed: int, n: int = 30, inside: bool = False, closing: float = 0.0):
-    """A vehicle amid n neighbours 6–30 m away (r_pz 5) closing in from all sides: most of the
-    grid lies in some VO, so the fallbacks' blocks decide most points. ``inside``: one
-    neighbour's zone already holds the vehicle (its VO is then a half-space, no block's).
-    ``closing``: each neighbour's least speed towards it (then, as in the sphere swap's
-    centre, every velocity enters some zone and the least-bad search is by time)."""
-    rng = np.random.default_rng(seed)
-    p = np.array([0.0, 0.0, 30.0])
-    nbs = []
-    for k in range(n):
-        d = rng.normal(size=3)
-        d /= np.linalg.norm(d)
-        dist = 3.0 if (inside and k == 0) else rng.uniform(6.0, 30.0)
-        vel = -d * rng.uniform(closing, 4.0) + rng.normal(size=3) * 0.5
-        nbs.append(Neighbor(position=p + dist * d, velocity=vel, r_pz=5.0))
-    v_pref = rng.normal(size=3)
-    v_pref *= rng.uniform(1.0, 4.0) / np.linalg.norm(v_pref)
-    return dict(own=AgentState(position=p, velocity=v_pref), preferred_velocity=v_pref,
-                neighbors=nbs, obstacles=[], limits=Limits(speed=(0.0, 4.0), altitude=(0.0, 60.0)),
-                dt=0.2)
-
-
 def _grid_reference(enc, planes, grid):
     """grid_search in plain numpy: points in order of deviation (ties within 1e-12 plane by
     plane, then in grid order), on e1 on plane 0 only; the first that ``first_safe`` (point
@@ -156,8 +133,8 @@ def test_fallbacks_in_a_swap_centre_are_the_point_by_point_answers(seed):
     acceleration limit. (Skipping blocks whose bound is only below 1.5 x the best time changes
     answers here, and not in the crowds above; so does skipping in the clipped pass.)"""
     for case in range(5 * seed, 5 * seed + 5):  # 100 crowds in all
-        kw = _crowd(1000 + case, n=20 + case % 60, closing=3.0)
-        _check_crowd(case, kw, Options(reciprocal=True, pz_buffer=1.6),
+        kw = crowd(1000 + case, n=20 + case % 60, closing=3.0)
+        _checkcrowd(case, kw, Options(reciprocal=True, pz_buffer=1.6),
                      accel=3.0 if case % 3 == 2 else None)
 
 
@@ -166,7 +143,7 @@ def test_closing_rate_is_the_fastest_closing_on_the_zones_inside():
     vehicle, the largest rel·(v − apex) / d_oi, 0 when none closes; the others do not count."""
     rng = np.random.default_rng(5)
     for case in range(20):
-        kw = _crowd(3000 + case, n=12, inside=True, closing=1.0)
+        kw = crowd(3000 + case, n=12, inside=True, closing=1.0)
         enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
                       kw["limits"], kw["dt"], Options(reciprocal=bool(case % 2), pz_buffer=2.0))
         c = enc.vos.cones
@@ -185,13 +162,13 @@ def test_least_bad_escape_inside_zones_is_the_point_by_point_answer(seed):
     reference's too (nearest v_pref); some answers differ, the default's closing slower."""
     slower = 0
     for case in range(5 * seed, 5 * seed + 5):  # 40 crowds in all
-        kw = _crowd(2000 + case, n=30 + case % 40, inside=True, closing=3.0)
+        kw = crowd(2000 + case, n=30 + case % 40, inside=True, closing=3.0)
         accel = 3.0 if case % 4 == 3 else None
         default = Options(reciprocal=True, pz_buffer=1.6)
         assert default.least_bad_escape  # the default since the whole N = 10,000 swap
-        got, enc = _check_crowd(case, kw, default, accel)
+        got, enc = _checkcrowd(case, kw, default, accel)
         nearest = Options(reciprocal=True, pz_buffer=1.6, least_bad_escape=False)
-        plain, _ = _check_crowd(case, kw, nearest, accel)
+        plain, _ = _checkcrowd(case, kw, nearest, accel)
         if got is not None and plain is not None:
             c_got, c_plain = enc.closing_rate(np.array([got, plain]))
             assert c_got <= c_plain + 1e-12
@@ -200,12 +177,12 @@ def test_least_bad_escape_inside_zones_is_the_point_by_point_answer(seed):
 
 
 def _check_fallbacks(seed):
-    kw = _crowd(seed, n=20 + seed % 24, inside=seed % 4 == 3, closing=(0.0, 3.0)[seed % 3 == 0])
+    kw = crowd(seed, n=20 + seed % 24, inside=seed % 4 == 3, closing=(0.0, 3.0)[seed % 3 == 0])
     horizon = (None, None, 8.0, None, 2.0, 1.0)[seed % 6]
-    _check_crowd(seed, kw, Options(horizon=horizon), accel=3.0 if seed % 5 == 4 else None)
+    _checkcrowd(seed, kw, Options(horizon=horizon), accel=3.0 if seed % 5 == 4 else None)
 
 
-def _check_crowd(seed, kw, options, accel):
+def _checkcrowd(seed, kw, options, accel):
     """py_fallback on crowd ``kw`` against the numpy references (``seed``: its tried answers);
     returns the least-bad velocity (None when the grid found a safe one) and the encounter."""
     limits = Limits(speed=kw["limits"].speed, altitude=kw["limits"].altitude, acceleration=accel)
@@ -252,7 +229,7 @@ def test_the_crowds_use_the_blocks():
     in some of them and none in others (the least-bad fallback)."""
     covered, found = [], []
     for seed in range(24):
-        kw = _crowd(seed, n=20 + seed, inside=seed % 4 == 3)
+        kw = crowd(seed, n=20 + seed, inside=seed % 4 == 3)
         enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
                       kw["limits"], kw["dt"], Options())
         planes = py_decision_planes(enc.vos, enc.v_now, enc.options.config)
@@ -311,7 +288,7 @@ def test_block_certificates_hold_for_every_velocity_of_the_ball(seed):
     to far outside the cone, of every size: both certificates certify some and refuse some,
     and the time bound is tight within a factor 3 on some (it bounds something)."""
     rng = np.random.default_rng(seed)
-    kw = _crowd(seed, n=12, inside=seed == 5)
+    kw = crowd(seed, n=12, inside=seed == 5)
     enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
                   kw["limits"], kw["dt"], Options())
     cones = enc.vos.cones
@@ -371,7 +348,7 @@ def test_block_certificates_hold_at_their_largest_ball(seed):
     on the edge of the margins), with its hardest points: ``in_cone`` and the zone time, as
     computed, still hold at every one."""
     rng = np.random.default_rng(100 + seed)
-    kw = _crowd(seed, n=12)
+    kw = crowd(seed, n=12)
     enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
                   kw["limits"], kw["dt"], Options())
     cones = enc.vos.cones
@@ -392,95 +369,6 @@ def test_block_certificates_hold_at_their_largest_ball(seed):
             pts = _ball_points(rng, c, rho, worst=worst)
             assert (_zone_times(enc.vos, k, pts) <= _time_bound(enc.vos, k, c, rho)).all()
     assert edges > 20
-
-
-# ------------------------------- fine_fallback: the default grid with something that does not avoid
-
-def _hazard_decisions(n=120):
-    """Decisions near the ground under an acceleration limit (as in the lagged sweep family),
-    with cooperative neighbours and, in turn, obstacles in reach, a non-cooperative neighbour,
-    or neither."""
-    from vo3d_opt import Cylinder
-    rng = np.random.default_rng(7)
-    out = []
-    for t in range(n):
-        kind = ("obstacle", "noncoop", "none")[t % 3]
-        p = np.array([0.0, 0.0, rng.uniform(1.0, 10.0)])
-        v = rng.uniform(-4.0, 4.0, 3) * (1.0, 1.0, 0.3)
-        nbrs = [Neighbor(position=tuple(p + rng.uniform(-15.0, 15.0, 3)),
-                         velocity=tuple(rng.uniform(-3.0, 3.0, 3)), r_pz=6.0,
-                         cooperative=not (kind == "noncoop" and k == 0)) for k in range(4)]
-        obs = [Cylinder(center=tuple(rng.uniform(-12.0, 12.0, 2)), radius=rng.uniform(2.0, 5.0),
-                        height=40.0) for _ in range(3)] if kind == "obstacle" else []
-        limits = Limits(speed=(0.0, 5.0), altitude=(0.0, 40.0), acceleration=9.6)
-        out.append((kind, dict(own=AgentState(position=p, velocity=v), neighbors=nbrs,
-                               preferred_velocity=(4.5, 0.0, 0.0), obstacles=obs, dt=0.2,
-                               limits=limits)))
-    return out
-
-
-@pytest.mark.parametrize("solver", ["exact2d", "daqp"])
-def test_fine_fallback_is_the_default_grid_where_something_does_not_avoid(solver):
-    """With the fast preset's coarse grid, a decision with an obstacle in reach or a non-cooperative
-    neighbour falls back on the default grid (the same answer as the coarse planes with the
-    default grid); one with cooperative neighbours only keeps the coarse grid (the same answer
-    as ``fine_fallback=False``). The compiled kernel and a Python formulation alike. Among the
-    decisions of each kind, some fall back and the two grids answer differently, so that
-    either rule applied to the wrong kind would fail."""
-    from vo3d_opt import VelocitySelector
-    fast = VelocitySelector("plane_qp", solver, preset="paper", **COARSE)
-    coarse = VelocitySelector("plane_qp", solver, preset="paper", **COARSE, fine_fallback=False)
-    fine_grid = VelocitySelector("plane_qp", solver, preset="paper", **{**COARSE, "heading_step_deg": 10.0,
-                                                        "speed_levels": 9})
-    fell_back = {"obstacle": 0, "noncoop": 0, "none": 0}
-    grids_differ = dict(fell_back)
-    for kind, kw in _hazard_decisions(60 if solver == "daqp" else 120):
-        got = fast.select(**kw)
-        want = (coarse if kind == "none" else fine_grid).select(**kw)
-        np.testing.assert_array_equal(got.velocity, want.velocity)
-        assert got.status == want.status
-        if got.info.get("round") in ("sampled", "least_bad"):
-            fell_back[kind] += 1
-        grids_differ[kind] += not np.array_equal(coarse.select(**kw).velocity,
-                                                  fine_grid.select(**kw).velocity)
-    assert min(fell_back.values()) > 0 and min(grids_differ.values()) > 0, (fell_back,
-                                                                            grids_differ)
-
-
-def test_fine_fallback_changes_nothing_with_the_default_grid():
-    """The default grid is the fine one: ``fine_fallback`` off gives the same answers (the
-    safe preset's rules, the fallbacks on the sampled grid's defaults)."""
-    from vo3d_opt import VelocitySelector
-    default_grid = {"fallback_heading_step_deg": None, "fallback_speed_levels": None}
-    on = VelocitySelector(**default_grid)
-    off = VelocitySelector(**default_grid, fine_fallback=False)
-    fell_back = 0
-    for _, kw in _hazard_decisions(60):
-        got = on.select(**kw)
-        np.testing.assert_array_equal(got.velocity, off.select(**kw).velocity)
-        fell_back += got.info.get("round") in ("sampled", "least_bad")
-    assert fell_back > 0
-
-
-def test_a_lagged_vehicle_at_the_floor_stays_out_of_a_box_with_either_grid():
-    """Encounter 5573 of the lagged sweep (seed 0): a vehicle pinned to the altitude floor beside
-    a box. While a ray under the floor counted as a way past the box (the prism's bottom at the
-    ground), it drifted into the prism on the fast preset's coarse grid and stayed out only
-    with the default grid near obstacles (``fine_fallback``); with the prism reaching below the
-    ground, it stays out with either grid."""
-    from vo3d_opt.sim.scenario import scenario_variant
-    from vo3d_opt.sim.simulator import run_scenario
-    from vo3d_opt.sim.metrics import summarize
-    from vo3d_opt.sweep import make_encounter
-    sc = make_encounter("lagged", 0, 5573).load()
-    intrusions = {}
-    for fine in (False, True):
-        fast = scenario_variant(sc, selector_options={"preset": "fast", "fine_fallback": fine})
-        s = summarize(run_scenario(fast, progress=False))
-        intrusions[fine] = s["obstacle_pz_intrusions"]
-        assert s["collisions"] == 0
-    assert intrusions == {False: 0, True: 0}, intrusions
-
 
 
 def _near_surfaces(rng: np.random.Generator, cones, m: int) -> np.ndarray:
@@ -511,7 +399,7 @@ EDGES = (float(np.nextafter(5.0, np.inf)), 5.0 + 1e-12, 5.0 * (1 + 1e-6), 5.0 * 
 
 def _next_to_zone(seed: int, d: float) -> dict:
     """A crowd of four with a fifth neighbour d m away (its zone r_pz 5 m)."""
-    kw = _crowd(seed, n=4)
+    kw = crowd(seed, n=4)
     rng = np.random.default_rng(seed)
     u = rng.normal(size=3)
     u /= np.linalg.norm(u)
@@ -530,7 +418,7 @@ def test_clearance_floor_bounds_each_cones_clearance(seed):
 
     rng = np.random.default_rng(seed)
     kw = (_next_to_zone(seed, EDGES[seed - 4]) if seed >= 4
-          else _crowd(seed, n=10, inside=seed == 3, closing=2.0 * (seed % 2)))
+          else crowd(seed, n=10, inside=seed == 3, closing=2.0 * (seed % 2)))
     enc = prepare(kw["own"], np.asarray(kw["preferred_velocity"]), kw["neighbors"], [],
                   kw["limits"], kw["dt"], Options(reciprocal=True, pz_buffer=1.6))
     cones = enc.vos.cones
@@ -569,7 +457,7 @@ def test_the_margin_check_is_clearance_against_the_margin(seed):
     from vo3d_opt.geometry.membership import clearances, in_vos
 
     rng = np.random.default_rng(10 + seed)
-    kw = _next_to_zone(20 + seed, EDGES[seed - 3]) if seed >= 3 else _crowd(20 + seed, n=8)
+    kw = _next_to_zone(20 + seed, EDGES[seed - 3]) if seed >= 3 else crowd(20 + seed, n=8)
     options = dict(reciprocal=True, pz_buffer=1.6) if seed == 2 + len(EDGES) else {}
     accepted = refused = 0
     for horizon in (None, 3.0):
@@ -588,31 +476,3 @@ def test_the_margin_check_is_clearance_against_the_margin(seed):
                 accepted += expect
                 refused += not expect
     assert accepted > 5 and refused > 5
-
-
-def test_the_fallbacks_grid_of_their_own_leaves_the_sampled_grid_alone():
-    """``fallback_heading_step_deg`` and ``fallback_speed_levels`` set the grid the fallbacks
-    search (the sampled grid's own when none), not the sampled selection's grid: plane_qp
-    answers with them as with the same values on the sampled grid, fallbacks included, and
-    the safe preset's sampled grid is the default one while its fallbacks' is 8 x 3."""
-    from vo3d_opt import VelocitySelector
-    coarse = {"plane_step_deg": 45.0, "qp_samples": 12}
-    own = VelocitySelector(**coarse, fallback_heading_step_deg=45.0, fallback_speed_levels=3,
-                           fine_fallback=False)
-    shared = VelocitySelector(**coarse, heading_step_deg=45.0, speed_levels=3,
-                              fallback_heading_step_deg=None, fallback_speed_levels=None,
-                              fine_fallback=False)
-    fine = VelocitySelector(**coarse, fallback_heading_step_deg=None, fallback_speed_levels=None,
-                            fine_fallback=False)
-    fell_back = differ = 0
-    for _, kw in _hazard_decisions(60):
-        got = own.select(**kw)
-        np.testing.assert_array_equal(got.velocity, shared.select(**kw).velocity)
-        fell_back += got.info.get("round") in ("sampled", "least_bad")
-        differ += not np.array_equal(got.velocity, fine.select(**kw).velocity)
-    assert fell_back > 0 and differ > 0
-    bounds = Bounds(v_min=0.0, v_max=5.0, z_min=0.0, z_max=40.0, acceleration=float("nan"), dt=0.2)
-    cfg = Options(fallback_heading_step_deg=45.0, fallback_speed_levels=3).config
-    assert len(py_polar_grid(bounds, cfg)) == 36 * 8 + 1  # 10 degrees by 9 speeds, 0 once
-    assert len(grid_of(bounds, cfg, False).points) == 8 * 2 + 1  # 45 degrees by 3 speeds
-    assert len(grid_of(bounds, cfg, True).points) == 36 * 8 + 1  # near a hazard: the fine one

@@ -50,7 +50,9 @@ def test_a_plain_select_per_agent_decides_as_the_simulator(name: str) -> None:
         p = record.positions[k]
         v = record.velocities[k - 1].copy() if k else np.zeros_like(p)
         deciding = record.decided[k]
-        v[record.arrived[k] & ~deciding] = 0.0  # a vehicle that has arrived hovers from then on
+        # a vehicle hovers from the step it arrives (whether it then keeps watch or not)
+        just_arrived = record.arrived[k] & ~record.arrived[k - 1] if k else record.arrived[k]
+        v[(record.arrived[k] & ~deciding) | just_arrived] = 0.0
         for i in np.flatnonzero(deciding):
             d = selector.select(
                 own=AgentState(position=p[i], velocity=v[i]),

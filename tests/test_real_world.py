@@ -380,23 +380,21 @@ def test_paper_case1_under_noise_and_latency_is_collision_free():
 # ---------------------------------------------------------------------------- dynamics
 
 
-
-
 def test_the_derived_margins_keep_a_lagging_swarm_off_the_altitude_limits_and_the_boxes():
     # encounter 734 of the lagged sweep (first-order lag, boxes), on the paper's planes and
     # grid: planning to the real altitude limits (margin off) dips below the floor; the derived
     # margin keeps every sample inside.
-    shipped = load_scenario(Path(__file__).parent / "data" / "sweep-failures" / "lagged-s0-i734.yaml")
+    shipped = load_scenario(Path(__file__).parent / "data" / "sweep-failures" /
+                            "lagged-s0-i734.yaml")
     base = scenario_variant(shipped, selector_options={**shipped.selector_options, **PAPER_GRID})
     assert base.vehicle_dynamics.model == "first_order"
     off = summarize(run_scenario(scenario_variant(base, safety={"altitude_margin": 0.0}),
                                  progress=False))
-    on = summarize(run_scenario(base, progress=False))
     assert off["altitude_violations"] > 0
-    assert on["altitude_violations"] == 0 and on["collisions"] == 0 and on["all_reached"]
-    assert on["obstacle_pz_intrusions"] == 0
-    as_shipped = summarize(run_scenario(shipped, progress=False))  # the preset's own planes
-    assert as_shipped["altitude_violations"] == 0 and as_shipped["all_reached"]
+    for sc in (base, shipped):  # on those planes and on the preset's own
+        on = summarize(run_scenario(sc, progress=False))
+        assert on["altitude_violations"] == 0 and on["collisions"] == 0 and on["all_reached"]
+        assert on["pz_intrusions"] == 0 and on["obstacle_pz_intrusions"] == 0
 
 
 def test_rotorpy_in_a_wind_in_the_loop_judged_on_its_sub_steps():

@@ -77,9 +77,12 @@ def test_contract_example(formulation, solver):
 @settings(max_examples=60, **SETTINGS)
 @given(encounters())
 def test_plane_qp_safe_whenever_sampled_is_and_no_worse(kw):
+    """On the same planes, with its fallbacks on the sampled grid (the safe preset's own
+    fallbacks' grid is coarser)."""
     sel = VelocitySelector("sampled")
     ref = sel.select(**kw)
-    got = VelocitySelector("plane_qp").select(**kw)
+    got = VelocitySelector("plane_qp", fallback_heading_step_deg=None,
+                           fallback_speed_levels=None).select(**kw)
     for d in (ref, got):
         assert_within_limits(kw, d.velocity)
     if ref.status == "optimal":

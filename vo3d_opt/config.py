@@ -107,7 +107,7 @@ class SafetyConfig(Model):
     #: the one closing slowest on the zones it is inside, not the one nearest the preference.
     least_bad_escape: StrictBool = True
     #: With an obstacle in reach or a neighbour that does not avoid, the fallbacks' grid takes
-    #: at least the default grid's speeds and headings, however coarse ``sampled`` is.
+    #: at least the default grid's speeds and headings, however coarse it is otherwise.
     fine_fallback: StrictBool = True
     #: degrees, [1, 180]: headings of the fallbacks' grid (tried when no QP answer is safe);
     #: None: the sampled grid's, ``heading_step_deg``.
@@ -126,7 +126,8 @@ class PlaneConfig(Model):
 
 
 class SampledConfig(Model):
-    """The paper's sampled selection: a polar grid on every plane (the fallbacks' grid too)."""
+    """The paper's sampled selection: a polar grid on every plane (the fallbacks' grid too,
+    unless ``fallback_heading_step_deg`` or ``fallback_speed_levels`` give it its own)."""
 
     #: degrees, [1, 180]: headings of the grid on each plane.
     heading_step_deg: _number(1.0, 180.0) = 10.0  # type: ignore[valid-type]
@@ -177,7 +178,7 @@ _COARSE: Final[dict[str, Any]] = {
 #:   flight larger (both move before the next decision), and caps its speed towards a close
 #:   neighbour (closing guard); planes every 30 degrees with 24 tangent samples and a fallback
 #:   grid of 8 headings by 3 speeds (the default grid near an obstacle or a vehicle that does
-#:   not avoid: ``fine_fallback``), which keep its decision within RVO2-3D's time per agent;
+#:   not avoid: ``fine_fallback``), so that a crowded decision costs few rows;
 #: - ``paper``: the selection as published, the VO unbounded and unshared;
 #: - ``fast``: the shared rules of ``safe`` with planes every 45 degrees, 12 tangent samples
 #:   and a sampled grid (the fallbacks' too) of 8 headings by 3 speeds: for swarms where time

@@ -28,7 +28,7 @@ class Status(StrEnum):
     #: closing slowest on them, ``least_bad_escape``, the default; then nearest the preferred
     #: velocity).
     INFEASIBLE_MIN_VIOLATION = "infeasible_min_violation"
-    #: Decision: the backend failed on every problem; the sampled grid's safe velocity or the
+    #: Decision: the backend failed on every problem; the fallbacks' grid's safe velocity or the
     #: least-bad one was used instead.
     SOLVER_FAILED_FALLBACK = "solver_failed_fallback"
 

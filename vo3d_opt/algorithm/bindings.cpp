@@ -520,7 +520,7 @@ NB_MODULE(_core, m) {
         vec3(p, "p", P_), vec3(v_now, "v_now", W);
         LimitRows L = limits_of(G3, h3);
         Bounds b = bounds_of(bounds);
-        Grid g = grid_of(b, cfg, false);
+        Grid g = sampled_grid(b, cfg);
         Cover cover;  // no block known to lie in a cone
         cover.B = g.blocks();
         cover.cone.assign(pl.count() * cover.B, -2);

@@ -15,8 +15,8 @@
 //    answer is the decision (every other QP's answer is at least as far), an answer that enters
 //    VOs not yet constrained on that QP adds their rows and that QP is solved again (constraint
 //    generation per QP, so no answer depends on the order the QPs are solved in);
-// 5. no QP gives a safe answer: the sampled grid with the exact check and the margin, else the
-//    least-bad velocity (latest first intrusion: fallback.hpp);
+// 5. no QP gives a safe answer: the fallbacks' grid with the exact check and the margin, else
+//    the least-bad velocity (latest first intrusion: fallback.hpp);
 // 6. the limits, whatever came before: never above v_max, never leaving the altitude band in dt.
 //
 // A plane QP costs well under a microsecond, so its key in the best-first order is a one-line

@@ -336,10 +336,10 @@ inline bool safe_by_margin(const VOs& vos, const double* v, const LimitRows& L, 
 // ------------------------------------------------------------------------------ the grid
 
 // A polar grid on the planes (L speeds v_min..v_max, a heading every heading_step; speed 0
-// once, repeated speeds once): the sampled selection's, and the fallbacks' (grid_of) in blocks
-// of BLOCK x BLOCK neighbouring points, each with a disc holding them: a VO cone that holds a
-// block's disc holds each of its points (ball_in_cone), so the fallbacks skip them without
-// checking them one by one.
+// once, repeated speeds once): the sampled selection's and the fallbacks' (sampled_grid,
+// grid_of). Their points go in blocks (blocked) of BLOCK x BLOCK neighbouring points, each with
+// a disc holding them: a VO cone that holds a block's disc holds each of its points
+// (ball_in_cone), so the fallbacks skip them without checking them one by one.
 struct Grid {
     std::vector<double> points;  // (M, 2) the in-plane candidates
     std::vector<int64_t> where;  // (M, 2) each point's speed level and heading index
@@ -378,14 +378,9 @@ inline bool has_hazard(const VOs& vos, const Rows& nbrs) {
     return false;
 }
 
-// The fallbacks' grid: cfg's, but with fine_fallback and a hazard at least the default grid's
-// speeds and headings (denser, not a superset: 45 degree headings are not on a 10 degree grid).
-inline Grid grid_of(const Bounds& b, const Config& cfg, bool hazard) {
-    int64_t L = cfg.fallback_speed_levels;
-    double step = cfg.fallback_heading_step;
-    if (hazard && cfg.fine_fallback)
-        L = std::max(L, FINE_SPEED_LEVELS), step = std::min(step, FINE_HEADING_STEP);
-    Grid g = polar(b, L, step);
+// g's points in blocks of BLOCK x BLOCK neighbouring speeds and headings, each block's disc
+// holding its points.
+inline Grid blocked(Grid g) {
     int64_t M = int64_t(g.where.size() / 2), per_row = 1;
     if (M) {
         int64_t top = g.where[1];
@@ -412,6 +407,21 @@ inline Grid grid_of(const Bounds& b, const Config& cfg, bool hazard) {
         disc[2] = std::max(disc[2], d * (1.0 + 1e-9) + 1e-9);
     }
     return g;
+}
+
+// The fallbacks' grid: cfg's, but with fine_fallback and a hazard at least the default grid's
+// speeds and headings (denser, not a superset: 45 degree headings are not on a 10 degree grid).
+inline Grid grid_of(const Bounds& b, const Config& cfg, bool hazard) {
+    int64_t L = cfg.fallback_speed_levels;
+    double step = cfg.fallback_heading_step;
+    if (hazard && cfg.fine_fallback)
+        L = std::max(L, FINE_SPEED_LEVELS), step = std::min(step, FINE_HEADING_STEP);
+    return blocked(polar(b, L, step));
+}
+
+// The sampled selection's grid, in blocks (its least-bad fallback searches its own candidates).
+inline Grid sampled_grid(const Bounds& b, const Config& cfg) {
+    return blocked(polar(b, cfg.speed_levels, cfg.heading_step));
 }
 
 // Block b's disc centre on plane p, in 3D, lifted as a grid point is.

@@ -126,7 +126,7 @@ class Options(Model):
     # and headings (FINE_SPEED_LEVELS, FINE_HEADING_STEP: denser, though it need not hold every
     # point of a coarser grid) in a decision with something that does not avoid: an obstacle's
     # VO pyramid in reach or any non-cooperative neighbour (fallback.has_hazard, grid_of). A
-    # no-op with the default grid; with a coarse one (FAST_OPTIONS) it is what keeps
+    # no-op with the default grid; with a coarse one (safe's, fast's) it is what keeps
     # obstacles' zones clear: under an acceleration limit few points of an 8 x 3 grid can be
     # reached, and an obstacle does not take its share of the avoidance
     fine_fallback: StrictBool = True

@@ -1,5 +1,5 @@
 """The fallbacks every formulation shares, compiled (``vo3d_opt/algorithm/fallback.hpp``): the
-sampled reference's polar grid on the avoidance planes (the paper's candidates), the first of
+fallbacks' polar grid on the avoidance planes (the paper's kind of candidates), the first of
 them that is safe by the exact check with the margin kept, and the least-bad velocity when
 nothing is safe.
 
@@ -88,7 +88,7 @@ def py_least_bad(
     bounds: Bounds,
     cfg: Config,
 ) -> np.ndarray:
-    """``least_bad`` on ``cfg``'s own grid (``sampled``, whose candidates that grid is): among
+    """``least_bad`` on the sampled grid (``sampled``, whose candidates that grid is): among
     the tried answers (k, 3), the grid on every plane, zero and v_now, within the limits, the
     velocity whose first protected-zone intrusion comes latest (ties at once, inside zones:
     first the one closing slowest on them, with ``least_bad_escape``; then nearest the
@@ -112,8 +112,8 @@ def first_safe(enc: Encounter, candidates: np.ndarray) -> int | None:
 def fallback(
     enc: Encounter, planes: AvoidancePlanes, tried: np.ndarray, all_failed: bool
 ) -> Outcome:
-    """No answer passed the exact check: the sampled reference's grid (the exact check and the
-    margin decide, not its sections); if none is safe either, the least-bad velocity. When the
+    """No answer passed the exact check: the fallbacks' grid (the exact check and the margin
+    decide, not its sections); if none is safe either, the least-bad velocity. When the
     backend failed on every problem the status says so whatever the fallback found."""
     G3, h3 = enc.linear_bounds()
     found, v, p = py_fallback(

@@ -5,7 +5,7 @@ The algorithm is compiled (``vo3d_opt._core``) and reads top to bottom in
 reads: the VOs' inputs and the limits as rows; the preferred velocity itself when it is safe;
 the VO cones and pyramids, the avoidance planes about the preferred direction and, on each
 plane and in each linearisation round, one QP solved exactly; a best-first search over those
-QPs with constraint generation and the exact 3D check; the sampled grid and the least-bad
+QPs with constraint generation and the exact 3D check; the fallbacks' grid and the least-bad
 velocity when no QP gives a safe answer; the limits, whatever came before.
 
 Here: the names of its answer's fields, the entry ``decide``, and the plane QPs for the Python
@@ -24,7 +24,7 @@ from .common import Bounds, Config, VOs
 from .rows import ROUNDS
 
 #: How a decision's velocity was found (``info["round"]``): the preferred velocity, a QP round,
-#: the sampled grid, the least-bad fallback.
+#: a point of the fallbacks' grid ("sampled"), the least-bad fallback.
 ROUND_NAMES = ("preferred",) + ROUNDS + ("sampled", "least_bad")
 PREFERRED, SAMPLED, LEAST_BAD = 0, len(ROUNDS) + 1, len(ROUNDS) + 2
 #: ``decide``'s status codes: the order of vo3d_opt.status.DECISION_STATUSES.
