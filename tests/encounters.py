@@ -7,7 +7,8 @@ from hypothesis import strategies as st
 from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor
 
 #: The coarse planes, tangent samples and fallback grid of the ``fast`` preset.
-COARSE = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "speed_levels": 3}
+COARSE = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "speed_levels": 3,
+          "fine_planes": False}
 #: The paper's avoidance planes and tangent samples, and one grid for the sampled selection and
 #: the fallbacks: the safe preset's rules on the planes the scenarios were first flown on.
 PAPER_GRID = {"plane_step_deg": 10.0, "qp_samples": 36, "fallback_heading_step_deg": None,

@@ -40,7 +40,8 @@ RUN_FLAGS = (
 )
 #: The sensing range the swarm configuration's horizon was derived from (m).
 SWARM_RANGE = 55.0
-FAST = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "speed_levels": 3}
+FAST = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "speed_levels": 3,
+        "fine_planes": False}
 SAFE_GRID = {"plane_step_deg": 30.0, "qp_samples": 24, "fallback_heading_step_deg": 45.0,
              "fallback_speed_levels": 3}
 KINDS = ("random", "crowd", "inside", "ceiling", "obstacles", "noncoop", "accel", "coplanar")

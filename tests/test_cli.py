@@ -197,12 +197,15 @@ def test_selector_options_fly_as_the_scenario_key_and_override_it(small, tmp_pat
     assert {k: v for k, v in row.items() if k not in TIMING_KEYS | {"selector_options"}} == in_file
 
 
-COARSE = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "speed_levels": 3}
+#: The fast preset's fields over the safe preset's, as -o takes them.
+COARSE = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "speed_levels": 3,
+          "fallback_heading_step_deg": "null", "fallback_speed_levels": "null",
+          "fine_planes": "false"}
 
 
 def test_fast_is_the_fast_preset_and_fields_override_it(cli, small, here):
     """--fast is --preset fast is -o preset=fast: the safe preset's flight with the coarse
-    planes, samples and grid given field by field; a field given by -o overrides the preset's
+    planes, samples and grid, one grid and no finer planes near obstacles given field by field; a field given by -o overrides the preset's
     wherever it stands; sweep takes them too (parsed only: its run is the sweep's -o path)."""
     fast = _behaviour(here("run", small, "--json", "--fast"), {"preset": "fast"})
     assert fast == _behaviour(here("run", small, "--json", "--preset", "fast"), {"preset": "fast"})

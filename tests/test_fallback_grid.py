@@ -1,5 +1,5 @@
-"""The fallbacks' grid: the default grid near something that does not avoid
-(``fine_fallback``), and a grid of its own (``fallback_heading_step_deg``,
+"""Near something that does not avoid, the default planes (``fine_planes``) and the default
+grid (``fine_fallback``); and the fallbacks' grid of its own (``fallback_heading_step_deg``,
 ``fallback_speed_levels``) that leaves the sampled selection's grid alone."""
 from __future__ import annotations
 
@@ -61,6 +61,28 @@ def test_fine_fallback_is_the_default_grid_where_something_does_not_avoid(solver
                                                   fine_grid.select(**kw).velocity)
     assert min(fell_back.values()) > 0 and min(grids_differ.values()) > 0, (fell_back,
                                                                             grids_differ)
+
+
+@pytest.mark.parametrize("solver", ["exact2d", "daqp"])
+def test_fine_planes_are_the_default_planes_where_something_does_not_avoid(solver):
+    """Under the safe preset, a decision with an obstacle in reach or a non-cooperative
+    neighbour plans on the default planes and tangent samples (the same answer, status and
+    plane as safe on those planes); one with cooperative neighbours only keeps the coarse
+    planes (as ``fine_planes=False``). The compiled kernel and a Python formulation alike; in
+    each kind the two sets of planes answer differently somewhere, so that either rule applied
+    to the wrong kind would fail."""
+    safe = VelocitySelector("plane_qp", solver)
+    coarse = VelocitySelector("plane_qp", solver, fine_planes=False)
+    fine = VelocitySelector("plane_qp", solver, plane_step_deg=10.0, qp_samples=36)
+    differ = {"obstacle": 0, "noncoop": 0, "none": 0}
+    for kind, kw in _hazard_decisions(60 if solver == "daqp" else 120):
+        got = safe.select(**kw)
+        want = (coarse if kind == "none" else fine).select(**kw)
+        np.testing.assert_array_equal(got.velocity, want.velocity)
+        assert (got.status, got.plane) == (want.status, want.plane)
+        differ[kind] += not np.array_equal(coarse.select(**kw).velocity,
+                                           fine.select(**kw).velocity)
+    assert min(differ.values()) > 0, differ
 
 
 def test_fine_fallback_changes_nothing_with_the_default_grid():

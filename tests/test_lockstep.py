@@ -93,11 +93,13 @@ def test_arrived_agents_making_room_for_a_stuck_one_side_by_side_with_others():
     run is still its own, and the batch's detour rule wakes only the stuck run's vehicles."""
     from pathlib import Path
 
-    from vo3d_opt.sim.scenario import load_scenario
+    from encounters import PAPER_GRID
+    from vo3d_opt.sim.scenario import load_scenario, scenario_variant
 
     data = Path(__file__).parent / "data" / "sweep-failures"
-    scs = [make_encounter("pair", 1, 0).load(), load_scenario(data / "dense-s0-i95048.yaml"),
-           make_encounter("pair", 1, 1).load()]
+    stuck = load_scenario(data / "dense-s0-i95048.yaml")  # stalls on the planes it was found on
+    stuck = scenario_variant(stuck, selector_options={**stuck.selector_options, **PAPER_GRID})
+    scs = [make_encounter("pair", 1, 0).load(), stuck, make_encounter("pair", 1, 1).load()]
     together = fly_together([flown(sc, Method())[:2] for sc in scs])
     woken = together[1].decided & together[1].arrived[:-1]
     assert woken.any()

@@ -49,6 +49,7 @@ class Config:
     heading_step: float
     fallback_speed_levels: int
     fallback_heading_step: float
+    fine: Config | None
     closing_guard: bool
     least_bad_escape: bool
     fine_fallback: bool

@@ -114,6 +114,9 @@ class SafetyConfig(Model):
     fallback_heading_step_deg: _number(1.0, 180.0) | None = None  # type: ignore[valid-type]
     #: [2, 50]: speeds of the fallbacks' grid; None: the sampled grid's, ``speed_levels``.
     fallback_speed_levels: _count(2, 50) | None = None  # type: ignore[valid-type]
+    #: With an obstacle in reach or a neighbour that does not avoid, the avoidance planes and
+    #: tangent samples at least the default ones, however coarse they are otherwise.
+    fine_planes: StrictBool = True
 
 
 class PlaneConfig(Model):
@@ -170,6 +173,7 @@ _COARSE: Final[dict[str, Any]] = {
     "qp_samples": 12,
     "heading_step_deg": 45.0,
     "speed_levels": 3,
+    "fine_planes": False,
 }
 #: The presets, as the fields they set over the defaults (which are ``paper``'s):
 #:
@@ -178,11 +182,13 @@ _COARSE: Final[dict[str, Any]] = {
 #:   flight larger (both move before the next decision), and caps its speed towards a close
 #:   neighbour (closing guard); planes every 30 degrees with 24 tangent samples and a fallback
 #:   grid of 8 headings by 3 speeds (the default grid near an obstacle or a vehicle that does
-#:   not avoid: ``fine_fallback``), so that a crowded decision costs few rows;
+#:   not avoid: ``fine_fallback``; the default planes too: ``fine_planes``), so that a
+#:   crowded decision costs few rows;
 #: - ``paper``: the selection as published, the VO unbounded and unshared;
 #: - ``fast``: the shared rules of ``safe`` with planes every 45 degrees, 12 tangent samples
-#:   and a sampled grid (the fallbacks' too) of 8 headings by 3 speeds: for swarms where time
-#:   matters more than the shortest detour;
+#:   and a sampled grid (the fallbacks' too) of 8 headings by 3 speeds, the planes as coarse
+#:   near obstacles (``fine_planes`` off): for swarms where time matters more than the
+#:   shortest detour;
 #: - ``swarm``: ``fast`` with RVO2-3D's time horizon, ``sensing_range / (2 v_max)``.
 PRESET_VALUES: Final[dict[str, Mapping[str, Any]]] = {
     "safe": _SAFE,

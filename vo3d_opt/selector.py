@@ -22,7 +22,7 @@ import numpy as np
 
 from .config import SelectorConfig
 from .formulations import inputs, kernel
-from .formulations.common import Bounds, Encounter, Options, py_build_vos
+from .formulations.common import Bounds, Encounter, Options, planning_options, py_build_vos
 from .formulations.outside import PythonPath, backend_for, qp_backend
 from .formulations.sampled import check_grid
 from .solvers import available_solvers
@@ -288,7 +288,13 @@ class VelocitySelector:
         bounds = Bounds.of(limits, dt)
         vos = py_build_vos(p, v_now, v_pref, nbrs, prisms, bounds, options.config)
         enc = Encounter(
-            position=p, v_now=v_now, vos=vos, limits=limits, dt=dt, options=options, nbrs=nbrs
+            position=p,
+            v_now=v_now,
+            vos=vos,
+            limits=limits,
+            dt=dt,
+            options=planning_options(options, vos, nbrs),
+            nbrs=nbrs,
         )
         out = self._python.run(enc, prisms)
         status = out.status

@@ -7,6 +7,7 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/pair.h>
+#include <nanobind/stl/shared_ptr.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
@@ -71,6 +72,7 @@ NB_MODULE(_core, m) {
         .def_rw("heading_step", &Config::heading_step)
         .def_rw("fallback_speed_levels", &Config::fallback_speed_levels)
         .def_rw("fallback_heading_step", &Config::fallback_heading_step)
+        .def_rw("fine", &Config::fine)
         .def_rw("closing_guard", &Config::closing_guard)
         .def_rw("least_bad_escape", &Config::least_bad_escape)
         .def_rw("fine_fallback", &Config::fine_fallback);

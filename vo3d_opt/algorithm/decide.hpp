@@ -7,7 +7,8 @@
 // 2. the preferred velocity itself, when within the limits and outside every VO (the exact 3D
 //    check), is the optimum of every formulation: returned at once;
 // 3. the VO cones of eqs 1-6 with the virtual sphere; the avoidance planes about the preferred
-//    direction (eq. 8); on each plane and in each linearisation round (near, left, right) one QP:
+//    direction (eq. 8), at least the default ones with an obstacle in reach or a vehicle that
+//    does not avoid (cfg.fine); on each plane and in each linearisation round (near, left, right) one QP:
 //    the point nearest the preferred velocity inside the speed disc (or annulus), the limit rows
 //    and one half-plane per VO that holds the preferred velocity or that A is inside (the
 //    sections of 3.1 / 4.2 linearised: sections.hpp), solved exactly (exact2d.hpp);
@@ -143,9 +144,13 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
         enforce_limits(vos.v_pref, p, b, out.velocity);
         return out;
     }
-    Planes planes = decision_planes(vos, v_now, cfg);
+    // an obstacle does not take its share of the avoidance, nor does a vehicle that does not
+    // avoid, and a velocity between coarse planes may be the one that clears it under a lag
+    bool hazard = has_hazard(vos, nbrs);
+    const Config& pc = hazard && cfg.fine ? *cfg.fine : cfg;
+    Planes planes = decision_planes(vos, v_now, pc);
     thread_local QPBuffers buffers;
-    PlaneQPs qps(vos, planes, limits, initial, cfg, true, buffers);
+    PlaneQPs qps(vos, planes, limits, initial, pc, true, buffers);
     // at most every QP once, then once per VO it gains; only the answers written are read
     buffers.tried.resize(3 * ROUNDS * planes.count() * (V + 1));
     double* tried = buffers.tried.data();
@@ -155,19 +160,19 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
     if (s.r >= 0) {
         lift(planes, qps.sol_at(s.r, s.p), s.p, v);
         enforce_limits(v, p, b, out.velocity);
-        out.phi = cfg.phi[s.p], out.round = 1 + s.r;
+        out.phi = pc.phi[s.p], out.round = 1 + s.r;
         return out;
     }
-    Grid grid = grid_of(b, cfg, has_hazard(vos, nbrs));  // 5
+    Grid grid = grid_of(b, pc, hazard);  // 5
     Cover cover;
-    Found f = grid_search(vos, planes, grid, limits, b, cfg, cover);
+    Found f = grid_search(vos, planes, grid, limits, b, pc, cover);
     if (f.found) {
         enforce_limits(f.v, p, b, out.velocity);
-        out.phi = cfg.phi[f.plane], out.round = SAMPLED;
+        out.phi = pc.phi[f.plane], out.round = SAMPLED;
         return out;
     }
     Rows answers{tried, s.n_tried, 3, 3, 1};
-    least_bad(vos, planes, grid, cover, answers, p, v_now, limits, b, cfg, v);
+    least_bad(vos, planes, grid, cover, answers, p, v_now, limits, b, pc, v);
     enforce_limits(v, p, b, out.velocity);  // 6
     out.status = INFEASIBLE_MIN_VIOLATION, out.phi = kNaN, out.round = LEAST_BAD;
     return out;

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <vector>
 
 namespace vo3d {
@@ -82,6 +83,9 @@ struct Config {
     int64_t fallback_speed_levels = 9;          // the fallbacks' grid, likewise (grid_of)
     double fallback_heading_step = 0.0;
     bool closing_guard = false, least_bad_escape = true, fine_fallback = true;
+    // The same options on at least the default planes and tangent samples (fine_planes), for a
+    // decision with something that does not avoid; null: these planes everywhere.
+    std::shared_ptr<const Config> fine;
     int64_t planes() const { return int64_t(phi.size()); }
     int64_t samples() const { return int64_t(t.size()); }
 };

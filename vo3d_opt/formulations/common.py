@@ -133,6 +133,22 @@ class Options(Model):
     # the fallbacks' grid's headings (degrees) and speeds; None: the sampled grid's
     fallback_heading_step_deg: _Deg | None = None
     fallback_speed_levels: Annotated[int, Field(ge=2, strict=True)] | None = None
+    # in a decision with something that does not avoid (has_hazard), at least the default
+    # planes and tangent samples (fine_options): an obstacle takes no share of the avoidance,
+    # and under a lag the velocity that clears it may lie between coarse planes
+    fine_planes: StrictBool = True
+
+    @cached_property
+    def fine_options(self) -> Options | None:
+        """These options on at least the default planes and tangent samples, for a decision
+        with something that does not avoid (``fine_planes``); None when off, or when these
+        planes are as fine already."""
+        step = min(self.plane_step_deg, FINE_PLANE_STEP_DEG)
+        samples = max(self.qp_samples, FINE_QP_SAMPLES)
+        if not self.fine_planes or (step, samples) == (self.plane_step_deg, self.qp_samples):
+            return None
+        fields = {name: getattr(self, name) for name in type(self).model_fields}
+        return type(self)(**{**fields, "plane_step_deg": step, "qp_samples": samples})
 
     def kernel_fields(self) -> dict[str, object]:
         """The compiled core's ``Config`` fields by name: every option the core has a field of
@@ -178,11 +194,17 @@ class Options(Model):
         config = Config()
         for name, value in self.kernel_fields().items():
             setattr(config, name, value)
+        if self.fine_options is not None:
+            config.fine = self.fine_options.config
         return config
 
 
 #: The options the compiled core has a field of the same name for.
 KERNEL_OPTIONS = tuple(name for name in Options.model_fields if hasattr(Config, name))
+#: The planes and tangent samples of a decision with something that does not avoid
+#: (``fine_planes``): at least the defaults'.
+FINE_PLANE_STEP_DEG: float = Options.model_fields["plane_step_deg"].default
+FINE_QP_SAMPLES: int = Options.model_fields["qp_samples"].default
 
 #: The fallbacks' grid in a decision with something that does not avoid (``fine_fallback``):
 #: at least the default grid's speeds and headings (rad); the core's (tests hold them to the
@@ -399,7 +421,8 @@ def prepare(
     dt: float,
     options: Options,
 ) -> Encounter:
-    """Build the VO cones and pyramids of one decision (``build_vos``)."""
+    """Build the VO cones and pyramids of one decision (``build_vos``); with something that
+    does not avoid, the decision goes on with ``options.fine_options`` where there are any."""
     bounds, nbrs = Bounds.of(limits, dt), neighbor_rows(neighbors)
     vos = py_build_vos(
         np.asarray(own.position, dtype=float),
@@ -416,9 +439,18 @@ def prepare(
         vos=vos,
         limits=limits,
         dt=float(dt),
-        options=options,
+        options=planning_options(options, vos, nbrs),
         nbrs=nbrs,
     )
+
+
+def planning_options(options: Options, vos: VOs, nbrs: np.ndarray) -> Options:
+    """The options a decision plans with once its VOs are built (they do not depend on the
+    planes): ``options.fine_options`` with something that does not avoid (``has_hazard``)
+    where there are any, else ``options``."""
+    if options.fine_options is not None and _core.has_hazard(vos, nbrs):
+        return options.fine_options
+    return options
 
 
 @dataclass
