@@ -204,8 +204,8 @@ COARSE = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "s
 
 
 def test_fast_is_the_fast_preset_and_fields_override_it(cli, small, here):
-    """--fast is --preset fast is -o preset=fast: the safe preset's flight with the coarse
-    planes, samples and grid, one grid and no finer planes near obstacles given field by field; a field given by -o overrides the preset's
+    """--fast is --preset fast is -o preset=fast: the safe preset's flight with fast's fields
+    given one by one (COARSE); a field given by -o overrides the preset's
     wherever it stands; sweep takes them too (parsed only: its run is the sweep's -o path)."""
     fast = _behaviour(here("run", small, "--json", "--fast"), {"preset": "fast"})
     assert fast == _behaviour(here("run", small, "--json", "--preset", "fast"), {"preset": "fast"})

@@ -245,6 +245,14 @@ def test_the_config_is_set_by_name_and_checked_where_the_core_reads_it():
             _decide(args, partial)
     with pytest.raises(ValueError, match="cfg.phi"):
         _decide(args, _core.Config())  # nothing set
+    fine = Options(plane_step_deg=30.0).config
+    assert fine.fine is not None and len(fine.fine.phi) == 19 and fine.fine.fine is None
+    nested = _core.Config()
+    for name, value in opts.kernel_fields().items():
+        setattr(nested, name, value)
+    nested.fine = fine  # whose own fine planes are set: one level only
+    with pytest.raises(ValueError, match="cfg.fine.fine"):
+        _decide(args, nested)
 
 
 def test_the_core_constants_are_the_options_defaults():

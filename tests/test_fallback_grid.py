@@ -124,7 +124,7 @@ def test_the_fallbacks_grid_of_their_own_leaves_the_sampled_grid_alone():
     search (the sampled grid's own when none), not the sampled selection's grid: plane_qp
     answers with them as with the same values on the sampled grid, fallbacks included, and
     the safe preset's sampled grid is the default one while its fallbacks' is 8 x 3."""
-    coarse = {"plane_step_deg": 45.0, "qp_samples": 12}
+    coarse = {"plane_step_deg": 45.0, "qp_samples": 12, "fine_planes": False}
     own = VelocitySelector(**coarse, fallback_heading_step_deg=45.0, fallback_speed_levels=3,
                            fine_fallback=False)
     shared = VelocitySelector(**coarse, heading_step_deg=45.0, speed_levels=3,

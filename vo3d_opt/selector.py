@@ -82,7 +82,9 @@ class VelocitySelector:
     preferred velocity), fine_fallback (on by default: the fallbacks' grid at least the
     default one in a decision with an obstacle in reach or a non-cooperative neighbour),
     fallback_heading_step_deg and fallback_speed_levels (the fallbacks' grid; None: the
-    sampled grid's). The preset (``safe`` by default) sets some of them: ``SelectorConfig``.
+    sampled grid's), fine_planes (on by default: at least the default planes and tangent
+    samples in a decision with an obstacle in reach or a non-cooperative neighbour). The
+    preset (``safe`` by default) sets some of them: ``SelectorConfig``.
     """
 
     def __init__(

@@ -363,6 +363,8 @@ const Config& checked(const Config& c) {
         throw nb::value_error("cfg.fallback_speed_levels: expected at least 2");
     if (!(c.fallback_heading_step > 0.0))
         throw nb::value_error("cfg.fallback_heading_step: expected a positive angle");
+    if (c.fine && c.fine->fine)
+        throw nb::value_error("cfg.fine.fine: expected none (the fine planes are one level)");
     if (c.fine) checked(*c.fine);
     return c;
 }

@@ -190,7 +190,8 @@ class Options(Model):
     @cached_property
     def config(self) -> Config:
         """The options as the compiled core reads them: a ``Config`` set field by field (shared
-        by every decision with these options: not to be changed)."""
+        by every decision with these options: not to be changed), with ``fine_options``'s as
+        its ``fine`` where there are any."""
         config = Config()
         for name, value in self.kernel_fields().items():
             setattr(config, name, value)

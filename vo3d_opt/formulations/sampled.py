@@ -15,7 +15,7 @@ import numpy as np
 from ..config import SelectorConfig
 from ..geometry import AvoidancePlanes, Sections, cone_sections, pyramid_sections
 from ..status import Status
-from .common import Encounter, Outcome, py_decision_planes
+from .common import FINE_PLANE_STEP_DEG, Encounter, Outcome, py_decision_planes
 from .fallback import first_safe, py_least_bad, py_polar_grid
 
 #: VO shapes tested against the grid at once. The test's arrays are (shapes, planes, grid
@@ -47,9 +47,13 @@ def plane_sections(enc: Encounter, planes: AvoidancePlanes) -> Iterator[Sections
 
 def check_grid(config: SelectorConfig) -> None:
     """``ValueError`` when ``config``'s sampled grid is finer than ``MAX_GRID_WORK`` allows
-    (counted from above: planes every ``plane_step_deg`` in [-90, 90], every heading times
-    every speed and the origin, the section points)."""
-    planes = math.floor(180.0 / config.planes.plane_step_deg) + 1
+    (counted from above: planes every ``plane_step_deg`` in [-90, 90], or the default ones
+    where ``fine_planes`` gives a decision those, every heading times every speed and the
+    origin, the section points)."""
+    step = config.planes.plane_step_deg
+    if config.safety.fine_planes:
+        step = min(step, FINE_PLANE_STEP_DEG)
+    planes = math.floor(180.0 / step) + 1
     grid = math.ceil(360.0 / config.sampled.heading_step_deg) * config.sampled.speed_levels + 1
     work = planes * grid * (config.sampled.n_samples + 4)
     if work > MAX_GRID_WORK:
