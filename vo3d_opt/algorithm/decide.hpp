@@ -9,9 +9,10 @@
 // 3. the VO cones of eqs 1-6 with the virtual sphere; the avoidance planes about the preferred
 //    direction (eq. 8), at least the default ones with an obstacle in reach or a vehicle that
 //    does not avoid (cfg.fine); on each plane and in each linearisation round (near, left,
-//    right) one QP: the point nearest the preferred velocity inside the speed disc (or annulus), the limit rows
-//    and one half-plane per VO that holds the preferred velocity or that A is inside (the
-//    sections of 3.1 / 4.2 linearised: sections.hpp), solved exactly (exact2d.hpp);
+//    right) one QP: the point nearest the preferred velocity inside the speed disc (or
+//    annulus), the limit rows and one half-plane per VO that holds the preferred velocity or
+//    that A is inside (the sections of 3.1 / 4.2 linearised: sections.hpp), solved exactly
+//    (exact2d.hpp);
 // 4. best first: the QP of least deviation is checked with the exact 3D membership; a safe
 //    answer is the decision (every other QP's answer is at least as far), an answer that enters
 //    VOs not yet constrained on that QP adds their rows and that QP is solved again (constraint
