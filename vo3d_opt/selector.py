@@ -73,18 +73,14 @@ class VelocitySelector:
     ``solver``: a name from ``vo3d_opt.solvers.available_solvers()``; by default the
     formulation's entry of ``DEFAULT_SOLVERS`` (plane_qp: "exact2d", the compiled exact
     per-plane solver); "nlp" is started from plane_qp on ``start_solver`` (default exact2d).
-    Keyword options (see ``Options``): plane_step_deg, heading_step_deg, speed_levels,
-    polygon_sides, reciprocal, horizon, corrections, n_samples, qp_samples, pz_buffer (m: plan
-    with every neighbour's sphere this much larger), margin, closing_guard (the speed towards
-    each cooperative neighbour at most half the gap to its zone per dt), least_bad_escape (on
-    by default: the least-bad fallback, when every velocity enters a zone at once, takes the
-    one closing slowest on the zones the vehicle is inside; False: the one nearest the
-    preferred velocity), fine_fallback (on by default: the fallbacks' grid at least the
-    default one in a decision with an obstacle in reach or a non-cooperative neighbour),
-    fallback_heading_step_deg and fallback_speed_levels (the fallbacks' grid; None: the
-    sampled grid's), fine_planes (on by default: at least the default planes and tangent
-    samples in a decision with an obstacle in reach or a non-cooperative neighbour). The
-    preset (``safe`` by default) sets some of them: ``SelectorConfig``.
+    ``preset``: "safe" (default), "paper", "fast" or "swarm"; keyword options: any field of
+    ``SelectorConfig`` over the preset's (the options table of the presets guide): among them
+    ``reciprocal``, ``horizon``, ``obstacle_horizon``, ``sensing_range``, ``buffer_steps``,
+    ``pz_buffer``, ``margin``, ``closing_guard``, ``least_bad_escape``, the planes and grids
+    (``plane_step_deg``, ``qp_samples``, ``heading_step_deg``, ``speed_levels``,
+    ``fallback_heading_step_deg``, ``fallback_speed_levels``) and the rules that refine them
+    near an obstacle or a vehicle that does not avoid (``fine_planes``, ``fine_fallback``). An
+    unknown option or a value out of range is a ``ValueError`` naming it.
     """
 
     def __init__(
