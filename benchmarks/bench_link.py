@@ -1,4 +1,4 @@
-"""``vo3d sitl`` against ``vo3d run`` on bundled scenarios (issue 42): the same safety figures
+"""``vo3d sitl`` against ``vo3d run`` on bundled scenarios: the same safety figures
 when every vehicle and every link is a process of its own talking MAVLink over UDP, and what
 the link costs (set-point latency: newest own state message -> set-point sent, wall time;
 ``select()`` time per call inside a link).

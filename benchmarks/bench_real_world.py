@@ -1,4 +1,5 @@
-"""Issue 12's conditions on the bundled scenarios: writes docs/results/real-world.md.
+"""Real-world conditions (dynamics, wind, noisy and late sensing) on the bundled scenarios:
+writes docs/results/real-world.md.
 
 Every bundled scenario under ideal kinematics (the reference for the cost columns), under
 ``first_order`` (tau 0.5 s and 1 s; and tau 1 s with the derived margins switched off, to show
@@ -14,7 +15,7 @@ comparison; one period of the one-by-one model at N = 1000 is timed too (hours i
     .venv/bin/python benchmarks/bench_real_world.py --swarm  # the swarm preset (vo3d run --swarm)
 
 ``--swarm``: every run with the swarm preset merged into its ``selector_options``
-(``FAST_OPTIONS`` and ``horizon: sensing``), into ``docs/results/real-world-swarm.md``.
+(``vo3d run --swarm``), into ``docs/results/real-world-swarm.md``.
 
 Writes the whole page (``real_world_page.py`` renders it from the rows, as each run finishes)
 and, at the end, its rows beside it (``.jsonl``); ``--render`` writes the page again from those

@@ -4,7 +4,7 @@ vo3d_opt``, and the first call of every formulation and backend, each in a fresh
 the same after ``pip install`` of the solver extras ([qp,cvxpy,nlp]) and of [sim] (with the
 first ``vo3d run``). Nothing is compiled at run time: the numeric core is built with the wheel.
 
-Each first-call row is benchmarks/first_call.py's child process (the contract's example: a
+Each first-call row is benchmarks/first_call.py's child process (the README's first example: a
 neighbour head-on and a cylinder): the time to import vo3d_opt, to import the backend's library
 (none for exact2d and sampled), to construct the selector, its first select(), then a second
 one to compare; and the README's 100-vehicle select_many() in a process of its own (first and

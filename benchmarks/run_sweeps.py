@@ -1,4 +1,4 @@
-"""The evidence sweeps of issue 13: every family's rates, ours and RVO2-3D's, in one table.
+"""The evidence sweeps: every family's rates, ours and RVO2-3D's, in one table.
 
 Three stages (all by default, or those named with ``--stages``):
 

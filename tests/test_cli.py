@@ -307,7 +307,7 @@ def test_usage_errors_exit_2():
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
 
 
-# ------------------------------------------------------------------------------ issue 11
+# ---------------------------------------------------------------- bad input: one line, status 2
 
 
 @pytest.mark.parametrize("kind", ["file", "proc"])

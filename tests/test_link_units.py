@@ -1,4 +1,4 @@
-"""The MAVLink link's parts (issue 42): frames against known points and PROJ, messages against
+"""The MAVLink link's parts: frames against known points and PROJ, messages against
 pymavlink's own definitions, rejected packets over a real UDP socket, the neighbour table's
 rules, the selector and planning world against the simulator's, and the command line's errors."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The built wheel works anywhere (issue 11 §1): it carries every module, the bundled scenarios
+"""The built wheel works anywhere: it carries every module, the bundled scenarios
 (built from the top-level scenarios/ folder), py.typed and the licence; installed in a fresh
 venv, ``vo3d list`` and ``vo3d run`` of a bundled scenario work from outside the repository."""
 

@@ -1,4 +1,4 @@
-"""Issue 12: the real-world keys in the scenario and the loop (dynamics, wind,
+"""The real-world keys in the scenario and the loop (dynamics, wind,
 noisy and late sensing, agents that do not avoid), the margins the simulator derives from them
 (vo3d_opt.sim.safety) and the safety they buy, on small cases."""
 from __future__ import annotations

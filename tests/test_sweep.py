@@ -501,13 +501,13 @@ def test_horizon_sensing_is_each_encounter_s_own_sensing_horizon():
 # ------------------------------------------------- group variants (real-world keys)
 
 SECTION5_FAMILIES = ("intruder", "rotorpy", "noisy")
-#: The §5 keys each family adds to its ``group`` draw (removed, the rest is a group scenario).
+#: The scenario keys each family adds to its ``group`` draw (removed, the rest is a group scenario).
 ADDED_KEYS = {"lagged": ("dynamics",), "rotorpy": ("dynamics", "wind")}
 
 
 def first_draw(name: str, seed: int, index: int) -> Draw:
     """The first draw the family's generator keeps from the stream of (seed, index), before
-    the loader's checks (which need the §5 keys for some families)."""
+    the loader's checks (which need the added keys for some families)."""
     rng = encounter_rng(seed, index)
     return next(d for d in iter(lambda: FAMILIES[name].generate(rng), 0) if d is not None)
 
@@ -589,7 +589,7 @@ def test_noisy_draws_sensing_noise_latency_and_seed():
 def test_section5_families_run_or_are_refused_naming_their_keys(name):
     fam = FAMILIES[name]
     missing = fam.missing_keys()
-    if missing:  # a loader without the §5 keys: refused before any cluster starts
+    if missing:  # a loader without the added keys: refused before any cluster starts
         with pytest.raises(SweepError, match=f"{name!r} needs the scenario keys "
                                              f"{missing[0]}"):
             run_sweep(name, 1)

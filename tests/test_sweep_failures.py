@@ -135,7 +135,8 @@ def _open(name: str, options: dict | None = None) -> object:
     ],
 )
 def test_open_sweep_failures(name, options):
-    """The sweeps' failures whose cause is not fixed yet (each family's results page lists them).
+    """The sweeps' failures whose cause is not fixed yet (each family's results page lists those
+    of its own preset; 91377 is open only on the planes and grid it was found on).
     `lagged` 14945, 51181, 14347 and 91377: one vehicle has not reached its goal when the
     run ends; no zone is entered. In 14945 it ends 18-25 m from its goal among six
     obstacles, a vehicle hovering at a goal 12.3 m from its own; in 51181 it waits about 11

@@ -238,8 +238,8 @@ NOT_NUMBERS = [True, False, np.bool_(True), "3", "1e3", b"3"]
 
 @pytest.mark.parametrize("bad", NOT_NUMBERS, ids=repr)
 def test_booleans_and_strings_are_not_numbers(bad):
-    """What the YAML loader refuses, the Python API refuses too (issue 11: ``r_pz=True`` was
-    1 m, ``radius="3"`` was 3 m)."""
+    """What the YAML loader refuses, the Python API refuses too (``r_pz=True`` is not
+    1 m, ``radius="3"`` is not 3 m)."""
     _raises("r_pz", lambda: Neighbor(position=(0, 0, 0), r_pz=bad))
     _raises("radius", lambda: Cylinder(center=(0, 0), radius=bad, height=3.0))
     _raises("height", lambda: Box(center=(0, 0), size=(1, 1), height=bad))

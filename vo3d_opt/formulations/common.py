@@ -119,8 +119,8 @@ class Options(Model):
     closing_guard: StrictBool = False
     # the least-bad fallback, when every velocity it tries enters a zone at once (A inside
     # planning spheres, closing on one whichever way it turns): the one that closes slowest
-    # on the zones A is inside, not the one nearest the preferred velocity (fallback.least_bad;
-    # on by default since the whole N = 10,000 swap: off, 550 pairs collided flying straight on)
+    # on the zones A is inside, not the one nearest the preferred velocity (fallback.least_bad):
+    # the nearest one tends to fly straight on into the zone it is already in
     least_bad_escape: StrictBool = True
     # the fallbacks' grid (when no QP answer is safe) with at least the default one's speeds
     # and headings (FINE_SPEED_LEVELS, FINE_HEADING_STEP: denser, though it need not hold every

@@ -32,8 +32,8 @@ class Grid(NamedTuple):
     discs: np.ndarray  # (B, 3) each block's disc in plane coordinates: centre x, y, radius
 
 
-#: Speed levels and headings per block side. 3 x 3: in the sphere swap's least-bad decisions
-#: 96 % of the grid's points lie in a block inside a VO cone (a prototype gave 80 % for 3 x 6).
+#: Speed levels and headings per block side: small enough that, in a crowd, most blocks lie
+#: wholly inside some VO cone and are skipped by one certificate.
 BLOCK = 3
 
 

@@ -1,4 +1,4 @@
-"""Margins that keep the selector safe under the scenario's dynamics and sensing (issue 12).
+"""Margins that keep the selector safe under the scenario's dynamics and sensing.
 
 The selector plans as if every vehicle took its new velocity at once and sensed the others
 exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the difference

@@ -96,7 +96,7 @@ def flown(sc: Scenario, method: Method) -> tuple[Scenario, DecisionStep, Any]:
 
 
 def fly_encounter(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, Any]]:
-    """Fly one scenario with the method; its record and its §3 summary, with
+    """Fly one scenario with the method; its record and its run summary (``vo3d run --json``'s), with
     ``selector_options``: the scenario's, the method's merged in (None for RVO2-3D and for
     ``none``).
 
