@@ -96,9 +96,9 @@ def flown(sc: Scenario, method: Method) -> tuple[Scenario, DecisionStep, Any]:
 
 
 def fly_encounter(sc: Scenario, method: Method) -> tuple[RunRecord, dict[str, Any]]:
-    """Fly one scenario with the method; its record and its run summary (``vo3d run --json``'s), with
-    ``selector_options``: the scenario's, the method's merged in (None for RVO2-3D and for
-    ``none``).
+    """Fly one scenario with the method; its record and its run summary (``vo3d run
+    --json``'s), with ``selector_options``: the scenario's, the method's merged in (None for
+    RVO2-3D and for ``none``).
 
     RVO2-3D keeps two agents ``radius_i + radius_j`` apart, so it flies every agent with the
     radius max(r_pz) / 2: each pair keeps at least its larger r_pz apart, which is what the
