@@ -149,7 +149,8 @@ def _pct(x: float) -> str:
 
 
 def method_label(s: dict[str, Any]) -> str:
-    options = ", ".join(f"{k}: {json.dumps(v)}" for k, v in s.get("selector_options", {}).items())
+    options = ", ".join(f"{k}: {json.dumps(v)}" for k, v in s.get("selector_options", {}).items()
+                        if (k, v) != ("preset", "safe"))
     label = "plane_qp" + (f"; {options}" if options else "")
     return f"ours ({label})" if s["method"] == "vo3d" else "RVO2-3D"
 
@@ -248,6 +249,7 @@ def section(out_root: Path, families: list[str], rvo2: list[str]) -> tuple[list[
                     for x in (s["seed"] if isinstance(s["seed"], list) else [s["seed"]])})
     options = next((s.get("selector_options") or {} for s in summaries.values()
                     if s["method"] == "vo3d"), {})
+    options = {k: v for k, v in options.items() if (k, v) != ("preset", "safe")}  # the default
     title = ("With the defaults (the `safe` preset)" if not options else "With " + ", ".join(
         f"`-o {k}={json.dumps(v)}`" for k, v in options.items()))
     lines = [f"## {title}", "", f"Seeds {', '.join(map(str, seeds))} (encounters 0..N_seed-1 of "

@@ -6,6 +6,7 @@ a timeout (a guard against a hang, not a measure of speed)."""
 from __future__ import annotations
 
 import json
+import socket
 import os
 import resource
 import signal
@@ -195,6 +196,11 @@ def test_command_line_numbers_and_addresses_are_checked(tmp_path):
     assert res.returncode == 0 and json.loads(res.stdout)["agents"] == 2, res.stderr
     refused(vo3d("sweep", "pair", "--n", "2", "--scheduler", "ucx://127.0.0.1:1"), "--scheduler")
     refused(vo3d("sweep", "pair", "--n", "2", "--scheduler", "tcp://[::1"), "--scheduler")
+    with socket.socket() as s:  # a port nothing listens on: refused at once, in one line
+        s.bind(("127.0.0.1", 0))
+        closed = s.getsockname()[1]
+    refused(vo3d("sweep", "pair", "--n", "2", "--scheduler", f"tcp://127.0.0.1:{closed}"),
+            "--scheduler", "cannot connect")
     refused(vo3d("run", small, "--out", ""), "--out")
 
 

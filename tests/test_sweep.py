@@ -42,9 +42,10 @@ from vo3d_opt.sweep.flight import fly_encounter as fly
 from vo3d_opt.sweep.output import failed_rows, failure_scenario, write_results
 from vo3d_opt.sweep.runner import rows_equal
 
-SECTION6_KEYS = ("family", "encounters", "seed", "method", "formulation", "solver", "collisions",
-                 "encounters_with_collision", "pz_intrusions", "encounters_with_intrusion",
-                 "not_arrived", "limit_violations", "collision_rate_upper95", "wall_time")
+SWEEP_SUMMARY_KEYS = ("family", "encounters", "seed", "method", "formulation", "solver",
+                      "collisions", "encounters_with_collision", "pz_intrusions",
+                      "encounters_with_intrusion", "not_arrived", "limit_violations",
+                      "collision_rate_upper95", "wall_time")
 TIMING_SUMMARY_KEYS = {"decision_time_median_us", "decision_time_p99_us", "decision_time_max_us",
                        "wall_time"}
 
@@ -321,6 +322,31 @@ def test_bad_options_are_refused_before_any_cluster_starts():
         run_sweep("pair", 2, method=Method(name="rvo2", selector_options=(("margin", 0.1),)))
 
 
+def test_a_finished_sweep_is_replaced_only_by_itself_or_with_overwrite(cluster, tmp_path):
+    """Without --resume, a directory holding a finished sweep of other arguments is refused
+    (its rows would be lost) and left as it was; the same sweep again gives the same rows;
+    ``overwrite`` replaces it."""
+    out = tmp_path / "done"
+    first = run_sweep("pair", 4, seed=0, scheduler=cluster, progress=False, out=out)
+    write_results(first, out)
+    table = (out / "encounters.parquet").read_bytes()
+    with pytest.raises(SweepError, match="finished sweep of another kind .*encounters: 4 there, 3"):
+        run_sweep("pair", 3, seed=0, scheduler=cluster, progress=False, out=out)
+    res = vo3d("sweep", "pair", "--n", "3", "--out", out, "--json")
+    assert res.returncode == 2 and res.stdout == "", res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and "--overwrite" in res.stderr
+    assert (out / "encounters.parquet").read_bytes() == table
+    with pytest.raises(SweepError, match="--resume, --overwrite: give one of them"):
+        run_sweep("pair", 4, seed=0, scheduler=cluster, out=out, resume=True, overwrite=True)
+    again = run_sweep("pair", 4, seed=0, scheduler=cluster, progress=False, out=out)
+    assert rows_equal(again.rows, first.rows)
+    replaced = run_sweep("pair", 3, seed=0, scheduler=cluster, progress=False, out=out,
+                         overwrite=True)
+    assert list(replaced.rows["index"]) == [0, 1, 2]
+    assert rows_equal(replaced.rows, first.rows[first.rows["index"] < 3])
+    assert not (out / "summary.json").exists()  # not finished until its results are written
+
+
 # ------------------------------------------------------------- outputs and the CLI
 
 
@@ -358,10 +384,10 @@ def test_sweep_json_prints_one_object_with_the_contract_keys(cluster, tmp_path):
     out = proc.stdout.strip()
     assert out.startswith("{") and "\n" not in out
     summary = json.loads(out)
-    assert set(SECTION6_KEYS) <= set(summary)
+    assert set(SWEEP_SUMMARY_KEYS) <= set(summary)
     assert (summary["family"], summary["encounters"], summary["seed"]) == ("pair", 2, 5)
     assert summary["method"] == "vo3d" and summary["formulation"] == "plane_qp"
-    assert summary["selector_options"] == {"closing_guard": True}
+    assert summary["selector_options"] == {"preset": "safe", "closing_guard": True}
     k = summary["encounters_with_collision"]
     assert summary["collision_rate_upper95"] == pytest.approx(upper_bound(k, 2))
     assert json.loads((tmp_path / "summary.json").read_text()) == summary
@@ -371,7 +397,8 @@ def test_sweep_json_prints_one_object_with_the_contract_keys(cluster, tmp_path):
     assert set(CONTRACT_KEYS) <= set(rows.columns)
     assert (rows["selector_options"] == '{"closing_guard": true, "preset": "safe"}').all()
     table = vo3d("sweep", "pair", "--n", "1", "--scheduler", cluster, "-o", "closing_guard=true")
-    assert re.search(r"^selector_options +closing_guard=true$", table.stdout, re.M), table.stdout
+    assert re.search(r"^selector_options +preset=safe closing_guard=true$", table.stdout, re.M), \
+        table.stdout
     assert (tmp_path / "min_distance.png").stat().st_size > 0
 
 
@@ -500,7 +527,7 @@ def test_horizon_sensing_is_each_encounter_s_own_sensing_horizon():
 
 # ------------------------------------------------- group variants (real-world keys)
 
-SECTION5_FAMILIES = ("intruder", "rotorpy", "noisy")
+FAMILIES_WITH_KEYS = ("intruder", "rotorpy", "noisy")
 #: The scenario keys each family adds to its ``group`` draw (removed, the rest is a group scenario).
 ADDED_KEYS = {"lagged": ("dynamics",), "rotorpy": ("dynamics", "wind")}
 
@@ -512,7 +539,7 @@ def first_draw(name: str, seed: int, index: int) -> Draw:
     return next(d for d in iter(lambda: FAMILIES[name].generate(rng), 0) if d is not None)
 
 
-def without_section5(name: str, scenario: dict) -> dict:
+def without_added_keys(name: str, scenario: dict) -> dict:
     """The draw with the keys the variant adds removed (a plain group scenario)."""
     data = {k: v for k, v in scenario.items() if k not in ADDED_KEYS.get(name, ())}
     data["sensing"] = {k: scenario["sensing"][k] for k in ("vehicle_range", "obstacle_range")}
@@ -520,13 +547,13 @@ def without_section5(name: str, scenario: dict) -> dict:
     return data
 
 
-@pytest.mark.parametrize("name", ["lagged", *SECTION5_FAMILIES])
+@pytest.mark.parametrize("name", ["lagged", *FAMILIES_WITH_KEYS])
 def test_group_variants_are_deterministic_and_sound_group_scenarios(name):
     for index in range(12):
         a, b = first_draw(name, 4, index), first_draw(name, 4, index)
         assert a == b  # per (seed, index) alone
         assert a.scenario != first_draw(name, 5, index).scenario
-        data = {"name": f"{name}-{index}", **without_section5(name, a.scenario)}
+        data = {"name": f"{name}-{index}", **without_added_keys(name, a.scenario)}
         sc = scenario_from_dict(data)  # this build's loader takes the rest
         assert 3 <= sc.n_agents - (name == "intruder") <= 8
         assert len(sc.obstacles) <= 6
@@ -585,8 +612,8 @@ def test_noisy_draws_sensing_noise_latency_and_seed():
     assert len({s["seed"] for s in sensing}) == len(sensing)
 
 
-@pytest.mark.parametrize("name", SECTION5_FAMILIES)
-def test_section5_families_run_or_are_refused_naming_their_keys(name):
+@pytest.mark.parametrize("name", FAMILIES_WITH_KEYS)
+def test_families_with_keys_run_or_are_refused_naming_them(name):
     fam = FAMILIES[name]
     missing = fam.missing_keys()
     if missing:  # a loader without the added keys: refused before any cluster starts

@@ -133,6 +133,7 @@ def test_ctrl_c_then_resume_ends_as_an_uninterrupted_sweep(tmp_path, procs, flow
     code, out, err = finish(proc, timeout=60)
     assert code == 130, err
     assert "Traceback" not in err and out == ""
+    assert "--resume" in err.strip().splitlines()[-1]
     assert_clean_stop(cut)
     kept = sum(len(pd.read_parquet(p)) for p in (cut / "parts").glob("part-*.parquet"))
     assert 0 < kept < N
@@ -204,7 +205,8 @@ def test_refused_resumes_name_what_differs(tmp_path, procs):
     for extra, why in cases:
         code, out_text, err = finish(procs.start(*sweep_args(out, "--resume"), *extra))
         assert code == 2 and out_text == "", err
-        line = err.strip().splitlines()[-1]
+        assert len(err.strip().splitlines()) == 1, err  # the refusal alone, said first
+        line = err.strip()
         assert "holds another sweep" in line and why in line, line
     code, _, err = finish(procs.start(*sweep_args(out)))  # no --resume: kept, not overwritten
     assert code == 2 and "holds an unfinished sweep" in err and "--resume" in err

@@ -142,16 +142,19 @@ class _Preset(argparse.Action):
         setattr(namespace, self.dest, [*pairs, ("preset", name)])
 
 
-def add_selector_options(p: argparse.ArgumentParser, what: str) -> None:
-    """``--preset``, its aliases ``--fast`` and ``--swarm``, and ``-o KEY=VALUE``."""
+def add_selector_options(
+    p: argparse.ArgumentParser, what: str, default: str = "the scenario's, else safe"
+) -> None:
+    """``--preset``, its aliases ``--fast`` and ``--swarm``, and ``-o KEY=VALUE``; ``default``:
+    which preset applies without them, as the help says it."""
     p.add_argument(
         "--preset",
         dest="selector_options",
         action=_Preset,
         choices=PRESETS,
         metavar="NAME",
-        help=f"the selector's preset for {what}: {', '.join(PRESETS)} (default: the "
-        f"scenario's, else safe). {describe()}",
+        help=f"the selector's preset for {what}: {', '.join(PRESETS)} (default: {default}). "
+        f"{describe()}",
     )
     for name in ("fast", "swarm"):
         p.add_argument(

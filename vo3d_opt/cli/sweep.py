@@ -16,13 +16,13 @@ import logging
 import math
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from vo3d_opt.extras import check
 from vo3d_opt.selector import DEFAULT_NLP_SOLVER, DEFAULT_QP_SOLVER, FORMULATIONS
 from vo3d_opt.sim.scenario import ScenarioError, check_selector_options
 from vo3d_opt.sim.simulator import DEFAULT_FORMULATION
-from vo3d_opt.sweep.store import FLUSH_SECONDS
+from vo3d_opt.sweep.store import FLUSH_SECONDS, ResumeError, check_out
 
 from .common import (
     EXIT_OK,
@@ -30,10 +30,15 @@ from .common import (
     add_selector_options,
     non_negative_int,
     out_dir,
+    positive_int,
     stdout_to_stderr,
 )
 
+if TYPE_CHECKING:
+    from vo3d_opt.sweep.runner import Method, SweepResult
+
 EXIT_ERRORS = 1
+EXIT_INTERRUPTED = 130
 
 log = logging.getLogger("vo3d_opt.sweep")
 
@@ -66,7 +71,7 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     sw.add_argument("family", nargs="?", help="encounter family (vo3d sweep --list names them)")
     sw.add_argument("--list", action="store_true", help="list the families, one line each")
     sw.add_argument(
-        "--n", type=non_negative_int, metavar="N", help="number of encounters (1 to 10,000,000)"
+        "--n", type=positive_int, metavar="N", help="number of encounters (1 to 10,000,000)"
     )
     sw.add_argument(
         "--seed",
@@ -78,7 +83,7 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     where = sw.add_mutually_exclusive_group()
     where.add_argument(
         "--workers",
-        type=non_negative_int,
+        type=positive_int,
         metavar="K",
         default=_cpus(),
         help="local Dask worker processes, one thread each (default: the CPUs; at most four "
@@ -109,7 +114,7 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
         help="solver names as for `vo3d run --solver`; default: "
         f"{DEFAULT_QP_SOLVER} (QP) / {DEFAULT_NLP_SOLVER} (nlp)",
     )
-    add_selector_options(sw, "every encounter (--method vo3d)")
+    add_selector_options(sw, "every encounter (--method vo3d)", default="safe")
     sw.add_argument(
         "--out",
         metavar="DIR",
@@ -130,19 +135,25 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
         "missing there",
     )
     sw.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the sweep in --out DIR, finished or not (without it a directory holding "
+        "an unfinished sweep, or a finished one of other arguments, is refused)",
+    )
+    sw.add_argument(
         "--json",
         action="store_true",
         help="print the summary as one JSON object on stdout (default: a table)",
     )
     sw.add_argument(
         "--in-flight",
-        type=non_negative_int,
+        type=positive_int,
         metavar="M",
         help="encounters submitted at once (default 4 per worker, at least 8)",
     )
     sw.add_argument(
         "--batch",
-        type=non_negative_int,
+        type=positive_int,
         metavar="B",
         help="encounters per Dask task (default: up to 64 for families flown side by side, else 1)",
     )
@@ -205,7 +216,8 @@ def _list(as_json: bool) -> int:
 
 def _fmt(x: Any) -> str:
     if isinstance(x, dict):  # selector options, as -o takes them
-        return " ".join(f"{k}={json.dumps(v)}" for k, v in x.items()) or "-"
+        shown = (f"{k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in x.items())
+        return " ".join(shown) or "-"
     if x is None:
         return "-"
     return f"{x:.4g}" if isinstance(x, float) else str(x)
@@ -282,10 +294,36 @@ def _without_avoidance(folder: str, family: str, n: int, seed: int) -> dict[str,
     return summary
 
 
+def _run(args: argparse.Namespace, workers: int, method: Method) -> SweepResult:
+    """``run_sweep`` with the command line's arguments."""
+    from vo3d_opt.sweep.runner import run_sweep
+
+    with stdout_to_stderr():  # worker processes inherit the redirected descriptor too
+        return run_sweep(
+            args.family,
+            args.n,
+            seed=args.seed,
+            workers=workers,
+            scheduler=args.scheduler,
+            method=method,
+            in_flight=args.in_flight,
+            progress=not args.no_progress and log.isEnabledFor(logging.INFO),
+            out=args.out,
+            resume=args.resume,
+            overwrite=args.overwrite,
+            batch=args.batch,
+            flush_seconds=args.flush_every,
+        )
+
+
+def _local(workers: int) -> str:
+    return f"{workers} local worker" + ("" if workers == 1 else "s")
+
+
 def _sweep(args: argparse.Namespace) -> int:
     """Run ``vo3d sweep`` with its parsed ``args``; progress is logged (``vo3d_opt.sweep``
     logger, shown on stderr) and native code's prints are kept off stdout (the JSON's)."""
-    from vo3d_opt.sweep.runner import Method, SweepError, run_sweep, validate
+    from vo3d_opt.sweep.runner import Method, SweepError, manifest, validate
     from vo3d_opt.sweep.stats import risk_ratios
 
     if args.list:
@@ -311,14 +349,15 @@ def _sweep(args: argparse.Namespace) -> int:
         selector_options=tuple(options.items()),
     )
     if args.scheduler is not None:
-        from vo3d_opt.sweep.cluster import ConnectError, check_address
+        from vo3d_opt.sweep.cluster import ConnectError, check_address, check_reachable
 
         try:
             check_address(args.scheduler)
+            check_reachable(args.scheduler)
         except ConnectError as exc:
             raise SweepError(f"--scheduler: {exc}") from None
     workers = 1 if args.workers is None and args.scheduler else args.workers
-    validate(
+    fam, formulation, solver = validate(
         args.family,
         args.n,
         seed=args.seed,
@@ -327,29 +366,31 @@ def _sweep(args: argparse.Namespace) -> int:
         in_flight=args.in_flight,
         batch=args.batch,
     )
+    if args.out is not None:  # refused before anything is said: one line
+        try:
+            key = manifest(fam, args.n, args.seed, method, formulation, solver)
+            check_out(args.out, key, resume=args.resume, overwrite=args.overwrite)
+        except ResumeError as exc:
+            raise SweepError(str(exc)) from None
     log.info(
         "sweep %s: %d encounters, seed %d, method %s, %s",
         args.family,
         args.n,
         args.seed,
         args.method,
-        f"scheduler {args.scheduler}" if args.scheduler else f"{workers} local workers",
+        f"scheduler {args.scheduler}" if args.scheduler else _local(workers),
     )
-    with stdout_to_stderr():  # worker processes inherit the redirected descriptor too
-        result = run_sweep(
-            args.family,
-            args.n,
-            seed=args.seed,
-            workers=workers,
-            scheduler=args.scheduler,
-            method=method,
-            in_flight=args.in_flight,
-            progress=not args.no_progress and log.isEnabledFor(logging.INFO),
-            out=args.out,
-            resume=args.resume,
-            batch=args.batch,
-            flush_seconds=args.flush_every,
+    try:
+        result = _run(args, workers, method)
+    except KeyboardInterrupt:
+        if args.out is None:
+            raise
+        log.error(
+            "interrupted: the encounters flown are kept in %s; the same command with --resume "
+            "flies the rest",
+            args.out,
         )
+        return EXIT_INTERRUPTED
     s = result.summary
     if without is not None:
         try:

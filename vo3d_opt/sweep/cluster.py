@@ -16,6 +16,7 @@ import contextlib
 import logging
 import re
 import signal
+import socket
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -63,6 +64,17 @@ def check_address(scheduler: str) -> None:
         )
 
 
+def check_reachable(scheduler: str) -> None:
+    """``ConnectError`` unless something accepts a TCP connection at ``scheduler``'s host and
+    port: a refused or unroutable address fails at once, not after Dask's retries."""
+    host, port = scheduler.split("://", 1)[1].rsplit(":", 1)
+    try:
+        socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT).close()
+    except (OSError, OverflowError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc)
+        raise ConnectError(f"cannot connect to {scheduler}: {reason}") from None
+
+
 @contextlib.contextmanager
 def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> Iterator[Client]:
     """A client of the scheduler at ``scheduler``, or of a new local cluster of ``workers``
@@ -71,6 +83,7 @@ def client_for(workers: int, scheduler: str | None, allowed_failures: int) -> It
 
     if scheduler:
         check_address(scheduler)
+        check_reachable(scheduler)
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT)
         except Exception as exc:  # noqa: BLE001 - any failure to connect is one line

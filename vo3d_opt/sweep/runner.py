@@ -195,6 +195,7 @@ def run_sweep(
     allowed_failures: int = ALLOWED_FAILURES,
     out: str | Path | None = None,
     resume: bool = False,
+    overwrite: bool = False,
     batch: int | None = None,
     flush_seconds: float = FLUSH_SECONDS,
 ) -> SweepResult:
@@ -205,7 +206,9 @@ def run_sweep(
     encounters per task (default :func:`default_batch`); ``allowed_failures``: Dask's retries of
     a task whose worker died (local cluster only). ``out``: keep the rows in this directory as
     they come (``vo3d_opt.sweep.store``: a part at least every ``flush_seconds``); ``resume``:
-    fly only the encounters missing there, or whose row there is an error.
+    fly only the encounters missing there, or whose row there is an error; ``overwrite``:
+    replace the sweep there, finished or not, of whatever kind (without it a finished sweep of
+    another kind, or an unfinished one, is refused).
     ``SweepError`` for bad options, before any cluster starts, or an unreachable scheduler;
     :class:`~vo3d_opt.extras.MissingExtra` without the ``[sweep]`` extra.
     """
@@ -213,11 +216,11 @@ def run_sweep(
     fam, formulation, solver = validate(
         family, n, seed=seed, workers=workers, method=method, in_flight=in_flight, batch=batch
     )
+    key = manifest(fam, n, seed, method, formulation, solver)
     store = None
     if out is not None:
         try:
-            key = manifest(fam, n, seed, method, formulation, solver)
-            store = PartStore(out, key, resume, flush_seconds)
+            store = PartStore(out, key, resume, flush_seconds, overwrite=overwrite)
         except (ResumeError, OSError) as exc:
             raise SweepError(str(exc)) from None
     # an error row is flown again: a worker or scheduler lost is no result of the encounter's
@@ -258,7 +261,7 @@ def run_sweep(
     wall = flying["wall"]
     summary.update(
         {
-            "selector_options": dict(method.selector_options),
+            "selector_options": key["selector_options"],
             "wall_time": round(wall, 3),
             "setup_time": round(flying["setup"], 3),
             "encounters_per_second": round(len(missing) / wall, 4) if wall > 0 else None,

@@ -102,10 +102,55 @@ def differences(want: dict[str, Any], have: dict[str, Any]) -> list[str]:
     ]
 
 
+def manifest_in(out: Path) -> dict[str, Any] | None:
+    """The manifest of the sweep in ``out``, None when there is none."""
+    path = out / MANIFEST
+    if not path.exists():
+        return None
+    try:
+        found = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise ResumeError(f"--out {out}: {MANIFEST} is unreadable ({exc})") from None
+    if not isinstance(found, dict):
+        raise ResumeError(f"--out {out}: {MANIFEST} is not a sweep's")
+    return found
+
+
+def check_out(
+    out: str | Path, manifest: dict[str, Any], *, resume: bool, overwrite: bool = False
+) -> dict[str, Any] | None:
+    """The manifest of the sweep already in ``out`` (None: none), or ``ResumeError`` when the
+    sweep described by ``manifest`` may not write there: with ``resume``, a sweep of another
+    kind is there; without it, an unfinished sweep or a finished one of another kind (its rows
+    would be lost; the same sweep again gives the same rows) unless ``overwrite``. Nothing is
+    written."""
+    out = Path(out)
+    if resume and overwrite:
+        raise ResumeError("--resume, --overwrite: give one of them")
+    found = manifest_in(out)
+    if found is None or overwrite:
+        return found
+    wrong = differences(manifest, found)
+    if resume:
+        if wrong:
+            raise ResumeError(f"--resume: {out} holds another sweep ({'; '.join(wrong)})")
+    elif not (out / "summary.json").exists():
+        raise ResumeError(
+            f"--out {out}: holds an unfinished sweep; continue it with --resume "
+            "(the same arguments), replace it with --overwrite, or give another directory"
+        )
+    elif wrong:
+        raise ResumeError(
+            f"--out {out}: holds a finished sweep of another kind ({'; '.join(wrong)}); "
+            "replace it with --overwrite, or give another directory"
+        )
+    return found
+
+
 class PartStore:
     """The rows of a sweep in ``out`` (the module docstring). ``manifest``: what the sweep is;
-    ``resume``: continue the sweep already there (refused if it is another), else start afresh
-    (refused if an unfinished one is there). ``rows``: those flown before, by index."""
+    ``resume``, ``overwrite``: as for :func:`check_out`; a sweep not resumed starts afresh.
+    ``rows``: those flown before, by index."""
 
     def __init__(
         self,
@@ -113,6 +158,7 @@ class PartStore:
         manifest: dict[str, Any],
         resume: bool,
         flush_seconds: float = FLUSH_SECONDS,
+        overwrite: bool = False,
     ) -> None:
         self.out = Path(out)
         self.flush_seconds = float(flush_seconds)
@@ -120,33 +166,12 @@ class PartStore:
         self.manifest = manifest
         self.pending: list[dict[str, Any]] = []
         self.last_flush = time.monotonic()
-        found = self._manifest_there()
-        if found is not None and resume:
-            wrong = differences(manifest, found)
-            if wrong:
-                raise ResumeError(f"--resume: {self.out} holds another sweep ({'; '.join(wrong)})")
-        elif found is not None and not (self.out / "summary.json").exists():
-            raise ResumeError(
-                f"--out {self.out}: holds an unfinished sweep; continue it with --resume "
-                "(the same arguments), or give another directory"
-            )
+        found = check_out(self.out, manifest, resume=resume, overwrite=overwrite)
         if found is None or not resume:
             self._clear()
             with atomic(self.out / MANIFEST) as tmp:
                 tmp.write_text(json.dumps(manifest, indent=2) + "\n")
         self.rows = self._read()
-
-    def _manifest_there(self) -> dict[str, Any] | None:
-        path = self.out / MANIFEST
-        if not path.exists():
-            return None
-        try:
-            found = json.loads(path.read_text())
-        except (OSError, ValueError) as exc:
-            raise ResumeError(f"--out {self.out}: {MANIFEST} is unreadable ({exc})") from None
-        if not isinstance(found, dict):
-            raise ResumeError(f"--out {self.out}: {MANIFEST} is not a sweep's")
-        return found
 
     def _clear(self) -> None:
         """Remove an earlier sweep's files (``summary.json`` first: incomplete until the end)."""
