@@ -34,10 +34,11 @@ def test_site_builds_strictly(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -
         build(config)
     except Abort as exc:  # the warnings themselves are in the captured log
         pytest.fail(f"mkdocs build --strict: {exc}")
-    for page in ("index.html", "reference/api/selector/index.html"):
+    for page in ("index.html", "reference/api/selector.html"):
         assert (site / page).is_file(), page
-    plane_qp = (site / "formulations/plane_qp/index.html").read_text()
+    plane_qp = (site / "formulations/plane_qp.html").read_text()
     assert "exact2d" in plane_qp  # the note itself is included, not only its title
-    assert "select_many" in (site / "reference/api/selector/index.html").read_text()
+    assert 'href="getting-started.html"' in (site / "index.html").read_text()  # browsable from disk
+    assert "select_many" in (site / "reference/api/selector.html").read_text()
     assert (site / "reference/scenario.schema.json").is_file()
     assert os.path.getsize(site / "figures/paper-case1-ten-uav-crossing/top_view.png") > 0
