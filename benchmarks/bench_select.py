@@ -47,7 +47,8 @@ from vo3d_opt.formulations.common import bounds_array, neighbor_rows
 from vo3d_opt.geometry.pyramid import prism_rows
 from vo3d_opt.solvers import available_qp_solvers, get_backend
 
-#: The backends of the Python path, each meant to decide in at most 300 µs at 9 x 6.
+#: The backends of the Python path, each meant to decide in at most 300 µs at 9
+#: neighbours x 6 obstacles.
 PYTHON_PATH_BACKENDS = ("osqp", "clarabel", "daqp")
 
 

@@ -88,13 +88,20 @@ def pooled(dirs: list[Path]) -> dict[str, Any]:
         s = aggregate(rows, family=first["family"], seed=first["seed"], method=first["method"],
                       formulation=first["formulation"], solver=first["solver"])
         wall = sum(x["wall_time"] for x in summaries)
-        if any(x.get("selector_options") != first.get("selector_options") for x in summaries):
+        if any(own_options(x) != own_options(first) for x in summaries):
             raise SystemExit(f"{dirs}: the seeds ran with different selector options")
         s.update({"seed": [x["seed"] for x in summaries], "wall_time": wall,
-                  "selector_options": first.get("selector_options", {}),
+                  "selector_options": own_options(first),
                   "encounters_per_second": s["encounters"] / wall, "workers": first["workers"]})
     s["deep_intrusions"] = int((rows["min_normalised_distance"] < DEEP).sum())
     return s
+
+
+def own_options(summary: dict[str, Any]) -> dict[str, Any]:
+    """A summary's selector options but the default preset (summaries before it was named
+    there have none)."""
+    options = summary.get("selector_options") or {}
+    return {k: v for k, v in options.items() if (k, v) != ("preset", "safe")}
 
 
 def vo3d_sweep(cmd: list[str], out: Path, what: str, log_mode: str = "w") -> dict[str, Any]:
@@ -113,7 +120,8 @@ def run_one(family: str, n: int, *, seed: int, workers: int, method: str, out: P
     """One ``vo3d sweep`` process; its stderr (progress) goes to ``out/sweep.log``."""
     out.mkdir(parents=True, exist_ok=True)
     cmd = vo3d_cmd() + ["sweep", family, "--n", str(n), "--seed", str(seed), "--workers",
-                        str(workers), "--method", method, "--out", str(out), "--json"]
+                        str(workers), "--method", method, "--out", str(out), "--json",
+                        "--overwrite"]  # a new flight: whatever an earlier run left there
     if method == "vo3d":
         cmd += [arg for option in options for arg in ("-o", option)]
     t0 = time.perf_counter()
@@ -149,8 +157,7 @@ def _pct(x: float) -> str:
 
 
 def method_label(s: dict[str, Any]) -> str:
-    options = ", ".join(f"{k}: {json.dumps(v)}" for k, v in s.get("selector_options", {}).items()
-                        if (k, v) != ("preset", "safe"))
+    options = ", ".join(f"{k}: {json.dumps(v)}" for k, v in own_options(s).items())
     label = "plane_qp" + (f"; {options}" if options else "")
     return f"ours ({label})" if s["method"] == "vo3d" else "RVO2-3D"
 
@@ -247,9 +254,7 @@ def section(out_root: Path, families: list[str], rvo2: list[str]) -> tuple[list[
     first = next(iter(summaries.values()), {})
     seeds = sorted({x for s in summaries.values()
                     for x in (s["seed"] if isinstance(s["seed"], list) else [s["seed"]])})
-    options = next((s.get("selector_options") or {} for s in summaries.values()
-                    if s["method"] == "vo3d"), {})
-    options = {k: v for k, v in options.items() if (k, v) != ("preset", "safe")}  # the default
+    options = next((own_options(s) for s in summaries.values() if s["method"] == "vo3d"), {})
     title = ("With the defaults (the `safe` preset)" if not options else "With " + ", ".join(
         f"`-o {k}={json.dumps(v)}`" for k, v in options.items()))
     lines = [f"## {title}", "", f"Seeds {', '.join(map(str, seeds))} (encounters 0..N_seed-1 of "

@@ -6,10 +6,10 @@ a timeout (a guard against a hang, not a measure of speed)."""
 from __future__ import annotations
 
 import json
-import socket
 import os
 import resource
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -196,11 +196,17 @@ def test_command_line_numbers_and_addresses_are_checked(tmp_path):
     assert res.returncode == 0 and json.loads(res.stdout)["agents"] == 2, res.stderr
     refused(vo3d("sweep", "pair", "--n", "2", "--scheduler", "ucx://127.0.0.1:1"), "--scheduler")
     refused(vo3d("sweep", "pair", "--n", "2", "--scheduler", "tcp://[::1"), "--scheduler")
-    with socket.socket() as s:  # a port nothing listens on: refused at once, in one line
+    refused(vo3d("sweep", "pair", "--n", "2", "--scheduler", "tcp://127.0.0.1:70000"),
+            "--scheduler", "PORT 1 to 65535")
+    with socket.socket() as s:  # bound, not listening: connections are refused, at once
         s.bind(("127.0.0.1", 0))
         closed = s.getsockname()[1]
-    refused(vo3d("sweep", "pair", "--n", "2", "--scheduler", f"tcp://127.0.0.1:{closed}"),
-            "--scheduler", "cannot connect")
+        refused(vo3d("sweep", "pair", "--n", "2", "--scheduler", f"tcp://127.0.0.1:{closed}"),
+                "--scheduler", "cannot connect")
+    refused(vo3d("sweep", "pair", "--n", "0"), "--n", ">= 1")
+    refused(vo3d("sweep", "pair", "--n", "2", "--overwrite"), "--overwrite", "--out")
+    refused(vo3d("sweep", "pair", "--n", "2", "--out", tmp_path / "o", "--resume",
+                 "--overwrite"), "--resume, --overwrite")
     refused(vo3d("run", small, "--out", ""), "--out")
 
 
@@ -364,7 +370,9 @@ def test_ctrl_c_of_a_sweep_exits_130_without_tracebacks(tmp_path):
     _interrupt_when(out, proc, lambda names: "parts" in names and bool(os.listdir(out / "parts")))
     _, err = proc.communicate(timeout=TIMEOUT)
     assert proc.returncode == 130, err[-2000:]
-    assert "Traceback" not in err and err.strip().splitlines()[-1] == "vo3d: interrupted", err
+    last = err.strip().splitlines()[-1]
+    assert "Traceback" not in err and last.startswith("vo3d: interrupted"), err
+    assert str(out) in last and "--resume" in last  # where the rows are, and how to go on
     assert not (tmp_path / "sweep" / "summary.json").exists()
 
 

@@ -301,9 +301,10 @@ def test_the_opened_vo_holds_the_vo_of_the_real_apex(gap, direction, v_a, v_b, h
 
 @pytest.mark.parametrize("formulation", ["sampled", "plane_qp"])
 def test_answer_keeps_the_margin_off_the_cone(formulation):
-    """A neighbour at rest 20 m ahead on the line of flight (r_pz 10 m): the VO is
-    the cone about +x of half-angle 30°, whose nearest point to the preferred velocity is
-    (2.598, 0, 1.5), exactly on the cone; every answer must be at least the margin (1e-3 m/s) outside it."""
+    """A neighbour at rest 20 m ahead on the line of flight (r_pz 10 m): the VO is the cone
+    about +x of half-angle 30°, whose nearest point to the preferred velocity is (2.598, 0,
+    1.5), exactly on the cone; every answer must be at least the margin (1e-3 m/s) outside
+    it."""
     own = AgentState(position=(0.0, 0.0, 20.0), velocity=(4.0, 0.0, 0.0))
     kw = dict(own=own, preferred_velocity=(4.0, 0.0, 0.0), obstacles=[], limits=Limits(), dt=0.2,
               neighbors=[Neighbor(position=(20.0, 0.0, 20.0), velocity=(0.0, 0.0, 0.0), r_pz=10.0)])

@@ -322,29 +322,35 @@ def test_bad_options_are_refused_before_any_cluster_starts():
         run_sweep("pair", 2, method=Method(name="rvo2", selector_options=(("margin", 0.1),)))
 
 
-def test_a_finished_sweep_is_replaced_only_by_itself_or_with_overwrite(cluster, tmp_path):
-    """Without --resume, a directory holding a finished sweep of other arguments is refused
-    (its rows would be lost) and left as it was; the same sweep again gives the same rows;
-    ``overwrite`` replaces it."""
+def test_a_finished_sweep_is_kept_unless_resumed_or_overwritten(cluster, tmp_path):
+    """A directory holding a finished sweep is refused without --resume or --overwrite (its
+    rows would be lost) and left as it was, whatever the arguments; --resume of the same sweep
+    flies nothing and gives its rows; --overwrite replaces it, even past a corrupt manifest."""
     out = tmp_path / "done"
     first = run_sweep("pair", 4, seed=0, scheduler=cluster, progress=False, out=out)
     write_results(first, out)
     table = (out / "encounters.parquet").read_bytes()
-    with pytest.raises(SweepError, match="finished sweep of another kind .*encounters: 4 there, 3"):
+    with pytest.raises(SweepError, match="finished sweep of other arguments .*encounters: 4 there"):
         run_sweep("pair", 3, seed=0, scheduler=cluster, progress=False, out=out)
+    with pytest.raises(SweepError, match="holds a finished sweep; continue or keep it with --res"):
+        run_sweep("pair", 4, seed=0, scheduler=cluster, progress=False, out=out)
     res = vo3d("sweep", "pair", "--n", "3", "--out", out, "--json")
     assert res.returncode == 2 and res.stdout == "", res.stderr
     assert len(res.stderr.strip().splitlines()) == 1 and "--overwrite" in res.stderr
     assert (out / "encounters.parquet").read_bytes() == table
     with pytest.raises(SweepError, match="--resume, --overwrite: give one of them"):
         run_sweep("pair", 4, seed=0, scheduler=cluster, out=out, resume=True, overwrite=True)
-    again = run_sweep("pair", 4, seed=0, scheduler=cluster, progress=False, out=out)
-    assert rows_equal(again.rows, first.rows)
+    again = run_sweep("pair", 4, seed=0, scheduler=cluster, progress=False, out=out,
+                      resume=True)
+    assert again.flown == 0 and rows_equal(again.rows, first.rows)
+    (out / "sweep.json").write_text("[1]")
     replaced = run_sweep("pair", 3, seed=0, scheduler=cluster, progress=False, out=out,
                          overwrite=True)
-    assert list(replaced.rows["index"]) == [0, 1, 2]
-    assert rows_equal(replaced.rows, first.rows[first.rows["index"] < 3])
-    assert not (out / "summary.json").exists()  # not finished until its results are written
+    write_results(replaced, out)
+    assert json.loads((out / "sweep.json").read_text())["encounters"] == 3
+    kept = pd.read_parquet(out / "encounters.parquet")
+    assert list(kept["index"]) == [0, 1, 2]
+    assert rows_equal(kept, first.rows[first.rows["index"] < 3])
 
 
 # ------------------------------------------------------------- outputs and the CLI

@@ -14,7 +14,15 @@ from vo3d_opt.extras import MissingExtra
 from vo3d_opt.link.command import add_parsers as add_link_parsers
 from vo3d_opt.types import one_line
 
-from .common import EXIT_FAIL, EXIT_USAGE, Parser, UsageError, common_parser, log
+from .common import (
+    EXIT_FAIL,
+    EXIT_INTERRUPTED,
+    EXIT_USAGE,
+    Parser,
+    UsageError,
+    common_parser,
+    log,
+)
 from .compare import add_compare_parser
 from .listing import add_list_parser
 from .run import add_run_parser
@@ -58,7 +66,7 @@ def run_command_line(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     except KeyboardInterrupt:
         log.error("interrupted")
-        return 130
+        return EXIT_INTERRUPTED
     except BrokenPipeError:  # stdout's reader went away (| head): no traceback, no more output
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_FAIL

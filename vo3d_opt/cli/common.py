@@ -31,6 +31,7 @@ from vo3d_opt.sim.simulator import scenario_selector
 from vo3d_opt.types import one_line
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report a Ctrl-C
 
 log = logging.getLogger("vo3d_opt.cli")
 

@@ -25,6 +25,7 @@ from vo3d_opt.sim.simulator import DEFAULT_FORMULATION
 from vo3d_opt.sweep.store import FLUSH_SECONDS, ResumeError, check_out
 
 from .common import (
+    EXIT_INTERRUPTED,
     EXIT_OK,
     UsageError,
     add_selector_options,
@@ -38,7 +39,6 @@ if TYPE_CHECKING:
     from vo3d_opt.sweep.runner import Method, SweepResult
 
 EXIT_ERRORS = 1
-EXIT_INTERRUPTED = 130
 
 log = logging.getLogger("vo3d_opt.sweep")
 
@@ -320,37 +320,45 @@ def _local(workers: int) -> str:
     return f"{workers} local worker" + ("" if workers == 1 else "s")
 
 
-def _sweep(args: argparse.Namespace) -> int:
-    """Run ``vo3d sweep`` with its parsed ``args``; progress is logged (``vo3d_opt.sweep``
-    logger, shown on stderr) and native code's prints are kept off stdout (the JSON's)."""
-    from vo3d_opt.sweep.runner import Method, SweepError, manifest, validate
-    from vo3d_opt.sweep.stats import risk_ratios
+def _method(args: argparse.Namespace) -> Method:
+    """The method the command line names, its selector options checked."""
+    from vo3d_opt.sweep.runner import Method, SweepError
 
-    if args.list:
-        return _list(args.json)
-    check("sweep", "vo3d sweep")  # before anything is said: one line if it is missing
-    if not args.family:
-        raise SweepError("family: required (vo3d sweep --list names them)")
-    if args.n is None:
-        raise SweepError("--n: required (the number of encounters)")
-    if args.resume and args.out is None:
-        raise SweepError("--resume: needs --out DIR (the directory of the sweep to continue)")
-    without = None
-    if args.against is not None:
-        without = _without_avoidance(args.against, args.family, args.n, args.seed)
     try:
         options = check_selector_options(dict(args.selector_options or ()), "--selector-option")
     except ScenarioError as exc:
         raise SweepError(str(exc)) from None
-    method = Method(
+    return Method(
         name=args.method,
         formulation=args.formulation,
         solver=args.solver,
         selector_options=tuple(options.items()),
     )
-    if args.scheduler is not None:
-        from vo3d_opt.sweep.cluster import ConnectError, check_address, check_reachable
 
+
+def _check_flags(args: argparse.Namespace) -> None:
+    """The arguments that need others, refused before anything else is looked at."""
+    from vo3d_opt.sweep.runner import SweepError
+
+    if not args.family:
+        raise SweepError("family: required (vo3d sweep --list names them)")
+    if args.n is None:
+        raise SweepError("--n: required (the number of encounters)")
+    for flag, given in (("--resume", args.resume), ("--overwrite", args.overwrite)):
+        if given and args.out is None:
+            raise SweepError(f"{flag}: needs --out DIR (the directory of the sweep)")
+    if args.resume and args.overwrite:
+        raise SweepError("--resume, --overwrite: give one of them")
+
+
+def _check_start(args: argparse.Namespace, method: Method) -> int:
+    """Everything a sweep can be refused for, checked before its first line is logged (so a
+    refusal is the only line): the scheduler reachable, the counts, the --out directory. The
+    local workers to start."""
+    from vo3d_opt.sweep.cluster import ConnectError, check_address, check_reachable
+    from vo3d_opt.sweep.runner import SweepError, manifest, validate
+
+    if args.scheduler is not None:
         try:
             check_address(args.scheduler)
             check_reachable(args.scheduler)
@@ -366,12 +374,30 @@ def _sweep(args: argparse.Namespace) -> int:
         in_flight=args.in_flight,
         batch=args.batch,
     )
-    if args.out is not None:  # refused before anything is said: one line
+    if args.out is not None:
         try:
             key = manifest(fam, args.n, args.seed, method, formulation, solver)
             check_out(args.out, key, resume=args.resume, overwrite=args.overwrite)
         except ResumeError as exc:
             raise SweepError(str(exc)) from None
+    return int(workers)
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    """Run ``vo3d sweep`` with its parsed ``args``; progress is logged (``vo3d_opt.sweep``
+    logger, shown on stderr) and native code's prints are kept off stdout (the JSON's)."""
+    from vo3d_opt.sweep.runner import SweepError
+    from vo3d_opt.sweep.stats import risk_ratios
+
+    if args.list:
+        return _list(args.json)
+    check("sweep", "vo3d sweep")  # before anything is said: one line if it is missing
+    _check_flags(args)
+    without = None
+    if args.against is not None:
+        without = _without_avoidance(args.against, args.family, args.n, args.seed)
+    method = _method(args)
+    workers = _check_start(args, method)
     log.info(
         "sweep %s: %d encounters, seed %d, method %s, %s",
         args.family,
@@ -397,16 +423,30 @@ def _sweep(args: argparse.Namespace) -> int:
             s["risk_ratios"] = risk_ratios(s, without)
         except ValueError as exc:
             raise SweepError(f"--against {args.against}: {exc}") from None
-    status = EXIT_ERRORS if s["errors"] else EXIT_OK
-    if args.out is not None:
+    status = _write(result, args.out)
+    _log_done(result)
+    print(json.dumps(s, allow_nan=False) if args.json else format_summary(s))
+    return status
+
+
+def _write(result: SweepResult, out: str | None) -> int:
+    """``result``'s files into ``out`` (if given); the exit status: EXIT_ERRORS when some
+    encounters raised or writing failed (the summary is printed all the same)."""
+    status = EXIT_ERRORS if result.summary["errors"] else EXIT_OK
+    if out is not None:
         from vo3d_opt.sweep.output import write_results  # matplotlib only when asked for
 
         try:
-            for path in write_results(result, Path(args.out)):
+            for path in write_results(result, Path(out)):
                 log.info("wrote %s", path)
         except OSError as exc:  # the sweep is done: still print its summary
-            log.error("--out %s: writing failed: %s", args.out, exc.strerror or exc)
+            log.error("--out %s: writing failed: %s", out, exc.strerror or exc)
             status = EXIT_ERRORS
+    return status
+
+
+def _log_done(result: SweepResult) -> None:
+    s = result.summary
     log.info(
         "done: %d encounters flown in %.1f s (+%.1f s cluster and warm-up), %d found in --out; "
         "%d/%d completed, %d errors",
@@ -418,5 +458,3 @@ def _sweep(args: argparse.Namespace) -> int:
         s["encounters"],
         len(s["errors"]),
     )
-    print(json.dumps(s, allow_nan=False) if args.json else format_summary(s))
-    return status

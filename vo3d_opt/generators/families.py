@@ -298,7 +298,7 @@ def dense(rng: np.random.Generator) -> Draw | None:
 #
 # Each draws a ``group`` encounter from the same stream and then the variant's own parameters,
 # so encounter i of ``lagged`` is encounter i of ``group`` (same agents and obstacles) plus a
-# time constant. ``SECTION5_KEYS`` of a family: the real-world scenario keys its draws use
+# time constant. ``needs`` of a family: the real-world scenario keys its draws use
 # (the sweep refuses the family, naming them, when this build's scenario loader does not
 # accept them).
 

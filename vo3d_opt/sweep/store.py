@@ -3,7 +3,8 @@ and ``--resume`` flies only what is missing.
 
 * ``DIR/sweep.json``: what the sweep is (family, encounters, seed, method, formulation, solver,
   selector options), written when it starts: ``--resume`` refuses a directory whose sweep is
-  another, naming what differs;
+  another, naming what differs, and a sweep without ``--resume`` or ``--overwrite`` refuses a
+  directory that holds one (:func:`check_out`);
 * ``DIR/parts/part-NNNNNN.parquet``: the rows of the encounters flown so far, a part every few
   seconds (:data:`FLUSH_SECONDS`) or :data:`FLUSH_ROWS` rows, and whatever is complete when the
   sweep is interrupted (a signal, an exception); each written under a temporary name and
@@ -42,7 +43,7 @@ OUTPUTS = ("summary.json", "encounters.parquet", "min_distance.png", "failures")
 
 
 class ResumeError(ValueError):
-    """``--out DIR`` holds another sweep, or an unfinished one without ``--resume``."""
+    """``--out DIR`` holds a sweep that this one may not continue or write over."""
 
 
 def failed(row: dict[str, Any]) -> bool:
@@ -119,30 +120,28 @@ def manifest_in(out: Path) -> dict[str, Any] | None:
 def check_out(
     out: str | Path, manifest: dict[str, Any], *, resume: bool, overwrite: bool = False
 ) -> dict[str, Any] | None:
-    """The manifest of the sweep already in ``out`` (None: none), or ``ResumeError`` when the
-    sweep described by ``manifest`` may not write there: with ``resume``, a sweep of another
-    kind is there; without it, an unfinished sweep or a finished one of another kind (its rows
-    would be lost; the same sweep again gives the same rows) unless ``overwrite``. Nothing is
-    written."""
+    """The manifest of the sweep already in ``out`` (None: none, or ``overwrite``), or
+    ``ResumeError`` when the sweep described by ``manifest`` may not write there: with
+    ``resume``, a sweep of other arguments is there; without ``resume`` or ``overwrite``, any
+    sweep is there, finished or not (its rows would be lost). Nothing is written."""
     out = Path(out)
     if resume and overwrite:
         raise ResumeError("--resume, --overwrite: give one of them")
+    if overwrite:
+        return None
     found = manifest_in(out)
-    if found is None or overwrite:
-        return found
+    if found is None:
+        return None
     wrong = differences(manifest, found)
-    if resume:
-        if wrong:
-            raise ResumeError(f"--resume: {out} holds another sweep ({'; '.join(wrong)})")
-    elif not (out / "summary.json").exists():
+    if resume and wrong:
+        raise ResumeError(f"--resume: {out} holds another sweep ({'; '.join(wrong)})")
+    if not resume:
+        state = "a finished" if (out / "summary.json").exists() else "an unfinished"
+        kind = f" of other arguments ({'; '.join(wrong)})" if wrong else ""
+        keep = "" if wrong else "continue or keep it with --resume, "
         raise ResumeError(
-            f"--out {out}: holds an unfinished sweep; continue it with --resume "
-            "(the same arguments), replace it with --overwrite, or give another directory"
-        )
-    elif wrong:
-        raise ResumeError(
-            f"--out {out}: holds a finished sweep of another kind ({'; '.join(wrong)}); "
-            "replace it with --overwrite, or give another directory"
+            f"--out {out}: holds {state} sweep{kind}; {keep}replace it with --overwrite, "
+            "or give another directory"
         )
     return found
 
@@ -167,7 +166,7 @@ class PartStore:
         self.pending: list[dict[str, Any]] = []
         self.last_flush = time.monotonic()
         found = check_out(self.out, manifest, resume=resume, overwrite=overwrite)
-        if found is None or not resume:
+        if found is None:  # nothing there, or replaced (overwrite)
             self._clear()
             with atomic(self.out / MANIFEST) as tmp:
                 tmp.write_text(json.dumps(manifest, indent=2) + "\n")
