@@ -215,6 +215,43 @@ def test_acceleration_limit(kw):
     assert np.all(np.abs(d.velocity) <= a_max * kw["dt"] + 1e-6)  # whatever the status
 
 
+@pytest.mark.parametrize("a_max", [0.5, 2.0, 8.0])
+def test_vz_range_leaves_room_to_brake_before_the_band_edges(a_max):
+    """With an acceleration limit, the vertical speeds allowed towards an edge d away are those
+    from which one step and then braking at a_max stop short of it (brute force over speeds),
+    and no fewer; without one, one step's worth of the band."""
+    from vo3d_opt.formulations.common import Bounds, vz_range
+
+    dt, z_min, z_max = 0.2, 0.0, 12.0
+    speeds = np.linspace(0.0, 4.0, 4001)
+    for z in np.linspace(0.01, 11.99, 97):
+        lo, hi = vz_range(z, Bounds(v_min=0.0, v_max=4.0, z_min=z_min, z_max=z_max,
+                                    acceleration=a_max, dt=dt))
+        for edge, s_allowed in ((z - z_min, -lo), (z_max - z, hi)):
+            stops = speeds[speeds * dt + speeds**2 / (2 * a_max) <= edge]
+            assert stops.max() - 1e-3 <= s_allowed <= stops.max() + 1e-3, (z, edge)
+        free = vz_range(z, Bounds(v_min=0.0, v_max=4.0, z_min=z_min, z_max=z_max,
+                                  acceleration=float("nan"), dt=dt))
+        assert free == pytest.approx((max(-z / dt, -4.0), min((z_max - z) / dt, 4.0)))
+
+
+@settings(max_examples=25, **SETTINGS)
+@given(st.floats(0.2, 6.0), st.floats(0.5, 3.0), st.floats(1.0, 4.0))
+def test_a_descent_under_an_acceleration_limit_can_always_stop_above_the_floor(z, a_max, sink):
+    """Sinking at ``sink`` m/s towards the floor with nothing to avoid and a goal below it: every
+    answer keeps one step and braking at a_max above the floor (the answer may not reach that
+    speed at once: the acceleration box holds it; then it brakes as hard as it may)."""
+    own = AgentState(position=(0.0, 0.0, z), velocity=(0.0, 0.0, -sink))
+    limits = Limits(speed=(0.0, 4.0), altitude=(0.0, 40.0), acceleration=a_max)
+    d = VelocitySelector().select(own=own, preferred_velocity=(0.0, 0.0, -4.0), limits=limits,
+                                  dt=0.2)
+    vz = d.velocity[2]
+    if vz < 0:
+        can_brake = -vz * 0.2 + vz**2 / (2 * a_max) <= z + 1e-9
+        braking = vz >= -sink + a_max * 0.2 - 1e-9  # already braking as hard as the box lets it
+        assert can_brake or braking, (vz, d.status)
+
+
 def test_reciprocal_takes_half_the_avoidance():
     own = AgentState(position=(0.0, 0.0, 20.0), velocity=(2.0, 0.0, 0.0))
     nb = Neighbor(position=(30.0, 1.0, 20.0), velocity=(-2.0, 0.0, 0.0), r_pz=10.0)

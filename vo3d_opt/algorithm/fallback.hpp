@@ -34,11 +34,20 @@ struct VzRange {
     double lo, hi;
 };
 
-// Vertical speeds that keep z + v_z dt within [z_min, z_max]; out of bounds already: head back
-// at full speed.
+// The fastest approach to a band edge d away (d > 0) that can still stop short of it with the
+// acceleration limit a: one step at s, then braking at a, covers s dt + s^2 / (2 a) <= d. (A
+// per-step braking of a dt stops sooner, so the band is kept.) inf without a limit.
+inline double braking_speed(double d, const Bounds& b) {
+    if (std::isnan(b.acceleration)) return kInf;
+    double a = b.acceleration, dt = b.dt;
+    return d > 0.0 ? a * (std::sqrt(dt * dt + 2.0 * d / a) - dt) : 0.0;
+}
+
+// Vertical speeds that keep z + v_z dt within [z_min, z_max] and, with an acceleration limit,
+// leave room to brake before either edge; out of bounds already: head back at full speed.
 inline VzRange vz_range(double z, const Bounds& b) {
-    double lo = std::max((b.z_min - z) / b.dt, -b.v_max);
-    double hi = std::min((b.z_max - z) / b.dt, b.v_max);
+    double lo = std::max({(b.z_min - z) / b.dt, -b.v_max, -braking_speed(z - b.z_min, b)});
+    double hi = std::min({(b.z_max - z) / b.dt, b.v_max, braking_speed(b.z_max - z, b)});
     if (lo > hi) lo = hi = z < b.z_min ? b.v_max : -b.v_max;
     return {lo, hi};
 }
@@ -112,7 +121,7 @@ inline bool within_limits(const double* v, const LimitRows& L, const Bounds& b) 
 }
 
 // The limits, whatever came before: never above v_max, never leaving [z_min, z_max] within dt
-// (from an in-bounds start); non-finite components become 0.
+// with room to brake (vz_range; from an in-bounds start); non-finite components become 0.
 inline void enforce_limits(const double* v, const double* p, const Bounds& b, double* out) {
     for (int c = 0; c < 3; ++c) out[c] = std::isfinite(v[c]) ? v[c] : 0.0;
     VzRange vz = vz_range(p[2], b);

@@ -271,8 +271,9 @@ def py_decision_planes(vos: VOs, v_now: np.ndarray, cfg: Config) -> AvoidancePla
 
 
 def vz_range(z: float, bounds: Bounds) -> tuple[float, float]:
-    """Vertical speeds that keep z + v_z dt within [z_min, z_max]; out of bounds already: head
-    back at full speed."""
+    """Vertical speeds that keep z + v_z dt within [z_min, z_max] and, with an acceleration
+    limit a, approach an edge d away at no more than s with s dt + s^2 / (2 a) <= d (room to
+    brake); out of bounds already: head back at full speed."""
     return _core.vz_range(float(z), bounds)
 
 
@@ -355,7 +356,7 @@ class Encounter:
         return bool(self.inside.any())
 
     def vz_range(self) -> tuple[float, float]:
-        """Vertical speeds that keep z + v_z dt within [z_min, z_max]."""
+        """Vertical speeds within the altitude band and its braking room (``vz_range``)."""
         return vz_range(float(self.position[2]), self.bounds)
 
     @cached_property

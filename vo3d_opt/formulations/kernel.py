@@ -78,7 +78,8 @@ def py_search(qps: _core.PlaneQPs, bounds: Bounds, tried: np.ndarray) -> tuple[i
 
 def enforce_limits(v: np.ndarray, p: np.ndarray, bounds: Bounds) -> np.ndarray:
     """The limits, whatever came before: never above v_max, never leaving [z_min, z_max] within dt
-    (from an in-bounds start); non-finite components become 0."""
+    and, with an acceleration limit, keeping room to brake before either (``vz_range``; from an
+    in-bounds start); non-finite components become 0."""
     return _core.enforce_limits(v, p, bounds)
 
 
