@@ -35,20 +35,32 @@ struct VzRange {
 };
 
 // The fastest approach to a band edge d away (d > 0) that can still stop short of it with the
-// acceleration limit a: one step at s, then braking at a, covers s dt + s^2 / (2 a) <= d. (A
-// per-step braking of a dt stops sooner, so the band is kept.) inf without a limit.
+// acceleration limit a: one step at s, then braking at a, covers s dt + s^2 / (2 a) <= d, so
+// s = 2 d / (dt + sqrt(dt^2 + 2 d / a)). (Braking by a dt per step stops sooner: the band is
+// kept, step after step.) inf without a limit.
 inline double braking_speed(double d, const Bounds& b) {
     if (std::isnan(b.acceleration)) return kInf;
-    double a = b.acceleration, dt = b.dt;
-    return d > 0.0 ? a * (std::sqrt(dt * dt + 2.0 * d / a) - dt) : 0.0;
+    double dt = b.dt;
+    return d > 0.0 ? 2.0 * d / (dt + std::sqrt(dt * dt + 2.0 * d / b.acceleration)) : 0.0;
 }
 
 // Vertical speeds that keep z + v_z dt within [z_min, z_max] and, with an acceleration limit,
-// leave room to brake before either edge; out of bounds already: head back at full speed.
-inline VzRange vz_range(double z, const Bounds& b) {
+// leave room to brake before either edge. Out of the band already: back towards it, as fast as
+// the far edge allows. With an acceleration limit and the current vertical speed vz_now (NaN:
+// unknown), the range reaches at least the nearest speed the box |v_z - vz_now| <= a dt holds:
+// a vehicle too fast for the room left brakes as hard as it can (the box wins: it is what the
+// vehicle can do), instead of every answer failing the limits.
+inline VzRange vz_range(double z, double vz_now, const Bounds& b) {
     double lo = std::max({(b.z_min - z) / b.dt, -b.v_max, -braking_speed(z - b.z_min, b)});
     double hi = std::min({(b.z_max - z) / b.dt, b.v_max, braking_speed(b.z_max - z, b)});
-    if (lo > hi) lo = hi = z < b.z_min ? b.v_max : -b.v_max;
+    if (lo > hi) {  // out of the band: back, no faster than the far edge allows
+        if (z < b.z_min) lo = hi;
+        else hi = lo;
+    }
+    if (!std::isnan(b.acceleration) && !std::isnan(vz_now)) {
+        double dv = b.acceleration * b.dt;
+        lo = std::min(lo, vz_now + dv), hi = std::max(hi, vz_now - dv);
+    }
     return {lo, hi};
 }
 
@@ -90,7 +102,7 @@ inline LimitRows limit_rows(const double* p, const double* v_now, const Rows& nb
     LimitRows L;
     L.G.assign(3 * (rows + guards), 0.0);
     L.h.assign(rows + guards, 0.0);
-    VzRange vz = vz_range(p[2], b);
+    VzRange vz = vz_range(p[2], v_now[2], b);
     L.G[2] = 1.0, L.h[0] = vz.hi, L.G[5] = -1.0, L.h[1] = -vz.lo;
     if (rows == 8) {
         double dv = b.acceleration * b.dt;
@@ -121,10 +133,12 @@ inline bool within_limits(const double* v, const LimitRows& L, const Bounds& b) 
 }
 
 // The limits, whatever came before: never above v_max, never leaving [z_min, z_max] within dt
-// with room to brake (vz_range; from an in-bounds start); non-finite components become 0.
-inline void enforce_limits(const double* v, const double* p, const Bounds& b, double* out) {
+// with room to brake (vz_range, around the current vertical speed v_now[2]; from an in-bounds
+// start); non-finite components become 0.
+inline void enforce_limits(const double* v, const double* p, const double* v_now, const Bounds& b,
+                           double* out) {
     for (int c = 0; c < 3; ++c) out[c] = std::isfinite(v[c]) ? v[c] : 0.0;
-    VzRange vz = vz_range(p[2], b);
+    VzRange vz = vz_range(p[2], v_now[2], b);
     out[2] = std::min(std::max(out[2], vz.lo), vz.hi);
     double speed = std::sqrt(sq(out[0]) + sq(out[1]) + sq(out[2]));
     if (speed > b.v_max)
@@ -608,7 +622,7 @@ inline void least_bad(const VOs& vos, const Planes& planes, const Grid& g, Cover
         consider(vos, v, clip, v_now, L, b, lb);
     }
     if (std::isnan(lb.best[0])) {
-        VzRange vz = vz_range(p[2], b);
+        VzRange vz = vz_range(p[2], v_now[2], b);
         lb.best[0] = 0.0, lb.best[1] = 0.0, lb.best[2] = std::min(std::max(0.0, vz.lo), vz.hi);
     }
     for (int c = 0; c < 3; ++c) out[c] = lb.best[c];
