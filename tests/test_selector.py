@@ -249,22 +249,21 @@ def _braking_speed(d: float, a: float, dt: float) -> float:
 @given(st.floats(0.2, 6.0), st.floats(0.5, 3.0), st.floats(0.0, 4.0))
 def test_a_descent_under_an_acceleration_limit_stops_above_the_floor(z, a_max, sink):
     """Flown in closed loop (each answer the next velocity), a vehicle asked to dive through the
-    floor: every answer is optimal and within the acceleration box; from inside the braking
-    envelope it never goes below the floor; from outside it (too fast for the room left) it
-    brakes as hard as the box lets it, until it is inside."""
+    floor never goes below it and never sinks faster than the braking room allows; while it is
+    within that room every answer is optimal and within the acceleration box (the room is kept
+    step after step); a vehicle that starts too fast for it is braked by the limits."""
     dt, limits = 0.2, Limits(speed=(0.0, 4.0), altitude=(0.0, 40.0), acceleration=a_max)
     sel, vz = VelocitySelector(), -sink
-    started_inside = sink <= _braking_speed(z, a_max, dt) + 1e-9
     for _ in range(60):
+        room = _braking_speed(z, a_max, dt)
         own = AgentState(position=(0.0, 0.0, z), velocity=(0.0, 0.0, vz))
         d = sel.select(own=own, preferred_velocity=(0.0, 0.0, -4.0), limits=limits, dt=dt)
-        assert d.status == "optimal"
-        assert np.all(np.abs(d.velocity - (0.0, 0.0, vz)) <= a_max * dt + 1e-9)
-        if -vz > _braking_speed(z, a_max, dt) + a_max * dt + 1e-9:  # cannot get back in at once
-            assert d.velocity[2] == pytest.approx(vz + a_max * dt, abs=1e-9)
+        assert d.velocity[2] >= -room - 1e-9
+        if -vz <= room:
+            assert d.status == "optimal"
+            assert np.all(np.abs(d.velocity - (0.0, 0.0, vz)) <= a_max * dt + 1e-9)
         z, vz = z + d.velocity[2] * dt, d.velocity[2]
-        if started_inside:
-            assert z >= -1e-9
+        assert z >= -1e-9
 
 
 def test_reciprocal_takes_half_the_avoidance():

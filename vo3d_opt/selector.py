@@ -299,7 +299,7 @@ class VelocitySelector:
         if status == Status.OPTIMAL and enc.inside_any:
             status = Status.INSIDE_PROTECTED_ZONE
         return Decision(
-            velocity=kernel.enforce_limits(np.asarray(out.velocity, dtype=float), p, bounds, v_now),
+            velocity=kernel.enforce_limits(np.asarray(out.velocity, dtype=float), p, bounds),
             status=status,
             solve_time=time.perf_counter() - t0,
             formulation=self.formulation,

@@ -425,18 +425,17 @@ NB_MODULE(_core, m) {
         size_t n = L.h.size();
         return nb::make_tuple(numpy(L.G, {n, 3}), numpy(L.h, {n}));
     });
-    m.def("vz_range", [](double z, nb::handle bounds, double vz_now) {
-        VzRange r = vz_range(z, vz_now, bounds_of(bounds));
+    m.def("vz_range", [](double z, nb::handle bounds) {
+        VzRange r = vz_range(z, bounds_of(bounds));
         return std::make_pair(r.lo, r.hi);
-    }, "z"_a, "bounds"_a, "vz_now"_a = kNaN);
-    m.def("enforce_limits", [](nb::handle v, nb::handle p, nb::handle bounds, nb::handle v_now) {
-        double x[3], P_[3], V[3] = {kNaN, kNaN, kNaN};
+    });
+    m.def("enforce_limits", [](nb::handle v, nb::handle p, nb::handle bounds) {
+        double x[3], P_[3];
         vec3(v, "v", x), vec3(p, "p", P_);
-        if (!v_now.is_none()) vec3(v_now, "v_now", V);
         std::vector<double> out(3);
-        enforce_limits(x, P_, V, bounds_of(bounds), out.data());
+        enforce_limits(x, P_, bounds_of(bounds), out.data());
         return numpy(std::move(out), {3});
-    }, "v"_a, "p"_a, "bounds"_a, "v_now"_a = nb::none());
+    });
     auto per_velocity = [](nb::handle v, auto&& fn) {
         Rows vel = rows_of(arr<double>(v, "v", {ANY, 3}));
         std::vector<double> out;

@@ -128,7 +128,7 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
     std::vector<Pyramid> pyramids = pyramids_in_reach(p, prisms, b, cfg);
     LimitRows limits = limit_rows(p, v_now, nbrs, b, cfg);
     if (pref_clear(p, rows, pyramids, pref, cfg.horizon, cfg.obstacle_horizon) && within_limits(pref, limits, b)) {
-        enforce_limits(pref, p, v_now, b, out.velocity);  // 2
+        enforce_limits(pref, p, b, out.velocity);  // 2
         return out;
     }
     VOs vos = vos_of(p, pref, rows, std::move(pyramids), b, cfg);  // 3
@@ -142,7 +142,7 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
     // 2 on the cones kept, as the Python formulations check it: pref_clear's answer but for a
     // rounding at min_speed's margin
     if (out.status == OPTIMAL && !pref_in && within_limits(vos.v_pref, limits, b)) {
-        enforce_limits(vos.v_pref, p, v_now, b, out.velocity);
+        enforce_limits(vos.v_pref, p, b, out.velocity);
         return out;
     }
     // an obstacle does not take its share of the avoidance, nor does a vehicle that does not
@@ -160,7 +160,7 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
     double v[3];
     if (s.r >= 0) {
         lift(planes, qps.sol_at(s.r, s.p), s.p, v);
-        enforce_limits(v, p, v_now, b, out.velocity);
+        enforce_limits(v, p, b, out.velocity);
         out.phi = pc.phi[s.p], out.round = 1 + s.r;
         return out;
     }
@@ -168,13 +168,13 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
     Cover cover;
     Found f = grid_search(vos, planes, grid, limits, b, pc, cover);
     if (f.found) {
-        enforce_limits(f.v, p, v_now, b, out.velocity);
+        enforce_limits(f.v, p, b, out.velocity);
         out.phi = pc.phi[f.plane], out.round = SAMPLED;
         return out;
     }
     Rows answers{tried, s.n_tried, 3, 3, 1};
     least_bad(vos, planes, grid, cover, answers, p, v_now, limits, b, pc, v);
-    enforce_limits(v, p, v_now, b, out.velocity);  // 6
+    enforce_limits(v, p, b, out.velocity);  // 6
     out.status = INFEASIBLE_MIN_VIOLATION, out.phi = kNaN, out.round = LEAST_BAD;
     return out;
 }

@@ -46,20 +46,16 @@ inline double braking_speed(double d, const Bounds& b) {
 
 // Vertical speeds that keep z + v_z dt within [z_min, z_max] and, with an acceleration limit,
 // leave room to brake before either edge. Out of the band already: back towards it, as fast as
-// the far edge allows. With an acceleration limit and the current vertical speed vz_now (NaN:
-// unknown), the range reaches at least the nearest speed the box |v_z - vz_now| <= a dt holds:
-// a vehicle too fast for the room left brakes as hard as it can (the box wins: it is what the
-// vehicle can do), instead of every answer failing the limits.
-inline VzRange vz_range(double z, double vz_now, const Bounds& b) {
+// the far edge allows (v_max without an acceleration limit). The limits win over the
+// acceleration box: a vehicle too fast for the room left gets no answer within both, and the
+// limits applied last command the braking the band needs (a lagging vehicle follows a larger
+// command faster; RotorPy's commands are rate-limited by the simulator).
+inline VzRange vz_range(double z, const Bounds& b) {
     double lo = std::max({(b.z_min - z) / b.dt, -b.v_max, -braking_speed(z - b.z_min, b)});
     double hi = std::min({(b.z_max - z) / b.dt, b.v_max, braking_speed(b.z_max - z, b)});
-    if (lo > hi) {  // out of the band: back, no faster than the far edge allows
+    if (lo > hi) {  // out of the band
         if (z < b.z_min) lo = hi;
         else hi = lo;
-    }
-    if (!std::isnan(b.acceleration) && !std::isnan(vz_now)) {
-        double dv = b.acceleration * b.dt;
-        lo = std::min(lo, vz_now + dv), hi = std::max(hi, vz_now - dv);
     }
     return {lo, hi};
 }
@@ -102,7 +98,7 @@ inline LimitRows limit_rows(const double* p, const double* v_now, const Rows& nb
     LimitRows L;
     L.G.assign(3 * (rows + guards), 0.0);
     L.h.assign(rows + guards, 0.0);
-    VzRange vz = vz_range(p[2], v_now[2], b);
+    VzRange vz = vz_range(p[2], b);
     L.G[2] = 1.0, L.h[0] = vz.hi, L.G[5] = -1.0, L.h[1] = -vz.lo;
     if (rows == 8) {
         double dv = b.acceleration * b.dt;
@@ -133,12 +129,10 @@ inline bool within_limits(const double* v, const LimitRows& L, const Bounds& b) 
 }
 
 // The limits, whatever came before: never above v_max, never leaving [z_min, z_max] within dt
-// with room to brake (vz_range, around the current vertical speed v_now[2]; from an in-bounds
-// start); non-finite components become 0.
-inline void enforce_limits(const double* v, const double* p, const double* v_now, const Bounds& b,
-                           double* out) {
+// with room to brake (vz_range; from an in-bounds start); non-finite components become 0.
+inline void enforce_limits(const double* v, const double* p, const Bounds& b, double* out) {
     for (int c = 0; c < 3; ++c) out[c] = std::isfinite(v[c]) ? v[c] : 0.0;
-    VzRange vz = vz_range(p[2], v_now[2], b);
+    VzRange vz = vz_range(p[2], b);
     out[2] = std::min(std::max(out[2], vz.lo), vz.hi);
     double speed = std::sqrt(sq(out[0]) + sq(out[1]) + sq(out[2]));
     if (speed > b.v_max)
@@ -622,7 +616,7 @@ inline void least_bad(const VOs& vos, const Planes& planes, const Grid& g, Cover
         consider(vos, v, clip, v_now, L, b, lb);
     }
     if (std::isnan(lb.best[0])) {
-        VzRange vz = vz_range(p[2], v_now[2], b);
+        VzRange vz = vz_range(p[2], b);
         lb.best[0] = 0.0, lb.best[1] = 0.0, lb.best[2] = std::min(std::max(0.0, vz.lo), vz.hi);
     }
     for (int c = 0; c < 3; ++c) out[c] = lb.best[c];

@@ -270,13 +270,11 @@ def py_decision_planes(vos: VOs, v_now: np.ndarray, cfg: Config) -> AvoidancePla
     return AvoidancePlanes(*_core.decision_planes(vos, v_now, cfg))
 
 
-def vz_range(z: float, bounds: Bounds, vz_now: float = math.nan) -> tuple[float, float]:
+def vz_range(z: float, bounds: Bounds) -> tuple[float, float]:
     """Vertical speeds that keep z + v_z dt within [z_min, z_max] and, with an acceleration
-    limit a, approach an edge d away at no more than the s with s dt + s^2 / (2 a) = d (room
-    to brake); out of the band already: back towards it. With a and the current vertical speed
-    ``vz_now``, at least the speed nearest the range that the box |v_z - vz_now| <= a dt holds
-    (a vehicle too fast for the room left brakes as hard as it can)."""
-    return _core.vz_range(float(z), bounds, float(vz_now))
+    limit a, approach an edge d away at no more than s with s dt + s^2 / (2 a) <= d (room to
+    brake); out of bounds already: head back at full speed."""
+    return _core.vz_range(float(z), bounds)
 
 
 def limit_rows(
@@ -359,7 +357,7 @@ class Encounter:
 
     def vz_range(self) -> tuple[float, float]:
         """Vertical speeds within the altitude band and its braking room (``vz_range``)."""
-        return vz_range(float(self.position[2]), self.bounds, float(self.v_now[2]))
+        return vz_range(float(self.position[2]), self.bounds)
 
     @cached_property
     def _linear_bounds(self) -> tuple[np.ndarray, np.ndarray]:

@@ -76,14 +76,11 @@ def py_search(qps: _core.PlaneQPs, bounds: Bounds, tried: np.ndarray) -> tuple[i
     return qps.search(bounds, tried)
 
 
-def enforce_limits(
-    v: np.ndarray, p: np.ndarray, bounds: Bounds, v_now: np.ndarray | None = None
-) -> np.ndarray:
+def enforce_limits(v: np.ndarray, p: np.ndarray, bounds: Bounds) -> np.ndarray:
     """The limits, whatever came before: never above v_max, never leaving [z_min, z_max] within dt
-    and, with an acceleration limit, keeping room to brake before either (``vz_range``, around
-    ``v_now``'s vertical speed when given; from an in-bounds start); non-finite components
-    become 0."""
-    return _core.enforce_limits(v, p, bounds, v_now)
+    and, with an acceleration limit, keeping room to brake before either (``vz_range``; from an
+    in-bounds start); non-finite components become 0."""
+    return _core.enforce_limits(v, p, bounds)
 
 
 def py_lift(planes: AvoidancePlanes, w: np.ndarray, p: int, out: np.ndarray) -> None:
