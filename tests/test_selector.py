@@ -238,6 +238,8 @@ def test_vz_range_leaves_room_to_brake_before_the_band_edges(a_max):
     for z, far in ((5.0, 1.5), (7.5, 1.5)):
         lo, hi = vz_range(z, narrow)
         assert lo == hi and abs(lo) == pytest.approx(min(_braking_speed(far, a_max, dt), 4.0))
+        free = vz_range(z, narrow._replace(acceleration=float("nan")))
+        assert free == (4.0, 4.0) if z < 6.0 else free == (-4.0, -4.0)  # as ever: the top speed
 
 
 def _braking_speed(d: float, a: float, dt: float) -> float:

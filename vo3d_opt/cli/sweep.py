@@ -137,8 +137,8 @@ def add_sweep_parser(sub: Any, common: list[argparse.ArgumentParser]) -> None:
     sw.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace the sweep in --out DIR, finished or not (without it a directory holding "
-        "an unfinished sweep, or a finished one of other arguments, is refused)",
+        help="replace the sweep in --out DIR, finished or not (without it, or --resume, a "
+        "directory holding a sweep is refused)",
     )
     sw.add_argument(
         "--json",
@@ -413,7 +413,7 @@ def _sweep(args: argparse.Namespace) -> int:
             raise
         log.error(
             "interrupted: the encounters flown are kept in %s; the same command with --resume "
-            "flies the rest",
+            "(and without --overwrite) flies the rest",
             args.out,
         )
         return EXIT_INTERRUPTED

@@ -272,8 +272,9 @@ def py_decision_planes(vos: VOs, v_now: np.ndarray, cfg: Config) -> AvoidancePla
 
 def vz_range(z: float, bounds: Bounds) -> tuple[float, float]:
     """Vertical speeds that keep z + v_z dt within [z_min, z_max] and, with an acceleration
-    limit a, approach an edge d away at no more than s with s dt + s^2 / (2 a) <= d (room to
-    brake); out of bounds already: head back at full speed."""
+    limit a, approach an edge d away at no more than the s with s dt + s^2 / (2 a) = d (room to
+    brake); out of the band already: back towards it, no faster than the far edge allows (v_max
+    without an acceleration limit)."""
     return _core.vz_range(float(z), bounds)
 
 

@@ -207,8 +207,8 @@ def run_sweep(
     a task whose worker died (local cluster only). ``out``: keep the rows in this directory as
     they come (``vo3d_opt.sweep.store``: a part at least every ``flush_seconds``); ``resume``:
     fly only the encounters missing there, or whose row there is an error; ``overwrite``:
-    replace the sweep there, finished or not, of whatever kind (without it a finished sweep of
-    another kind, or an unfinished one, is refused).
+    replace the sweep there, finished or not (without it, or ``resume``, a directory holding a
+    sweep is refused).
     ``SweepError`` for bad options, before any cluster starts, or an unreachable scheduler;
     :class:`~vo3d_opt.extras.MissingExtra` without the ``[sweep]`` extra.
     """
