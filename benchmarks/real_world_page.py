@@ -58,6 +58,7 @@ def record(cond: str, name: str, s: dict[str, Any], ideal: dict[str, Any] | None
     m = s["margins"]
     return {"kind": "run", "condition": cond, "scenario": name, "reached": s["reached"],
             "agents": s["agents"], **{k: s[k] for k in EVENTS},
+            "starts_inside_pz": s["starts_inside_pz"],
             "min_vehicle_distance": s["min_vehicle_distance"],
             "min_obstacle_distance": s["min_obstacle_distance"],
             "path_vs_ideal": ratio("path_length_ratio"),
@@ -94,6 +95,7 @@ def by_condition(runs: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
         out[cond] = {"scenarios": len(rs), "reached": sum(r["reached"] for r in rs),
                      "agents": sum(r["agents"] for r in rs),
                      **{k: sum(r[k] for r in rs) for k in EVENTS},
+                     "starts_inside_pz": sum(r.get("starts_inside_pz", 0) for r in rs),
                      "min_vehicle_distance": least("min_vehicle_distance"),
                      "min_obstacle_distance": least("min_obstacle_distance"),
                      "path": median("path_vs_ideal"), "arrival": median("arrival_vs_ideal")}
@@ -114,7 +116,10 @@ def summary_table(conds: dict[str, dict[str, Any]]) -> list[str]:
 
 
 def _events(c: dict[str, Any]) -> str:
-    said = [f"{c[k]} {EVENT_NAMES[k]}{'s' if c[k] > 1 else ''}" for k in EVENTS if c[k]]
+    starts = c.get("starts_inside_pz", 0)  # a pair that starts inside a zone counts as one
+    inside = {"pz_intrusions": f" ({starts} of them pairs that start inside a zone)"}
+    said = [f"{c[k]} {EVENT_NAMES[k]}{'s' if c[k] > 1 else ''}{inside.get(k, '') if starts else ''}"
+            for k in EVENTS if c[k]]
     if c["reached"] < c["agents"]:
         said.append(f"{c['agents'] - c['reached']} of {c['agents']} vehicles short of their goal")
     return ", ".join(said) or "none"
@@ -170,20 +175,22 @@ def paper_table(runs: list[dict[str, Any]]) -> list[str]:
     return lines if len(lines) > 2 else []
 
 
-def cost_note(r: dict[str, Any]) -> str:
-    """What RotorPy one by one would have cost on a scenario it does not fly."""
+def cost_note(r: dict[str, Any], batched: bool) -> str:
+    """What RotorPy one by one would have cost on a scenario it does not fly (``batched``: the
+    batched model flies it)."""
     return (f"`{r['scenario']}` under RotorPy one by one: not run. One {r['dt']:g} s period of its "
             f"{r['agents']} hummingbirds in steady flight costs {r['period_s']:.1f} s of RotorPy "
             f"alone here (each vehicle integrated on its own), so its up to {r['n_steps']} "
-            f"periods would take up to {r['period_s'] * r['n_steps'] / 3600:.1f} h. It flies "
-            "batched instead (the last rows).")
+            f"periods would take up to {r['period_s'] * r['n_steps'] / 3600:.1f} h."
+            + (" It flies batched instead (the last rows)." if batched else ""))
 
 
 def page(rows: list[dict[str, Any]], *, swarm: bool, machine: str, command: str,
          partial: bool = False) -> str:
     """The whole page from the rows (``kind``: ``run`` or ``rotorpy_cost``)."""
     runs = [r for r in rows if r["kind"] == "run"]
-    notes = [cost_note(r) for r in rows if r["kind"] == "rotorpy_cost"]
+    batched = {r["scenario"] for r in runs if "batched" in r["condition"]}
+    notes = [cost_note(r, r["scenario"] in batched) for r in rows if r["kind"] == "rotorpy_cost"]
     skipped = ", ".join(f"`{r['scenario']}`" for r in rows if r["kind"] == "rotorpy_cost")
     title = "# Real-world conditions" + (", the swarm preset" if swarm else "")
     how = ("every run with the `swarm` preset merged into its `selector_options`; the defaults' "
@@ -191,8 +198,8 @@ def page(rows: list[dict[str, Any]], *, swarm: bool, machine: str, command: str,
     conds = by_condition(runs)
     lines = [title, "", machine, "", f"`{command}`: {how}", "", "## Summary by condition", "",
              "Summed over each condition's scenarios"
-             + (f"; RotorPy's hummingbird one by one flies every scenario but {skipped}, which "
-                "flies batched" if skipped else "")
+             + (f"; RotorPy's hummingbird one by one flies every scenario but {skipped} (too "
+                "many vehicles to integrate one at a time)" if skipped else "")
              + ". Cost columns: median over the scenarios against the same scenario flown "
              "ideally.", "",
              *summary_table(conds), "", *findings(conds), ""]
