@@ -117,8 +117,9 @@ def summary_table(conds: dict[str, dict[str, Any]]) -> list[str]:
 
 def _events(c: dict[str, Any]) -> str:
     starts = c.get("starts_inside_pz", 0)  # a pair that starts inside a zone counts as one
-    inside = {"pz_intrusions": f" ({starts} of them pairs that start inside a zone)"}
-    said = [f"{c[k]} {EVENT_NAMES[k]}{'s' if c[k] > 1 else ''}{inside.get(k, '') if starts else ''}"
+    inside = f" ({starts} of them pairs that start inside a zone)" if starts else ""
+    note = {"pz_intrusions": inside}
+    said = [f"{c[k]} {EVENT_NAMES[k]}{'s' if c[k] > 1 else ''}{note.get(k, '')}"
             for k in EVENTS if c[k]]
     if c["reached"] < c["agents"]:
         said.append(f"{c['agents'] - c['reached']} of {c['agents']} vehicles short of their goal")
