@@ -16,6 +16,7 @@ range over twice the top speed) are recorded as the numbers they resolved to.
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -45,6 +46,13 @@ FAST = {"plane_step_deg": 45.0, "qp_samples": 12, "heading_step_deg": 45.0, "spe
 SAFE_GRID = {"plane_step_deg": 30.0, "qp_samples": 24, "fallback_heading_step_deg": 45.0,
              "fallback_speed_levels": 3}
 KINDS = ("random", "crowd", "inside", "ceiling", "obstacles", "noncoop", "accel", "coplanar")
+
+
+def _norm(x: np.ndarray) -> float:
+    """|x|, its squares summed in index order: ``np.linalg.norm`` of a vector goes through
+    BLAS's dot, whose kernels differ between CPUs in the last bit (fused multiply-adds), and
+    the recorded inputs must be the same on every machine."""
+    return math.sqrt(sum(float(t) * float(t) for t in np.ravel(x)))
 
 
 def option_set(name: str, v_max: float, dt: float) -> dict[str, Any]:
@@ -102,7 +110,7 @@ OB_COLS = 7
 
 def _unit(rng: np.random.Generator) -> np.ndarray:
     d = rng.normal(size=3)
-    return d / np.linalg.norm(d)
+    return d / _norm(d)
 
 
 def _obstacle(rng: np.random.Generator, p: np.ndarray, near: float) -> np.ndarray:
@@ -116,7 +124,7 @@ def _obstacle(rng: np.random.Generator, p: np.ndarray, near: float) -> np.ndarra
             lx, ly = rng.uniform(1.0, 8.0, 2)
             row = [1.0, c[0], c[1], lx, ly, h, rng.uniform(-3.2, 3.2)]
             half = 0.75 * float(np.hypot(lx, ly)) + 1.5
-        if np.linalg.norm(c - p[:2]) > half + 0.5:  # own vehicle outside the prism
+        if _norm(c - p[:2]) > half + 0.5:  # own vehicle outside the prism
             return np.array(row)
 
 
@@ -135,7 +143,7 @@ def encounter(seed: int) -> dict[str, Any]:
     p = np.array([0.0, 0.0, z])
     heading = rng.normal(size=3)
     heading[2] *= 1.0 if kind == "ceiling" else 0.3
-    v_pref = heading / np.linalg.norm(heading) * rng.uniform(0.3, 1.2) * v_max
+    v_pref = heading / _norm(heading) * rng.uniform(0.3, 1.2) * v_max
     v_now = v_pref if rng.random() < 0.5 else _unit(rng) * rng.uniform(0.0, v_max)
     n = int(rng.integers(8, 31)) if kind == "crowd" else int(rng.integers(1, 13))
     nbrs = np.zeros((n, 8))
@@ -144,7 +152,7 @@ def encounter(seed: int) -> dict[str, Any]:
         d = _unit(rng)
         if kind == "coplanar":
             d[2] = 0.0
-            d /= np.linalg.norm(d)
+            d /= _norm(d)
         if kind == "crowd":
             dist, vb = rng.uniform(r_pz * 1.02, r_pz * 2.0), -d * rng.uniform(0.5, 4.0)
         else:
