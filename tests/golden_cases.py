@@ -55,16 +55,23 @@ def _norm(x: np.ndarray) -> float:
     return math.sqrt(sum(float(t) * float(t) for t in np.ravel(x)))
 
 
-def option_set(name: str, v_max: float, dt: float) -> dict[str, Any]:
+def option_set(
+    name: str, v_max: float, dt: float, acceleration: float | None = None
+) -> dict[str, Any]:
     """The keyword options configuration ``name`` stood for at recording time, over the
-    ``paper`` preset's values (the defaults then): the recorder asks for them so."""
+    ``paper`` preset's values (the defaults then), for a decision with top speed ``v_max``,
+    period ``dt`` and acceleration limit ``acceleration``: the recorder asks for them so."""
     shared = {"reciprocal": True, "closing_guard": True, "pz_buffer": 2.0 * v_max * dt}
     safe = {**shared, **SAFE_GRID}
+    # the swarm horizon: RVO2-3D's, unless the acceleration limit keeps the vehicle from
+    # taking any velocity within a step
+    lagging = acceleration is not None and acceleration * dt < 2.0 * v_max
+    swarm_horizon = None if lagging else float(SWARM_RANGE) / (2.0 * float(v_max))
     return {
         "paper": {},
         "safe": safe,
         "fast": {**shared, **FAST},
-        "swarm": {**shared, **FAST, "horizon": float(SWARM_RANGE) / (2.0 * float(v_max))},
+        "swarm": {**shared, **FAST, "horizon": swarm_horizon},
         "safe_no_escape": {**safe, "least_bad_escape": False},
         "fast_coarse": {**shared, **FAST, "fine_fallback": False},
         "paper_planes20": {"plane_step_deg": 20.0, "qp_samples": 24, "margin": 1e-2},
@@ -74,13 +81,19 @@ def option_set(name: str, v_max: float, dt: float) -> dict[str, Any]:
 
 
 def recorded_selector(
-    name: str, v_max: float, dt: float, formulation: str = "plane_qp", solver: str | None = None
+    name: str,
+    v_max: float,
+    dt: float,
+    formulation: str = "plane_qp",
+    solver: str | None = None,
+    acceleration: float | None = None,
 ) -> Any:
     """The selector the recorder decides configuration ``name`` with: ``option_set`` over the
     ``paper`` preset."""
     from vo3d_opt import VelocitySelector
 
-    return VelocitySelector(formulation, solver, preset="paper", **option_set(name, v_max, dt))
+    options = option_set(name, v_max, dt, acceleration)
+    return VelocitySelector(formulation, solver, preset="paper", **options)
 
 
 OPTION_SETS = (
@@ -276,15 +289,16 @@ def _record() -> None:
         e = encounter(seed)
         kw = select_kwargs(e)
         v_max, dt = float(e["limits"][1]), float(e["dt"])
+        acc = kw["limits"].acceleration
         for name in OPTION_SETS:
-            sel = recorded_selector(name, v_max, dt)
+            sel = recorded_selector(name, v_max, dt, acceleration=acc)
             d = sel.select(**kw)
             rows.append(("plane_qp", "exact2d", name, seed, d))
         for form, solver, names, every in PY_PATHS:
             if seed % every:
                 continue
             for name in names:
-                sel = recorded_selector(name, v_max, dt, form, solver)
+                sel = recorded_selector(name, v_max, dt, form, solver, acc)
                 rows.append((form, solver or "", name, seed, sel.select(**kw)))
     out["dec_path"] = np.array([f"{f}/{s}" for f, s, *_ in rows])
     out["dec_set"] = np.array([r[2] for r in rows])

@@ -65,8 +65,10 @@ def test_presets_resolve_to_the_recorded_options(name: str) -> None:
     """Each configuration resolves, for a decision's top speed and period, to every option
     value it was recorded with: its options over the paper preset, as the recorder asks."""
     for v_max, dt in ((4.0, 0.2), (2.7, 0.05), (5.9, 0.43)):
-        recorded = recorded_selector(name, v_max, dt)
-        assert selector(name).options_for(v_max, dt) == recorded.options_for(v_max, dt), name
+        for acc in (None, 2.0, 2.0 * v_max / dt):
+            recorded = recorded_selector(name, v_max, dt, acceleration=acc)
+            today = selector(name).options_for(v_max, dt, None, acc)
+            assert today == recorded.options_for(v_max, dt, None, acc), (name, acc)
 
 
 @functools.cache

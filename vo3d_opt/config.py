@@ -76,7 +76,8 @@ class VOConfig(Model):
     #: running the same selector taking half of their avoidance.
     reciprocal: StrictBool = False
     #: s, (0, 1e6]: meetings further ahead are ignored; None: the paper's unbounded VO;
-    #: "sensing": ``sensing_range / (2 v_max)``.
+    #: "sensing": ``sensing_range / (2 v_max)``, or none under an acceleration limit that
+    #: keeps the vehicle from taking any velocity within a step (``turns_at_once``).
     horizon: Annotated[float | str | None, PlainValidator(_horizon)] = None
     #: s, (0, 1e6]: how far ahead an obstacle's VO pyramid reaches (RVO2-3D's
     #: ``timeHorizonObst``); None: without a horizon, whatever ``horizon`` is. A neighbour
@@ -189,7 +190,9 @@ _COARSE: Final[dict[str, Any]] = {
 #:   and a sampled grid (the fallbacks' too) of 8 headings by 3 speeds, the planes as coarse
 #:   near obstacles (``fine_planes`` off): for swarms where time matters more than the
 #:   shortest detour;
-#: - ``swarm``: ``fast`` with RVO2-3D's time horizon, ``sensing_range / (2 v_max)``.
+#: - ``swarm``: ``fast`` with RVO2-3D's time horizon, ``sensing_range / (2 v_max)``, for
+#:   vehicles that change velocity within a step (without an acceleration limit, or one that
+#:   spans the speed ball per step); with a tighter one, no horizon.
 PRESET_VALUES: Final[dict[str, Mapping[str, Any]]] = {
     "safe": _SAFE,
     "paper": {},
@@ -252,11 +255,18 @@ class SelectorConfig(Model):
         vo = self.vo
         return (vo.pz_buffer is None and vo.buffer_steps > 0) or vo.horizon == SENSING
 
-    def resolve(self, v_max: float, dt: float, sensing_range: float | None = None) -> dict:
+    def resolve(
+        self,
+        v_max: float,
+        dt: float,
+        sensing_range: float | None = None,
+        acceleration: float | None = None,
+    ) -> dict:
         """The numbers one decision plans with, keyed as the decision kernel's options: the
-        buffer in metres and the horizon in seconds (None: none) for top speed ``v_max`` and
-        period ``dt``; ``sensing_range`` stands in for the configuration's when it holds none.
-        ``ValueError`` when the horizon needs a range that neither gives."""
+        buffer in metres and the horizon in seconds (None: none) for top speed ``v_max``,
+        period ``dt`` and acceleration limit ``acceleration`` (m/s², None: none);
+        ``sensing_range`` stands in for the configuration's when it holds none. ``ValueError``
+        when the horizon needs a range that neither gives."""
         vo = self.vo
         pz_buffer = vo.buffer_steps * v_max * dt if vo.pz_buffer is None else vo.pz_buffer
         horizon = vo.horizon
@@ -270,10 +280,23 @@ class SelectorConfig(Model):
             horizon = float(rng) / (2.0 * float(v_max)) if v_max > 0 else None
             if horizon is not None and not math.isfinite(horizon):
                 horizon = None  # an unbounded range: no horizon
+            if not turns_at_once(v_max, dt, acceleration):
+                # A late reaction is safe only for a vehicle that can change its velocity
+                # within a step: under bounded acceleration (a lagging vehicle) the conflicts
+                # a horizon leaves for later pile up in a crowd until no velocity in reach
+                # is safe.
+                horizon = None
         flat = self.flat()
         for name in ("buffer_steps", "sensing_range"):
             del flat[name]
         return {**flat, "pz_buffer": float(pz_buffer), "horizon": horizon}
+
+
+def turns_at_once(v_max: float, dt: float, acceleration: float | None) -> bool:
+    """Whether a vehicle with top speed ``v_max`` and acceleration limit ``acceleration``
+    (m/s², None: none) can take any velocity within one period ``dt``: the acceleration
+    bound spans the speed ball, ``2 v_max``, per step."""
+    return acceleration is None or acceleration * dt >= 2.0 * v_max
 
 
 def describe() -> str:

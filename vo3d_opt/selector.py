@@ -98,7 +98,7 @@ class VelocitySelector:
             )
         #: The resolved configuration: the preset's values, each keyword over one field.
         self.config = SelectorConfig.of(preset, **overrides)
-        self._resolved: dict[tuple[float, float, float | None], Options] = {}
+        self._resolved: dict[tuple[float, float, float | None, float | None], Options] = {}
         # The last decision's limits, dt and sensing range, and their bounds and Config: a
         # control loop asks with the same ones every time.
         self._last: tuple[Any, ...] = (None, None, None, None, None)
@@ -129,15 +129,27 @@ class VelocitySelector:
             else PythonPath(formulation, qp, nlp)
         )
 
-    def options_for(self, v_max: float, dt: float, sensing_range: float | None = None) -> Options:
-        """The numbers a decision with top speed ``v_max`` and period ``dt`` plans with
-        (``SelectorConfig.resolve``), kept for the next decision with the same."""
-        key = (v_max, dt, sensing_range) if self.config.per_decision else (0.0, 0.0, None)
+    def options_for(
+        self,
+        v_max: float,
+        dt: float,
+        sensing_range: float | None = None,
+        acceleration: float | None = None,
+    ) -> Options:
+        """The numbers a decision with top speed ``v_max``, period ``dt`` and acceleration
+        limit ``acceleration`` plans with (``SelectorConfig.resolve``), kept for the next
+        decision with the same."""
+        key = (
+            (v_max, dt, sensing_range, acceleration)
+            if self.config.per_decision
+            else (0.0, 0.0, None, None)
+        )
         options = self._resolved.get(key)
         if options is None:
             if len(self._resolved) >= 64:
                 self._resolved.clear()
-            options = Options(**self.config.resolve(v_max, dt, sensing_range))
+            resolved = self.config.resolve(v_max, dt, sensing_range, acceleration)
+            options = Options(**resolved)
             self._resolved[key] = options
         return options
 
@@ -246,7 +258,7 @@ class VelocitySelector:
         if last[0] is limits and last[1] == dt and last[2] == sensing_range:
             return last[3], last[4]
         bounds = inputs.bounds_row(limits, dt)
-        config = self.options_for(limits.speed[1], dt, sensing_range).config
+        config = self.options_for(limits.speed[1], dt, sensing_range, limits.acceleration).config
         self._last = (limits, dt, sensing_range, bounds, config)
         return bounds, config
 
@@ -282,7 +294,7 @@ class VelocitySelector:
         """A decision on the Python path: the VOs (compiled), the formulation's answer, the
         last line of the contract."""
         assert self._python is not None
-        options = self.options_for(limits.speed[1], dt, sensing_range)
+        options = self.options_for(limits.speed[1], dt, sensing_range, limits.acceleration)
         bounds = Bounds.of(limits, dt)
         vos = py_build_vos(p, v_now, v_pref, nbrs, prisms, bounds, options.config)
         enc = Encounter(

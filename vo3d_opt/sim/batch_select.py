@@ -123,7 +123,7 @@ class BatchSelect:
         sel = step.selector
         if not sel.config.per_decision:
             top = step.limits.v_max
-        return sel.options_for(top, dt, rng)
+        return sel.options_for(top, dt, rng, step.limits.acceleration)
 
     def retire(self, members: Sequence[int]) -> None:
         """Forget the vehicle pairs of these members (done flying): fewer distances a step."""

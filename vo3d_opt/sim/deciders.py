@@ -313,7 +313,10 @@ class PerAgentSelect(_SelectorStep):
             r_pz=np.asarray(sc.r_pz, dtype=float),
             deciding=snap.deciding,
             limits=self.own_limits,
-            options=[self.selector.options_for(lim.speed[1], sc.dt) for lim in self.own_limits],
+            options=[
+                self.selector.options_for(lim.speed[1], sc.dt, None, lim.acceleration)
+                for lim in self.own_limits
+            ],
             dt=sc.dt,
         )
         return decide_sensed(fleet, observers, self.sphere_rows, self.prism_rows)

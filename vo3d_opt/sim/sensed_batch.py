@@ -115,11 +115,13 @@ def decide_sensed(
     few; a sweep runs its encounters in parallel)."""
     sw = sensed_swarm(fleet, observers, spheres, prisms)
     out = np.empty((len(observers), MANY_OUT_SIZE))
-    # options_for keys a vehicle's options on its top speed (dt is the run's): one call each
-    by_top_speed: dict[float, list[int]] = {}
+    # options_for keys a vehicle's options on its top speed and acceleration limit (dt is the
+    # run's): one call each
+    by_limits: dict[tuple[float, float | None], list[int]] = {}
     for d, o in enumerate(observers):
-        by_top_speed.setdefault(float(fleet.limits[o.index].speed[1]), []).append(d)
-    for ds in by_top_speed.values():
+        lim = fleet.limits[o.index]
+        by_limits.setdefault((lim.speed[1], lim.acceleration), []).append(d)
+    for ds in by_limits.values():
         rows = np.array(ds, dtype=np.int64)
         part = sw._replace(
             who=sw.who[rows],

@@ -18,8 +18,8 @@ from ..types import AgentState, Neighbor
 from .inputs import SwarmDecision, SwarmInputs
 
 #: The options a decision with top speed v_max and period dt plans with, given the sensing
-#: range: ``VelocitySelector.options_for``.
-OptionsFor = Callable[[float, float, float | None], Options]
+#: range and the acceleration limit (None: none): ``VelocitySelector.options_for``.
+OptionsFor = Callable[[float, float, float | None, float | None], Options]
 
 
 class Answer(Protocol):
@@ -35,16 +35,24 @@ class Answer(Protocol):
 def options_by_vehicle(
     inputs: SwarmInputs, options_for: OptionsFor, per_decision: bool
 ) -> list[tuple[Options, np.ndarray]]:
-    """The deciding vehicles grouped by the options they plan with (their own top speed may
-    set the buffer and the horizon when ``per_decision``): (options, the rows of ``who`` that
-    use them)."""
-    v_max = inputs.bounds[inputs.who, 1]
-    groups = np.unique(v_max) if per_decision else v_max[:0]
+    """The deciding vehicles grouped by the options they plan with (their own top speed and
+    acceleration limit may set the buffer and the horizon when ``per_decision``): (options,
+    the rows of ``who`` that use them)."""
     dt, rng = inputs.dt, inputs.sensing_range
-    if groups.size <= 1:
-        top = float(groups[0]) if groups.size else inputs.limits.v_max
-        return [(options_for(top, dt, rng), np.arange(inputs.who.shape[0]))]
-    return [(options_for(float(v), dt, rng), np.flatnonzero(v_max == v)) for v in groups]
+    bounds = inputs.bounds[inputs.who]
+    if not per_decision or bounds.shape[0] == 0:
+        lim = inputs.limits
+        return [(options_for(lim.v_max, dt, rng, lim.acceleration), np.arange(bounds.shape[0]))]
+    acc = bounds[:, 4]  # NaN: none (inputs.bounds_row)
+    # one key per (top speed, acceleration) pair: complex numbers sort by both at once
+    keys, group_of = np.unique(
+        bounds[:, 1] + 1j * np.where(np.isnan(acc), -1.0, acc), return_inverse=True
+    )
+    options = [options_for(k.real, dt, rng, None if k.imag < 0 else k.imag) for k in keys]
+    if len(options) == 1:
+        return [(options[0], np.arange(bounds.shape[0]))]
+    group_of = group_of.reshape(-1)
+    return [(opt, np.flatnonzero(group_of == g)) for g, opt in enumerate(options)]
 
 
 def select_many_compiled(
