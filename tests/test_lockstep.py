@@ -34,7 +34,7 @@ def summary(record) -> dict:
 
 @pytest.mark.parametrize(("family", "count", "method"), [
     ("pair", 12, "vo3d"), ("group", 6, "vo3d"), ("lagged", 6, "vo3d"),
-    ("intruder", 6, "vo3d"), ("dense", 3, "vo3d"), ("group", 6, "none"),
+    ("intruder", 6, "vo3d"), ("dense", 3, "vo3d"), ("group", 6, "none"), ("noisy", 6, "vo3d"),
 ])
 def test_flown_together_as_each_alone(family, count, method):
     runs = [flown(make_encounter(family, 7, i).load(), Method(name=method))[:2]
@@ -132,18 +132,39 @@ def test_a_watcher_back_home_stops_in_both_loops(tau):
 
 
 def test_runs_that_do_not_fit_are_refused():
-    noisy = flown(make_encounter("noisy", 0, 0).load(), Method())
-    assert not fits(noisy[0], noisy[1])
+    rotorpy = flown(make_encounter("rotorpy", 0, 0).load(), Method())
+    assert not fits(rotorpy[0], rotorpy[1])
     with pytest.raises(ValueError, match="cannot be flown together"):
-        fly_together([noisy[:2]])
+        fly_together([rotorpy[:2]])
+    # runs that sense for themselves and runs that decide from the true snapshot: apart
+    noisy = flown(make_encounter("noisy", 0, 0).load(), Method())
+    pair = flown(make_encounter("pair", 0, 0).load(), Method())
+    assert fits(noisy[0], noisy[1]) and fits(pair[0], pair[1])
+    with pytest.raises(ValueError, match="batches of their own"):
+        fly_together([noisy[:2], pair[:2]])
 
 
+def test_noisy_runs_beside_a_run_without_avoidance():
+    """A run in which nobody decides shares the batch of runs that sense for themselves: its
+    vehicles are never decided for, and each run is still its own."""
+    runs = [flown(make_encounter("noisy", 3, i).load(), Method())[:2] for i in (0, 1)]
+    runs.insert(1, flown(make_encounter("pair", 3, 0).load(), Method(name="none"))[:2])
+    together = fly_together(runs)
+    for (sc, step), got in zip(runs, together, strict=True):
+        family = "pair" if step.formulation == "none" else "noisy"
+        name = Method(name="none") if family == "pair" else Method()
+        index = int(sc.name.rsplit("i", 1)[1])
+        sc2, step2, _ = flown(make_encounter(family, 3, index).load(), name)
+        assert same_record(fly(sc2, step2, progress=False), got), sc.name
+
+
+@pytest.mark.parametrize("family", ["pair", "noisy"])
 @pytest.mark.parametrize("method", ["vo3d", "none"])
-def test_batched_rows_are_the_single_rows(method):
+def test_batched_rows_are_the_single_rows(family, method):
     m = Method(name=method)
     indices = [3, 0, 5, 1, 2]
-    alone = pd.DataFrame([run_encounter("pair", 2, i, m) for i in indices])
-    batched = pd.DataFrame(run_encounters("pair", 2, indices, m))
+    alone = pd.DataFrame([run_encounter(family, 2, i, m) for i in indices])
+    batched = pd.DataFrame(run_encounters(family, 2, indices, m))
     assert list(batched["index"]) == indices
     assert rows_equal(alone, batched)
 

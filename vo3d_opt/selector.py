@@ -139,17 +139,13 @@ class VelocitySelector:
         """The numbers a decision with top speed ``v_max``, period ``dt`` and acceleration
         limit ``acceleration`` plans with (``SelectorConfig.resolve``), kept for the next
         decision with the same."""
-        key = (
-            (v_max, dt, sensing_range, acceleration)
-            if self.config.per_decision
-            else (0.0, 0.0, None, None)
-        )
+        key = (v_max, dt, sensing_range, acceleration)
+        key = key if self.config.per_decision else (0.0, 0.0, None, None)
         options = self._resolved.get(key)
         if options is None:
             if len(self._resolved) >= 64:
                 self._resolved.clear()
-            resolved = self.config.resolve(v_max, dt, sensing_range, acceleration)
-            options = Options(**resolved)
+            options = Options(**self.config.resolve(v_max, dt, sensing_range, acceleration))
             self._resolved[key] = options
         return options
 

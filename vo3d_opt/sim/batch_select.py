@@ -16,6 +16,7 @@ It drives the kernel through the arrays ``select_many`` builds
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -33,21 +34,24 @@ from vo3d_opt.formulations.swarm import (
     neighbor_lists,
 )
 from vo3d_opt.geometry.pyramid import prism_rows
-from vo3d_opt.sim.deciders import SwarmSelect
+from vo3d_opt.sim.deciders import PerAgentSelect, SwarmSelect
 from vo3d_opt.sim.scenario import Scenario
-from vo3d_opt.status import DECISION_STATUSES
+from vo3d_opt.sim.sensed_batch import Fleet, Observer, decide_sensed
 from vo3d_opt.swarm.checks import vehicle_limits
 from vo3d_opt.swarm.sensing import sphere_links
 from vo3d_opt.types import Box
-
-#: The kernel's status codes as names (its code c is ``DECISION_STATUSES[c]``).
-STATUS_NAMES = tuple(str(s) for s in DECISION_STATUSES)
 
 
 def decides_in_batches(step: Any) -> bool:
     """Whether ``step`` decides as :class:`BatchSelect` can: a ``SwarmSelect`` whose selector
     runs compiled, with every vehicle in range as a neighbour (no ``max_neighbors``)."""
     return isinstance(step, SwarmSelect) and step.compiled and step.max_neighbors is None
+
+
+def decides_sensed_in_batches(step: Any) -> bool:
+    """Whether ``step`` decides as :class:`SensedBatch` can: a ``PerAgentSelect`` with a sensor
+    whose decisions run compiled, every vehicle in one call (``one_call``)."""
+    return isinstance(step, PerAgentSelect) and step.one_call
 
 
 @dataclass(frozen=True)
@@ -283,3 +287,92 @@ def _merge(parts: list[Any], rows: int) -> tuple[np.ndarray, np.ndarray]:
         m += sub_idx.shape[0]
     idx = np.concatenate(chunks).astype(np.int64) if chunks else np.zeros(0, dtype=np.int64)
     return span, np.ascontiguousarray(idx)
+
+
+@dataclass(frozen=True)
+class SensedMember:
+    """One run of a batch whose vehicles sense each other late or noisily: its scenario and
+    decision step, vehicles ``lo <= i < hi`` of the batch's arrays."""
+
+    sc: Scenario
+    step: PerAgentSelect
+    lo: int
+    hi: int
+
+
+class SensedBatch:
+    """The deciding vehicles of several runs with noisy or late sensing in one compiled call
+    per step: each run's step pushes its own sensor and lists what each of its vehicles
+    senses (``PerAgentSelect.observers``, the rows ``PerAgentSelect`` decides from), offset
+    into the batch's arrays; the kernel decides each vehicle from its own rows only, so every
+    velocity and status is its run's own, bit for bit (tests/test_lockstep.py)."""
+
+    def __init__(self, members: Sequence[SensedMember], n: int) -> None:
+        self.members = list(members)
+        self.n = n
+        self.r_pz = np.zeros(n)
+        # a vehicle of no member (a run in which nobody avoids) never decides: any row will do
+        first = self.members[0].step
+        self.limits: list[Any] = [first.own_limits[0]] * n
+        self.options: list[Any] = [first.own_options()[0]] * n
+        self.sphere_base: list[int] = []
+        self.prism_base: list[int] = []
+        spheres: list[np.ndarray] = []
+        prisms: list[np.ndarray] = []
+        same: dict[Options, Options] = {}  # one object per set of options: one kernel call
+        for mem in self.members:
+            self.r_pz[mem.lo : mem.hi] = mem.sc.r_pz
+            self.limits[mem.lo : mem.hi] = mem.step.own_limits
+            self.options[mem.lo : mem.hi] = [same.setdefault(o, o) for o in mem.step.own_options()]
+            self.sphere_base.append(sum(x.shape[0] for x in spheres))
+            self.prism_base.append(sum(x.shape[0] for x in prisms))
+            spheres.append(mem.step.sphere_rows)
+            prisms.append(mem.step.prism_rows)
+        self.spheres = np.ascontiguousarray(np.concatenate(spheres).reshape(-1, 4))
+        self.prisms = np.ascontiguousarray(np.concatenate(prisms).reshape(-1, 4))
+        self.dt = float(self.members[0].sc.dt)
+        self.retired: set[int] = set()
+
+    def retire(self, members: Sequence[int]) -> None:
+        """Stop sensing for these members (done flying)."""
+        self.retired |= set(members)
+
+    def decide(
+        self, P: np.ndarray, V: np.ndarray, W: np.ndarray, deciding: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, float]:
+        """As :meth:`BatchSelect.decide`; every member still flying senses this step's state
+        (its sensor's clock is its steps), whether or not any of its vehicles decides."""
+        t0 = time.perf_counter()
+        u, codes = V.copy(), np.full(self.n, -1, dtype=np.int64)
+        observers: list[Observer] = []
+        for f, mem in enumerate(self.members):
+            if f not in self.retired:
+                observers += self._observers(f, mem, P, V, deciding)
+        if observers:
+            fleet = Fleet(P, V, W, self.r_pz, deciding, self.limits, self.options, self.dt)
+            velocities, found = decide_sensed(fleet, observers, self.spheres, self.prisms)
+            who = np.array([o.index for o in observers], dtype=np.int64)
+            u[who], codes[who] = velocities, found
+        return u, codes, time.perf_counter() - t0
+
+    def _observers(
+        self, f: int, mem: SensedMember, P: np.ndarray, V: np.ndarray, deciding: np.ndarray
+    ) -> list[Observer]:
+        """Member ``f``'s deciding vehicles' views, indices into the batch's arrays."""
+        sl = slice(mem.lo, mem.hi)
+        p = P[sl]
+        obst, sph = mem.step.surfaces(p)
+        assert mem.step.sensor is not None
+        mem.step.sensor.push(p, V[sl])
+        who = [i for i in mem.step.order if deciding[mem.lo + i]]
+        lo, sb, pb = mem.lo, self.sphere_base[f], self.prism_base[f]
+        return [
+            dataclasses.replace(
+                o,
+                index=o.index + lo,
+                sensed=o.sensed + lo,
+                spheres=o.spheres + sb,
+                obstacles=o.obstacles + pb,
+            )
+            for o in mem.step.observers(p, who, obst, sph)
+        ]

@@ -13,10 +13,12 @@ Both apply the same sensing rules (``vo3d_opt.swarm``; ``simulator``'s docstring
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from vo3d_opt.formulations.common import Options
 from vo3d_opt.geometry.pyramid import prism_rows
 from vo3d_opt.sim.landing import Landing
 from vo3d_opt.sim.record import SelectorLike, Snapshot, StepDecision
@@ -26,7 +28,7 @@ from vo3d_opt.sim.safety import (
     planning_limits,
 )
 from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
-from vo3d_opt.sim.sensed_batch import Fleet, Observer, decide_sensed
+from vo3d_opt.sim.sensed_batch import STATUS_NAMES, Fleet, Observer, decide_sensed
 from vo3d_opt.sim.sensing import Sensor
 from vo3d_opt.types import AgentState, Limits, Neighbor
 
@@ -188,8 +190,12 @@ class PerAgentSelect(_SelectorStep):
     def _sensed(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Centre distances (N, N), obstacle surface distances (N, M), sphere surface distances
         (N, S)."""
-        sc, n = self.scenario, p.shape[0]
         centre = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
+        return (centre, *self.surfaces(p))
+
+    def surfaces(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Obstacle surface distances (N, M) and sphere surface distances (N, S)."""
+        sc, n = self.scenario, p.shape[0]
         bodies = sc.bodies
         obst = (
             np.stack([bodies[m].surface_distance(p) for m in self.sensed_idx], axis=1)
@@ -207,7 +213,7 @@ class PerAgentSelect(_SelectorStep):
             if sc.spheres
             else np.zeros((n, 0))
         )
-        return centre, obst, sph
+        return obst, sph
 
     def decide(self, snap: Snapshot) -> StepDecision:
         p, v = snap.positions, snap.velocities
@@ -288,14 +294,36 @@ class PerAgentSelect(_SelectorStep):
     ) -> tuple[np.ndarray, np.ndarray]:
         """The compiled decisions of the vehicles ``who``, each from the others as its sensor
         reports them (``sim.sensed_batch``): what ``_decide_each`` decides, in one call."""
+        observers = self.observers(snap.positions, who, obst, sph)
+        fleet = Fleet(
+            positions=snap.positions,
+            velocities=snap.velocities,
+            preferred=snap.preferred,
+            r_pz=np.asarray(self.scenario.r_pz, dtype=float),
+            deciding=snap.deciding,
+            limits=self.own_limits,
+            options=self.own_options(),
+            dt=self.scenario.dt,
+        )
+        velocities, codes = decide_sensed(fleet, observers, self.sphere_rows, self.prism_rows)
+        return velocities, STATUS_NAMES[codes]
+
+    def observers(
+        self, p: np.ndarray, who: Sequence[int] | np.ndarray, obst: np.ndarray, sph: np.ndarray
+    ) -> list[Observer]:
+        """What each of the vehicles ``who`` senses now (the sensor's view; ``push`` this
+        step's state first), given the true positions ``p`` and the surface distances
+        ``_sensed`` gives: the vehicles within its range by the sensed centre distance, the
+        spheres and obstacles within its obstacle range."""
         assert self.sensor is not None
-        sc, p = self.scenario, snap.positions
+        sc = self.scenario
         vrange, orange = sc.sensing.vehicle_range, sc.sensing.obstacle_range
         observers = []
         for i in who:
             seen_p, seen_v = self.sensor.sensed(int(i))
             near = np.linalg.norm(seen_p - p[i], axis=1)
-            js = np.array([j for j in np.flatnonzero(near <= vrange) if j != i], dtype=np.int64)
+            js = np.flatnonzero(near <= vrange)
+            js = js[js != i].astype(np.int64)
             observers.append(
                 Observer(
                     index=int(i),
@@ -306,20 +334,15 @@ class PerAgentSelect(_SelectorStep):
                     obstacles=np.flatnonzero(obst[i] <= orange),
                 )
             )
-        fleet = Fleet(
-            positions=p,
-            velocities=snap.velocities,
-            preferred=snap.preferred,
-            r_pz=np.asarray(sc.r_pz, dtype=float),
-            deciding=snap.deciding,
-            limits=self.own_limits,
-            options=[
-                self.selector.options_for(lim.speed[1], sc.dt, None, lim.acceleration)
-                for lim in self.own_limits
-            ],
-            dt=sc.dt,
-        )
-        return decide_sensed(fleet, observers, self.sphere_rows, self.prism_rows)
+        return observers
+
+    def own_options(self) -> list[Options]:
+        """Each vehicle's planning options (``VelocitySelector.options_for``)."""
+        dt = self.scenario.dt
+        return [
+            self.selector.options_for(lim.speed[1], dt, None, lim.acceleration)
+            for lim in self.own_limits
+        ]
 
     def extra(self) -> dict[str, Any]:
         return {

@@ -6,16 +6,18 @@ the preferred-velocity rule, the dynamics and the record, each on arrays of two 
 :func:`fly_together` takes the runs a batch at a time and does each of those once per step for
 every vehicle of the batch: the preferred velocities by one ``GoalWithDetours`` over all the
 vehicles (its rule is per vehicle, and the runs share the clock), the decisions by one
-:class:`~vo3d_opt.sim.batch_select.BatchSelect` pass, the dynamics and the arrivals as array
+:class:`~vo3d_opt.sim.batch_select.BatchSelect` pass (or, for runs with noisy or late sensing,
+one :class:`~vo3d_opt.sim.batch_select.SensedBatch` pass), the dynamics and the arrivals as array
 operations. Each run is :func:`~vo3d_opt.sim.simulator.fly`'s run of its scenario bit for bit
 (the same positions, velocities, commands, statuses and arrivals; only the decision times
 differ), which tests/test_lockstep.py checks: no vehicle sees another run's, and every
 operation is the same arithmetic on each vehicle's numbers.
 
 What it flies (:func:`fits`): kinematic or first-order dynamics, and either noiseless immediate
-sensing with a step that is a compiled ``SwarmSelect`` (``BatchSelect.fits``), or a step that
-nobody calls (every agent ``avoids: false``: a run without avoidance). Anything else goes
-through ``fly``.
+sensing with a step that is a compiled ``SwarmSelect`` (``decides_in_batches``), any sensing
+with a compiled ``PerAgentSelect`` that decides every vehicle in one call
+(``decides_sensed_in_batches``), or a step that nobody calls (every agent ``avoids: false``: a
+run without avoidance). Anything else goes through ``fly``.
 """
 
 from __future__ import annotations
@@ -26,10 +28,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vo3d_opt.sim.batch_select import STATUS_NAMES, BatchSelect, Member, decides_in_batches
+from vo3d_opt.sim.batch_select import (
+    BatchSelect,
+    Member,
+    SensedBatch,
+    SensedMember,
+    decides_in_batches,
+    decides_sensed_in_batches,
+)
 from vo3d_opt.sim.record import DecisionStep, RunRecord, Snapshot, StepDecision, check_allotment
 from vo3d_opt.sim.safety import derive_margins
 from vo3d_opt.sim.scenario import Scenario
+from vo3d_opt.sim.sensed_batch import STATUS_NAMES
 from vo3d_opt.sim.simulator import INVALID
 from vo3d_opt.sim.traffic import GoalWithDetours, keep_watch
 
@@ -47,10 +57,17 @@ def fits_scenario(sc: Scenario, deciding: bool = True) -> bool:
 
 def fits(sc: Scenario, step: DecisionStep) -> bool:
     """Whether :func:`fly_together` flies ``sc`` with ``step`` as ``fly`` would (with nobody
-    avoiding, nobody senses: the sensing does not matter)."""
-    if not sc.avoids.any():
+    avoiding, nobody senses: the sensing does not matter; a step that senses for itself,
+    ``decides_sensed_in_batches``, takes any sensing)."""
+    if not sc.avoids.any() or decides_sensed_in_batches(step):
         return fits_scenario(sc, deciding=False)
     return fits_scenario(sc) and decides_in_batches(step)
+
+
+def senses(step: DecisionStep) -> bool:
+    """Whether ``step``'s runs fly in batches of their own: every decider of a batch decides
+    either from the true snapshot (``BatchSelect``) or from its own sensor (``SensedBatch``)."""
+    return decides_sensed_in_batches(step)
 
 
 @dataclass
@@ -130,8 +147,7 @@ class _Batch:
         speeds = cat([r.sc.cruise_speed for r in runs])  # fly's rule: scenario_goal_velocity
         self.prefer = GoalWithDetours(self.goals, speeds, dt, near=cat([r.sc.r_pz for r in runs]))
         self.deciders = [r for r in runs if r.sc.avoids.any()]
-        members = [Member(r.sc, r.step, r.lo, r.hi) for r in self.deciders]  # type: ignore[arg-type]
-        self.select = BatchSelect(members, n) if members else None
+        self.select = _batch_select(self.deciders, n)
         self.retired: set[int] = set()
         self.hist = _History(max(r.total for r in runs), n)
         self.names = _Names()
@@ -286,6 +302,19 @@ class _Batch:
             wall_time=wall,
             extra=r.step.extra(),
         )
+
+
+def _batch_select(deciders: list[_Run], n: int) -> BatchSelect | SensedBatch | None:
+    """One decision pass for the deciding runs: from the true snapshot, or each run from its
+    own sensor (a batch holds one kind: ``senses``)."""
+    if not deciders:
+        return None
+    sensed = [senses(r.step) for r in deciders]
+    if all(sensed):
+        return SensedBatch([SensedMember(r.sc, r.step, r.lo, r.hi) for r in deciders], n)  # type: ignore[arg-type]
+    if any(sensed):
+        raise ValueError("runs that sense for themselves fly in batches of their own (senses)")
+    return BatchSelect([Member(r.sc, r.step, r.lo, r.hi) for r in deciders], n)  # type: ignore[arg-type]
 
 
 def _tau(sc: Scenario) -> float | None:

@@ -26,7 +26,8 @@ from vo3d_opt.formulations.swarm import AGENT_COLUMNS, MANY_OUT_SIZE, Swarm, dec
 from vo3d_opt.status import DECISION_STATUSES
 from vo3d_opt.types import Limits
 
-_STATUS_NAMES = np.array([str(s) for s in DECISION_STATUSES], dtype=object)
+#: The kernel's status codes as names: code c is ``STATUS_NAMES[c]``.
+STATUS_NAMES = np.array([str(s) for s in DECISION_STATUSES], dtype=object)
 
 
 @dataclass(frozen=True)
@@ -110,18 +111,17 @@ def sensed_swarm(
 def decide_sensed(
     fleet: Fleet, observers: Sequence[Observer], spheres: np.ndarray, prisms: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Each observer's velocity (D, 3) and status name (D,), in ``observers``' order: one
-    compiled call per set of planning options, on the calling thread (a run's vehicles are
-    few; a sweep runs its encounters in parallel)."""
+    """Each observer's velocity (D, 3) and kernel status code (D,) (``STATUS_NAMES[c]``), in
+    ``observers``' order: one compiled call per options object of ``fleet.options``, on the
+    calling thread (a run's vehicles are few; a sweep runs its encounters in parallel)."""
     sw = sensed_swarm(fleet, observers, spheres, prisms)
     out = np.empty((len(observers), MANY_OUT_SIZE))
-    # options_for keys a vehicle's options on its top speed and acceleration limit (dt is the
-    # run's): one call each
-    by_limits: dict[tuple[float, float | None], list[int]] = {}
+    # options_for hands out one object per set of options: grouping by the object is cheap,
+    # and two equal objects would only cost two calls with the same answers
+    by_options: dict[int, list[int]] = {}
     for d, o in enumerate(observers):
-        lim = fleet.limits[o.index]
-        by_limits.setdefault((lim.speed[1], lim.acceleration), []).append(d)
-    for ds in by_limits.values():
+        by_options.setdefault(id(fleet.options[o.index]), []).append(d)
+    for ds in by_options.values():
         rows = np.array(ds, dtype=np.int64)
         part = sw._replace(
             who=sw.who[rows],
@@ -130,4 +130,4 @@ def decide_sensed(
             ob_span=sw.ob_span[rows],
         )
         out[rows] = decide_many(part, fleet.options[observers[ds[0]].index].config, 1)
-    return out[:, :3], _STATUS_NAMES[out[:, 3].astype(np.int64)]
+    return out[:, :3], out[:, 3].astype(np.int64)

@@ -230,11 +230,12 @@ def run_encounters(
 
 
 def _lockstep_groups(waiting: list[_Waiting]) -> list[list[_Waiting]]:
-    """The waiting encounters in groups of one ``dt`` and at most LOCKSTEP_AGENTS vehicles."""
+    """The waiting encounters in groups of one ``dt``, one kind of sensing
+    (``lockstep.senses``) and at most LOCKSTEP_AGENTS vehicles."""
     groups: list[list[_Waiting]] = []
-    by_dt: dict[float, list[_Waiting]] = {}
+    by_dt: dict[tuple[float, bool], list[_Waiting]] = {}
     for w in waiting:
-        by_dt.setdefault(float(w.sc.dt), []).append(w)
+        by_dt.setdefault((float(w.sc.dt), lockstep.senses(w.step)), []).append(w)
     for same in by_dt.values():
         group: list[_Waiting] = []
         for w in same:
