@@ -92,6 +92,23 @@ def test_seeds_reproduce_whatever_the_order_or_subset_of_observers():
     assert not np.array_equal(a[0][0], d[0][0])
 
 
+@pytest.mark.parametrize(("noise", "latency"), [((0.5, 0.3), 0.4), ((0.0, 0.0), 0.2),
+                                                ((0.2, 0.0), 0.0)])
+def test_sensed_many_is_sensed_for_each(noise, latency):
+    rng = np.random.default_rng(5)
+    sensor = Sensor(7, 0.2, position_noise=noise[0], velocity_noise=noise[1], latency=latency,
+                    seed=11)
+    for _ in range(4):
+        sensor.push(rng.normal(size=(7, 3)) * 30.0, rng.normal(size=(7, 3)))
+        who = rng.permutation(7)[: rng.integers(1, 8)]
+        p, v = sensor.sensed_many(who)
+        for d, i in enumerate(who):
+            one_p, one_v = sensor.sensed(int(i))
+            assert np.array_equal(p[d], one_p) and np.array_equal(v[d], one_v)
+    with pytest.raises(ValueError, match="vehicle index"):
+        sensor.sensed_many(np.array([0, 7]))
+
+
 @pytest.mark.parametrize("kwargs, key", [
     (dict(n=0), "n"),
     (dict(n=2.5), "n"),

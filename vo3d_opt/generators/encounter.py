@@ -68,8 +68,8 @@ class Family:
     ``needs``: the scenario keys (dotted paths) its draws use that not every build's schema
     defines (the real-world keys); the sweep refuses the family while one is missing. ``batched``:
     its encounters can fly side by side (``vo3d_opt.sim.lockstep``: kinematic or first-order
-    dynamics, noiseless sensing), so a sweep hands a task many of them; else one each (an
-    encounter of seconds or minutes is a task of its own)."""
+    dynamics), so a sweep hands a task many of them; else one each (an encounter of seconds or
+    minutes is a task of its own)."""
 
     name: str
     summary: str

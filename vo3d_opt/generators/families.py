@@ -457,7 +457,6 @@ NOISY_SEEDS = 2**31  # the sensing seed, uniform in [0, 2^31)
         }
     },
     needs=("sensing.position_noise", "sensing.velocity_noise", "sensing.latency", "sensing.seed"),
-    batched=False,
 )
 def noisy(rng: np.random.Generator) -> Draw | None:
     """A ``group`` draw in which every sensed position and velocity carries Gaussian noise

@@ -16,7 +16,6 @@ It drives the kernel through the arrays ``select_many`` builds
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -365,14 +364,5 @@ class SensedBatch:
         assert mem.step.sensor is not None
         mem.step.sensor.push(p, V[sl])
         who = [i for i in mem.step.order if deciding[mem.lo + i]]
-        lo, sb, pb = mem.lo, self.sphere_base[f], self.prism_base[f]
-        return [
-            dataclasses.replace(
-                o,
-                index=o.index + lo,
-                sensed=o.sensed + lo,
-                spheres=o.spheres + sb,
-                obstacles=o.obstacles + pb,
-            )
-            for o in mem.step.observers(p, who, obst, sph)
-        ]
+        at = (mem.lo, self.sphere_base[f], self.prism_base[f])
+        return mem.step.observers(p, who, obst, sph, at=at)

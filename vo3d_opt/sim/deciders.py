@@ -309,29 +309,39 @@ class PerAgentSelect(_SelectorStep):
         return velocities, STATUS_NAMES[codes]
 
     def observers(
-        self, p: np.ndarray, who: Sequence[int] | np.ndarray, obst: np.ndarray, sph: np.ndarray
+        self,
+        p: np.ndarray,
+        who: Sequence[int] | np.ndarray,
+        obst: np.ndarray,
+        sph: np.ndarray,
+        *,
+        at: tuple[int, int, int] = (0, 0, 0),
     ) -> list[Observer]:
         """What each of the vehicles ``who`` senses now (the sensor's view; ``push`` this
         step's state first), given the true positions ``p`` and the surface distances
         ``_sensed`` gives: the vehicles within its range by the sensed centre distance, the
-        spheres and obstacles within its obstacle range."""
+        spheres and obstacles within its obstacle range. ``at``: offsets added to the vehicle,
+        sphere and obstacle indices (where the run's rows start in a batch's arrays)."""
         assert self.sensor is not None
         sc = self.scenario
         vrange, orange = sc.sensing.vehicle_range, sc.sensing.obstacle_range
+        who = np.asarray(who, dtype=np.int64).reshape(-1)
+        seen_p, seen_v = self.sensor.sensed_many(who)
+        near = np.linalg.norm(seen_p - p[who][:, None, :], axis=-1) <= vrange
+        near[np.arange(who.shape[0]), who] = False  # not itself
+        in_sph, in_obst = sph[who] <= orange, obst[who] <= orange
+        lo, at_sph, at_obst = at
         observers = []
-        for i in who:
-            seen_p, seen_v = self.sensor.sensed(int(i))
-            near = np.linalg.norm(seen_p - p[i], axis=1)
-            js = np.flatnonzero(near <= vrange)
-            js = js[js != i].astype(np.int64)
+        for d, i in enumerate(who.tolist()):
+            js = np.flatnonzero(near[d])
             observers.append(
                 Observer(
-                    index=int(i),
-                    sensed=js,
-                    positions=seen_p[js],
-                    velocities=seen_v[js],
-                    spheres=np.flatnonzero(sph[i] <= orange),
-                    obstacles=np.flatnonzero(obst[i] <= orange),
+                    index=i + lo,
+                    sensed=js + lo,
+                    positions=seen_p[d, js],
+                    velocities=seen_v[d, js],
+                    spheres=np.flatnonzero(in_sph[d]) + at_sph,
+                    obstacles=np.flatnonzero(in_obst[d]) + at_obst,
                 )
             )
         return observers

@@ -125,6 +125,26 @@ class Sensor:
         p[i], v[i] = self._p[now, i], self._v[now, i]
         return p, v
 
+    def sensed_many(self, who: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``sensed(i)`` for each vehicle index ``i`` of ``who`` (checked as ``sensed`` checks
+        it), stacked: (D, N, 3) each, the same numbers (one noiseless snapshot, each
+        observer's own errors added to it)."""
+        who = np.asarray(who, dtype=np.int64).reshape(-1)
+        bad = (who < 0) | (who >= self.n)
+        if bad.any():
+            raise ValueError(f"i: must be a vehicle index in [0, {self.n}), got {who[bad][0]}")
+        slot = self._slot(self.lag)
+        p = np.repeat(self._p[slot][None], who.shape[0], axis=0)
+        v = np.repeat(self._v[slot][None], who.shape[0], axis=0)
+        if self.noisy:
+            for d, i in enumerate(who.tolist()):
+                dp, dv = self.noise(i)
+                p[d] += dp
+                v[d] += dv
+        now, rows = self._slot(0), np.arange(who.shape[0])
+        p[rows, who], v[rows, who] = self._p[now, who], self._v[now, who]
+        return p, v
+
     def sensed_all(self) -> tuple[np.ndarray, np.ndarray]:
         """Every observer's view at once: (N, N, 3) each, ``[i]`` = ``sensed(i)``. O(N²)."""
         views = [self.sensed(i) for i in range(self.n)]
