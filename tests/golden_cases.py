@@ -11,7 +11,8 @@ A configuration is a name and the keyword options it stood for when the file was
 (``OPTION_SETS``): the test maps each to today's way of asking for it (a preset and
 overrides), so the file holds the meaning, not the spelling. Options that depend on the
 decision's limits (the safe buffer: two steps at the top speed; the swarm horizon: the sensing
-range over twice the top speed) are recorded as the numbers they resolved to.
+range over twice the top speed, none under an acceleration limit below 2 v_max / dt) are
+recorded as the numbers they resolved to.
 """
 
 from __future__ import annotations

@@ -158,6 +158,56 @@ def test_noisy_runs_beside_a_run_without_avoidance():
         assert same_record(fly(sc2, step2, progress=False), got), sc.name
 
 
+def test_noisy_runs_among_spheres_and_obstacles_side_by_side():
+    """Noisy runs with spheres (the second with its spheres moved) and with prisms (two cases):
+    each vehicle's spheres and obstacles are its own run's, wherever its run's rows start in
+    the batch's tables."""
+    from vo3d_opt.sim.scenario import (
+        bundled_files,
+        load_scenario,
+        scenario_from_dict,
+        scenario_variant,
+    )
+
+    files = {f.stem: f for f in bundled_files()}
+    moved = load_scenario(files["paper-case3-three-spheres"]).model_dump(exclude_none=True)
+    for sphere in moved["spheres"]:
+        sphere["center"] = [sphere["center"][0] + 6.0, *sphere["center"][1:]]
+    scenarios = [
+        load_scenario(files["paper-case3-three-spheres"]),
+        scenario_from_dict(moved, "<moved spheres>"),
+        load_scenario(files["paper-case2-two-uav-six-obstacles"]),
+        load_scenario(files["paper-case4-five-uav-six-square-obstacles"]),
+    ]
+    runs = []
+    for seed, sc in enumerate(scenarios):
+        sensing = {"vehicle_range": 55.0, "obstacle_range": 55.0, "position_noise": 0.4,
+                   "velocity_noise": 0.2, "latency": 0.2, "seed": seed}
+        runs.append(flown(scenario_variant(sc, sensing=sensing), Method())[:2])
+    assert all(fits(sc, step) for sc, step in runs)
+    together = fly_together(runs)
+    for (sc, _), got in zip(runs, together, strict=True):
+        alone = fly(*flown(sc, Method())[:2], progress=False)
+        assert same_record(alone, got), sc.name
+
+
+def test_a_batch_that_fails_late_is_flown_again_from_scratch(monkeypatch):
+    """Should a batch raise after flying (its steps' sensors pushed, landings counted), each
+    encounter is flown alone from a fresh step: the rows are still the single rows."""
+    from vo3d_opt.sim import lockstep
+
+    real = lockstep.fly_together
+
+    def fails_at_the_end(runs):
+        real(runs)
+        raise RuntimeError("late")
+
+    monkeypatch.setattr(lockstep, "fly_together", fails_at_the_end)
+    indices = [4, 1, 3]
+    alone = pd.DataFrame([run_encounter("noisy", 5, i) for i in indices])
+    assert rows_equal(alone, pd.DataFrame(run_encounters("noisy", 5, indices)))
+
+
 @pytest.mark.parametrize("family", ["pair", "noisy"])
 @pytest.mark.parametrize("method", ["vo3d", "none"])
 def test_batched_rows_are_the_single_rows(family, method):

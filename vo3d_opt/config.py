@@ -11,7 +11,8 @@ Two fields are stated in what they mean and resolved per decision from its limit
 (:meth:`SelectorConfig.resolve`): the buffer, ``buffer_steps`` steps of flight at the top
 speed (``buffer_steps · v_max · dt`` metres unless ``pz_buffer`` gives metres), and the horizon
 ``"sensing"``, the time two vehicles closing head-on at the top speed take to cross the sensing
-range (``sensing_range / (2 v_max)``, RVO2-3D's time horizon).
+range (``sensing_range / (2 v_max)``, RVO2-3D's time horizon), or none under an acceleration
+limit that keeps the vehicle from taking any velocity within a step (:func:`turns_at_once`).
 """
 
 from __future__ import annotations
@@ -37,7 +38,8 @@ CORRECTIONS: Final = (
     "vo_lines",
     "virtual_sphere",
 )
-#: ``horizon: "sensing"``: the sensing range over twice the top speed.
+#: ``horizon: "sensing"``: the sensing range over twice the top speed (none for a vehicle that
+#: cannot take any velocity within a step: :func:`turns_at_once`).
 SENSING = "sensing"
 
 

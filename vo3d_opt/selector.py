@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from .config import SelectorConfig
+from .config import SelectorConfig, turns_at_once
 from .formulations import inputs, kernel
 from .formulations.common import Bounds, Encounter, Options, planning_options, py_build_vos
 from .formulations.outside import PythonPath, backend_for, qp_backend
@@ -98,7 +98,7 @@ class VelocitySelector:
             )
         #: The resolved configuration: the preset's values, each keyword over one field.
         self.config = SelectorConfig.of(preset, **overrides)
-        self._resolved: dict[tuple[float, float, float | None, float | None], Options] = {}
+        self._resolved: dict[tuple[float, float, float | None, bool], Options] = {}
         # The last decision's limits, dt and sensing range, and their bounds and Config: a
         # control loop asks with the same ones every time.
         self._last: tuple[Any, ...] = (None, None, None, None, None)
@@ -139,8 +139,9 @@ class VelocitySelector:
         """The numbers a decision with top speed ``v_max``, period ``dt`` and acceleration
         limit ``acceleration`` plans with (``SelectorConfig.resolve``), kept for the next
         decision with the same."""
-        key = (v_max, dt, sensing_range, acceleration)
-        key = key if self.config.per_decision else (0.0, 0.0, None, None)
+        at_once = turns_at_once(v_max, dt, acceleration)  # all that resolve reads of it
+        per = self.config.per_decision
+        key = (v_max, dt, sensing_range, at_once) if per else (0.0, 0.0, None, True)
         options = self._resolved.get(key)
         if options is None:
             if len(self._resolved) >= 64:
@@ -163,7 +164,8 @@ class VelocitySelector:
     ) -> Decision:
         """The velocity nearest ``preferred_velocity`` outside every VO within the limits.
         ``sensing_range`` (m): the range the neighbours were sensed within, which a horizon
-        ``"sensing"`` (preset ``swarm``) is derived from when the configuration holds none;
+        ``"sensing"`` (preset ``swarm``; none under a ``limits.acceleration`` with
+        ``a dt < 2 v_max``) is derived from when the configuration holds none;
         positive, at most 1e7 or inf (no horizon), else a ``ValueError`` naming it."""
         t0 = _clock()
         own = inputs.agent(own)

@@ -12,6 +12,10 @@ vehicle's velocity and status are bit for bit those of its swarm's ``select_many
 
 It drives the kernel through the arrays ``select_many`` builds
 (``formulations.swarm.Swarm``) and its range entry (``formulations.swarm.decide_range``).
+
+:class:`SensedBatch` does the same for runs whose vehicles sense each other late or noisily
+(``PerAgentSelect`` with a sensor): each vehicle's neighbours are the rows its own sensor
+reports (``sim.sensed_batch``), decided in one compiled call for every run of the batch.
 """
 
 from __future__ import annotations
@@ -312,8 +316,8 @@ class SensedBatch:
         self.r_pz = np.zeros(n)
         # a vehicle of no member (a run in which nobody avoids) never decides: any row will do
         first = self.members[0].step
-        self.limits: list[Any] = [first.own_limits[0]] * n
-        self.options: list[Any] = [first.own_options()[0]] * n
+        self.bounds = np.tile(first.own_bounds[0], (n, 1))
+        self.options: list[Options] = [first.own_options()[0]] * n
         self.sphere_base: list[int] = []
         self.prism_base: list[int] = []
         spheres: list[np.ndarray] = []
@@ -321,7 +325,7 @@ class SensedBatch:
         same: dict[Options, Options] = {}  # one object per set of options: one kernel call
         for mem in self.members:
             self.r_pz[mem.lo : mem.hi] = mem.sc.r_pz
-            self.limits[mem.lo : mem.hi] = mem.step.own_limits
+            self.bounds[mem.lo : mem.hi] = mem.step.own_bounds
             self.options[mem.lo : mem.hi] = [same.setdefault(o, o) for o in mem.step.own_options()]
             self.sphere_base.append(sum(x.shape[0] for x in spheres))
             self.prism_base.append(sum(x.shape[0] for x in prisms))
@@ -329,7 +333,6 @@ class SensedBatch:
             prisms.append(mem.step.prism_rows)
         self.spheres = np.ascontiguousarray(np.concatenate(spheres).reshape(-1, 4))
         self.prisms = np.ascontiguousarray(np.concatenate(prisms).reshape(-1, 4))
-        self.dt = float(self.members[0].sc.dt)
         self.retired: set[int] = set()
 
     def retire(self, members: Sequence[int]) -> None:
@@ -348,7 +351,7 @@ class SensedBatch:
             if f not in self.retired:
                 observers += self._observers(f, mem, P, V, deciding)
         if observers:
-            fleet = Fleet(P, V, W, self.r_pz, deciding, self.limits, self.options, self.dt)
+            fleet = Fleet(P, V, W, self.r_pz, deciding, self.bounds, self.options)
             velocities, found = decide_sensed(fleet, observers, self.spheres, self.prisms)
             who = np.array([o.index for o in observers], dtype=np.int64)
             u[who], codes[who] = velocities, found

@@ -28,7 +28,13 @@ from vo3d_opt.sim.safety import (
     planning_limits,
 )
 from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
-from vo3d_opt.sim.sensed_batch import STATUS_NAMES, Fleet, Observer, decide_sensed
+from vo3d_opt.sim.sensed_batch import (
+    STATUS_NAMES,
+    Fleet,
+    Observer,
+    bounds_rows,
+    decide_sensed,
+)
 from vo3d_opt.sim.sensing import Sensor
 from vo3d_opt.types import AgentState, Limits, Neighbor
 
@@ -158,6 +164,10 @@ class SwarmSelect(_SelectorStep):
         }
 
 
+#: (observers x vehicles) entries of the sensed views ``PerAgentSelect.observers`` reads at once.
+VIEW_ENTRIES = 1 << 16
+
+
 class PerAgentSelect(_SelectorStep):
     """Each deciding agent by its own ``select`` call, in id order, with the neighbours (in
     index order, then the spheres) and the obstacles it senses. With a ``sensor``
@@ -186,6 +196,7 @@ class PerAgentSelect(_SelectorStep):
             [[*s.position, s.r_pz] for s in self.spheres], dtype=float
         ).reshape(-1, 4)
         self.prism_rows = prism_rows([self.bodies[m] for m in self.sensed_idx])
+        self.own_bounds = bounds_rows(self.own_limits, sc.dt)
 
     def _sensed(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Centre distances (N, N), obstacle surface distances (N, M), sphere surface distances
@@ -301,9 +312,8 @@ class PerAgentSelect(_SelectorStep):
             preferred=snap.preferred,
             r_pz=np.asarray(self.scenario.r_pz, dtype=float),
             deciding=snap.deciding,
-            limits=self.own_limits,
+            bounds=self.own_bounds,
             options=self.own_options(),
-            dt=self.scenario.dt,
         )
         velocities, codes = decide_sensed(fleet, observers, self.sphere_rows, self.prism_rows)
         return velocities, STATUS_NAMES[codes]
@@ -319,13 +329,28 @@ class PerAgentSelect(_SelectorStep):
     ) -> list[Observer]:
         """What each of the vehicles ``who`` senses now (the sensor's view; ``push`` this
         step's state first), given the true positions ``p`` and the surface distances
-        ``_sensed`` gives: the vehicles within its range by the sensed centre distance, the
+        ``surfaces`` gives: the vehicles within its range by the sensed centre distance, the
         spheres and obstacles within its obstacle range. ``at``: offsets added to the vehicle,
         sphere and obstacle indices (where the run's rows start in a batch's arrays)."""
+        who = np.asarray(who, dtype=np.int64).reshape(-1)
+        # the views of a chunk of observers at a time: (D, N, 3) arrays stay small
+        chunk = max(1, VIEW_ENTRIES // max(1, p.shape[0]))
+        observers: list[Observer] = []
+        for c in range(0, who.shape[0], chunk):
+            observers += self._views(p, who[c : c + chunk], obst, sph, at)
+        return observers
+
+    def _views(
+        self,
+        p: np.ndarray,
+        who: np.ndarray,
+        obst: np.ndarray,
+        sph: np.ndarray,
+        at: tuple[int, int, int],
+    ) -> list[Observer]:
         assert self.sensor is not None
         sc = self.scenario
         vrange, orange = sc.sensing.vehicle_range, sc.sensing.obstacle_range
-        who = np.asarray(who, dtype=np.int64).reshape(-1)
         seen_p, seen_v = self.sensor.sensed_many(who)
         near = np.linalg.norm(seen_p - p[who][:, None, :], axis=-1) <= vrange
         near[np.arange(who.shape[0]), who] = False  # not itself

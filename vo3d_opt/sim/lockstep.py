@@ -64,12 +64,6 @@ def fits(sc: Scenario, step: DecisionStep) -> bool:
     return fits_scenario(sc) and decides_in_batches(step)
 
 
-def senses(step: DecisionStep) -> bool:
-    """Whether ``step``'s runs fly in batches of their own: every decider of a batch decides
-    either from the true snapshot (``BatchSelect``) or from its own sensor (``SensedBatch``)."""
-    return decides_sensed_in_batches(step)
-
-
 @dataclass
 class _Run:
     """One run of the batch: vehicles ``lo <= i < hi``, at most ``total`` steps."""
@@ -306,14 +300,14 @@ class _Batch:
 
 def _batch_select(deciders: list[_Run], n: int) -> BatchSelect | SensedBatch | None:
     """One decision pass for the deciding runs: from the true snapshot, or each run from its
-    own sensor (a batch holds one kind: ``senses``)."""
+    own sensor (a batch holds one kind)."""
     if not deciders:
         return None
-    sensed = [senses(r.step) for r in deciders]
+    sensed = [decides_sensed_in_batches(r.step) for r in deciders]
     if all(sensed):
         return SensedBatch([SensedMember(r.sc, r.step, r.lo, r.hi) for r in deciders], n)  # type: ignore[arg-type]
     if any(sensed):
-        raise ValueError("runs that sense for themselves fly in batches of their own (senses)")
+        raise ValueError("runs that sense for themselves fly in batches of their own")
     return BatchSelect([Member(r.sc, r.step, r.lo, r.hi) for r in deciders], n)  # type: ignore[arg-type]
 
 

@@ -48,16 +48,21 @@ class Observer:
 class Fleet:
     """The vehicles' own state this step: true positions and velocities, preferred velocities,
     r_pz, who decides (a vehicle that does not is sensed as not avoiding), and each one's
-    limits and planning options (``VelocitySelector.options_for``)."""
+    limits as the kernel's bounds rows (N, 6) (:func:`bounds_rows`) and planning options
+    (``VelocitySelector.options_for``)."""
 
     positions: np.ndarray
     velocities: np.ndarray
     preferred: np.ndarray
     r_pz: np.ndarray
     deciding: np.ndarray
-    limits: Sequence[Limits]
+    bounds: np.ndarray
     options: Sequence[Options]
-    dt: float
+
+
+def bounds_rows(limits: Sequence[Limits], dt: float) -> np.ndarray:
+    """Each vehicle's limits as the kernel's bounds row (``inputs.bounds_row``): (N, 6)."""
+    return np.array([bounds_row(lim, dt) for lim in limits], dtype=float).reshape(-1, 6)
 
 
 def _spans(lists: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -88,7 +93,7 @@ def sensed_swarm(
         nb_lists.append(np.arange(start, start + count))
         start += count
     limits = np.zeros((rows, 6))
-    limits[:n] = [bounds_row(lim, fleet.dt) for lim in fleet.limits]
+    limits[:n] = fleet.bounds
     nb_span, nb_idx = _spans(nb_lists)
     sp_span, sp_idx = _spans([o.spheres for o in observers])
     ob_span, ob_idx = _spans([o.obstacles for o in observers])

@@ -129,7 +129,10 @@ class Sensor:
         """``sensed(i)`` for each vehicle index ``i`` of ``who`` (checked as ``sensed`` checks
         it), stacked: (D, N, 3) each, the same numbers (one noiseless snapshot, each
         observer's own errors added to it)."""
-        who = np.asarray(who, dtype=np.int64).reshape(-1)
+        raw = np.asarray(who)
+        if raw.size and raw.dtype.kind not in "iu":
+            raise ValueError(f"i: must be vehicle indices (integers), got {raw.dtype}")
+        who = raw.astype(np.int64).reshape(-1)
         bad = (who < 0) | (who >= self.n)
         if bad.any():
             raise ValueError(f"i: must be a vehicle index in [0, {self.n}), got {who[bad][0]}")

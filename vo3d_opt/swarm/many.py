@@ -35,24 +35,16 @@ class Answer(Protocol):
 def options_by_vehicle(
     inputs: SwarmInputs, options_for: OptionsFor, per_decision: bool
 ) -> list[tuple[Options, np.ndarray]]:
-    """The deciding vehicles grouped by the options they plan with (their own top speed and
-    acceleration limit may set the buffer and the horizon when ``per_decision``): (options,
-    the rows of ``who`` that use them)."""
-    dt, rng = inputs.dt, inputs.sensing_range
-    bounds = inputs.bounds[inputs.who]
-    if not per_decision or bounds.shape[0] == 0:
-        lim = inputs.limits
-        return [(options_for(lim.v_max, dt, rng, lim.acceleration), np.arange(bounds.shape[0]))]
-    acc = bounds[:, 4]  # NaN: none (inputs.bounds_row)
-    # one key per (top speed, acceleration) pair: complex numbers sort by both at once
-    keys, group_of = np.unique(
-        bounds[:, 1] + 1j * np.where(np.isnan(acc), -1.0, acc), return_inverse=True
-    )
-    options = [options_for(k.real, dt, rng, None if k.imag < 0 else k.imag) for k in keys]
-    if len(options) == 1:
-        return [(options[0], np.arange(bounds.shape[0]))]
-    group_of = group_of.reshape(-1)
-    return [(opt, np.flatnonzero(group_of == g)) for g, opt in enumerate(options)]
+    """The deciding vehicles grouped by the options they plan with (their own top speed may
+    set the buffer and the horizon when ``per_decision``; the acceleration limit is the
+    swarm's): (options, the rows of ``who`` that use them)."""
+    v_max = inputs.bounds[inputs.who, 1]
+    groups = np.unique(v_max) if per_decision else v_max[:0]
+    dt, rng, acc = inputs.dt, inputs.sensing_range, inputs.limits.acceleration
+    if groups.size <= 1:
+        top = float(groups[0]) if groups.size else inputs.limits.v_max
+        return [(options_for(top, dt, rng, acc), np.arange(inputs.who.shape[0]))]
+    return [(options_for(float(v), dt, rng, acc), np.flatnonzero(v_max == v)) for v in groups]
 
 
 def select_many_compiled(

@@ -22,6 +22,7 @@ import numpy as np
 
 from vo3d_opt.generators import Family, get_family, make_encounter
 from vo3d_opt.sim import lockstep
+from vo3d_opt.sim.batch_select import decides_sensed_in_batches
 from vo3d_opt.sim.deciders import NoAvoidance, decision_step
 from vo3d_opt.sim.metrics import pair_min_distances, summarize
 from vo3d_opt.sim.record import DecisionStep, RunRecord
@@ -230,12 +231,12 @@ def run_encounters(
 
 
 def _lockstep_groups(waiting: list[_Waiting]) -> list[list[_Waiting]]:
-    """The waiting encounters in groups of one ``dt``, one kind of sensing
-    (``lockstep.senses``) and at most LOCKSTEP_AGENTS vehicles."""
+    """The waiting encounters in groups of one ``dt``, one kind of decision step (from the
+    true snapshot, or each run from its own sensor) and at most LOCKSTEP_AGENTS vehicles."""
     groups: list[list[_Waiting]] = []
     by_dt: dict[tuple[float, bool], list[_Waiting]] = {}
     for w in waiting:
-        by_dt.setdefault((float(w.sc.dt), lockstep.senses(w.step)), []).append(w)
+        by_dt.setdefault((float(w.sc.dt), decides_sensed_in_batches(w.step)), []).append(w)
     for same in by_dt.values():
         group: list[_Waiting] = []
         for w in same:
@@ -259,8 +260,9 @@ def _fly_side_by_side(group: list[_Waiting], fam: Family, method: Method) -> Non
     for k, w in enumerate(group):
         t1 = time.perf_counter()
         try:
-            if records is None:
-                record = fly(w.sc, w.step, progress=False)
+            if records is None:  # a step of its own: the batch's were used (sensors pushed)
+                sc, step, _ = flown(w.sc, method)
+                record = fly(sc, step, progress=False)
             else:
                 record = records[k]
             _summarised(w.row, record, {**summarize(record), "selector_options": w.options})

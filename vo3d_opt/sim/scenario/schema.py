@@ -443,7 +443,8 @@ class Scenario(Spec):
         """``sensing.vehicle_range / (2 v_max)`` (s), v_max the top agent speed: the time two
         vehicles closing head-on at full speed take to cross the sensing range, RVO2-3D's time
         horizon in ``baselines.rvo2``, and what ``selector_options: {horizon: sensing}``
-        stands for."""
+        stands for while the derived acceleration bound lets a vehicle take any velocity
+        within a step (none otherwise: ``config.turns_at_once``)."""
         return float(self.sensing.vehicle_range / (2.0 * float(np.max(self.max_speed))))
 
     @property
