@@ -229,7 +229,6 @@ class PerAgentSelect(_SelectorStep):
     def decide(self, snap: Snapshot) -> StepDecision:
         p, v = snap.positions, snap.velocities
         n = p.shape[0]
-        centre, obst, sph = self._sensed(p)
         if self.sensor is not None:
             self.sensor.push(p, v)
         step = StepDecision(
@@ -238,10 +237,10 @@ class PerAgentSelect(_SelectorStep):
             decision_times=np.full(n, np.nan),
             solve_times=np.full(n, np.nan),
         )
-        if self.one_call:
-            self._decide_at_once(snap, obst, sph, step)
+        if self.one_call:  # the sensed distances are the sensor's: no (N, N) true ones
+            self._decide_at_once(snap, *self.surfaces(p), step)
         else:
-            self._decide_each(snap, (centre, obst, sph), step)
+            self._decide_each(snap, self._sensed(p), step)
         return self._land(snap, step)
 
     def _decide_at_once(
