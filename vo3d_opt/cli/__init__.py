@@ -36,10 +36,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``vo3d``; returns (and, as a script, exits with) the status."""
     try:
         check("sim", "the vo3d command line")
+        from tqdm import tqdm
+
         from .app import run_command_line
     except MissingExtra as exc:
         print(f"vo3d: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    # no tqdm monitor thread: a Ctrl-C that lands in its exit handler prints a traceback
+    tqdm.monitor_interval = 0
     return run_command_line(argv)
 
 
