@@ -99,7 +99,8 @@ def make_dynamics(
 ) -> Dynamics:
     """The model of a scenario's ``dynamics`` and ``wind`` mappings (None: the
     defaults, ``kinematic`` and no wind). ``seed`` fixes the Dryden gusts; ``rotorpy_options``
-    (``integrator_kwargs``) go to :class:`RotorPyDynamics` (refused by the batched model).
+    go to the RotorPy model: ``integrator_kwargs`` to :class:`RotorPyDynamics` (refused by the
+    batched model), ``fleet`` to :class:`BatchedRotorPyDynamics` (``RotorPyFleet``).
     Bad values raise ``ValueError`` naming the key."""
     cfg = (
         dynamics

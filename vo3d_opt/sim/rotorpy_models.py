@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import math
 import sys
+import threading
 import types
 from abc import abstractmethod
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -23,6 +25,7 @@ from vo3d_opt.sim.dynamics_base import (
     StepResult,
     WindConfig,
 )
+from vo3d_opt.sim.rotorpy_fleet import RotorPyFleet, import_torch
 
 
 def vehicle_params(vehicle: str) -> dict[str, Any]:
@@ -45,21 +48,28 @@ def hover_rotor_speed(params: Mapping[str, Any]) -> float:
 class _GlobalRNG:
     """RotorPy's Dryden gusts (and its motor noise) draw from numpy's global random state; this
     gives them a private, seeded stream that is swapped in only while the model steps, so a run
-    is reproducible for a seed whatever else in the process uses ``np.random``."""
+    is reproducible for a seed whatever else in the process uses ``np.random``. One lock for
+    all of them: models of runs flown in threads (a fleet) never swap the state under each
+    other."""
+
+    _lock = threading.RLock()
 
     def __init__(self, seed: int) -> None:
-        saved = np.random.get_state()
-        np.random.seed(seed)
-        self._state = np.random.get_state()
-        np.random.set_state(saved)
+        with self._lock:
+            saved = np.random.get_state()
+            np.random.seed(seed)
+            self._state = np.random.get_state()
+            np.random.set_state(saved)
 
     def __enter__(self) -> None:
+        self._lock.acquire()
         self._saved = np.random.get_state()
         np.random.set_state(self._state)
 
     def __exit__(self, *exc: object) -> None:
         self._state = np.random.get_state()
         np.random.set_state(self._saved)
+        self._lock.release()
 
 
 def dryden_gust_class() -> type:
@@ -101,6 +111,25 @@ def make_wind(config: WindConfig | None, dt: float) -> Any:
     return DrydenGust(
         dt=dt, avg_wind=np.array(config.velocity), sig_wind=sigma, altitude=config.altitude
     )
+
+
+@dataclass
+class Period:
+    """One control period of a RotorPy model in flight: the commands ``u`` (N, 3), its
+    sub-steps of ``h`` s, the vehicles it steps (``active``) and the samples it fills."""
+
+    u: np.ndarray
+    dt: float
+    substeps: int
+    h: float
+    start: np.ndarray  # (N, 3) the set-points the ramp starts from
+    active: np.ndarray
+    p_out: np.ndarray  # (substeps, N, 3)
+    v_out: np.ndarray
+
+    def command(self, k: int) -> np.ndarray:
+        """The velocity set-point of sub-step ``k``: ramped from ``start`` to ``u``."""
+        return self.start + (self.u - self.start) * ((k + 1) / self.substeps)
 
 
 class _RotorPyModel(Dynamics):
@@ -170,39 +199,49 @@ class _RotorPyModel(Dynamics):
             self.winds = [make_wind(self.wind, 1.0 / self.substep_rate) for _ in range(self.n)]
 
     def _step(self, u: np.ndarray, dt: float) -> StepResult:
+        period = self._begin(u, dt)
+        self._fly(period)
+        return self._end(period)
+
+    def _begin(self, u: np.ndarray, dt: float) -> Period:
         s = self.substeps(dt)
-        h = dt / s
-        p_out = np.empty((s, self.n, 3))
-        v_out = np.empty((s, self.n, 3))
-        active = np.flatnonzero(~self._held)
-        start = self.setpoints if self.command_ramp else u
-        with self._rng:
-            for w in self.winds:
-                if hasattr(w, "dt"):
-                    w.dt = h  # Dryden's discretisation follows the sub-step
-            for k in range(s):
-                cmd_v = start + (u - start) * ((k + 1) / s)  # the set-point of this sub-step
-                p_out[k], v_out[k] = self._substep(self.t + k * h, h, cmd_v, active)
-        self.t += dt
-        self.setpoints = np.where(self._held[:, None], 0.0, u)
+        return Period(
+            u=u,
+            dt=dt,
+            substeps=s,
+            h=dt / s,
+            start=self.setpoints if self.command_ramp else u,
+            active=np.flatnonzero(~self._held),
+            p_out=np.empty((s, self.n, 3)),
+            v_out=np.empty((s, self.n, 3)),
+        )
+
+    @abstractmethod
+    def _fly(self, period: Period) -> None:
+        """Fly the period's ``active`` vehicles through its sub-steps (at each, the wind first,
+        as RotorPy's ``simulate`` does, then the set-point ``period.command(k)``), filling its
+        samples (rows of held vehicles are overwritten by ``_end``)."""
+
+    def follow_substep(self, h: float) -> None:
+        """Dryden's discretisation follows the sub-step ``h``."""
+        for w in self.winds:
+            if hasattr(w, "dt"):
+                w.dt = h
+
+    def _end(self, period: Period) -> StepResult:
+        p_out, v_out = period.p_out, period.v_out
+        self.t += period.dt
+        self.setpoints = np.where(self._held[:, None], 0.0, period.u)
         p_out[:, self._held] = self._p[self._held]
         v_out[:, self._held] = 0.0
         self._p, self._v = p_out[-1].copy(), v_out[-1].copy()
         return StepResult(
             positions=p_out[-1].copy(),
             velocities=v_out[-1].copy(),
-            sample_times=h * np.arange(1, s + 1),
+            sample_times=period.h * np.arange(1, period.substeps + 1),
             sample_positions=p_out,
             sample_velocities=v_out,
         )
-
-    @abstractmethod
-    def _substep(
-        self, t: float, h: float, cmd_v: np.ndarray, active: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Fly the ``active`` vehicles for ``h`` s from time ``t`` (wind first, as RotorPy's
-        ``simulate`` does) towards the set-points ``cmd_v`` (N, 3); return every vehicle's
-        (N, 3) positions and velocities (rows of held vehicles are overwritten by the caller)."""
 
 
 class RotorPyDynamics(_RotorPyModel):
@@ -251,6 +290,16 @@ class RotorPyDynamics(_RotorPyModel):
             self.states[i] = self._hover_state(self._p[i], np.zeros(3))
         self.setpoints[mask] = 0.0
 
+    def _fly(self, period: Period) -> None:
+        """Fill ``period``'s samples, sub-step by sub-step."""
+        h = period.h
+        with self._rng:
+            self.follow_substep(h)
+            for k in range(period.substeps):
+                period.p_out[k], period.v_out[k] = self._substep(
+                    self.t + k * h, h, period.command(k), period.active
+                )
+
     def _substep(
         self, t: float, h: float, cmd_v: np.ndarray, active: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -264,26 +313,18 @@ class RotorPyDynamics(_RotorPyModel):
         )
 
 
-def _import_torch() -> Any:
-    """torch, after checking that the rest of the ``batched`` extra (torchdiffeq, roma, which
-    RotorPy's batched vehicles import) is there too; a ``MissingExtra`` (a ``ValueError``)
-    naming the key if not."""
-    with needs("batched", "dynamics.batched:"):
-        import roma  # noqa: F401 - imported by RotorPy's batched vehicles
-        import torch
-        import torchdiffeq  # noqa: F401 - the same
-    return torch
-
-
 class BatchedRotorPyDynamics(_RotorPyModel):
     """All vehicles in one RotorPy ``BatchedMultirotor`` (torch, on the CPU) under the same
     ``cmd_vel`` controller, the same parameters, wind objects, ramp and seed as
     :class:`RotorPyDynamics` (a seed gives both the same Dryden gusts), integrated by RotorPy's
     fixed-step ``rk4`` (one step per sub-step, hence the higher default ``substep_rate``): for
     swarms, where the one-by-one model takes hours (cost and accuracy:
-    ``docs/results/dynamics.md``). Needs the ``batched`` extra. RotorPy's batched motor
-    noise draws from torch's random stream (its scale is 0 for both vehicles): the model keeps
-    that stream private and seeded by ``seed``, as it does numpy's."""
+    ``docs/results/dynamics.md``). Needs the ``batched`` extra.
+
+    ``fleet``: a :class:`~vo3d_opt.sim.rotorpy_fleet.RotorPyFleet` whose one ``BatchedMultirotor``
+    steps the vehicles of many models at once, each model's run flown in a thread of its own
+    (a sweep's RotorPy encounters); None: a fleet of this model alone. Either way a vehicle's
+    numbers are the same (the fleet's docstring says why)."""
 
     def __init__(
         self,
@@ -294,43 +335,32 @@ class BatchedRotorPyDynamics(_RotorPyModel):
         command_ramp: bool = True,
         seed: int = 0,
         integrator_kwargs: Mapping[str, Any] | None = None,
+        fleet: RotorPyFleet | None = None,
     ) -> None:
         if integrator_kwargs is not None:
             raise ValueError(
                 "integrator_kwargs: only for the one-by-one RotorPy model (the batched one "
                 "integrates with RotorPy's fixed-step rk4)"
             )
-        self.torch = _import_torch()
+        import_torch()  # the extra this model needs, named before RotorPy's
         super().__init__(
             vehicle, wind=wind, substep_rate=substep_rate, command_ramp=command_ramp, seed=seed
         )
-        self.vehicles: Any = None  # a BatchedMultirotor for the N vehicles of the last reset
+        self.fleet = RotorPyFleet(seed=self.seed) if fleet is None else fleet
+        self.torch = self.fleet.torch
         self.state: dict[str, Any] = {}  # RotorPy's batched state: (N, k) float64 tensors
-        self._torch_rng = self._seeded_torch_rng()
+        self.fleet.join(self)
 
-    def _seeded_torch_rng(self) -> Any:
-        with self.torch.random.fork_rng(devices=[]):
-            self.torch.manual_seed(self.seed)
-            return self.torch.random.get_rng_state()
-
-    def _tensors(self, arrays: Mapping[str, np.ndarray]) -> dict[str, Any]:
-        return {key: self.torch.from_numpy(np.ascontiguousarray(a)) for key, a in arrays.items()}
+    def leave(self) -> None:
+        """This model's run is over: its fleet steps without it from now on."""
+        self.fleet.leave(self)
 
     def _reset_model(self) -> None:
-        from rotorpy.vehicles.multirotor import BatchedMultirotor, BatchedMultirotorParams
-
         super()._reset_model()
-        self._torch_rng = self._seeded_torch_rng()
-        cpu = self.torch.device("cpu")
-        self.state = self._tensors(self._hover_state(self._p, self._v))
-        self.vehicles = BatchedMultirotor(
-            BatchedMultirotorParams([self.params] * self.n, self.n, cpu),
-            self.n,
-            self.state,
-            cpu,
-            control_abstraction="cmd_vel",
-            integrator="rk4",
-        )
+        self.state = {
+            key: self.torch.from_numpy(np.ascontiguousarray(a))
+            for key, a in self._hover_state(self._p, self._v).items()
+        }
 
     def _hold_model(self, mask: np.ndarray) -> None:
         self.setpoints[mask] = 0.0
@@ -344,23 +374,22 @@ class BatchedRotorPyDynamics(_RotorPyModel):
             for key, a in rows.items():
                 self.state[key][at] = self.torch.from_numpy(a).to(self.state[key].dtype)
 
-    def _substep(
-        self, t: float, h: float, cmd_v: np.ndarray, active: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        torch = self.torch
-        if active.size:
-            if self.wind is not None:
-                self.state["wind"][active] = torch.from_numpy(self._winds_at(t, active))
-            with torch.random.fork_rng(devices=[]), torch.no_grad():
-                torch.random.set_rng_state(self._torch_rng)
-                # RotorPy returns NaN rows for the vehicles it does not step (the held ones):
-                # never stepped again, and _step overwrites their samples
-                self.state = self.vehicles.step(
-                    self.state, {"cmd_v": torch.from_numpy(cmd_v)}, h, idxs=torch.from_numpy(active)
-                )
-                self._torch_rng = torch.random.get_rng_state()
-        # views: the caller copies them into its samples, and step() returns new tensors
-        return self.state["x"].numpy(), self.state["v"].numpy()
+    def _fly(self, period: Period) -> None:
+        self.fleet.fly(self, period)
+
+    def period_winds(self, period: Period) -> np.ndarray | None:
+        """(sub-steps, active vehicles, 3): each active vehicle's wind at each sub-step of
+        ``period`` (None without a wind model). Drawn at once, in the one-by-one model's order
+        (sub-step by sub-step, vehicle by vehicle): RotorPy's constant and Dryden winds depend
+        on neither the time nor the position they are given."""
+        if self.wind is None or not period.active.size:
+            return None
+        h = period.h
+        with self._rng:
+            self.follow_substep(h)
+            return np.stack(
+                [self._winds_at(self.t + k * h, period.active) for k in range(period.substeps)]
+            )
 
     def _winds_at(self, t: float, active: np.ndarray) -> np.ndarray:
         """(len(active), 3) the wind of each active vehicle, drawn from numpy's stream in the

@@ -85,10 +85,12 @@ DEFAULT_FORMULATION = "plane_qp"
 INVALID = "invalid_velocity"
 
 
-def scenario_dynamics(sc: Scenario) -> Dynamics:
+def scenario_dynamics(sc: Scenario, fleet: Any = None) -> Dynamics:
     """The scenario's dynamics and wind (``velocity_response_tau`` is
-    ``first_order``); the Dryden gusts are seeded with ``sensing.seed``."""
-    return make_dynamics(sc.vehicle_dynamics, sc.wind, seed=sc.sensing.seed)
+    ``first_order``); the Dryden gusts are seeded with ``sensing.seed``. ``fleet``: the
+    ``RotorPyFleet`` a batched RotorPy model joins (``vo3d_opt.sim.rotorpy_fleet``)."""
+    extra = {} if fleet is None else {"fleet": fleet}
+    return make_dynamics(sc.vehicle_dynamics, sc.wind, seed=sc.sensing.seed, **extra)
 
 
 def scenario_goal_velocity(sc: Scenario) -> Callable[[np.ndarray], np.ndarray]:
