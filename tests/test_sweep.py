@@ -596,8 +596,8 @@ def test_intruder_adds_one_non_avoiding_uav_clear_of_the_obstacles():
 
 def test_rotorpy_draws_hummingbird_in_constant_or_dryden_wind():
     draws = [first_draw("rotorpy", 3, i) for i in range(60)]
-    assert all(d.scenario["dynamics"] == {"model": "rotorpy", "vehicle": "hummingbird"}
-               for d in draws)
+    batched = {"model": "rotorpy", "vehicle": "hummingbird", "batched": True}
+    assert all(d.scenario["dynamics"] == batched for d in draws)
     winds = [d.scenario["wind"] for d in draws]
     assert {w["type"] for w in winds} == {"constant", "dryden"}
     speeds = [np.linalg.norm(w["velocity"]) for w in winds]

@@ -399,6 +399,9 @@ def intruder(rng: np.random.Generator) -> Draw | None:
 
 
 ROTORPY_VEHICLE = "hummingbird"
+#: The family's vehicles: RotorPy's batched ones, so that a sweep task flies the vehicles of
+#: all of its encounters in one ``RotorPyFleet`` (``vo3d_opt.sim.rotorpy_fleet``).
+ROTORPY_DYNAMICS = {"model": "rotorpy", "vehicle": ROTORPY_VEHICLE, "batched": True}
 ROTORPY_WIND_TYPES = ("constant", "dryden")  # even odds
 ROTORPY_WIND_SPEED = (0.0, 3.0)  # m/s, horizontal (mean) wind, uniform; direction uniform
 
@@ -409,17 +412,16 @@ ROTORPY_WIND_SPEED = (0.0, 3.0)  # m/s, horizontal (mean) wind, uniform; directi
     "or Dryden wind, 0-3 m/s",
     obstacle_free=False,
     warm_keys={
-        "dynamics": {"model": "rotorpy", "vehicle": ROTORPY_VEHICLE},
+        "dynamics": ROTORPY_DYNAMICS,
         "wind": {"type": "dryden", "velocity": [1.0, 0.0, 0.0]},
     },
     needs=("dynamics", "wind"),
-    batched=False,
 )
 def rotorpy(rng: np.random.Generator) -> Draw | None:
-    """A ``group`` draw flown by RotorPy's ``hummingbird`` quadrotors (``dynamics: {model:
-    rotorpy, vehicle: hummingbird}``) in wind: ``constant`` or ``dryden`` (turbulence about a
-    mean) with even odds, the (mean) wind horizontal, its speed uniform 0-3 m/s, its direction
-    uniform."""
+    """A ``group`` draw flown by RotorPy's ``hummingbird`` quadrotors, batched (``dynamics:
+    {model: rotorpy, vehicle: hummingbird, batched: true}``), in wind: ``constant`` or
+    ``dryden`` (turbulence about a mean) with even odds, the (mean) wind horizontal, its speed
+    uniform 0-3 m/s, its direction uniform."""
     draw = _group_variant(rng)
     if draw is None:
         return None
@@ -427,7 +429,7 @@ def rotorpy(rng: np.random.Generator) -> Draw | None:
     speed = float(rng.uniform(*ROTORPY_WIND_SPEED))
     direction = float(rng.uniform(-math.pi, math.pi))
     wind = [speed * math.cos(direction), speed * math.sin(direction), 0.0]
-    draw.scenario["dynamics"] = {"model": "rotorpy", "vehicle": ROTORPY_VEHICLE}
+    draw.scenario["dynamics"] = dict(ROTORPY_DYNAMICS)
     draw.scenario["wind"] = {"type": kind, "velocity": to_mm(wind)}
     draw.params.update(
         {"wind_type": kind, "wind_speed": speed, "wind_direction_deg": math.degrees(direction)}

@@ -15,6 +15,7 @@ import dataclasses
 import json
 import time
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,7 +33,7 @@ from vo3d_opt.sim.scenario import (
     scenario_from_dict,
     scenario_variant,
 )
-from vo3d_opt.sim.simulator import flown_options, fly, scenario_selector
+from vo3d_opt.sim.simulator import flown_options, fly, scenario_dynamics, scenario_selector
 
 METHODS = ("vo3d", "rvo2", "none")
 #: Columns that measure time or place, not behaviour: the only ones allowed to differ between
@@ -206,7 +207,8 @@ def run_encounters(
 ) -> list[dict[str, Any]]:
     """:func:`run_encounter` of each of ``indices``, the same rows (but the timing columns),
     in that order: those ``vo3d_opt.sim.lockstep`` can fly are flown side by side, a few
-    hundred vehicles at a time, the others one by one."""
+    hundred vehicles at a time, those with batched RotorPy vehicles in one fleet
+    (:func:`in_fleet`), the others one by one."""
     fam = get_family(family)
     rows: list[dict[str, Any]] = []
     waiting: list[_Waiting] = []
@@ -218,14 +220,17 @@ def run_encounters(
             sc = _drawn(row, fam, seed, index)
             if method.name != "rvo2":
                 sc, step, options = flown(sc, method)
-                if lockstep.fits(sc, step):
+                if lockstep.fits(sc, step) or in_fleet(sc):
                     waiting.append(_Waiting(row, sc, step, options, time.perf_counter() - t0))
                     continue
             _summarised(row, *fly_encounter(sc, method))
         except Exception as exc:  # noqa: BLE001 - one bad encounter must not stop the sweep
             row["error"] = error_line(exc)
         _closed(row, time.perf_counter() - t0)
-    for group in _lockstep_groups(waiting):
+    fleet = [w for w in waiting if in_fleet(w.sc)]
+    for group in _fleet_groups(fleet):
+        _fly_in_fleet(group)
+    for group in _lockstep_groups([w for w in waiting if not in_fleet(w.sc)]):
         _fly_side_by_side(group, fam, method)
     return rows
 
@@ -270,6 +275,60 @@ def _fly_side_by_side(group: list[_Waiting], fam: Family, method: Method) -> Non
             w.row["error"] = error_line(exc)
         spent = w.seconds + time.perf_counter() - t1 + (0.0 if records is None else share)
         _closed(w.row, spent)
+
+
+def in_fleet(sc: Scenario) -> bool:
+    """Whether ``sc``'s vehicles are batched RotorPy ones, which fly in a ``RotorPyFleet``
+    with those of other encounters (``vo3d_opt.sim.rotorpy_fleet``: the same numbers)."""
+    dyn = sc.vehicle_dynamics
+    return dyn.model == "rotorpy" and bool(dyn.batched)
+
+
+def _fleet_groups(waiting: list[_Waiting]) -> list[list[_Waiting]]:
+    """The fleet's encounters in groups of one period, one vehicle and one sub-step rate."""
+    groups: dict[tuple[Any, ...], list[_Waiting]] = {}
+    for w in waiting:
+        dyn = w.sc.vehicle_dynamics
+        key = (float(w.sc.dt), dyn.vehicle, dyn.substep_rate, dyn.ramped)
+        groups.setdefault(key, []).append(w)
+    return list(groups.values())
+
+
+def _fly_in_fleet(group: list[_Waiting]) -> None:
+    """Fly a group with one ``RotorPyFleet``, each encounter by ``fly`` in a thread of its
+    own, and fill in its rows (an encounter's error in its own row)."""
+    from vo3d_opt.sim.rotorpy_fleet import RotorPyFleet, import_torch
+
+    # a sweep's worker is one thread: torch's own pool would contend with the other workers
+    import_torch().set_num_threads(1)
+    t0 = time.perf_counter()
+    fleet = RotorPyFleet()
+    models: list[Any] = []
+    for w in group:
+        try:
+            models.append(scenario_dynamics(w.sc, fleet=fleet))
+        except Exception as exc:  # noqa: BLE001 - one bad encounter must not stop the sweep
+            w.row["error"] = error_line(exc)
+            models.append(None)
+
+    def one(w: _Waiting, model: Any) -> RunRecord:
+        try:
+            return fly(w.sc, w.step, dynamics=model, progress=False)
+        finally:
+            model.leave()
+
+    flying = [(w, m) for w, m in zip(group, models, strict=True) if m is not None]
+    with ThreadPoolExecutor(max_workers=max(1, len(flying))) as pool:
+        futures = [pool.submit(one, w, m) for w, m in flying]
+    share = (time.perf_counter() - t0) / len(group)
+    for (w, _), future in zip(flying, futures, strict=True):
+        try:
+            record = future.result()
+            _summarised(w.row, record, {**summarize(record), "selector_options": w.options})
+        except Exception as exc:  # noqa: BLE001 - one bad encounter must not stop the sweep
+            w.row["error"] = error_line(exc)
+    for w in group:
+        _closed(w.row, w.seconds + share)
 
 
 _WARM = {
