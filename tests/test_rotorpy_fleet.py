@@ -2,6 +2,7 @@
 numbers are those of the run flown alone, bit for bit, and no run waits for one that is over."""
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -12,9 +13,9 @@ pytest.importorskip("rotorpy")
 from vo3d_opt.sim.dynamics import make_dynamics  # noqa: E402
 from vo3d_opt.sim.metrics import summarize  # noqa: E402
 from vo3d_opt.sim.record import StepDecision  # noqa: E402
-from vo3d_opt.sim.rotorpy_fleet import RotorPyFleet  # noqa: E402
+from vo3d_opt.sim.rotorpy_fleet import FleetStepError, RotorPyFleet  # noqa: E402
 from vo3d_opt.sim.scenario import scenario_from_dict  # noqa: E402
-from vo3d_opt.sim.simulator import fly  # noqa: E402
+from vo3d_opt.sim.simulator import fly, scenario_dynamics  # noqa: E402
 from vo3d_opt.sweep import flight  # noqa: E402
 
 BATCHED = {"model": "rotorpy", "batched": True}
@@ -23,8 +24,8 @@ WINDS = [None, {"type": "constant", "velocity": [2.0, 0.0, 0.0]},
 
 
 def _case(j: int, periods: int) -> dict:
-    """Run j: 2 + j vehicles, its own wind, seed, commands and length; vehicle 0 held from
-    period 2 to 5 (hold and release inside the fleet)."""
+    """Run j: 2 + j vehicles, its own wind, seed, commands and length; vehicle 0 (run 1: all)
+    held from period 2 to 5 (hold and release inside the fleet)."""
     rng = np.random.default_rng(j)
     n = 2 + j
     return {"n": n, "wind": WINDS[j % 3], "seed": j, "starts": rng.normal(size=(n, 3)) * 5,
@@ -34,7 +35,8 @@ def _case(j: int, periods: int) -> dict:
 def _flown(case: dict, dyn) -> list[np.ndarray]:
     dyn.reset(case["starts"])
     out = []
-    hold = np.arange(case["n"]) == 0
+    # run 1 holds all of its vehicles (it asks with none to step while the others fly)
+    hold = np.arange(case["n"]) == 0 if case["seed"] != 1 else np.ones(case["n"], dtype=bool)
     for k, u in enumerate(case["commands"]):
         if k == 2:
             dyn.hold(hold)
@@ -58,21 +60,29 @@ def _in_threads(cases: list[dict], fleet: RotorPyFleet) -> list[list[np.ndarray]
         finally:
             models[i].leave()
 
-    threads = [threading.Thread(target=one, args=(i,)) for i in range(len(cases))]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(timeout=120)
-    assert not any(t.is_alive() for t in threads), "a run waits for ever"
+    _join_all([threading.Thread(target=one, args=(i,), daemon=True) for i in range(len(cases))])
     assert not errors, errors
     return out
+
+
+def _join_all(threads: list[threading.Thread], seconds: float = 120.0) -> None:
+    """Start the threads and wait for all, at most ``seconds`` in all (daemons: a run that
+    waits for ever fails the test without keeping pytest from exiting)."""
+    for t in threads:
+        t.start()
+    deadline = time.monotonic() + seconds
+    for t in threads:
+        t.join(timeout=max(0.0, deadline - time.monotonic()))
+    assert not any(t.is_alive() for t in threads), "a run waits for ever"
 
 
 def test_runs_in_a_fleet_fly_as_each_alone_bit_for_bit():
     # runs of different lengths (the short ones leave while the others fly), winds, seeds
     cases = [_case(j, periods) for j, periods in enumerate((7, 3, 8, 1, 6))]
     alone = [_flown(c, make_dynamics(BATCHED, c["wind"], seed=c["seed"])) for c in cases]
-    together = _in_threads(cases, RotorPyFleet())
+    fleet = RotorPyFleet()
+    together = _in_threads(cases, fleet)
+    assert max(fleet._vehicles) > max(c["n"] for c in cases)  # runs stepped in one call
     for a, b in zip(alone, together, strict=True):
         assert len(a) == len(b)
         for x, y in zip(a, b, strict=True):
@@ -100,18 +110,15 @@ def test_periods_of_different_length_fail_every_run_of_the_step_none_hangs():
         try:
             models[i].reset(np.zeros((1, 3)) + i)
             models[i].step(np.zeros((1, 3)), dt)
-        except ValueError as exc:
+        except FleetStepError as exc:
+            assert isinstance(exc.__cause__, ValueError)
             errors.append(str(exc))
         finally:
             models[i].leave()
 
-    threads = [threading.Thread(target=one, args=(i, dt)) for i, dt in enumerate((0.2, 0.1))]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(timeout=60)
-    assert not any(t.is_alive() for t in threads)
-    assert len(errors) == 2 and all(e.startswith("dt:") for e in errors)
+    _join_all([threading.Thread(target=one, args=(i, dt), daemon=True)
+               for i, dt in enumerate((0.2, 0.1))])
+    assert len(errors) == 2 and all("dt:" in e for e in errors)
 
 
 def _scenario(j: int) -> dict:
@@ -149,23 +156,84 @@ class _Failing:
         return self.step.decide(snap)
 
 
-def test_a_sweep_task_flies_its_encounters_in_a_fleet_with_the_rows_of_each_alone():
-    waiting = []
-    for j in range(3):
+def _waiting(count: int) -> list:
+    out = []
+    for j in range(count):
         sc = scenario_from_dict({k: v for k, v in _scenario(j).items() if v is not None})
         assert flight.in_fleet(sc)
         sc, step, options = flight.flown(sc, flight.Method())
-        if j == 1:
-            step = _Failing(step)
-        waiting.append(flight._Waiting({"index": j, "error": None}, sc, step, options, 0.0))
-    flight._fly_in_fleet(waiting)
+        out.append(flight._Waiting({"index": j, "error": None}, sc, step, options, 0.0))
+    return out
+
+
+def _row_alone(w) -> dict:
+    """The row of ``w``'s encounter flown alone (its own batched model, no fleet)."""
+    alone = fly(w.sc, flight.flown(w.sc, flight.Method())[1], progress=False)
+    row = {"index": w.row["index"], "error": None}
+    flight._summarised(row, alone, {**summarize(alone), "selector_options": w.options})
+    return row
+
+
+def _same_rows(row: dict, expected: dict) -> None:
+    keys = [k for k in expected if k not in flight.TIMING_COLUMNS]
+    assert len(keys) > 10
+    assert {k: row[k] for k in keys} == {k: expected[k] for k in keys}
+    assert row["run_time"] >= 0 and row["worker"]
+
+
+def test_a_sweep_task_flies_its_encounters_in_a_fleet_with_the_rows_of_each_alone():
+    waiting = _waiting(3)
+    waiting[1].step = _Failing(waiting[1].step)
+    flight._fly_in_fleet(waiting, flight.Method())
     assert "decision failed on purpose" in waiting[1].row["error"]
     for j in (0, 2):
-        w = waiting[j]
+        _same_rows(waiting[j].row, _row_alone(waiting[j]))
+
+
+def test_a_failed_fleet_step_flies_each_encounter_again_alone(monkeypatch):
+    made = []
+
+    def dynamics(sc, fleet=None):
+        model = scenario_dynamics(sc, fleet=fleet)
+        if fleet is not None and not made:  # the first run's winds fail once, in the fleet
+            model.period_winds = lambda period: (_ for _ in ()).throw(OSError("wind lost"))
+        made.append(model)
+        return model
+
+    waiting = _waiting(3)
+    monkeypatch.setattr(flight, "scenario_dynamics", dynamics)
+    flight._fly_in_fleet(waiting, flight.Method())
+    monkeypatch.undo()
+    for w in waiting:
         assert w.row["error"] is None
-        alone = fly(w.sc, flight.flown(w.sc, flight.Method())[1], progress=False)
-        expected = {"index": j, "error": None}
-        flight._summarised(expected, alone, {**summarize(alone), "selector_options": w.options})
-        same = [k for k in expected if k not in flight.TIMING_COLUMNS]
-        assert len(same) > 10
-        assert {k: w.row[k] for k in same} == {k: expected[k] for k in same}
+        _same_rows(w.row, _row_alone(w))
+
+
+def test_a_run_that_cannot_be_set_up_does_not_hold_up_the_others(monkeypatch):
+    def dynamics(sc, fleet=None):
+        if sc.name == "fleet-1":
+            raise ValueError("dynamics: refused on purpose")
+        return scenario_dynamics(sc, fleet=fleet)
+
+    waiting = _waiting(3)
+    monkeypatch.setattr(flight, "scenario_dynamics", dynamics)
+    flight._fly_in_fleet(waiting, flight.Method())
+    monkeypatch.undo()
+    assert "refused on purpose" in waiting[1].row["error"]
+    for j in (0, 2):
+        _same_rows(waiting[j].row, _row_alone(waiting[j]))
+
+
+def test_the_sweep_refuses_the_rotorpy_family_without_torch_naming_the_extra(monkeypatch):
+    from vo3d_opt import extras
+    from vo3d_opt.sweep.runner import SweepError, validate
+
+    real = extras.installed
+    monkeypatch.setattr(extras, "installed", lambda m: m != "torch" and real(m))
+    with pytest.raises(SweepError) as err:
+        validate("rotorpy", 10)
+    msg = str(err.value)
+    assert "'rotorpy'" in msg and "[batched]" in msg and "pip install" in msg and "\n" not in msg
+    validate("group", 10)  # a family without RotorPy needs no torch
+    monkeypatch.undo()
+    validate("rotorpy", 10)

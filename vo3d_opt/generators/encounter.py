@@ -66,10 +66,12 @@ class Family:
     can fly it (``--method rvo2``). ``warm_keys``: scenario keys added to the workers' warm-up
     encounter, so that it runs the same code as the family's (e.g. its ``dynamics``).
     ``needs``: the scenario keys (dotted paths) its draws use that not every build's schema
-    defines (the real-world keys); the sweep refuses the family while one is missing. ``batched``:
-    its encounters can fly side by side (``vo3d_opt.sim.lockstep``: kinematic or first-order
-    dynamics), so a sweep hands a task many of them; else one each (an encounter of seconds or
-    minutes is a task of its own)."""
+    defines (the real-world keys); the sweep refuses the family while one is missing.
+    ``extras``: the optional extras its encounters need (the sweep refuses the family without
+    them). ``batched``: its encounters can fly side by side (``vo3d_opt.sim.lockstep`` for
+    kinematic or first-order dynamics, one ``vo3d_opt.sim.rotorpy_fleet.RotorPyFleet`` for
+    batched RotorPy vehicles), so a sweep hands a task many of them; else one each (an
+    encounter of seconds or minutes is a task of its own)."""
 
     name: str
     summary: str
@@ -79,6 +81,7 @@ class Family:
     warm_keys: dict[str, Any] = field(default_factory=dict)
     needs: tuple[str, ...] = ()
     batched: bool = True
+    extras: tuple[str, ...] = ()
 
     def missing_keys(self) -> list[str]:
         """The scenario keys of ``needs`` (dotted paths, e.g. ``sensing.latency``) that this
@@ -139,6 +142,7 @@ def register(
     warm_keys: dict[str, Any] | None = None,
     needs: tuple[str, ...] = (),
     batched: bool = True,
+    extras: tuple[str, ...] = (),
 ) -> Callable[[Generator], Generator]:
     """Decorator: register ``rng -> Draw`` as family ``name`` (``summary``: one line for
     ``vo3d sweep --list``; the rest as in :class:`Family`)."""
@@ -152,6 +156,7 @@ def register(
             warm_keys=dict(warm_keys or {}),
             needs=tuple(needs),
             batched=batched,
+            extras=tuple(extras),
         )
         return fn
 

@@ -416,6 +416,7 @@ ROTORPY_WIND_SPEED = (0.0, 3.0)  # m/s, horizontal (mean) wind, uniform; directi
         "wind": {"type": "dryden", "velocity": [1.0, 0.0, 0.0]},
     },
     needs=("dynamics", "wind"),
+    extras=("rotorpy", "batched"),
 )
 def rotorpy(rng: np.random.Generator) -> Draw | None:
     """A ``group`` draw flown by RotorPy's ``hummingbird`` quadrotors, batched (``dynamics:

@@ -9,10 +9,9 @@ period and waits; when every model still flying has done so, the last one in fli
 A run whose flight is over ``leave``-s, and the others go on without it.
 
 A vehicle's numbers do not depend on who else flies: RotorPy's batched dynamics is arithmetic
-row by row (the same rows bit for bit in a batch of 8 or of 600, which
-tests/test_rotorpy_fleet.py checks against each run flown alone), and each model keeps its own
-wind objects and numpy stream. RotorPy's batched motor noise draws from the fleet's torch
-stream, seeded by ``seed`` (its scale is 0 for both vehicles).
+row by row (tests/test_rotorpy_fleet.py flies runs in a fleet and each alone, bit for bit), and
+each model keeps its own wind objects and numpy stream. RotorPy's batched motor noise would
+draw from the fleet's torch stream: a fleet takes only vehicles without it (both of ours).
 """
 
 from __future__ import annotations
@@ -39,6 +38,11 @@ def import_torch() -> Any:
     return torch
 
 
+class FleetStepError(RuntimeError):
+    """A step of the fleet failed: each run that waited for it gets one of these (the cause
+    chained); flown alone, a run that did not cause it flies on."""
+
+
 class RotorPyFleet:
     """One ``BatchedMultirotor`` for the models that ``join`` it, stepped when all of those
     still flying asked for a period (the module docstring). All fly one vehicle type; the
@@ -52,9 +56,7 @@ class RotorPyFleet:
         self._asked: dict[int, Period] = {}
         self._failed: dict[int, BaseException] = {}
         self._vehicles: dict[int, Any] = {}  # BatchedMultirotor by number of vehicles
-        with self.torch.random.fork_rng(devices=[]):
-            self.torch.manual_seed(seed)
-            self._torch_rng = self.torch.random.get_rng_state()
+        self.reseed(seed)
 
     def join(self, model: BatchedRotorPyDynamics) -> None:
         with self._cond:
@@ -63,13 +65,24 @@ class RotorPyFleet:
                     f"vehicle: a fleet flies one vehicle type ({self._members[0].vehicle}), "
                     f"got {model.vehicle!r}"
                 )
+            if model.params.get("motor_noise_std", 0.0) != 0.0 and len(self._members) > 0:
+                raise ValueError(
+                    "vehicle: RotorPy's motor noise draws from one torch stream per fleet: "
+                    "a vehicle with motor noise flies alone"
+                )
             self._members.append(model)
             self._flying.add(id(model))
 
     def leave(self, model: BatchedRotorPyDynamics) -> None:
         with self._cond:
             self._flying.discard(id(model))
-            self._fly_when_all_asked()
+            self._fly_when_all_asked(caller=None)
+
+    def reseed(self, seed: int) -> None:
+        """Start the fleet's torch stream again from ``seed``."""
+        with self.torch.random.fork_rng(devices=[]):
+            self.torch.manual_seed(seed)
+            self._torch_rng = self.torch.random.get_rng_state()
 
     def fly(self, model: BatchedRotorPyDynamics, period: Period) -> None:
         """Fill ``period``'s samples once every member still flying asked for its own."""
@@ -77,14 +90,14 @@ class RotorPyFleet:
             if id(model) not in self._flying:
                 raise RuntimeError("a model that left its fleet cannot step again")
             self._asked[id(model)] = period
-            self._fly_when_all_asked()
+            self._fly_when_all_asked(caller=id(model))
             while id(model) in self._asked:
                 self._cond.wait()
             failure = self._failed.pop(id(model), None)
         if failure is not None:
-            raise failure
+            raise FleetStepError(f"the fleet's step failed: {failure}") from failure
 
-    def _fly_when_all_asked(self) -> None:
+    def _fly_when_all_asked(self, caller: int | None) -> None:
         # called with the lock held; whoever completes the set flies it and wakes the others
         if not self._asked or len(self._asked) < len(self._flying):
             return
@@ -92,14 +105,18 @@ class RotorPyFleet:
         try:
             self._fly_all(batch, [self._asked[id(m)] for m in batch])
         except BaseException as exc:  # every waiting run gets the error, none waits forever
-            self._failed.update({id(m): exc for m in batch})
-            if not isinstance(exc, Exception):
+            # a Ctrl-C goes up the caller's own stack; the others get it as their failure
+            mine = isinstance(exc, Exception)
+            self._failed.update({id(m): exc for m in batch if mine or id(m) != caller})
+            if not mine:
                 raise
         finally:
             self._asked.clear()
             self._cond.notify_all()
 
     def _fly_all(self, batch: list[BatchedRotorPyDynamics], periods: list[Period]) -> None:
+        """Fill the samples of each member's period: every sub-step, each member's winds into
+        its state rows, then one call for all the active vehicles."""
         first = periods[0]
         if any(p.substeps != first.substeps or p.h != first.h for p in periods):
             raise ValueError("dt: the runs of one fleet step with one period and sub-step rate")
@@ -144,7 +161,8 @@ class RotorPyFleet:
 
     def _vehicles_for(self, model: BatchedRotorPyDynamics, state: dict[str, Any]) -> Any:
         """A ``BatchedMultirotor`` of the fleet's vehicle for the rows of ``state`` (it keeps
-        no state of its own: one per number of vehicles serves every step of that size)."""
+        no state of its own: one per number of vehicles serves every step of that size; a
+        fleet meets at most as many sizes as runs leave it, dozens)."""
         from rotorpy.vehicles.multirotor import BatchedMultirotor, BatchedMultirotorParams
 
         n = int(state["x"].shape[0])

@@ -63,13 +63,19 @@ class _GlobalRNG:
 
     def __enter__(self) -> None:
         self._lock.acquire()
-        self._saved = np.random.get_state()
-        np.random.set_state(self._state)
+        try:
+            self._saved = np.random.get_state()
+            np.random.set_state(self._state)
+        except BaseException:
+            self._lock.release()
+            raise
 
     def __exit__(self, *exc: object) -> None:
-        self._state = np.random.get_state()
-        np.random.set_state(self._saved)
-        self._lock.release()
+        try:
+            self._state = np.random.get_state()
+            np.random.set_state(self._saved)
+        finally:
+            self._lock.release()
 
 
 def dryden_gust_class() -> type:
@@ -346,6 +352,7 @@ class BatchedRotorPyDynamics(_RotorPyModel):
         super().__init__(
             vehicle, wind=wind, substep_rate=substep_rate, command_ramp=command_ramp, seed=seed
         )
+        self._own_fleet = fleet is None
         self.fleet = RotorPyFleet(seed=self.seed) if fleet is None else fleet
         self.torch = self.fleet.torch
         self.state: dict[str, Any] = {}  # RotorPy's batched state: (N, k) float64 tensors
@@ -357,6 +364,8 @@ class BatchedRotorPyDynamics(_RotorPyModel):
 
     def _reset_model(self) -> None:
         super()._reset_model()
+        if self._own_fleet:  # a model alone starts its torch stream again, as numpy's
+            self.fleet.reseed(self.seed)
         self.state = {
             key: self.torch.from_numpy(np.ascontiguousarray(a))
             for key, a in self._hover_state(self._p, self._v).items()

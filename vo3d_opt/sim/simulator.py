@@ -55,7 +55,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -79,13 +79,16 @@ from vo3d_opt.sim.traffic import GoalWithDetours, keep_watch
 with needs("sim", "the simulator"):
     from tqdm import tqdm
 
+if TYPE_CHECKING:
+    from vo3d_opt.sim.rotorpy_fleet import RotorPyFleet
+
 #: Default formulation when neither the caller nor the scenario names one.
 DEFAULT_FORMULATION = "plane_qp"
 #: The status of a command that was not a finite 3-vector (replaced by 0).
 INVALID = "invalid_velocity"
 
 
-def scenario_dynamics(sc: Scenario, fleet: Any = None) -> Dynamics:
+def scenario_dynamics(sc: Scenario, fleet: RotorPyFleet | None = None) -> Dynamics:
     """The scenario's dynamics and wind (``velocity_response_tau`` is
     ``first_order``); the Dryden gusts are seeded with ``sensing.seed``. ``fleet``: the
     ``RotorPyFleet`` a batched RotorPy model joins (``vo3d_opt.sim.rotorpy_fleet``)."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import threading
 import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -229,7 +230,7 @@ def run_encounters(
         _closed(row, time.perf_counter() - t0)
     fleet = [w for w in waiting if in_fleet(w.sc)]
     for group in _fleet_groups(fleet):
-        _fly_in_fleet(group)
+        _fly_in_fleet(group, method)
     for group in _lockstep_groups([w for w in waiting if not in_fleet(w.sc)]):
         _fly_side_by_side(group, fam, method)
     return rows
@@ -285,7 +286,7 @@ def in_fleet(sc: Scenario) -> bool:
 
 
 def _fleet_groups(waiting: list[_Waiting]) -> list[list[_Waiting]]:
-    """The fleet's encounters in groups of one period, one vehicle and one sub-step rate."""
+    """The fleet's encounters in groups of one period, vehicle, sub-step rate and ramp."""
     groups: dict[tuple[Any, ...], list[_Waiting]] = {}
     for w in waiting:
         dyn = w.sc.vehicle_dynamics
@@ -294,41 +295,88 @@ def _fleet_groups(waiting: list[_Waiting]) -> list[list[_Waiting]]:
     return list(groups.values())
 
 
-def _fly_in_fleet(group: list[_Waiting]) -> None:
-    """Fly a group with one ``RotorPyFleet``, each encounter by ``fly`` in a thread of its
-    own, and fill in its rows (an encounter's error in its own row)."""
+class _OneAtATime:
+    """A decision step whose decisions take turns with those of the other runs of a fleet
+    (one lock): some backends keep state per problem shape that two runs deciding at once
+    would share (cvxpy's parameters, casadi's solver), and a sweep's worker is one core."""
+
+    def __init__(self, step: DecisionStep, lock: threading.Lock) -> None:
+        self._step, self._lock = step, lock
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._step, name)
+
+    def decide(self, snap: Any) -> Any:
+        with self._lock:
+            return self._step.decide(snap)
+
+
+def _fly_in_fleet(group: list[_Waiting], method: Method) -> None:
+    """Fly a group with one ``RotorPyFleet`` (each encounter by ``fly`` in a thread of its
+    own) and fill in its rows, each encounter's error in its own row: one whose run met a
+    failed step of the fleet flies again alone."""
+    from vo3d_opt.sim.rotorpy_fleet import FleetStepError
+
+    t0 = time.perf_counter()
+    outcomes = _fleet_outcomes(group)
+    share = (time.perf_counter() - t0) / len(group)
+    for w, outcome in zip(group, outcomes, strict=True):
+        t1 = time.perf_counter()
+        try:
+            if isinstance(outcome, FleetStepError):
+                sc, step, _ = flown(w.sc, method)
+                outcome = fly(sc, step, progress=False)
+            if isinstance(outcome, BaseException):
+                raise outcome
+            _summarised(w.row, outcome, {**summarize(outcome), "selector_options": w.options})
+        except Exception as exc:  # noqa: BLE001 - one bad encounter must not stop the sweep
+            w.row["error"] = error_line(exc)
+        _closed(w.row, w.seconds + share + time.perf_counter() - t1)
+
+
+def _fleet_outcomes(group: list[_Waiting]) -> list[RunRecord | Exception]:
+    """Each encounter's record, or the exception its set-up or flight raised."""
     from vo3d_opt.sim.rotorpy_fleet import RotorPyFleet, import_torch
 
-    # a sweep's worker is one thread: torch's own pool would contend with the other workers
-    import_torch().set_num_threads(1)
-    t0 = time.perf_counter()
-    fleet = RotorPyFleet()
-    models: list[Any] = []
-    for w in group:
-        try:
-            models.append(scenario_dynamics(w.sc, fleet=fleet))
-        except Exception as exc:  # noqa: BLE001 - one bad encounter must not stop the sweep
-            w.row["error"] = error_line(exc)
-            models.append(None)
+    torch = import_torch()
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # torch's own pool would contend with the other workers
+    try:
+        fleet, lock = RotorPyFleet(), threading.Lock()
+        outcomes: list[Any] = [None] * len(group)
+        models: list[Any] = []
+        for k, w in enumerate(group):
+            try:
+                models.append(scenario_dynamics(w.sc, fleet=fleet))
+            except Exception as exc:  # noqa: BLE001 - that encounter's outcome
+                outcomes[k] = exc
+                models.append(None)
+        futures = {}
+        with ThreadPoolExecutor(max_workers=max(1, len(group))) as pool:
+            try:
+                for k, w in enumerate(group):
+                    if models[k] is not None:
+                        step = _OneAtATime(w.step, lock)
+                        futures[k] = pool.submit(_fly_member, w.sc, step, models[k])
+            finally:  # a run that never started must not keep the others waiting
+                for k, model in enumerate(models):
+                    if model is not None and k not in futures:
+                        model.leave()
+        for k, future in futures.items():
+            try:
+                outcomes[k] = future.result()
+            except Exception as exc:  # noqa: BLE001 - that encounter's outcome
+                outcomes[k] = exc
+        return outcomes
+    finally:
+        torch.set_num_threads(threads)
 
-    def one(w: _Waiting, model: Any) -> RunRecord:
-        try:
-            return fly(w.sc, w.step, dynamics=model, progress=False)
-        finally:
-            model.leave()
 
-    flying = [(w, m) for w, m in zip(group, models, strict=True) if m is not None]
-    with ThreadPoolExecutor(max_workers=max(1, len(flying))) as pool:
-        futures = [pool.submit(one, w, m) for w, m in flying]
-    share = (time.perf_counter() - t0) / len(group)
-    for (w, _), future in zip(flying, futures, strict=True):
-        try:
-            record = future.result()
-            _summarised(w.row, record, {**summarize(record), "selector_options": w.options})
-        except Exception as exc:  # noqa: BLE001 - one bad encounter must not stop the sweep
-            w.row["error"] = error_line(exc)
-    for w in group:
-        _closed(w.row, w.seconds + share)
+def _fly_member(sc: Scenario, step: Any, model: Any) -> RunRecord:
+    try:
+        return fly(sc, step, dynamics=model, progress=False)
+    finally:
+        model.leave()
 
 
 _WARM = {

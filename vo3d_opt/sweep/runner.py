@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from vo3d_opt.config import DEFAULT_PRESET
-from vo3d_opt.extras import check, needs
+from vo3d_opt.extras import MissingExtra, check, needs
 from vo3d_opt.generators import FAMILIES, Family, get_family
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, error_line
@@ -147,6 +147,11 @@ def validate(
             f"family: {fam.name!r} needs the scenario keys {', '.join(missing)} "
             f"(real-world keys), which this build's scenario loader does not accept"
         )
+    for extra in fam.extras:
+        try:
+            check(extra, f"family: {fam.name!r}")
+        except MissingExtra as exc:
+            raise SweepError(str(exc)) from None
     _check_counts(n=n, seed=seed, workers=workers, in_flight=in_flight, batch=batch)
     return (fam, *check_method(fam, method))
 
@@ -158,7 +163,8 @@ MAX_BATCH = 64
 
 def default_batch(fam: Family, method: Method, count: int, threads: int) -> int:
     """Encounters per task: up to MAX_BATCH (about four tasks per worker thread) when the
-    family's encounters fly side by side (``Family.batched``; RVO2-3D flies one at a time),
+    family's encounters fly side by side (``Family.batched``: in lockstep, or their RotorPy
+    vehicles in one fleet; RVO2-3D flies one at a time),
     else one (an encounter of seconds or minutes is its own task: its row comes as soon as it
     lands)."""
     if method.name == "rvo2" or not fam.batched:
