@@ -23,7 +23,7 @@ from pages import RESULTS, machine_line, write_page  # this folder's
 
 from vo3d_opt.sim.metrics import summarize
 from vo3d_opt.sim.rotorpy_fleet import RotorPyFleet
-from vo3d_opt.sim.scenario import Scenario, load_scenario
+from vo3d_opt.sim.scenario import Scenario, load_scenario, scenario_from_dict
 from vo3d_opt.sim.simulator import fly, scenario_dynamics
 from vo3d_opt.sweep.flight import Method, flown
 
@@ -67,9 +67,33 @@ def row(path: Path, record: Any) -> dict[str, Any]:
     }
 
 
+#: An excess above this (m/s) is not the velocity loop settling: such an encounter is flown
+#: again by the one-by-one model (RK45 at 100 Hz) to tell the vehicle from the integrator.
+LARGE = 0.1
+
+
+def one_by_one(sc: Scenario) -> float:
+    """The largest excess of ``sc`` flown by the one-by-one RotorPy model."""
+    data = sc.model_dump(exclude_none=True)
+    data["dynamics"] = {**data["dynamics"], "batched": False}
+    plain = scenario_from_dict(data, sc.source)
+    sc2, step, _ = flown(plain, Method())
+    record = fly(sc2, step, progress=False)
+    v = np.linalg.norm(record.sample_velocities, axis=-1)
+    return float((v - plain.max_speed[None, :]).max())
+
+
 def render(rows: list[dict[str, Any]], files: str) -> str:
     worst = max(r["largest excess m/s"] for r in rows)
     command = max(r["largest command excess m/s"] for r in rows)
+    large = [r for r in rows if r["largest excess m/s"] > LARGE]
+    upsets = "".join(
+        f" {r['file']}: {r['largest excess m/s']:.2f} m/s, and {r['one by one']:.2f} m/s flown "
+        "by the one-by-one model (RK45, 100 Hz): the vehicle's velocity leaves its command for "
+        "a moment (an upset of RotorPy's vehicle under its velocity loop, not of the "
+        "integrator)."
+        for r in large
+    )
     lines = [
         "# RotorPy's speed overshoot in the `rotorpy` sweep",
         "",
@@ -83,8 +107,9 @@ def render(rows: list[dict[str, Any]], files: str) -> str:
         f"Over these {len(rows)} encounters the largest excess is **{worst:.3f} m/s**; the largest",
         f"commanded speed over the top speed is {command:.3g} m/s. The group draws cruise at their",
         "top speed, so a vehicle holding its top speed in wind overshoots it while RotorPy's",
-        "velocity loop settles. The sweep without avoidance, whose vehicles fly straight at",
-        "that speed, counts such violations too ([its page](rotorpy.md)).",
+        f"velocity loop settles: {len(rows) - len(large)} of the {len(rows)} stay within",
+        f"{LARGE} m/s. The sweep without avoidance, whose vehicles fly straight at that speed,",
+        f"counts such violations too ([its page](rotorpy.md)). Above {LARGE} m/s:{upsets}",
         "",
         "| file | wind | speed violations | largest excess m/s | largest command excess m/s "
         "| top speeds m/s |",
@@ -109,6 +134,9 @@ def main() -> None:
     )
     records = replay([load_scenario(f) for f in paths])
     rows = [row(f, r) for f, r in zip(paths, records, strict=True)]
+    for r, sc in zip(rows, (r.scenario for r in records), strict=True):
+        if r["largest excess m/s"] > LARGE:
+            r["one by one"] = one_by_one(sc)
     shown = " ".join(str(x) for x in args.files).replace(str(RESULTS.parents[1]) + "/", "")
     write_page(args.out, render(rows, shown))
     print(f"wrote {args.out}")
