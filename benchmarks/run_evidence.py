@@ -47,9 +47,8 @@ NOTES = {
     "rotorpy": [
         "Every limit violation here is a speed violation of the vehicle: its true speed, "
         "sampled at every RotorPy sub-step, above its top speed while the commands stay within "
-        "it (RotorPy's velocity loop overshooting in wind). How far: "
-        "[RotorPy's speed overshoot](rotorpy-speed.md) replays our encounters "
-        "(`benchmarks/speed_overshoot.py`).",
+        "it. How far, and why: [RotorPy's speed overshoot](rotorpy-speed.md) replays our "
+        "encounters (`benchmarks/speed_overshoot.py`).",
         "",
     ],
 }
