@@ -42,6 +42,16 @@ NAMES = {"vo3d": "vo3d (ours, preset safe)", "rvo2": "RVO2-3D", "none": "no avoi
 COMMITS = "commits.txt"
 #: The preset our method flies (``--preset``; the pages name it).
 PRESET = {"name": "safe"}
+#: What a family's page says below its table, beyond the rates.
+NOTES = {
+    "rotorpy": [
+        "Every limit violation here is a speed violation of the vehicle: its true speed, "
+        "sampled at every RotorPy sub-step, above its top speed while the commands stay within "
+        "it. How far, and why: [RotorPy's speed overshoot](rotorpy-speed.md) replays our "
+        "encounters (`benchmarks/speed_overshoot.py`).",
+        "",
+    ],
+}
 
 
 def methods_of(family: str) -> list[str]:
@@ -223,6 +233,7 @@ def page(family: str, out_root: Path, pages: Path) -> str:
         "",
         *table,
         "",
+        *NOTES.get(family, []),
     ]
     lines += flown_on(found)
     if found:
