@@ -51,10 +51,21 @@ def replay(scenarios: list[Scenario]) -> list[Any]:
     return records
 
 
+def watcher_steps(record: Any, sample: int, i: int) -> int | None:
+    """How many steps before the period of ``sample`` vehicle ``i`` had arrived at its goal,
+    if it was home and deciding again (a watcher, ``keep_watch``) at some point of the three
+    steps up to it; else None."""
+    step = (sample - 1) // record.substeps
+    home = [s for s in range(max(0, step - 3), step + 1) if record.arrived[s, i]]
+    watching = [s for s in home if record.decided[s, i]]
+    return step - watching[0] if watching else None
+
+
 def row(path: Path, record: Any) -> dict[str, Any]:
     sc = record.scenario
     v_max = sc.max_speed[None, :]
     true = np.linalg.norm(record.sample_velocities, axis=-1) - v_max
+    sample, vehicle = np.unravel_index(int(np.argmax(true)), true.shape)
     commanded = np.linalg.norm(record.commands, axis=-1) - v_max
     wind = sc.wind
     return {
@@ -64,6 +75,7 @@ def row(path: Path, record: Any) -> dict[str, Any]:
         "largest excess m/s": float(true.max()),
         "largest command excess m/s": float(commanded.max()),
         "top speeds m/s": f"{sc.max_speed.min():.2f}–{sc.max_speed.max():.2f}",
+        "watcher": watcher_steps(record, int(sample), int(vehicle)),
     }
 
 
@@ -90,8 +102,14 @@ def render(rows: list[dict[str, Any]], files: str) -> str:
     upsets = "".join(
         f" {r['file']}: {r['largest excess m/s']:.2f} m/s, and {r['one by one']:.2f} m/s flown "
         "by the one-by-one model (RK45, 100 Hz): the vehicle's velocity leaves its command for "
-        "a moment (an upset of RotorPy's vehicle under its velocity loop, not of the "
-        "integrator)."
+        "a moment under either integrator"
+        + (
+            "."
+            if r["watcher"] is None
+            else f", {r['watcher']} steps after it had arrived at its goal and began to decide "
+            "again as a watcher (the simulator stops an arrived vehicle dead and flies a "
+            "watcher on from hover)."
+        )
         for r in large
     )
     lines = [
