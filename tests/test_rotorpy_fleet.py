@@ -200,13 +200,30 @@ def test_a_failed_fleet_step_flies_each_encounter_again_alone(monkeypatch):
         made.append(model)
         return model
 
+    alone = []
+
+    def fly_alone(sc, step, **kwargs):
+        if kwargs.get("dynamics") is None:
+            alone.append(sc.name)
+        return fly(sc, step, **kwargs)
+
     waiting = _waiting(3)
     monkeypatch.setattr(flight, "scenario_dynamics", dynamics)
+    monkeypatch.setattr(flight, "fly", fly_alone)
     flight._fly_in_fleet(waiting, flight.Method())
     monkeypatch.undo()
+    assert sorted(alone) == ["fleet-0", "fleet-1", "fleet-2"]  # the fleet failed: each again
     for w in waiting:
         assert w.row["error"] is None
         _same_rows(w.row, _row_alone(w))
+
+
+def test_a_model_alone_raises_its_own_error_not_a_fleet_error():
+    dyn = make_dynamics(BATCHED, {"type": "dryden", "velocity": [1.0, 0.0, 0.0]})
+    dyn.reset(np.zeros((2, 3)))
+    dyn.period_winds = lambda period: (_ for _ in ()).throw(KeyError("gust"))
+    with pytest.raises(KeyError, match="gust"):
+        dyn.step(np.zeros((2, 3)), 0.2)
 
 
 def test_a_run_that_cannot_be_set_up_does_not_hold_up_the_others(monkeypatch):

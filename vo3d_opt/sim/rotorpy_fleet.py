@@ -11,7 +11,7 @@ A run whose flight is over ``leave``-s, and the others go on without it.
 A vehicle's numbers do not depend on who else flies: RotorPy's batched dynamics is arithmetic
 row by row (tests/test_rotorpy_fleet.py flies runs in a fleet and each alone, bit for bit), and
 each model keeps its own wind objects and numpy stream. RotorPy's batched motor noise would
-draw from the fleet's torch stream: a fleet takes only vehicles without it (both of ours).
+draw from the fleet's torch stream: only vehicles without it (both of ours) join a fleet.
 """
 
 from __future__ import annotations
@@ -54,26 +54,23 @@ class RotorPyFleet:
         self._members: list[BatchedRotorPyDynamics] = []  # in joining order
         self._flying: set[int] = set()  # id() of the members that did not leave
         self._asked: dict[int, Period] = {}
-        self._failed: dict[int, BaseException] = {}
+        self._failed: dict[int, tuple[BaseException, bool]] = {}  # error, step shared
         self._vehicles: dict[int, Any] = {}  # BatchedMultirotor by number of vehicles
         self.reseed(seed)
 
     def join(self, model: BatchedRotorPyDynamics) -> None:
+        """Count ``model`` among the members: the fleet waits for it until it leaves."""
         with self._cond:
             if self._members and model.vehicle != self._members[0].vehicle:
                 raise ValueError(
                     f"vehicle: a fleet flies one vehicle type ({self._members[0].vehicle}), "
                     f"got {model.vehicle!r}"
                 )
-            if model.params.get("motor_noise_std", 0.0) != 0.0 and len(self._members) > 0:
-                raise ValueError(
-                    "vehicle: RotorPy's motor noise draws from one torch stream per fleet: "
-                    "a vehicle with motor noise flies alone"
-                )
             self._members.append(model)
             self._flying.add(id(model))
 
     def leave(self, model: BatchedRotorPyDynamics) -> None:
+        """``model``'s run is over: the others step without it from now on."""
         with self._cond:
             self._flying.discard(id(model))
             self._fly_when_all_asked(caller=None)
@@ -93,9 +90,13 @@ class RotorPyFleet:
             self._fly_when_all_asked(caller=id(model))
             while id(model) in self._asked:
                 self._cond.wait()
-            failure = self._failed.pop(id(model), None)
-        if failure is not None:
-            raise FleetStepError(f"the fleet's step failed: {failure}") from failure
+            failure, shared = self._failed.pop(id(model), (None, False))
+        if failure is None:
+            return
+        if not shared:  # a fleet of this model alone: its own error, as it is
+            raise failure
+        name = type(failure).__name__
+        raise FleetStepError(f"the fleet's step failed: {name}: {failure}") from failure
 
     def _fly_when_all_asked(self, caller: int | None) -> None:
         # called with the lock held; whoever completes the set flies it and wakes the others
@@ -106,8 +107,8 @@ class RotorPyFleet:
             self._fly_all(batch, [self._asked[id(m)] for m in batch])
         except BaseException as exc:  # every waiting run gets the error, none waits forever
             # a Ctrl-C goes up the caller's own stack; the others get it as their failure
-            mine = isinstance(exc, Exception)
-            self._failed.update({id(m): exc for m in batch if mine or id(m) != caller})
+            mine, shared = isinstance(exc, Exception), len(batch) > 1
+            self._failed.update({id(m): (exc, shared) for m in batch if mine or id(m) != caller})
             if not mine:
                 raise
         finally:
@@ -122,8 +123,8 @@ class RotorPyFleet:
             raise ValueError("dt: the runs of one fleet step with one period and sub-step rate")
         h = first.h
         winds = [m.period_winds(p) for m, p in zip(batch, periods, strict=True)]
+        moving = [(m, p) for m, p in zip(batch, periods, strict=True) if p.active.size]
         for k in range(first.substeps):
-            moving = [(m, p) for m, p in zip(batch, periods, strict=True) if p.active.size]
             for m, p, w in zip(batch, periods, winds, strict=True):
                 if w is not None:
                     m.state["wind"][p.active] = self.torch.from_numpy(w[k])
@@ -161,8 +162,8 @@ class RotorPyFleet:
 
     def _vehicles_for(self, model: BatchedRotorPyDynamics, state: dict[str, Any]) -> Any:
         """A ``BatchedMultirotor`` of the fleet's vehicle for the rows of ``state`` (it keeps
-        no state of its own: one per number of vehicles serves every step of that size; a
-        fleet meets at most as many sizes as runs leave it, dozens)."""
+        no state of its own: one per number of vehicles serves every step of that size; the
+        size changes as runs leave and vehicles are held, a few dozen sizes a fleet)."""
         from rotorpy.vehicles.multirotor import BatchedMultirotor, BatchedMultirotorParams
 
         n = int(state["x"].shape[0])

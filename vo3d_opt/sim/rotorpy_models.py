@@ -352,6 +352,11 @@ class BatchedRotorPyDynamics(_RotorPyModel):
         super().__init__(
             vehicle, wind=wind, substep_rate=substep_rate, command_ramp=command_ramp, seed=seed
         )
+        if fleet is not None and self.params.get("motor_noise_std", 0.0) != 0.0:
+            raise ValueError(
+                "fleet: RotorPy's motor noise would draw from the fleet's torch stream: a "
+                "vehicle with motor noise flies alone"
+            )
         self._own_fleet = fleet is None
         self.fleet = RotorPyFleet(seed=self.seed) if fleet is None else fleet
         self.torch = self.fleet.torch

@@ -15,8 +15,9 @@ import dataclasses
 import json
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,8 +27,9 @@ from vo3d_opt.generators import Family, get_family, make_encounter
 from vo3d_opt.sim import lockstep
 from vo3d_opt.sim.batch_select import decides_sensed_in_batches
 from vo3d_opt.sim.deciders import NoAvoidance, decision_step
+from vo3d_opt.sim.dynamics import Dynamics
 from vo3d_opt.sim.metrics import pair_min_distances, summarize
-from vo3d_opt.sim.record import DecisionStep, RunRecord
+from vo3d_opt.sim.record import DecisionStep, RunRecord, Snapshot, StepDecision
 from vo3d_opt.sim.scenario import (
     Scenario,
     check_selector_options,
@@ -51,6 +53,9 @@ TIMING_COLUMNS = (
 #: Vehicles flown side by side at most (``vo3d_opt.sim.lockstep``): enough that the per-step
 #: overhead is shared by dozens of encounters, few enough that the arrays stay small.
 LOCKSTEP_AGENTS = 512
+#: Vehicles in one RotorPy fleet at most (``vo3d_opt.sim.rotorpy_fleet``): a sweep task's
+#: RotorPy encounters, each in a thread of its own with its record held until the last lands.
+FLEET_AGENTS = 1024
 
 
 @dataclass(frozen=True)
@@ -286,13 +291,17 @@ def in_fleet(sc: Scenario) -> bool:
 
 
 def _fleet_groups(waiting: list[_Waiting]) -> list[list[_Waiting]]:
-    """The fleet's encounters in groups of one period, vehicle, sub-step rate and ramp."""
-    groups: dict[tuple[Any, ...], list[_Waiting]] = {}
+    """The fleet's encounters in groups of one period, vehicle, sub-step rate and ramp, at
+    most FLEET_AGENTS vehicles each (a thread and a record per encounter)."""
+    groups: dict[tuple[Any, ...], list[list[_Waiting]]] = {}
     for w in waiting:
         dyn = w.sc.vehicle_dynamics
         key = (float(w.sc.dt), dyn.vehicle, dyn.substep_rate, dyn.ramped)
-        groups.setdefault(key, []).append(w)
-    return list(groups.values())
+        same = groups.setdefault(key, [[]])
+        if sum(g.sc.n_agents for g in same[-1]) + w.sc.n_agents > FLEET_AGENTS and same[-1]:
+            same.append([])
+        same[-1].append(w)
+    return [g for same in groups.values() for g in same]
 
 
 class _OneAtATime:
@@ -306,7 +315,7 @@ class _OneAtATime:
     def __getattr__(self, name: str) -> Any:
         return getattr(self._step, name)
 
-    def decide(self, snap: Any) -> Any:
+    def decide(self, snap: Snapshot) -> StepDecision:
         with self._lock:
             return self._step.decide(snap)
 
@@ -318,7 +327,10 @@ def _fly_in_fleet(group: list[_Waiting], method: Method) -> None:
     from vo3d_opt.sim.rotorpy_fleet import FleetStepError
 
     t0 = time.perf_counter()
-    outcomes = _fleet_outcomes(group)
+    try:
+        outcomes: list[Any] = _fleet_outcomes(group)
+    except Exception as exc:  # noqa: BLE001 - no fleet (e.g. no thread): each flies alone
+        outcomes = [FleetStepError(error_line(exc))] * len(group)
     share = (time.perf_counter() - t0) / len(group)
     for w, outcome in zip(group, outcomes, strict=True):
         t1 = time.perf_counter()
@@ -338,10 +350,7 @@ def _fleet_outcomes(group: list[_Waiting]) -> list[RunRecord | Exception]:
     """Each encounter's record, or the exception its set-up or flight raised."""
     from vo3d_opt.sim.rotorpy_fleet import RotorPyFleet, import_torch
 
-    torch = import_torch()
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # torch's own pool would contend with the other workers
-    try:
+    with _one_torch_thread(import_torch()):
         fleet, lock = RotorPyFleet(), threading.Lock()
         outcomes: list[Any] = [None] * len(group)
         models: list[Any] = []
@@ -368,15 +377,35 @@ def _fleet_outcomes(group: list[_Waiting]) -> list[RunRecord | Exception]:
             except Exception as exc:  # noqa: BLE001 - that encounter's outcome
                 outcomes[k] = exc
         return outcomes
+
+
+_TORCH_THREADS = threading.Lock()
+_torch_users = [0, 0]  # fleets flying in this process, torch's thread count before the first
+
+
+@contextmanager
+def _one_torch_thread(torch: Any) -> Iterator[None]:
+    """torch on one thread while fleets fly (a sweep's worker is one core: torch's own pool
+    would contend with the other workers); its count is restored when the last one lands."""
+    with _TORCH_THREADS:
+        if _torch_users[0] == 0:
+            _torch_users[1] = torch.get_num_threads()
+            torch.set_num_threads(1)
+        _torch_users[0] += 1
+    try:
+        yield
     finally:
-        torch.set_num_threads(threads)
+        with _TORCH_THREADS:
+            _torch_users[0] -= 1
+            if _torch_users[0] == 0:
+                torch.set_num_threads(_torch_users[1])
 
 
-def _fly_member(sc: Scenario, step: Any, model: Any) -> RunRecord:
+def _fly_member(sc: Scenario, step: DecisionStep, model: Dynamics) -> RunRecord:
     try:
         return fly(sc, step, dynamics=model, progress=False)
     finally:
-        model.leave()
+        model.leave()  # type: ignore[attr-defined]  # a BatchedRotorPyDynamics
 
 
 _WARM = {
