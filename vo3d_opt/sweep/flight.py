@@ -350,7 +350,7 @@ def _fleet_outcomes(group: list[_Waiting]) -> list[RunRecord | Exception]:
     """Each encounter's record, or the exception its set-up or flight raised."""
     from vo3d_opt.sim.rotorpy_fleet import RotorPyFleet, import_torch
 
-    with _one_torch_thread(import_torch()):
+    with _TorchThreads.one(import_torch()):
         fleet, lock = RotorPyFleet(), threading.Lock()
         outcomes: list[Any] = [None] * len(group)
         models: list[Any] = []
@@ -379,26 +379,29 @@ def _fleet_outcomes(group: list[_Waiting]) -> list[RunRecord | Exception]:
         return outcomes
 
 
-_TORCH_THREADS = threading.Lock()
-_torch_users = [0, 0]  # fleets flying in this process, torch's thread count before the first
-
-
-@contextmanager
-def _one_torch_thread(torch: Any) -> Iterator[None]:
+class _TorchThreads:
     """torch on one thread while fleets fly (a sweep's worker is one core: torch's own pool
     would contend with the other workers); its count is restored when the last one lands."""
-    with _TORCH_THREADS:
-        if _torch_users[0] == 0:
-            _torch_users[1] = torch.get_num_threads()
-            torch.set_num_threads(1)
-        _torch_users[0] += 1
-    try:
-        yield
-    finally:
-        with _TORCH_THREADS:
-            _torch_users[0] -= 1
-            if _torch_users[0] == 0:
-                torch.set_num_threads(_torch_users[1])
+
+    lock = threading.Lock()
+    fleets = 0  # flying in this process
+    before = 1  # torch's thread count before the first
+
+    @classmethod
+    @contextmanager
+    def one(cls, torch: Any) -> Iterator[None]:
+        with cls.lock:
+            if cls.fleets == 0:
+                cls.before = torch.get_num_threads()
+                torch.set_num_threads(1)
+            cls.fleets += 1
+        try:
+            yield
+        finally:
+            with cls.lock:
+                cls.fleets -= 1
+                if cls.fleets == 0:
+                    torch.set_num_threads(cls.before)
 
 
 def _fly_member(sc: Scenario, step: DecisionStep, model: Dynamics) -> RunRecord:
