@@ -150,5 +150,4 @@ class Sensor:
 
     def sensed_all(self) -> tuple[np.ndarray, np.ndarray]:
         """Every observer's view at once: (N, N, 3) each, ``[i]`` = ``sensed(i)``. O(N²)."""
-        views = [self.sensed(i) for i in range(self.n)]
-        return np.stack([p for p, _ in views]), np.stack([v for _, v in views])
+        return self.sensed_many(np.arange(self.n))
