@@ -254,3 +254,38 @@ def test_keep_watch_is_the_pairwise_rule_within_each_run(seed):
     assert np.array_equal(keep_watch(lost, goals, **kw),
                           kw["watching"] & kw["done"] & ~kw["straight"]
                           & (np.linalg.norm(p - goals, axis=1) > 1.0))
+
+
+def test_a_watcher_released_from_hover_ramps_its_command_up_from_zero():
+    """Under a rate-limited command interface (RotorPy's), an agent that arrives at speed stops
+    dead and hovers; kept watching, it flies again from hover, so its first command after the
+    release is within one period's reach of 0, not of its last command before it arrived (a
+    set-point step many times the limit flipped a RotorPy vehicle). Every command stays within
+    reach of the vehicle's own velocity before the step (here the vehicle flies its command)."""
+    from vo3d_opt.sim.dynamics import KinematicDynamics
+    from vo3d_opt.sim.safety import command_rate
+    from vo3d_opt.sim.scenario import scenario_from_dict
+    from vo3d_opt.sim.simulator import Simulator, fly, scenario_selector
+
+    data = {"name": "released-watcher", "dt": 0.1, "max_time": 40.0, "goal_tolerance": 0.5,
+            "sensing": {"vehicle_range": 40.0},
+            "dynamics": {"model": "rotorpy", "vehicle": "hummingbird"},
+            "limits": {"speed": [0.0, 2.5], "altitude": [0.0, 40.0]},
+            "defaults": {"r_pz": 1.0, "radius": 0.2, "max_speed": 2.5},
+            "agents": [{"id": "a", "start": [0.0, 0.0, 20.0], "goal": [20.0, 0.0, 20.0]},
+                       {"id": "c", "start": [25.0, -45.0, 20.0], "goal": [25.0, 45.0, 20.0],
+                        "avoids": False}]}
+    sc = scenario_from_dict(data, "released-watcher.yaml")
+    reach = command_rate(sc) * sc.dt
+
+    class Checked(KinematicDynamics):
+        def _step(self, u, dt):
+            gap = np.abs(u - self._v)[~self._held]
+            assert (gap <= reach + 1e-9).all(), f"a command {gap.max():.2f} m/s from the velocity"
+            return super()._step(u, dt)
+
+    selector, _, _ = scenario_selector(sc)
+    record = fly(sc, Simulator(sc, selector).step, dynamics=Checked(), progress=False)
+    home = record.arrived[:-1, 0]
+    assert home.any() and (record.decided[:, 0] & home).any()  # arrived, then kept watch
+    assert np.abs(record.commands[home & ~record.decided[:, 0], 0]).max() == 0.0  # in hover

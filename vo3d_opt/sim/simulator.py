@@ -214,6 +214,7 @@ def fly(
             arrived = ~done & at_goal
             done = done | arrived
             dyn.hold(arrived)  # an arrived agent hovers: the others see it still (v: next step)
+            last = np.where(arrived[:, None], 0.0, last)  # stopped dead: a release ramps from 0
             # a watcher away from its goal is not there: a run ending so has not all arrived
             buf.pos[k + 1], buf.arrived[k + 1] = p, done & (at_goal | ~watching)
             buf.release(k)
