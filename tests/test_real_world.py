@@ -526,3 +526,25 @@ def test_rotorpy_commands_of_an_agent_that_does_not_avoid_are_rate_limited_too()
     assert rec.extra["margins"]["command_rate"] == 0.5
     steps = np.diff(np.concatenate([np.zeros((1, 2, 3)), rec.commands[: rec.steps]]), axis=0)
     assert np.abs(steps).max() <= 0.5 * sc.dt + 1e-12
+
+
+def test_rotorpy_plans_below_its_top_speed_by_what_its_velocity_loop_overshoots_in_gusts():
+    """A hummingbird cruising at its top speed through Dryden gusts flies above it for a moment
+    when the selector plans at that speed (``safety.speed_margin: 0``); with the derived margin
+    no sample is over it, and every command is the margin below it."""
+    data = {"name": "cruise-in-gusts", "dt": 0.2, "max_time": 40.0, "goal_tolerance": 1.0,
+            "dynamics": {"model": "rotorpy", "vehicle": "hummingbird"},
+            "wind": {"type": "dryden", "velocity": [2.23, 1.97, 0.0]},
+            "limits": {"speed": [0.0, 5.0], "altitude": [0.0, 40.0]},
+            "defaults": {"r_pz": 5.0, "radius": 0.5, "max_speed": 2.2},
+            "agents": [{"id": "a", "start": [0.0, 0.0, 20.0], "goal": [60.0, 0.0, 20.0]}]}
+    sc = scenario_from_dict(data)
+    margin = derive_margins(sc).speed_margin
+    assert margin > 0 and derive_margins(small()).speed_margin == 0.0
+    rec = run_scenario(sc, progress=False)
+    s = summarize(rec)
+    assert s["speed_violations"] == 0 and s["all_reached"]
+    assert np.linalg.norm(rec.commands, axis=-1).max() <= 2.2 - margin + 1e-9
+    at_top = summarize(run_scenario(scenario_from_dict({**data, "safety": {"speed_margin": 0.0}}),
+                                    progress=False))
+    assert at_top["speed_violations"] > 0

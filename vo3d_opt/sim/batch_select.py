@@ -94,7 +94,7 @@ class BatchSelect:
             sl = slice(mem.lo, mem.hi)
             dt, rng = float(sc.dt), float(sc.sensing.vehicle_range)
             self.r_pz[sl] = sc.r_pz
-            self.limits[sl] = vehicle_limits(step.limits, dt, sc.n_agents, sc.max_speed)
+            self.limits[sl] = vehicle_limits(step.limits, dt, sc.n_agents, step.top_speeds)
             for i in range(mem.lo, mem.hi):
                 options = self._options(step, float(self.limits[i, 1]), dt, rng)
                 self.group[i] = keys.setdefault(options, len(keys))

@@ -26,6 +26,7 @@ from vo3d_opt.sim.safety import (
     derive_margins,
     planning_bodies,
     planning_limits,
+    planning_speeds,
 )
 from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
 from vo3d_opt.sim.sensed_batch import (
@@ -62,6 +63,7 @@ class _SelectorStep:
         steps = config.vo.buffer_steps if config is not None else 2.0
         self.margins = derive_margins(sc, steps)
         self.limits = planning_limits(sc.limits, self.margins)
+        self.top_speeds = planning_speeds(sc, self.margins)
         self.bodies = planning_bodies(sc, self.margins)
         self.landing = Landing.for_scenario(sc, self.limits, self.bodies, self.margins.pz_buffer)
         self.landings = 0
@@ -87,9 +89,9 @@ class _SelectorStep:
         return out
 
     def agent_limits(self, i: int) -> Limits:
-        """Agent ``i``'s planning limits (its own speed cap)."""
-        sc = self.scenario
-        return self.limits.model_copy(update={"speed": (sc.limits.v_min, float(sc.max_speed[i]))})
+        """Agent ``i``'s planning limits (its own top speed, ``planning_speeds``)."""
+        v_min = self.scenario.limits.v_min
+        return self.limits.model_copy(update={"speed": (v_min, float(self.top_speeds[i]))})
 
     def extra(self) -> dict[str, Any]:
         m = self.margins
@@ -103,6 +105,7 @@ class _SelectorStep:
                 "obstacle_margin": m.obstacle_margin,
                 "altitude_margin": m.altitude_margin,
                 "prism_rise": m.prism_rise,
+                "speed_margin": m.speed_margin,
             },
         }
 
@@ -142,7 +145,7 @@ class SwarmSelect(_SelectorStep):
             snap.deciding,
             obstacle_range=sc.sensing.obstacle_range,
             spheres=self.spheres,
-            max_speed=sc.max_speed,
+            max_speed=self.top_speeds,
             threads=self.threads,
         )
         return self._land(

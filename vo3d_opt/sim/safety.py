@@ -37,7 +37,9 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
 * ``altitude_margin`` (m): ``max(v_max tau_eff, tracking)``: room to stop from full vertical
   speed, and the altitude a manoeuvre may cost; with rate-limited commands (RotorPy) the
   braking distance ``v_max tau_eff + v_max² / (2 command_rate)``; at most what keeps every
-  start and goal inside.
+  start and goal inside;
+* ``speed_margin`` (m/s, RotorPy only): planned below each vehicle's top speed by this much,
+  :data:`SPEED_MARGIN`: the velocity loop overshoots a command at the top speed in wind.
 
 Every value can be overridden by the scenario's ``safety`` mapping, and ``pz_buffer`` /
 ``acceleration`` by ``selector_options.pz_buffer`` / ``limits.acceleration``.
@@ -74,6 +76,10 @@ GAP_SHARE = 0.5
 #: the rate limit around the previous command: in a steady wind a P loop keeps a steady gap
 #: between the two.
 COMMAND_SHARE = 0.25
+#: m/s: RotorPy's P velocity loop, holding a command at the top speed in a wind of up to 3 m/s
+#: (constant or Dryden gusts), flies up to 0.05 m/s above it for a moment
+#: (``docs/results/sweeps/rotorpy-speed.md``); the selector plans twice that below.
+SPEED_MARGIN = 0.1
 
 
 @dataclass(frozen=True)
@@ -90,6 +96,7 @@ class Margins:
     obstacle_margin: float
     altitude_margin: float
     prism_rise: float
+    speed_margin: float
     why: dict[str, str] = field(default_factory=dict, compare=False)
 
 
@@ -185,6 +192,8 @@ def derive_margins(sc: Scenario, buffer_steps: float = 2.0) -> Margins:
         # distance to stop from full speed
         stop = v_max * tau + v_max**2 / (2.0 * rate)
     altitude = _pick(sc.safety.altitude_margin, min(stop, cap))
+    rotorpy = sc.vehicle_dynamics.model == "rotorpy"
+    speed = _pick(sc.safety.speed_margin, SPEED_MARGIN if rotorpy else 0.0)
     why = {
         "tau_eff": f"{sc.vehicle_dynamics.model} response time",
         "acceleration": why_a,
@@ -200,6 +209,7 @@ def derive_margins(sc: Scenario, buffer_steps: float = 2.0) -> Margins:
         "obstacle_margin": "tracking + vehicle radius",
         "prism_rise": "tracking" if sc.safety.obstacle_margin is None else "given obstacle_margin",
         "altitude_margin": (f"stopping room {stop:.3g}, at most {cap:.3g} (starts and goals)"),
+        "speed_margin": "velocity loop overshoot in wind" if rotorpy else "follows its command",
     }
     return Margins(
         tau_eff=tau,
@@ -210,6 +220,7 @@ def derive_margins(sc: Scenario, buffer_steps: float = 2.0) -> Margins:
         obstacle_margin=obstacle,
         altitude_margin=altitude,
         prism_rise=rise,
+        speed_margin=speed,
         why=why,
     )
 
@@ -241,14 +252,20 @@ def _pick(given: float | None, derived: float) -> float:
 
 def planning_limits(limits: Limits, m: Margins) -> Limits:
     """The limits the selector plans with: the altitude range shrunk by ``altitude_margin`` on
-    both sides, ``acceleration`` from the margins."""
+    both sides, the top speed lowered by ``speed_margin``, ``acceleration`` from the margins."""
     lo, hi = limits.altitude
     return limits.model_copy(
         update={
             "altitude": (lo + m.altitude_margin, hi - m.altitude_margin),
+            "speed": (limits.v_min, max(limits.v_min, limits.v_max - m.speed_margin)),
             "acceleration": m.acceleration,
         }
     )
+
+
+def planning_speeds(sc: Scenario, m: Margins) -> np.ndarray:
+    """(N,) the top speed each agent plans with: its own lowered by ``speed_margin``."""
+    return np.maximum(sc.limits.v_min, sc.max_speed - m.speed_margin)
 
 
 def prism_clearance(body: Cylinder | Box) -> float:

@@ -48,7 +48,8 @@ Further keys (all optional):
   ``velocity_response_tau`` is an alias of ``dynamics: {model: first_order, tau: ...}`` (not
   both).
 * ``safety``: overrides of the margins the simulator derives for those conditions
-  (``acceleration``, ``pz_buffer``, ``altitude_margin``, ``obstacle_margin``;
+  (``acceleration``, ``pz_buffer``, ``altitude_margin``, ``obstacle_margin``,
+  ``speed_margin``;
   ``vo3d_opt.sim.safety``).
 * ``formulation``, ``solver``: defaults for ``vo3d run`` when the command line gives none.
 * ``selector_options``: the selector's configuration, ``preset`` (default ``safe``) and any

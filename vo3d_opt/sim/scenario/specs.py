@@ -56,12 +56,14 @@ class SafetySpec(Spec):
     (the selector's ``Limits.acceleration``; None derived, 0 none); ``pz_buffer``: m (the
     selector's option); ``altitude_margin``: m kept from each altitude bound while planning;
     ``obstacle_margin``: m added to every obstacle's protected prism while planning (given,
-    it alone sizes them: the prism tops are not raised by the tracking error either)."""
+    it alone sizes them: the prism tops are not raised by the tracking error either);
+    ``speed_margin``: m/s planned below each vehicle's top speed."""
 
     acceleration: NonNegative | None = None
     pz_buffer: NonNegative | None = None
     altitude_margin: NonNegative | None = None
     obstacle_margin: NonNegative | None = None
+    speed_margin: NonNegative | None = None
 
 
 class DefaultsSpec(Spec):
