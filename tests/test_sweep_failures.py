@@ -114,6 +114,21 @@ def test_dense_95048_arrives_when_the_hovering_vehicles_make_room(monkeypatch):
     assert (s["reached"], s["agents"]) == (14, 15)
 
 
+def test_rotorpy_998_flies_its_watcher_from_hover_without_an_upset():
+    """In `rotorpy` 998 vehicle 1 arrives at 2.8 m/s (step 211), stops dead and hovers, and
+    the next step keeps watch; its command-rate limit started from its last command, not from
+    hover, so it was asked for 2.5 m/s at once and flipped (4.2 m/s over its top speed). Flown
+    as then (planning at the top speed: no ``speed_margin``), its first 225 steps, which hold
+    the release, now stay within every limit."""
+    pytest.importorskip("torch")  # batched RotorPy vehicles
+    pytest.importorskip("rotorpy")
+    sc = load_scenario(FAILURES / "rotorpy-s0-i998.yaml")
+    sc = scenario_variant(sc, safety={"speed_margin": 0.0})
+    record = run_scenario(sc, progress=False, max_steps=225)
+    assert (record.decided & record.arrived[:-1]).any()  # a vehicle home decided again
+    assert_safe(summarize(record))
+
+
 # --- encounters a sweep found failing whose cause is not fixed yet: each flies as recorded ---
 
 
