@@ -353,6 +353,26 @@ def test_a_finished_sweep_is_kept_unless_resumed_or_overwritten(cluster, tmp_pat
     assert rows_equal(kept, first.rows[first.rows["index"] < 3])
 
 
+def test_a_resume_refuses_rows_of_a_family_that_drew_other_encounters(cluster, tmp_path):
+    """The manifest names a digest of what the family draws (its encounter 0's scenario: a
+    version with other dynamics or draws is another sweep); a resume where it differs is
+    refused naming it, and nothing there changes."""
+    from vo3d_opt.generators import get_family
+    from vo3d_opt.sweep.runner import draws_digest
+
+    out = tmp_path / "older"
+    run_sweep("pair", 2, seed=0, scheduler=cluster, progress=False, out=out)
+    found = json.loads((out / "sweep.json").read_text())
+    assert found["draws"] == draws_digest(get_family("pair"), 0)
+    assert draws_digest(get_family("pair"), 1) != found["draws"]
+    assert draws_digest(get_family("group"), 0) != found["draws"]
+    (out / "sweep.json").write_text(json.dumps({**found, "draws": "0" * 16}))
+    before = sorted((p.name, p.read_bytes()) for p in out.rglob("*") if p.is_file())
+    with pytest.raises(SweepError, match='another sweep .*draws: "0{16}" there'):
+        run_sweep("pair", 2, seed=0, scheduler=cluster, progress=False, out=out, resume=True)
+    assert sorted((p.name, p.read_bytes()) for p in out.rglob("*") if p.is_file()) == before
+
+
 # ------------------------------------------------------------- outputs and the CLI
 
 

@@ -8,6 +8,8 @@ submission to the last row; ``setup_time`` the cluster's start and the warm-up b
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import os
 import sys
@@ -20,7 +22,7 @@ import numpy as np
 
 from vo3d_opt.config import DEFAULT_PRESET
 from vo3d_opt.extras import MissingExtra, check, needs
-from vo3d_opt.generators import FAMILIES, Family, get_family
+from vo3d_opt.generators import FAMILIES, Family, get_family, make_encounter
 from vo3d_opt.sim.simulator import make_selector
 from vo3d_opt.sweep.flight import DEFAULT_METHOD, METHODS, TIMING_COLUMNS, Method, error_line
 from vo3d_opt.sweep.stats import aggregate
@@ -173,7 +175,8 @@ def default_batch(fam: Family, method: Method, count: int, threads: int) -> int:
 
 
 def manifest(fam: Family, n: int, seed: int, method: Method, formulation: str, solver: str) -> dict:
-    """What makes a sweep the same sweep (``sweep.json``, compared by ``--resume``)."""
+    """What makes a sweep the same sweep (``sweep.json``, compared by ``--resume``); its
+    ``draws`` names what the family draws in this version (:func:`draws_digest`)."""
     options = dict(method.selector_options)
     if method.name == "vo3d":
         options = {"preset": DEFAULT_PRESET, **options}
@@ -185,7 +188,17 @@ def manifest(fam: Family, n: int, seed: int, method: Method, formulation: str, s
         "formulation": formulation,
         "solver": solver,
         "selector_options": options,
+        "draws": draws_digest(fam, seed),
     }
+
+
+def draws_digest(fam: Family, seed: int) -> str:
+    """SHA-256 (16 hex digits) of the scenario of the family's encounter 0 with ``seed``: a
+    version of the family that draws other encounters or flies them under other conditions (its
+    dynamics, wind, sensing) is another sweep, whose rows a resume must not mix in."""
+    scenario = make_encounter(fam, seed, 0).scenario
+    text = json.dumps(scenario, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def run_sweep(

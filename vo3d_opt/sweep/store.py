@@ -2,9 +2,9 @@
 and ``--resume`` flies only what is missing.
 
 * ``DIR/sweep.json``: what the sweep is (family, encounters, seed, method, formulation, solver,
-  selector options), written when it starts: ``--resume`` refuses a directory whose sweep is
-  another, naming what differs, and a sweep without ``--resume`` or ``--overwrite`` refuses a
-  directory that holds one (:func:`check_out`);
+  selector options, a digest of what the family draws), written when it starts: ``--resume``
+  refuses a directory whose sweep is another, naming what differs, and a sweep without
+  ``--resume`` or ``--overwrite`` refuses a directory that holds one (:func:`check_out`);
 * ``DIR/parts/part-NNNNNN.parquet``: the rows of the encounters flown so far, a part every few
   seconds (:data:`FLUSH_SECONDS`) or :data:`FLUSH_ROWS` rows, and whatever is complete when the
   sweep is interrupted (a signal, an exception); each written under a temporary name and
