@@ -44,10 +44,14 @@ def replay(scenarios: list[Scenario]) -> list[Any]:
             models[k].leave()
 
     threads = [threading.Thread(target=one, args=(k,)) for k in range(len(scenarios))]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    except BaseException:  # a Ctrl-C: the runs end at their next period
+        fleet.abort()
+        raise
     for k, sc in enumerate(scenarios):  # a run the fleet failed flies alone (the same numbers)
         if records[k] is None:
             flown_sc, step, _ = flown(sc, Method())

@@ -13,7 +13,7 @@ pytest.importorskip("rotorpy")
 from vo3d_opt.sim.dynamics import make_dynamics  # noqa: E402
 from vo3d_opt.sim.metrics import summarize  # noqa: E402
 from vo3d_opt.sim.record import StepDecision  # noqa: E402
-from vo3d_opt.sim.rotorpy_fleet import FleetStepError, RotorPyFleet  # noqa: E402
+from vo3d_opt.sim.rotorpy_fleet import FleetAborted, FleetStepError, RotorPyFleet  # noqa: E402
 from vo3d_opt.sim.scenario import scenario_from_dict  # noqa: E402
 from vo3d_opt.sim.simulator import fly, scenario_dynamics  # noqa: E402
 from vo3d_opt.sweep import flight  # noqa: E402
@@ -119,6 +119,68 @@ def test_periods_of_different_length_fail_every_run_of_the_step_none_hangs():
     _join_all([threading.Thread(target=one, args=(i, dt), daemon=True)
                for i, dt in enumerate((0.2, 0.1))])
     assert len(errors) == 2 and all("dt:" in e for e in errors)
+
+
+def test_an_aborted_fleet_ends_every_run_at_its_next_period():
+    """``abort`` (a Ctrl-C of the thread that started the runs): each run, waiting or asking
+    for its next period, gets FleetAborted at once instead of flying to its end."""
+    fleet = RotorPyFleet()
+    models = [make_dynamics(BATCHED, fleet=fleet) for _ in range(2)]
+    flown, ended = [0, 0], []
+
+    def one(i: int) -> None:
+        try:
+            models[i].reset(np.zeros((1, 3)) + 5.0 * i)
+            for _ in range(100_000):  # hours of flight
+                models[i].step(np.zeros((1, 3)), 0.2)
+                flown[i] += 1
+        except FleetAborted:
+            ended.append(i)
+        finally:
+            models[i].leave()
+
+    threads = [threading.Thread(target=one, args=(i,), daemon=True) for i in range(2)]
+    for t in threads:
+        t.start()
+    while min(flown) < 3:
+        time.sleep(0.01)
+    fleet.abort()
+    for t in threads:
+        t.join(timeout=30.0)
+    assert sorted(ended) == [0, 1] and max(flown) < 1000
+
+
+def test_a_ctrl_c_while_a_sweep_task_waits_for_its_fleet_ends_the_runs(monkeypatch):
+    """A KeyboardInterrupt in the thread waiting for the fleet's runs goes up, and the runs'
+    threads end with it (else they would fly on to their ends, and the process with them)."""
+    from concurrent.futures import Future
+
+    before = set(threading.enumerate())
+    ends: list[str] = []
+    member = flight._fly_member
+
+    def spied(*args):
+        try:
+            member(*args)
+            ends.append("landed")
+        except FleetAborted:
+            ends.append("aborted")
+
+    def interrupted(self, timeout=None):
+        time.sleep(0.5)  # the runs are flying
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(flight, "_fly_member", spied)
+    monkeypatch.setattr(Future, "result", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        flight._fleet_outcomes(_waiting(2))
+    def flying() -> set:  # the pool's threads, which the process would wait for at exit
+        return {t for t in threading.enumerate() if not t.daemon} - before
+
+    deadline = time.monotonic() + 30.0
+    while flying() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not flying() and ends == ["aborted", "aborted"]
 
 
 def _scenario(j: int) -> dict:

@@ -6,7 +6,8 @@ period about 20 ms for 8 vehicles, under 1 ms for 500). A :class:`RotorPyFleet` 
 vehicles of many runs in one call per sub-step, each run flown by ``fly`` in a thread of its
 own: each run's model (a ``BatchedRotorPyDynamics`` made with ``fleet=``) hands the fleet its
 period and waits; when every model still flying has done so, the last one in flies them all.
-A run whose flight is over ``leave``-s, and the others go on without it.
+A run whose flight is over ``leave``-s, and the others go on without it; ``abort`` ends every
+run at its next period (after a Ctrl-C of the thread that waits for them).
 
 A vehicle's numbers do not depend on who else flies: RotorPy's batched dynamics is arithmetic
 row by row (tests/test_rotorpy_fleet.py flies runs in a fleet and each alone, bit for bit), and
@@ -43,6 +44,11 @@ class FleetStepError(RuntimeError):
     chained); flown alone, a run that did not cause it flies on."""
 
 
+class FleetAborted(RuntimeError):
+    """The fleet was aborted (:meth:`RotorPyFleet.abort`): raised in each of its runs at its
+    next period."""
+
+
 class RotorPyFleet:
     """One ``BatchedMultirotor`` for the models that ``join`` it, stepped when all of those
     still flying asked for a period (the module docstring). All fly one vehicle type; the
@@ -56,6 +62,7 @@ class RotorPyFleet:
         self._asked: dict[int, Period] = {}
         self._failed: dict[int, tuple[BaseException, bool]] = {}  # error, step shared
         self._vehicles: dict[int, Any] = {}  # BatchedMultirotor by number of vehicles
+        self._aborted = False
         self.reseed(seed)
 
     def join(self, model: BatchedRotorPyDynamics) -> None:
@@ -75,6 +82,15 @@ class RotorPyFleet:
             self._flying.discard(id(model))
             self._fly_when_all_asked(caller=None)
 
+    def abort(self) -> None:
+        """End every run: each waiting for its period, and each asking for one from now on,
+        gets :class:`FleetAborted` (a step in progress ends first). For the thread that started
+        the runs, on a Ctrl-C: otherwise they fly on to their end, and the process with them."""
+        with self._cond:
+            self._aborted = True
+            self._asked.clear()
+            self._cond.notify_all()
+
     def reseed(self, seed: int) -> None:
         """Start the fleet's torch stream again from ``seed``."""
         with self.torch.random.fork_rng(devices=[]):
@@ -86,12 +102,16 @@ class RotorPyFleet:
         with self._cond:
             if id(model) not in self._flying:
                 raise RuntimeError("a model that left its fleet cannot step again")
-            self._asked[id(model)] = period
-            self._fly_when_all_asked(caller=id(model))
+            if not self._aborted:
+                self._asked[id(model)] = period
+                self._fly_when_all_asked(caller=id(model))
             while id(model) in self._asked:
                 self._cond.wait()
             failure, shared = self._failed.pop(id(model), (None, False))
+            aborted = self._aborted
         if failure is None:
+            if aborted:
+                raise FleetAborted("the fleet was aborted")
             return
         if not shared:  # a fleet of this model alone: its own error, as it is
             raise failure

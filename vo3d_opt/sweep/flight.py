@@ -16,7 +16,7 @@ import json
 import threading
 import time
 from collections.abc import Iterator, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -360,23 +360,36 @@ def _fleet_outcomes(group: list[_Waiting]) -> list[RunRecord | Exception]:
             except Exception as exc:  # noqa: BLE001 - that encounter's outcome
                 outcomes[k] = exc
                 models.append(None)
-        futures = {}
-        with ThreadPoolExecutor(max_workers=max(1, len(group))) as pool:
-            try:
-                for k, w in enumerate(group):
-                    if models[k] is not None:
-                        step = _OneAtATime(w.step, lock)
-                        futures[k] = pool.submit(_fly_member, w.sc, step, models[k])
-            finally:  # a run that never started must not keep the others waiting
-                for k, model in enumerate(models):
-                    if model is not None and k not in futures:
-                        model.leave()
-        for k, future in futures.items():
-            try:
-                outcomes[k] = future.result()
-            except Exception as exc:  # noqa: BLE001 - that encounter's outcome
-                outcomes[k] = exc
+        try:
+            futures = _start_members(group, models, lock)
+            for k, future in futures.items():
+                try:
+                    outcomes[k] = future.result()
+                except Exception as exc:  # noqa: BLE001 - that encounter's outcome
+                    outcomes[k] = exc
+        except BaseException:  # a Ctrl-C: the runs end at their next period, not their last
+            fleet.abort()
+            raise
         return outcomes
+
+
+def _start_members(
+    group: list[_Waiting], models: list[Any], lock: threading.Lock
+) -> dict[int, Future[RunRecord]]:
+    """Each encounter with a model flying in a thread of its own: their futures by index."""
+    futures = {}
+    pool = ThreadPoolExecutor(max_workers=max(1, len(group)))
+    try:
+        for k, w in enumerate(group):
+            if models[k] is not None:
+                step = _OneAtATime(w.step, lock)
+                futures[k] = pool.submit(_fly_member, w.sc, step, models[k])
+    finally:  # a run that never started must not keep the others waiting
+        for k, model in enumerate(models):
+            if model is not None and k not in futures:
+                model.leave()
+        pool.shutdown(wait=False)  # its threads end with their runs
+    return futures
 
 
 class _TorchThreads:
