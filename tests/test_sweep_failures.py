@@ -179,3 +179,22 @@ def test_lagged_52246_needs_the_fine_planes_near_its_prisms():
     own) it flies clean (``test_sweep_failures_are_fixed``)."""
     s = flown("lagged-s0-i52246", {"fine_planes": False})
     assert s["obstacle_pz_intrusions"] > 0 and s["collisions"] == 0
+
+
+def test_open_rotorpy_960_a_vehicle_skimming_a_prism_top_is_led_down_into_it():
+    """`rotorpy` 960 (the safe preset's 1,000-encounter sweep): vehicle 3 crosses a cylinder at
+    the top of its planning prism (raised by the tracking error), 2 mm below it once RotorPy's
+    velocity loop lags a climb of 0.03 m/s. Inside the prism the decision counts as escape only
+    moving away horizontally, which no velocity within one step's acceleration does, so the
+    least-bad velocity brakes and sinks towards the preferred descent, into the zone: 1.36 m
+    from the surface (the zone: 2 m). The escape is up (2 mm): once the decision sees
+    that, this test fails and the encounter moves to the fixed ones. Its first 100 steps hold
+    the intrusion."""
+    pytest.importorskip("torch")  # batched RotorPy vehicles
+    pytest.importorskip("rotorpy")
+    record = run_scenario(load_scenario(FAILURES / "rotorpy-s0-i960.yaml"), progress=False,
+                          max_steps=100)
+    s = summarize(record)
+    assert s["collisions"] == 0 and s["pz_intrusions"] == 0
+    assert s["altitude_violations"] == 0 and s["speed_violations"] == 0
+    assert s["obstacle_pz_intrusions"] == 1, "no intrusion now: move it to the fixed ones"
