@@ -47,9 +47,10 @@ NOTES = {
     "rotorpy": [
         "A limit violation here is a speed violation of the vehicle: its true speed, sampled "
         "at every RotorPy sub-step, above its top speed. RotorPy's velocity loop overshoots a "
-        "command held at the top speed in gusts, so under RotorPy our method plans 0.1 m/s "
-        "below it ([what that margin buys](rotorpy-speed.md), `benchmarks/speed_overshoot.py`); "
-        "without avoidance the vehicles fly straight at their top speed.",
+        "command held at the top speed in wind, so under RotorPy in wind our method plans "
+        "0.1 m/s below it ([what that margin buys](rotorpy-speed.md), "
+        "`benchmarks/speed_overshoot.py`); without avoidance the vehicles fly straight at their "
+        "top speed.",
         "",
         "Encounter 960's intrusion is into an obstacle's zone, not a vehicle's: a vehicle "
         "skimming the top of a cylinder's planning prism lags a small climb, ends 2 mm inside "

@@ -104,9 +104,10 @@ def render(rows: list[dict[str, Any]], command: str) -> str:
         f"`{command}`: {len(rows)} encounters of the `rotorpy` family (hummingbirds in winds of",
         "up to 3 m/s, constant or Dryden gusts; the group draws cruise at their top speed), flown",
         "by our method planning at each vehicle's top speed (`safety.speed_margin: 0`) and with",
-        "the margin the simulator derives (0.1 m/s under RotorPy), each run as in the sweep. A",
-        "speed violation is a vehicle-step in which the true speed, sampled at every RotorPy",
-        "sub-step, is above the vehicle's top speed; the commands are what the selector chose.",
+        "the margin the simulator derives (0.1 m/s under RotorPy in wind), each run as in the",
+        "sweep. A speed violation is a vehicle-step in which the true speed, sampled at every",
+        "RotorPy sub-step, is above the vehicle's top speed; the commands are what the selector",
+        "chose.",
         "",
         "| | encounters with a speed violation | largest speed over the top speed m/s "
         "| largest command over the top speed m/s |",

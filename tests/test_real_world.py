@@ -541,6 +541,8 @@ def test_rotorpy_plans_below_its_top_speed_by_what_its_velocity_loop_overshoots_
     sc = scenario_from_dict(data)
     margin = derive_margins(sc).speed_margin
     assert margin > 0 and derive_margins(small()).speed_margin == 0.0
+    calm = {k: v for k, v in data.items() if k != "wind"}  # no wind: no overshoot, no margin
+    assert derive_margins(scenario_from_dict(calm)).speed_margin == 0.0
     rec = run_scenario(sc, progress=False)
     s = summarize(rec)
     assert s["speed_violations"] == 0 and s["all_reached"]

@@ -38,8 +38,9 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
   speed, and the altitude a manoeuvre may cost; with rate-limited commands (RotorPy) the
   braking distance ``v_max tau_eff + v_max² / (2 command_rate)``; at most what keeps every
   start and goal inside;
-* ``speed_margin`` (m/s, RotorPy only): planned below each vehicle's top speed by this much,
-  :data:`SPEED_MARGIN`: the velocity loop overshoots a command at the top speed in wind.
+* ``speed_margin`` (m/s, RotorPy in wind only): planned below each vehicle's top speed by this
+  much, :data:`SPEED_MARGIN`: the velocity loop overshoots a command at the top speed in wind
+  (without wind it does not: ``docs/results/acceleration-bound.md``).
 
 Every value can be overridden by the scenario's ``safety`` mapping, and ``pz_buffer`` /
 ``acceleration`` by ``selector_options.pz_buffer`` / ``limits.acceleration``.
@@ -78,7 +79,8 @@ GAP_SHARE = 0.5
 COMMAND_SHARE = 0.25
 #: m/s: RotorPy's P velocity loop, holding a command at the top speed in a wind of up to 3 m/s
 #: (constant or Dryden gusts), flies up to 0.05 m/s above it for a moment
-#: (``docs/results/sweeps/rotorpy-speed.md``); the selector plans twice that below.
+#: (``docs/results/sweeps/rotorpy-speed.md``); the selector plans twice that below. A fixed
+#: figure, not a share of the top speed: the overshoot comes from the wind, not the speed.
 SPEED_MARGIN = 0.1
 
 
@@ -192,8 +194,8 @@ def derive_margins(sc: Scenario, buffer_steps: float = 2.0) -> Margins:
         # distance to stop from full speed
         stop = v_max * tau + v_max**2 / (2.0 * rate)
     altitude = _pick(sc.safety.altitude_margin, min(stop, cap))
-    rotorpy = sc.vehicle_dynamics.model == "rotorpy"
-    speed = _pick(sc.safety.speed_margin, SPEED_MARGIN if rotorpy else 0.0)
+    gusts = sc.vehicle_dynamics.model == "rotorpy" and sc.wind is not None
+    speed = _pick(sc.safety.speed_margin, SPEED_MARGIN if gusts else 0.0)
     why = {
         "tau_eff": f"{sc.vehicle_dynamics.model} response time",
         "acceleration": why_a,
@@ -209,7 +211,7 @@ def derive_margins(sc: Scenario, buffer_steps: float = 2.0) -> Margins:
         "obstacle_margin": "tracking + vehicle radius",
         "prism_rise": "tracking" if sc.safety.obstacle_margin is None else "given obstacle_margin",
         "altitude_margin": (f"stopping room {stop:.3g}, at most {cap:.3g} (starts and goals)"),
-        "speed_margin": "velocity loop overshoot in wind" if rotorpy else "follows its command",
+        "speed_margin": "velocity loop overshoot in wind" if gusts else "no overshoot",
     }
     return Margins(
         tau_eff=tau,

@@ -57,7 +57,7 @@ class SafetySpec(Spec):
     selector's option); ``altitude_margin``: m kept from each altitude bound while planning;
     ``obstacle_margin``: m added to every obstacle's protected prism while planning (given,
     it alone sizes them: the prism tops are not raised by the tracking error either);
-    ``speed_margin``: m/s planned below each vehicle's top speed."""
+    ``speed_margin``: m/s planned below each vehicle's top speed (RotorPy in wind: derived)."""
 
     acceleration: NonNegative | None = None
     pz_buffer: NonNegative | None = None
