@@ -91,6 +91,20 @@ def both_ways(sc: Scenario) -> list[Scenario]:
     return [at_top, sc]
 
 
+def row(sc: Scenario, records: list[Any]) -> dict[str, Any]:
+    """The page's row of ``sc`` from its two records (at the top speed, with the margin)."""
+    wind = sc.wind
+    r = {
+        "name": sc.name,
+        "wind": "none" if wind is None else f"{wind.type} {np.linalg.norm(wind.velocity):.2f} m/s",
+        "top speeds": f"{sc.max_speed.min():.2f}–{sc.max_speed.max():.2f}",
+        **{w: excess(rec) for w, rec in zip(WAYS, records, strict=True)},
+    }
+    if max(r[w]["largest"] for w in WAYS) > LARGE:
+        r["one by one"] = one_by_one(both_ways(sc)[0])
+    return r
+
+
 def render(rows: list[dict[str, Any]], command: str) -> str:
     total = {w: sum(r[w]["violations"] > 0 for r in rows) for w in WAYS}
     worst = {w: max(r[w]["largest"] for r in rows) for w in WAYS}
@@ -140,6 +154,7 @@ def render(rows: list[dict[str, Any]], command: str) -> str:
 
 
 def scenarios_given(args: argparse.Namespace) -> list[Scenario]:
+    """The encounters of ``--indices`` (as the sweep draws them) or the files of ``--files``."""
     if args.indices:
         return [make_encounter("rotorpy", args.seed, i).load() for i in args.indices]
     paths = sorted(f for x in args.files for f in (sorted(x.glob("*.yaml")) if x.is_dir() else [x]))
@@ -157,17 +172,7 @@ def main() -> None:
     import_torch().set_num_threads(1)  # as a sweep's worker flies them
     scenarios = scenarios_given(args)
     records = replay([v for sc in scenarios for v in both_ways(sc)])
-    rows = []
-    for k, sc in enumerate(scenarios):
-        r = {
-            "name": sc.name,
-            "wind": f"{sc.wind.type} {np.linalg.norm(sc.wind.velocity):.2f} m/s",
-            "top speeds": f"{sc.max_speed.min():.2f}–{sc.max_speed.max():.2f}",
-            **{w: excess(records[2 * k + j]) for j, w in enumerate(WAYS)},
-        }
-        if max(r[w]["largest"] for w in WAYS) > LARGE:
-            r["one by one"] = one_by_one(both_ways(sc)[0])
-        rows.append(r)
+    rows = [row(sc, records[2 * k : 2 * k + 2]) for k, sc in enumerate(scenarios)]
     shown = (
         ("--indices " + " ".join(map(str, args.indices)))
         if args.indices

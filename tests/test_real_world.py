@@ -89,6 +89,7 @@ BAD = [
     (("agents", 0, "avoids"), "no", "agents[0].avoids"),
     (("safety", "pz_buffer"), -1.0, "safety.pz_buffer"),
     (("safety", "altitude_margins"), 1.0, "safety.altitude_margins"),
+    (("safety", "speed_margin"), 4.0, "safety.speed_margin"),  # no speed left to plan with
     (("velocity_response_tau",), 0.5, "velocity_response_tau"),  # with dynamics below
 ]
 
@@ -550,3 +551,49 @@ def test_rotorpy_plans_below_its_top_speed_by_what_its_velocity_loop_overshoots_
     at_top = summarize(run_scenario(scenario_from_dict({**data, "safety": {"speed_margin": 0.0}}),
                                     progress=False))
     assert at_top["speed_violations"] > 0
+
+
+def test_the_speed_margin_reaches_every_decision_path_and_the_command_rate_limit():
+    """Planning speeds lowered by the margin in each agent's limits (one select() each), in
+    select_many's caps and the batched decisions', and in the simulator's command-rate limit:
+    a turn moved into reach there may be faster than either command, and is capped at the
+    planning speed (the vehicle here flies its command, to check every one)."""
+    from vo3d_opt.sim.batch_select import BatchSelect, Member
+    from vo3d_opt.sim.deciders import SwarmSelect
+    from vo3d_opt.sim.dynamics import KinematicDynamics
+    from vo3d_opt.sim.record import StepDecision
+
+    windy = {"model": "rotorpy", "vehicle": "hummingbird"}
+    sc = small(dynamics=windy, wind={"type": "constant", "velocity": [0.0, 3.0, 0.0]})
+    margin = derive_margins(sc).speed_margin
+    assert margin == pytest.approx(0.1)
+    sel, _, _ = scenario_selector(sc)
+    assert PerAgentSelect(sc, sel).agent_limits(1).speed[1] == pytest.approx(4.0 - margin)
+    swarm = SwarmSelect(sc, sel)
+    np.testing.assert_allclose(swarm.top_speeds, 4.0 - margin)
+    batch = BatchSelect([Member(sc, swarm, 0, 2)], 2)
+    np.testing.assert_allclose(batch.limits[:, 1], 4.0 - margin)
+    # calm air, or a slow vehicle: no margin, or at most half its speed
+    calm = small(dynamics=windy, wind={"type": "constant", "velocity": [0.0, 0.0, 0.0]})
+    assert derive_margins(calm).speed_margin == 0.0
+    slow = small(dynamics=windy, wind={"type": "constant", "velocity": [0.0, 3.0, 0.0]},
+                 defaults={**SMALL["defaults"], "max_speed": 0.1})
+    assert derive_margins(slow).speed_margin == pytest.approx(0.05)
+    # decisions at the planning speed, 30 degrees off the x axis, then along it: moved into
+    # reach of the last command axis by axis, the turn's command is faster than either
+    top = 4.0 - margin
+
+    class Turning:
+        formulation = solver = "turning"
+
+        def decide(self, snap):
+            heading = np.radians(30.0 if snap.k < 20 else 0.0)
+            u = np.tile([top * np.cos(heading), top * np.sin(heading), 0.0], (2, 1))
+            return StepDecision(commands=u, statuses=np.full(2, "optimal", dtype=object),
+                                decision_times=np.zeros(2), solve_times=np.zeros(2))
+
+        def extra(self):
+            return {}
+
+    record = fly(sc, Turning(), dynamics=KinematicDynamics(), progress=False, max_steps=30)
+    assert np.linalg.norm(record.commands, axis=-1).max() <= top + 1e-9

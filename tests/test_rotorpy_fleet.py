@@ -14,7 +14,7 @@ from vo3d_opt.sim.dynamics import make_dynamics  # noqa: E402
 from vo3d_opt.sim.metrics import summarize  # noqa: E402
 from vo3d_opt.sim.record import StepDecision  # noqa: E402
 from vo3d_opt.sim.rotorpy_fleet import FleetAborted, FleetStepError, RotorPyFleet  # noqa: E402
-from vo3d_opt.sim.scenario import scenario_from_dict  # noqa: E402
+from vo3d_opt.sim.scenario import scenario_from_dict, scenario_variant  # noqa: E402
 from vo3d_opt.sim.simulator import fly, scenario_dynamics  # noqa: E402
 from vo3d_opt.sweep import flight  # noqa: E402
 
@@ -166,14 +166,25 @@ def test_a_ctrl_c_while_a_sweep_task_waits_for_its_fleet_ends_the_runs(monkeypat
         except FleetAborted:
             ends.append("aborted")
 
+    stepped, step_all = threading.Event(), RotorPyFleet._fly_all
+
+    def counted(self, batch, periods):
+        step_all(self, batch, periods)
+        stepped.set()
+
     def interrupted(self, timeout=None):
-        time.sleep(0.5)  # the runs are flying
+        assert stepped.wait(60.0)  # the runs are flying (for 10 minutes of flight)
         raise KeyboardInterrupt
 
+    waiting = _waiting(2)
+    for w in waiting:
+        w.sc = scenario_variant(w.sc, max_time=600.0)
+    monkeypatch.setattr(RotorPyFleet, "_fly_all", counted)
     monkeypatch.setattr(flight, "_fly_member", spied)
     monkeypatch.setattr(Future, "result", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        flight._fleet_outcomes(_waiting(2))
+        flight._fleet_outcomes(waiting)
+
     def flying() -> set:  # the pool's threads, which the process would wait for at exit
         return {t for t in threading.enumerate() if not t.daemon} - before
 

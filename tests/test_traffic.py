@@ -287,5 +287,6 @@ def test_a_watcher_released_from_hover_ramps_its_command_up_from_zero():
     selector, _, _ = scenario_selector(sc)
     record = fly(sc, Simulator(sc, selector).step, dynamics=Checked(), progress=False)
     home = record.arrived[:-1, 0]
-    assert home.any() and (record.decided[:, 0] & home).any()  # arrived, then kept watch
+    first = int(np.argmax(home))  # the step after it arrived: released at once
+    assert home.any() and record.decided[first, 0]
     assert np.abs(record.commands[home & ~record.decided[:, 0], 0]).max() == 0.0  # in hover

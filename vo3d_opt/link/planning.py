@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from vo3d_opt.sim.safety import derive_margins, planning_bodies, planning_limits
+from vo3d_opt.sim.safety import derive_margins, planning_bodies, planning_limits, planning_speeds
 from vo3d_opt.sim.scenario import Scenario, sphere_surface_distance
 from vo3d_opt.sim.simulator import scenario_selector
 from vo3d_opt.sim.traffic import GoalWithDetours
@@ -50,9 +50,10 @@ def link_selector(sc: Scenario, agent: str) -> LinkSelector:
 
 class Plan:
     """Agent ``agent`` of ``sc`` deciding every ``period`` s: its planning limits (the
-    simulator's altitude margin and acceleration bound, its own speed cap), the sensed
-    obstacles inflated as the simulator plans with them, the static spheres, its goal and the
-    simulator's preferred-velocity rule (towards the goal, with its detours out of deadlocks)."""
+    simulator's altitude margin and acceleration bound, its own speed cap less the speed
+    margin), the sensed obstacles inflated as the simulator plans with them, the static
+    spheres, its goal and the simulator's preferred-velocity rule (towards the goal, with its
+    detours out of deadlocks)."""
 
     def __init__(self, sc: Scenario, agent: str, period: float) -> None:
         i = sc.ids.index(agent)
@@ -60,7 +61,7 @@ class Plan:
         margins = derive_margins(sc)
         limits = planning_limits(sc.limits, margins)
         self.limits: Limits = limits.model_copy(
-            update={"speed": (sc.limits.v_min, float(sc.max_speed[i]))}
+            update={"speed": (sc.limits.v_min, float(planning_speeds(sc, margins)[i]))}
         )
         bodies = planning_bodies(sc, margins)
         seen = np.flatnonzero(sc.sensed) if sc.obstacles else np.zeros(0, dtype=int)

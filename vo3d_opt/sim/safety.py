@@ -161,6 +161,19 @@ def _acceleration(sc: Scenario, tau: float, v_max: float) -> tuple[float | None,
     )
 
 
+def _speed_margin(sc: Scenario) -> float:
+    """:data:`SPEED_MARGIN` for RotorPy vehicles in a wind (a mean wind or gusts), else 0; at
+    most half of what the slowest vehicle that avoids has above the minimum speed."""
+    wind = sc.wind
+    if sc.vehicle_dynamics.model != "rotorpy" or wind is None:
+        return 0.0
+    gusts = wind.type == "dryden" and (wind.sigma is None or np.any(wind.sigma > 0))
+    if not gusts and not np.any(wind.velocity != 0):
+        return 0.0
+    tops = sc.max_speed[sc.avoids] if sc.avoids.any() else sc.max_speed
+    return min(SPEED_MARGIN, 0.5 * (float(np.min(tops)) - sc.limits.v_min))
+
+
 def _altitude_cap(sc: Scenario) -> float:
     """The largest margin that keeps every start and goal within the planning altitudes."""
     z = np.concatenate([sc.starts[:, 2], sc.goals[:, 2]])
@@ -194,8 +207,7 @@ def derive_margins(sc: Scenario, buffer_steps: float = 2.0) -> Margins:
         # distance to stop from full speed
         stop = v_max * tau + v_max**2 / (2.0 * rate)
     altitude = _pick(sc.safety.altitude_margin, min(stop, cap))
-    gusts = sc.vehicle_dynamics.model == "rotorpy" and sc.wind is not None
-    speed = _pick(sc.safety.speed_margin, SPEED_MARGIN if gusts else 0.0)
+    speed = _pick(sc.safety.speed_margin, _speed_margin(sc))
     why = {
         "tau_eff": f"{sc.vehicle_dynamics.model} response time",
         "acceleration": why_a,
@@ -211,7 +223,7 @@ def derive_margins(sc: Scenario, buffer_steps: float = 2.0) -> Margins:
         "obstacle_margin": "tracking + vehicle radius",
         "prism_rise": "tracking" if sc.safety.obstacle_margin is None else "given obstacle_margin",
         "altitude_margin": (f"stopping room {stop:.3g}, at most {cap:.3g} (starts and goals)"),
-        "speed_margin": "velocity loop overshoot in wind" if gusts else "no overshoot",
+        "speed_margin": f"velocity loop overshoot in wind {speed:.3g}" if speed else "none",
     }
     return Margins(
         tau_eff=tau,

@@ -35,8 +35,8 @@ zone, which is what the metrics count); those that do not decide (arrived ones h
 of the avoidance, not half); the obstacles
 within ``sensing.obstacle_range`` of their nearest point (those with ``sensed: false`` are never
 seen), and the scenario's static spheres within that range as zero-velocity, non-cooperative
-neighbours; its limits: speed ``(limits.speed[0], min(limits.speed[1], max_speed))`` and the
-altitude range.
+neighbours; its limits: speed ``(limits.speed[0], min(limits.speed[1], max_speed))`` less the
+speed margin (``vo3d_opt.sim.safety``: RotorPy in wind) and the altitude range.
 
 An agent within ``goal_tolerance`` of its goal has arrived: it stops (velocity 0 from that
 sample on, which is what the others sense next), hovers there, still seen by the others, and no
@@ -72,7 +72,7 @@ from vo3d_opt.sim.record import (
     StepDecision,
     check_allotment,
 )
-from vo3d_opt.sim.safety import derive_margins, within_reach
+from vo3d_opt.sim.safety import derive_margins, planning_speeds, within_reach
 from vo3d_opt.sim.scenario import Scenario, load_scenario
 from vo3d_opt.sim.traffic import GoalWithDetours, keep_watch
 
@@ -166,8 +166,12 @@ def fly(
         total, n, same_commands=dyn.model == "kinematic", spill=spill, spill_dir=spill_dir
     )
     p, v = dyn.positions, dyn.velocities
-    rate = derive_margins(sc).command_rate  # None: commands may change at once
+    margins = derive_margins(sc)
+    rate = margins.command_rate  # None: commands may change at once
     last = v  # the commands before: rate-limited models change them gradually from these
+    # the rate limit's cap: the planning speeds (a turn moved into reach may be faster than
+    # either command), the top speed for those that fly straight
+    top = np.where(straight, sc.max_speed, planning_speeds(sc, margins))
     done = np.linalg.norm(p - sc.goals, axis=1) <= tol
     dyn.hold(done)
     watching = np.zeros(n, dtype=bool)
@@ -200,7 +204,7 @@ def fly(
             u, statuses = _checked_commands(out, deciding)
             u[straight] = w[straight]
             if rate is not None:  # the vehicle's command interface, whoever decided: RotorPy's
-                u = within_reach(u, last, rate, dt, sc.max_speed)  # velocity loop (safety.py)
+                u = within_reach(u, last, rate, dt, top)  # velocity loop (safety.py)
                 u[done & ~watching] = 0.0  # held in hover
                 last = u
             buf.pref[k], buf.cmd[k], buf.decided[k] = w, u, deciding
@@ -214,7 +218,8 @@ def fly(
             arrived = ~done & at_goal
             done = done | arrived
             dyn.hold(arrived)  # an arrived agent hovers: the others see it still (v: next step)
-            last = np.where(arrived[:, None], 0.0, last)  # stopped dead: a release ramps from 0
+            if rate is not None:  # stopped dead: a release ramps from 0
+                last = np.where(arrived[:, None], 0.0, last)
             # a watcher away from its goal is not there: a run ending so has not all arrived
             buf.pos[k + 1], buf.arrived[k + 1] = p, done & (at_goal | ~watching)
             buf.release(k)
@@ -359,8 +364,9 @@ def scenario_buffer(sc: Scenario, options: dict[str, Any]) -> float | None:
     if config.vo.pz_buffer is not None:
         return None
     steps = config.vo.buffer_steps
-    derived = derive_margins(sc, steps).pz_buffer
-    dt, top = float(sc.dt), np.minimum(sc.max_speed, sc.limits.v_max)
+    margins = derive_margins(sc, steps)
+    derived = margins.pz_buffer
+    dt, top = float(sc.dt), np.minimum(planning_speeds(sc, margins), sc.limits.v_max)
     own = {steps * float(v) * dt for v in top[sc.avoids]} or {derived}
     return None if own == {derived} else derived
 

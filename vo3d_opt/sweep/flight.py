@@ -367,7 +367,7 @@ def _fleet_outcomes(group: list[_Waiting]) -> list[RunRecord | Exception]:
                     outcomes[k] = future.result()
                 except Exception as exc:  # noqa: BLE001 - that encounter's outcome
                     outcomes[k] = exc
-        except BaseException:  # a Ctrl-C: the runs end at their next period, not their last
+        except BaseException:  # interrupted (or failed): the runs end at their next period
             fleet.abort()
             raise
         return outcomes

@@ -188,17 +188,29 @@ def manifest(fam: Family, n: int, seed: int, method: Method, formulation: str, s
         "formulation": formulation,
         "solver": solver,
         "selector_options": options,
-        "draws": draws_digest(fam, seed),
+        "draws": draws_digest(fam, seed, n),
     }
 
 
-def draws_digest(fam: Family, seed: int) -> str:
-    """SHA-256 (16 hex digits) of the scenario of the family's encounter 0 with ``seed``: a
-    version of the family that draws other encounters or flies them under other conditions (its
-    dynamics, wind, sensing) is another sweep, whose rows a resume must not mix in."""
-    scenario = make_encounter(fam, seed, 0).scenario
-    text = json.dumps(scenario, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+def draws_digest(fam: Family, seed: int, n: int) -> str:
+    """SHA-256 (16 hex digits) of the scenarios of encounters 0, n/3, 2n/3 and n-1 of the
+    family with ``seed``, their names and descriptions left out: a version of the family that
+    draws other encounters or flies them under other conditions (its dynamics, wind, sensing) is
+    another sweep, whose rows a resume must not mix in."""
+    digest = hashlib.sha256()
+    for i in sorted({0, n // 3, 2 * n // 3, max(n - 1, 0)}):
+        try:
+            drawn = make_encounter(fam, seed, i).scenario
+        except RuntimeError as exc:  # a family that cannot be met: its row says so, as here
+            digest.update(f"{i}: {exc}".encode())
+            continue
+        kept = {k: v for k, v in drawn.items() if k not in ("name", "description")}
+        digest.update(json.dumps(kept, sort_keys=True, default=_not_json).encode())
+    return digest.hexdigest()[:16]
+
+
+def _not_json(value: Any) -> Any:
+    raise TypeError(f"a drawn scenario holds {type(value).__name__}, not plain JSON")
 
 
 def run_sweep(

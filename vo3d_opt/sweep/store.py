@@ -134,7 +134,8 @@ def check_out(
         return None
     wrong = differences(manifest, found)
     if resume and wrong:
-        raise ResumeError(f"--resume: {out} holds another sweep ({'; '.join(wrong)})")
+        older = "" if "draws" in found else "; started by a version that did not record them"
+        raise ResumeError(f"--resume: {out} holds another sweep ({'; '.join(wrong)}{older})")
     if not resume:
         state = "a finished" if (out / "summary.json").exists() else "an unfinished"
         kind = f" of other arguments ({'; '.join(wrong)})" if wrong else ""

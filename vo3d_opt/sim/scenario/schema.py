@@ -261,6 +261,16 @@ class Scenario(Spec):
                     rate,
                 )
             )
+        margin, room = self.safety.speed_margin, self._speed_room()
+        if margin is not None and margin >= room:
+            out.append(
+                (
+                    ("safety", "speed_margin"),
+                    f"must leave every vehicle some speed: below {room:g} (the smallest top "
+                    "speed over limits.speed[0])",
+                    margin,
+                )
+            )
         if self.wind is not None and self.vehicle_dynamics.model != "rotorpy":
             out.append(
                 (
@@ -288,6 +298,11 @@ class Scenario(Spec):
                 )
             )
         return out
+
+    def _speed_room(self) -> float:
+        """The smallest top speed over the minimum speed among the vehicles that avoid (m/s)."""
+        tops = self.max_speed[self.avoids] if self.avoids.any() else self.max_speed
+        return float(np.min(tops)) - self.limits.v_min
 
     def _step_problems(self) -> list[Problem]:
         step = float(np.max(self.max_speed)) * self.dt
