@@ -170,8 +170,7 @@ def _speed_margin(sc: Scenario) -> float:
     gusts = wind.type == "dryden" and (wind.sigma is None or np.any(wind.sigma > 0))
     if not gusts and not np.any(wind.velocity != 0):
         return 0.0
-    tops = sc.max_speed[sc.avoids] if sc.avoids.any() else sc.max_speed
-    return min(SPEED_MARGIN, 0.5 * (float(np.min(tops)) - sc.limits.v_min))
+    return min(SPEED_MARGIN, 0.5 * sc.speed_room)
 
 
 def _altitude_cap(sc: Scenario) -> float:

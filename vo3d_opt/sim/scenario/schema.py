@@ -261,7 +261,7 @@ class Scenario(Spec):
                     rate,
                 )
             )
-        margin, room = self.safety.speed_margin, self._speed_room()
+        margin, room = self.safety.speed_margin, self.speed_room
         if margin is not None and margin >= room:
             out.append(
                 (
@@ -298,11 +298,6 @@ class Scenario(Spec):
                 )
             )
         return out
-
-    def _speed_room(self) -> float:
-        """The smallest top speed over the minimum speed among the vehicles that avoid (m/s)."""
-        tops = self.max_speed[self.avoids] if self.avoids.any() else self.max_speed
-        return float(np.min(tops)) - self.limits.v_min
 
     def _step_problems(self) -> list[Problem]:
         step = float(np.max(self.max_speed)) * self.dt
@@ -462,6 +457,13 @@ class Scenario(Spec):
         stands for while the derived acceleration bound lets a vehicle take any velocity
         within a step (none otherwise: ``config.turns_at_once``)."""
         return float(self.sensing.vehicle_range / (2.0 * float(np.max(self.max_speed))))
+
+    @property
+    def speed_room(self) -> float:
+        """The smallest top speed over the minimum speed among the vehicles that avoid (all of
+        them if none does), m/s: the most a speed margin may take."""
+        tops = self.max_speed[self.avoids] if self.avoids.any() else self.max_speed
+        return float(np.min(tops)) - self.limits.v_min
 
     @property
     def avoids(self) -> np.ndarray:
