@@ -39,8 +39,9 @@ exactly. :func:`derive_margins` sizes, from the scenario alone, what covers the 
   braking distance ``v_max tau_eff + v_max² / (2 command_rate)``; at most what keeps every
   start and goal inside;
 * ``speed_margin`` (m/s, RotorPy in wind only): planned below each vehicle's top speed by this
-  much, :data:`SPEED_MARGIN`: the velocity loop overshoots a command at the top speed in wind
-  (without wind it does not: ``docs/results/acceleration-bound.md``).
+  much, :data:`SPEED_MARGIN` (at most half the slowest vehicle's speed), and the simulator's
+  command-rate limit caps commands there too: the velocity loop overshoots a command at the top
+  speed in wind (without wind it does not: ``docs/results/acceleration-bound.md``).
 
 Every value can be overridden by the scenario's ``safety`` mapping, and ``pz_buffer`` /
 ``acceleration`` by ``selector_options.pz_buffer`` / ``limits.acceleration``.
