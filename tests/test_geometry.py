@@ -27,7 +27,10 @@ from vo3d_opt.geometry import (
     vo_cones,
     vo_pyramids,
 )
+from vo3d_opt.formulations.common import Options, prepare
 from vo3d_opt.geometry.cone import outward_normals
+from vo3d_opt.geometry.membership import _no_cones, clearances
+from vo3d_opt import AgentState, Limits, VelocitySelector
 from vo3d_opt.types import Box, Cylinder
 
 REACH = 6.0  # largest own speed of interest (m/s) in these tests
@@ -364,9 +367,21 @@ def test_pyramid_kinds(altitude, expected):
         assert np.allclose(sec.apex[0, 0], 0.0)  # eq. (19): the apex is the velocity origin
 
 
-def test_pyramid_inside_kind():
+def _depths(pyr, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Brute force: how far points q (M, 3), relative to p_A, lie inside pyramid 0's prism
+    from its side (the nearest of its four walls) and from its top."""
+    x = q @ pyr.frame[0].T
+    side = np.minimum(x[:, :2] - pyr.lo[0, :2], pyr.hi[0, :2] - x[:, :2]).min(axis=1)
+    return side, pyr.hi[0, 2] - x[:, 2]
+
+
+@pytest.mark.parametrize(("z", "top"), [(5.0, False), (14.2, True)])
+def test_pyramid_inside_kind(z, top):
+    """Inside C_pz the VO is the velocities with a horizontal component towards its centre and,
+    just under its top, the descents too; the section is the half-plane of the first, so on
+    every plane it lies in the VO, and is all of it when low down."""
     ob = Box(center=(1.0, 1.0), size=(4.0, 2.0), height=15.0)
-    p_a = np.array([0.0, 0.0, 5.0])
+    p_a = np.array([0.0, 0.0, z])
     pyr = vo_pyramids(p_a, [ob])
     assert pyr.inside[0]
     planes = _planes((0.3, -1.0, 0.2), default_phis(15))
@@ -374,10 +389,74 @@ def test_pyramid_inside_kind():
     assert np.all(sec.kind_names == "inside")
     xy = np.random.default_rng(5).uniform(-REACH, REACH, (len(planes.phi), 200, 2))
     got = sec.contains(xy)[0]
-    exact = in_vo_pyramids(pyr, planes.lift(xy).reshape(-1, 3))[0].reshape(got.shape)
-    assert np.array_equal(got, exact)
-    toward = planes.lift(xy) @ np.r_[_unit([1.0, 1.0]), 0.0] > 0
-    assert np.array_equal(exact, toward)
+    v = planes.lift(xy)
+    exact = in_vo_pyramids(pyr, v.reshape(-1, 3))[0].reshape(got.shape)
+    toward = v @ np.r_[_unit([1.0, 1.0]), 0.0] > 0
+    assert np.array_equal(got, toward)
+    assert np.array_equal(exact, toward | (v[..., 2] < 0) if top else toward)
+    assert (exact & ~got).any() == top
+
+
+def test_inside_a_prism_the_vo_is_closing_in_by_brute_force():
+    """Inside C_pz, anywhere in it (near the side, the top, or the edge between them): a
+    velocity is in the VO, closes on the zone (``closing_rate``) and intrudes at once
+    (``time_to_intrusion`` 0) exactly when a short step along it takes A deeper from the side
+    or, where the top is the nearer face, from the top; the closing rate is the sum of both
+    ways in, the clearance the slower of the two ways out."""
+    rng = np.random.default_rng(11)
+    ob = Cylinder(center=(0.0, 0.0), radius=3.0, height=20.0)
+
+    def encounter(p_a: np.ndarray):  # the decision's planning prism, with its buffer
+        return prepare(AgentState(position=p_a, velocity=np.zeros(3)), np.zeros(3), [], [ob],
+                       Limits(speed=(0.0, 8.0), altitude=(0.0, 60.0)), 0.1, Options())
+
+    pyr0 = encounter(np.zeros(3)).vos.pyramids
+    half, top = pyr0.L_pz[0] / 2, pyr0.h_pz[0]
+    faces = {True: 0, False: 0}  # top nearer, side nearer
+    for _ in range(300):
+        r, a = half * rng.uniform(0.0, 0.98), rng.uniform(0, 2 * np.pi)
+        p_a = np.array([r * np.cos(a), r * np.sin(a), top - rng.uniform(0.01, 1.2 * half)])
+        gap = (half - r) - (top - p_a[2])  # > 0: the top is the nearer face
+        if abs(gap) < 1e-3 or r < 1e-3:  # on an edge the nearest face is either one
+            continue
+        enc = encounter(p_a)
+        pyr = enc.vos.pyramids
+        assert pyr.inside[0]
+        faces[bool(gap > 0)] += 1
+        v = rng.uniform(-4.0, 4.0, (40, 3))
+        # a step short enough that the nearest wall (the near one, by r nearer than the
+        # others) and the top stay the nearest of their kinds
+        eps = 0.1 * min(half - r, top - p_a[2], r) / 4.0 / np.sqrt(3)
+        side0, top0 = _depths(pyr, np.zeros((1, 3)))
+        side1, top1 = _depths(pyr, eps * v)
+        from_side = (side1 - side0) / eps
+        from_top = (top1 - top0) / eps if gap > 0 else np.full(len(v), -np.inf)
+        rate = np.maximum(from_side, from_top)
+        keep = np.abs(rate) > 1e-6  # not along a face
+        closing = rate[keep] > 0
+        assert np.array_equal(in_vo_pyramids(pyr, v)[0][keep], closing)
+        deeper = np.maximum(from_side, 0.0) + np.maximum(from_top, 0.0)  # both ways summed
+        np.testing.assert_allclose(enc.closing_rate(v), deeper, atol=1e-9)
+        assert np.array_equal(enc.time_to_intrusion(v)[keep] == 0.0, closing)
+        np.testing.assert_allclose(clearances(_no_cones(), pyr, v), -rate, atol=1e-9)
+    assert min(faces.values()) > 50
+
+
+@pytest.mark.parametrize("formulation", ["plane_qp", "cone_qp", "sampled"])
+def test_beside_a_box_under_its_prisms_top_no_answer_closes_in(formulation):
+    """A vehicle 0.5 m from a box's long wall and 0.5 m under its top is nearer the top of the
+    turned square C_pz than its side, though beside the box below the box's own top: its
+    answer, asked to fly into the wall, neither goes towards the centre nor sinks."""
+    ob = Box(center=(0.0, 0.0), size=(8.0, 2.0), height=15.0)
+    p = np.array([0.0, -1.5, 14.5])
+    pyr = vo_pyramids(p, [ob])
+    assert pyr.inside[0] and pyr.hi[0, 2] < -pyr.lo[0, 0]  # the top is the nearer face
+    d = VelocitySelector(formulation).select(
+        own=AgentState(position=p, velocity=np.zeros(3)), preferred_velocity=(0.0, 3.0, -0.5),
+        neighbors=[], obstacles=[ob], limits=Limits(speed=(0, 4), altitude=(0, 60)), dt=0.1)
+    assert d.status == "inside_protected_zone"
+    assert d.velocity @ pyr.frame[0, 0] <= 0.0 and d.velocity[2] >= 0.0
+    assert ob.surface_distance((p + 0.5 * d.velocity)[None])[0] >= ob.surface_distance(p[None])[0]
 
 
 def test_unknown_correction_rejected():
@@ -895,3 +974,24 @@ def test_compiled_rotations_match_eqs_6_and_8():
     for direction in rng.normal(size=(10, 3)):
         planes = _planes(direction, default_phis(10))
         assert np.allclose(planes.to_plane, rotation_plane(planes.phi) @ planes.frame, atol=1e-12)
+
+
+@pytest.mark.parametrize("formulation", ["plane_qp", "cone_qp", "sampled"])
+def test_just_under_a_prisms_top_the_least_bad_velocity_does_not_sink(formulation):
+    """A vehicle crossing a cylinder 2 mm under the top of its planning prism, too fast towards
+    the centre to turn back within a step, asked to descend: no velocity it can reach escapes,
+    and the least-bad one (slowest going deeper, from the side and the top together) brakes
+    without sinking."""
+    ob = Cylinder(center=(0.0, 0.0), radius=3.0, height=20.0)
+    v_now = np.array([2.0, 0.0, 0.0])
+    own = AgentState(position=(-3.5, 0.0, 0.0), velocity=v_now)
+    kw = dict(preferred_velocity=(2.0, 0.0, -0.5), neighbors=[], obstacles=[ob],
+              limits=Limits(speed=(0, 4), altitude=(0, 60), acceleration=2.0), dt=0.1)
+    enc = prepare(own, np.zeros(3), [], [ob], kw["limits"], kw["dt"], Options())
+    top = enc.vos.pyramids.h_pz[0]
+    own = AgentState(position=(-3.5, 0.0, top - 0.002), velocity=v_now)
+    pyr = prepare(own, np.zeros(3), [], [ob], kw["limits"], kw["dt"], Options()).vos.pyramids
+    assert pyr.inside[0] and pyr.hi[0, 2] < -pyr.lo[0, 0]  # just under the top
+    d = VelocitySelector(formulation).select(own=own, **kw)
+    assert d.status == "infeasible_min_violation"
+    assert d.velocity[0] < v_now[0] and d.velocity[2] >= 0.0

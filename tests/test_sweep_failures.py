@@ -49,7 +49,8 @@ def flies_clean(name: str, options: dict | None = None) -> None:
         "intruder-s0-i72580", "intruder-s0-i29918", "lagged-s0-i76920", "noisy-s0-i66134",
         "lagged-s0-i16783", "lagged-s0-i92409", "dense-s0-i82705", "lagged-s0-i91377",
         "lagged-s0-i52246")),
-     pytest.param("dense-s0-i82432", PAPER_GRID, id="dense-s0-i82432-paper-grid")],
+     pytest.param("dense-s0-i82432", PAPER_GRID, id="dense-s0-i82432-paper-grid"),
+     pytest.param("lagged-s0-i52246", {"fine_planes": False}, id="lagged-s0-i52246-7-planes")],
 )
 def test_sweep_failures_are_fixed(name, options):
     """`lagged` seed 0 before the margins derived from the scenario (sim/safety.py): encounter
@@ -92,8 +93,9 @@ def test_sweep_failures_are_fixed(name, options):
     on the safe preset's own it is open). `lagged` 91377 (one vehicle short of its goal,
     beyond a box) arrives on the safe preset: another trajectory, not a rule aimed at it; on
     the planes it was found on it stays open (``test_open_sweep_failures``). `lagged` 52246,
-    found on 7 planes everywhere, entered a prism's zone under the lag; near obstacles the safe
-    preset plans on the default planes (``fine_planes``)."""
+    found on 7 planes everywhere (``fine_planes`` off), entered a prism's zone under the lag;
+    near obstacles the safe preset plans on the default planes (``fine_planes``), and since a
+    vehicle just under a prism's top no longer sinks it flies clean on 7 planes too."""
     flies_clean(name, options)
 
 
@@ -126,6 +128,21 @@ def test_rotorpy_998_flies_its_watcher_from_hover_without_an_upset():
     sc = scenario_variant(sc, safety={"speed_margin": 0.0})
     record = run_scenario(sc, progress=False, max_steps=225)
     assert (record.decided & record.arrived[:-1]).any()  # a vehicle home decided again
+    assert_safe(summarize(record))
+
+
+def test_rotorpy_960_brakes_under_a_prism_top_without_sinking():
+    """In `rotorpy` 960 vehicle 3 crosses a cylinder at the top of its planning prism (raised by
+    the tracking error) and ends 2 mm below it once RotorPy's velocity loop lags a climb. Inside
+    a prism only going towards its centre closed in, and no velocity within one step's
+    acceleration turned back, so the least-bad velocity braked and sank with the preferred
+    descent into the zone (1.36 m from the surface, the zone 2 m). Just under a prism's top a
+    descent now closes in too, and the least-bad velocity brakes without sinking: the first 100
+    steps, which held the intrusion, fly clean (the whole encounter too, everyone home)."""
+    pytest.importorskip("torch")  # batched RotorPy vehicles
+    pytest.importorskip("rotorpy")
+    record = run_scenario(load_scenario(FAILURES / "rotorpy-s0-i960.yaml"), progress=False,
+                          max_steps=100)
     assert_safe(summarize(record))
 
 
@@ -171,30 +188,3 @@ def test_open_sweep_failures(name, options):
     s = flown(name, options)
     assert_safe(s)
     assert s["reached"] == s["agents"] - 1, "arrives now: move it to the fixed ones"
-
-
-def test_lagged_52246_needs_the_fine_planes_near_its_prisms():
-    """`lagged` 52246 on the safe preset's 7 planes everywhere (``fine_planes`` off): a vehicle
-    under the lag enters a prism's zone; with the default planes near obstacles (the preset's
-    own) it flies clean (``test_sweep_failures_are_fixed``)."""
-    s = flown("lagged-s0-i52246", {"fine_planes": False})
-    assert s["obstacle_pz_intrusions"] > 0 and s["collisions"] == 0
-
-
-def test_open_rotorpy_960_a_vehicle_skimming_a_prism_top_is_led_down_into_it():
-    """`rotorpy` 960 (the safe preset's 1,000-encounter sweep): vehicle 3 crosses a cylinder at
-    the top of its planning prism (raised by the tracking error), 2 mm below it once RotorPy's
-    velocity loop lags a climb of 0.03 m/s. Inside the prism the decision counts as escape only
-    moving away horizontally, which no velocity within one step's acceleration does, so the
-    least-bad velocity brakes and sinks towards the preferred descent, into the zone: 1.36 m
-    from the surface (the zone: 2 m). The escape is up (2 mm): once the decision sees
-    that, this test fails and the encounter moves to the fixed ones. Its first 100 steps hold
-    the intrusion."""
-    pytest.importorskip("torch")  # batched RotorPy vehicles
-    pytest.importorskip("rotorpy")
-    record = run_scenario(load_scenario(FAILURES / "rotorpy-s0-i960.yaml"), progress=False,
-                          max_steps=100)
-    s = summarize(record)
-    assert s["collisions"] == 0 and s["pz_intrusions"] == 0
-    assert s["altitude_violations"] == 0 and s["speed_violations"] == 0
-    assert s["obstacle_pz_intrusions"] == 1, "no intrusion now: move it to the fixed ones"

@@ -30,10 +30,7 @@ inline double zone_time(const VOs& vos, int64_t k, const double* v) {
     int64_t n = vos.n();
     if (k >= n) {
         const Pyramid& py = vos.pyramids[k - n];
-        if (py.inside) {
-            const double* h = py.frame[0];
-            return h[0] * v[0] + h[1] * v[1] + h[2] * v[2] > 0 ? 0.0 : kInf;
-        }
+        if (py.inside) return pyramid_closing(py, v) > 0 ? 0.0 : kInf;
         return entry_time(py, v);
     }
     const Cone& c = vos.cones[k];
@@ -86,7 +83,9 @@ inline double time_to_intrusion(const VOs& vos, const double* v, double floor, i
 }
 
 // The fastest rate (m/s) at which v closes on a zone A is inside (a neighbour's centre along
-// the line of centres, a prism's horizontally); 0 when it closes on none.
+// the line of centres; a prism's from its side and its top summed, prism_rates, so that the
+// least-bad velocity under a top it cannot leave brakes without sinking); 0 when it closes on
+// none.
 inline double closing_rate(const VOs& vos, const double* v) {
     double worst = 0.0;
     for (const Cone& c : vos.cones)
@@ -94,8 +93,8 @@ inline double closing_rate(const VOs& vos, const double* v) {
             worst = std::max(worst, closing_speed(c.apex, c.rel, v) / std::max(c.d_oi, 1e-12));
     for (const Pyramid& py : vos.pyramids) {
         if (py.inside) {
-            const double* h = py.frame[0];
-            worst = std::max(worst, h[0] * v[0] + h[1] * v[1] + h[2] * v[2]);
+            PrismRates r = prism_rates(py, v);
+            worst = std::max(worst, std::max(r.side, 0.0) + std::max(r.top, 0.0));
         }
     }
     return worst;
@@ -147,10 +146,8 @@ inline double zone_clearance(const VOs& vos, int64_t k, const double* v, double 
                  (v[2] - c.apex[2]) * c.rel[2]) /
                std::max(c.d_oi, 1e-12);
     }
-    if (!cone && vos.pyramids[k - vos.n()].inside) {
-        const double* h = vos.pyramids[k - vos.n()].frame[0];
-        return -(h[0] * v[0] + h[1] * v[1] + h[2] * v[2]);
-    }
+    if (!cone && vos.pyramids[k - vos.n()].inside)
+        return -pyramid_closing(vos.pyramids[k - vos.n()], v);
     double reach_time = cone ? horizon : pyramid_horizon(vos, horizon);
     double lo = reach_time > 0.0 ? 1.0 / reach_time : 0.0;
     // Beyond hi the zone is farther than at lo: s dist(0, Z) - |v - apex| > f(lo).

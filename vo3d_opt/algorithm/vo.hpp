@@ -207,6 +207,28 @@ inline Pyramid build_pyramid(const double* p_A, double x, double y, double L, do
     return py;
 }
 
+// Inside C_pz, the rates (m/s) at which v goes deeper from its side (towards the centre
+// horizontally, h . v) and from its top (down, -v_z; -inf unless the top is nearer than the
+// side, H - z_A < L/2 - dist): a vehicle just under the top must not sink, its way out is up
+// or back. The side counts under the top too: the obstacle's own walls are not known here (the
+// turned square reaches beyond a box's), so going towards the centre closes in everywhere.
+struct PrismRates {
+    double side, top;
+};
+
+inline PrismRates prism_rates(const Pyramid& py, const double* v) {
+    const double* h = py.frame[0];
+    double side = h[0] * v[0] + h[1] * v[1] + h[2] * v[2];
+    return {side, py.hi[2] < -py.lo[0] ? -v[2] : -kInf};
+}
+
+// Inside C_pz, the rate (m/s) at which v closes in: the faster of prism_rates (negative:
+// escaping, as fast as the slower of the two ways out).
+inline double pyramid_closing(const Pyramid& py, const double* v) {
+    PrismRates r = prism_rates(py, v);
+    return std::max(r.side, r.top);
+}
+
 // ------------------------------------------------------------------------------ the VOs
 
 // The VO cones and pyramids of one decision (cones first wherever they are numbered together)
@@ -335,12 +357,9 @@ inline double entry_time(const Pyramid& py, const double* v) {
     return t_exit > t0 ? t0 : kInf;
 }
 
-// Whether v lies in the VO pyramid (inside C_pz: whether it heads towards its centre).
+// Whether v lies in the VO pyramid (inside C_pz: whether it closes in, pyramid_closing).
 inline bool in_pyramid(const Pyramid& py, const double* v, double horizon) {
-    if (py.inside) {
-        const double* h = py.frame[0];
-        return h[0] * v[0] + h[1] * v[1] + h[2] * v[2] > 0.0;
-    }
+    if (py.inside) return pyramid_closing(py, v) > 0.0;
     double t = entry_time(py, v);
     return horizon < 0.0 ? t < kInf : t <= horizon;
 }

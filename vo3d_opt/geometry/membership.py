@@ -7,8 +7,9 @@ the infinite collision cone of section 2.1 translated by the apex. It is in the 
 obstacle when the ray p_A + v t, t >= 0, enters the protected prism C_pz.
 
 Inside a protected zone every velocity 'enters' it, so there the VO is defined as the velocities
-that still close in: (v - apex)·(p_B - p_A) > 0 for a sphere, and a horizontal component towards
-the prism's centre for C_pz. Velocities that leave are the escape set.
+that still close in: (v - apex)·(p_B - p_A) > 0 for a sphere, and for C_pz a horizontal component
+towards the prism's centre, or, when its top is nearer than its side, a descent too. Velocities
+that do neither are the escape set.
 
 ``clearances`` measures how far outside every VO a velocity is, in m/s (its distance to the VOs
 in velocity space), for candidates that must be strictly outside by a margin. The tests are

@@ -176,7 +176,9 @@ def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
     """Sections of VO pyramids (section 4.2). Every avoidance plane contains the apex (the
     velocity origin, eq. 19), so a section is a triangle (apex and the two extreme points where
     C_pz's edges meet the plane; with the VO lines, the whole wedge), a line, or the apex point.
-    Inside C_pz the VO is every velocity with a horizontal component towards its centre."""
+    Inside C_pz the section is the half-plane of the velocities with a horizontal component
+    towards its centre; just under its top the VO holds every descent as well
+    (``in_vo_pyramids``), which no one half-plane adds."""
     return Sections(*_core.pyramid_sections(pyramids, planes), np.zeros(0), Corrections())
 
 
