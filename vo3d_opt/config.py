@@ -106,8 +106,9 @@ class SafetyConfig(Model):
     #: The speed towards each cooperative neighbour near its zone at most half the gap per
     #: step, so that two vehicles deciding on the same snapshot cannot both close it.
     closing_guard: StrictBool = False
-    #: When every velocity tried enters a zone at once (the vehicle inside planning spheres):
-    #: the one closing slowest on the zones it is inside, not the one nearest the preference.
+    #: When every velocity tried enters a zone at once (the vehicle inside planning spheres or
+    #: prisms): the one closing slowest on the zones it is inside, not the one nearest the
+    #: preference.
     least_bad_escape: StrictBool = True
     #: With an obstacle in reach or a neighbour that does not avoid, the fallbacks' grid takes
     #: at least the default grid's speeds and headings, however coarse it is otherwise.

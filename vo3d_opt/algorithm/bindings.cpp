@@ -425,6 +425,11 @@ NB_MODULE(_core, m) {
         size_t n = L.h.size();
         return nb::make_tuple(numpy(L.G, {n, 3}), numpy(L.h, {n}));
     });
+    m.def("escape_rows", [](nb::handle vos, double margin) {
+        LimitRows L = qp_limit_rows(LimitRows{}, vos_of_py(vos), margin);
+        size_t n = L.h.size();
+        return nb::make_tuple(numpy(L.G, {n, 3}), numpy(L.h, {n}));
+    });
     m.def("vz_range", [](double z, nb::handle bounds) {
         VzRange r = vz_range(z, bounds_of(bounds));
         return std::make_pair(r.lo, r.hi);

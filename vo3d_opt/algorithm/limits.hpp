@@ -104,6 +104,22 @@ inline LimitRows limit_rows(const double* p, const double* v_now, const Rows& nb
     return L;
 }
 
+// The plane QPs' limits: ``limits`` and, inside a prism under its top (prism_rates), the
+// escape's second row -v_z <= -margin. The side's half-plane is the prism's own row
+// (sections.hpp); with this one the QPs hold the escape set {h . v <= 0, v_z >= 0}, by the
+// margin as every VO row. Not a limit of the fallbacks: the clearance checks their candidates.
+inline LimitRows qp_limit_rows(const LimitRows& limits, const VOs& vos, double margin) {
+    LimitRows L = limits;
+    for (const Pyramid& py : vos.pyramids) {
+        if (py.inside && under_top(py)) {
+            L.G.insert(L.G.end(), {0.0, 0.0, -1.0});
+            L.h.push_back(-margin);
+            break;  // one row for every such prism
+        }
+    }
+    return L;
+}
+
 // Speed in [v_min, v_max] and G v <= h, each within LIMIT_TOL.
 inline bool within_limits(const double* v, const LimitRows& L, const Bounds& b) {
     double speed = std::sqrt(sq(v[0]) + sq(v[1]) + sq(v[2]));

@@ -401,8 +401,8 @@ inline bool plane_rows(const VOs& vos, int64_t k, int64_t p, const Base& base, c
     int64_t kind = cone ? cone_section(vos.cones[k], base, planes.frame, c, s, cfg.corrections, sec)
                         : pyramid_section(vos.pyramids[k - vos.n()], base, c, s, sec);
     bool active = false;
-    // Escape, every round: not closing in (horizontally for a prism: a descent under its top,
-    // which pyramid_closing refuses too, a wedge no one row holds, is left to the exact check).
+    // Escape, every round: not closing in (for a prism horizontally; under its top the QPs'
+    // climb row holds the descent, qp_limit_rows).
     if (kind == INSIDE_CODE) {
         for (int r = 0; r < ROUNDS; ++r) {
             out.G[r][0] = sec.halfplane[0], out.G[r][1] = sec.halfplane[1];

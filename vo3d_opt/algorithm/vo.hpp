@@ -216,10 +216,12 @@ struct PrismRates {
     double side, top;
 };
 
+inline bool under_top(const Pyramid& py) { return py.hi[2] < -py.lo[0]; }
+
 inline PrismRates prism_rates(const Pyramid& py, const double* v) {
     const double* h = py.frame[0];
     double side = h[0] * v[0] + h[1] * v[1] + h[2] * v[2];
-    return {side, py.hi[2] < -py.lo[0] ? -v[2] : -kInf};
+    return {side, under_top(py) ? -v[2] : -kInf};
 }
 
 // Inside C_pz, the rate (m/s) at which v closes in: the faster of prism_rates (negative:

@@ -118,9 +118,9 @@ class Options(Model):
     # (limit_rows; its conditions: formulations/plane_qp.md)
     closing_guard: StrictBool = False
     # the least-bad fallback, when every velocity it tries enters a zone at once (A inside
-    # planning spheres, closing on one whichever way it turns): the one that closes slowest
-    # on the zones A is inside, not the one nearest the preferred velocity (fallback.least_bad):
-    # the nearest one tends to fly straight on into the zone it is already in
+    # planning spheres or prisms, closing on one whichever way it turns): the one that closes
+    # slowest on the zones A is inside, not the one nearest the preferred velocity
+    # (fallback.least_bad): the nearest one tends to fly straight on into the zone it is in
     least_bad_escape: StrictBool = True
     # the fallbacks' grid (when no QP answer is safe) with at least the default one's speeds
     # and headings (FINE_SPEED_LEVELS, FINE_HEADING_STEP: denser, though it need not hold every
@@ -370,6 +370,21 @@ class Encounter:
     def linear_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Altitude and acceleration limits as G v <= h in 3D (computed once; read-only)."""
         return self._linear_bounds
+
+    @cached_property
+    def _qp_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        G, h = self._linear_bounds
+        Ge, he = _core.escape_rows(self.vos, float(self.options.margin))
+        G, h = np.vstack((G, Ge)), np.concatenate((h, he))
+        G.setflags(write=False)
+        h.setflags(write=False)
+        return G, h
+
+    def qp_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The QPs' rows G v <= h: ``linear_bounds`` and, inside a prism under its top, the
+        climb its escape needs besides the prism's own row (``qp_limit_rows`` in
+        algorithm/limits.hpp); not the fallbacks' limits."""
+        return self._qp_bounds
 
     def within_limits(self, v: np.ndarray) -> np.ndarray:
         """(M,) whether each velocity respects speed, altitude and acceleration limits."""

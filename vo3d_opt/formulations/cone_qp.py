@@ -90,7 +90,7 @@ def build_qp(
         N, b = supporting_faces(enc.pyramids, enc.v_pref)
         rows_G.append(-N[inc[n:]])
         rows_h.append(-b[inc[n:]] - enc.options.margin)
-    G3, h3 = enc.linear_bounds()
+    G3, h3 = enc.qp_bounds()
     rows_G.append(G3)
     rows_h.append(h3)
     if not has_cones:

@@ -39,7 +39,7 @@ def build_nlp(enc: Encounter, start: np.ndarray) -> NLP:
         N, b = supporting_faces(enc.pyramids, start)
         rows_G.append(-N)
         rows_h.append(-b - enc.options.margin)
-    G3, h3 = enc.linear_bounds()
+    G3, h3 = enc.qp_bounds()
     rows_G.append(G3)
     rows_h.append(h3)
     qp = QP(

@@ -48,7 +48,7 @@ def select_plane_qp(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     """The best safe answer over the (round, plane) QPs on the backend ``solve``."""
     cfg, bounds = enc.options.config, enc.bounds
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)
-    G3, h3 = enc.linear_bounds()
+    G3, h3 = enc.qp_bounds()
     qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg, False)
     key, included = qps.key, qps.included  # views of the compiled state, fixed in size
     R, P = key.shape

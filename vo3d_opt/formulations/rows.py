@@ -11,7 +11,8 @@ of a VO becomes one half-plane G·w <= h on that plane:
   the VO, and it is pushed out by ``margin`` (m/s) so that answers are strictly outside;
 - a triangle (the apex on the plane, section 3.1.3, and every pyramid section, eq. 19): one of
   its two sides through the apex;
-- A inside the zone: the escape half-plane (not closing in), every round.
+- A inside the zone: the escape half-plane (not closing in), every round; under a prism's top
+  the QPs' climb row comes with the limits' (``Encounter.qp_bounds``).
 
 Blank, point and line sections constrain nothing. The rows are compiled
 (``vo3d_opt/algorithm/sections.hpp``: ``plane_rows``); the exact solver and every other backend

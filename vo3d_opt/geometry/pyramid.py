@@ -97,5 +97,6 @@ def supporting_faces(pyr: VOPyramids, v0: np.ndarray) -> tuple[np.ndarray, np.nd
     score = np.where(supporting, N @ v0, -np.inf)
     best = np.argmax(score, axis=1)
     Nb = N[np.arange(pyr.n), best]
-    Nb = np.where(pyr.inside[:, None], -pyr.frame[:, 0, :], Nb)  # escape: horizontal, outwards
+    # inside: the side's escape, horizontal and outwards (under the top, the QPs' climb row too)
+    Nb = np.where(pyr.inside[:, None], -pyr.frame[:, 0, :], Nb)
     return Nb, np.zeros(pyr.n)
