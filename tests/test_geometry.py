@@ -997,18 +997,27 @@ def test_just_under_a_prisms_top_the_least_bad_velocity_does_not_sink(formulatio
     assert d.velocity[0] < v_now[0] and d.velocity[2] >= 0.0
 
 
-@pytest.mark.parametrize("formulation", ["plane_qp", "cone_qp", "sampled"])
-def test_under_a_prisms_top_answers_clear_both_ways_out_by_the_margin(formulation):
+@pytest.mark.parametrize(("formulation", "solver"), [
+    ("plane_qp", None), ("plane_qp", "daqp"), ("cone_qp", None), ("sampled", None), ("nlp", None)])
+def test_under_a_prisms_top_answers_clear_both_ways_out_by_the_margin(formulation, solver):
     """0.3 m under a cylinder prism's top, 1 m from its axis (the top far nearer than the
-    side), whatever the preferred velocity: the answer neither nears the centre nor sinks, each
-    by at least the margin, as every answer clears the VOs it is outside of (the QPs hold
+    side), whatever the preferred velocity (level ones among them, which the prism's own row
+    alone answers on the boundary, v_z = 0): the answer neither nears the centre nor sinks,
+    each by at least the margin, as every answer clears the VOs it is outside of (the QPs hold
     both rows of the escape; the grid checks the clearance)."""
+    if formulation == "nlp":
+        pytest.importorskip("casadi")
+    if solver == "daqp":
+        pytest.importorskip("daqp")
     ob = Cylinder(center=(0.0, 0.0), radius=3.0, height=20.0)
     own = AgentState(position=(-1.0, 0.0, ob.prism_height - 0.3), velocity=np.zeros(3))
-    selector, margin = VelocitySelector(formulation), Options().margin
+    pyr = prepare(own, np.zeros(3), [], [ob], Limits(speed=(0, 4), altitude=(0, 60)), 0.1,
+                  Options()).vos.pyramids
+    assert pyr.inside[0] and pyr.hi[0, 2] < -pyr.lo[0, 0]  # under the top
+    selector, margin = VelocitySelector(formulation, solver), Options().margin
     rng = np.random.default_rng(3)
-    for _ in range(12):
-        pref = rng.normal(size=3) * (1.5, 1.5, 0.5)
+    level = [(-1.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (1.5, -0.7, 0.0)]
+    for pref in [*map(np.array, level), *(rng.normal(size=(8, 3)) * (1.5, 1.5, 0.5))]:
         d = selector.select(own=own, preferred_velocity=pref, neighbors=[], obstacles=[ob],
                             limits=Limits(speed=(0, 4), altitude=(0, 60)), dt=0.1)
         assert d.status == "inside_protected_zone", pref

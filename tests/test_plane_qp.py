@@ -33,7 +33,7 @@ def _exhaustive(enc, solve, has_cones):
     constraint generation; the least deviation among the safe answers within the limits."""
     cfg = enc.options.config
     planes = py_decision_planes(enc.vos, enc.v_now, cfg)
-    G3, h3 = enc.linear_bounds()
+    G3, h3 = enc.qp_bounds()
     qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg, False)
     G_speed, h_speed = (np.zeros((0, 2)), np.zeros(0)) if has_cones else plane_qp.speed_polygon(
         enc.limits.v_max, enc.options.polygon_sides)

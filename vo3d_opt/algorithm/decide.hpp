@@ -151,8 +151,10 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
     const Config& pc = hazard && cfg.fine ? *cfg.fine : cfg;
     Planes planes = decision_planes(vos, v_now, pc);
     thread_local QPBuffers buffers;
-    LimitRows qp_limits = qp_limit_rows(limits, vos, pc.margin);
-    PlaneQPs qps(vos, planes, qp_limits, initial, pc, true, buffers);
+    // the QPs' limits with the climb row: copied only under a prism's top, which few are
+    bool climb = under_a_top(vos);
+    LimitRows climbing = climb ? qp_limit_rows(limits, vos, pc.margin) : LimitRows{};
+    PlaneQPs qps(vos, planes, climb ? climbing : limits, initial, pc, true, buffers);
     // at most every QP once, then once per VO it gains; only the answers written are read
     buffers.tried.resize(3 * ROUNDS * planes.count() * (V + 1));
     double* tried = buffers.tried.data();

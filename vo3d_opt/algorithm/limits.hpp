@@ -108,14 +108,17 @@ inline LimitRows limit_rows(const double* p, const double* v_now, const Rows& nb
 // escape's second row -v_z <= -margin. The side's half-plane is the prism's own row
 // (sections.hpp); with this one the QPs hold the escape set {h . v <= 0, v_z >= 0}, by the
 // margin as every VO row. Not a limit of the fallbacks: the clearance checks their candidates.
+inline bool under_a_top(const VOs& vos) {
+    for (const Pyramid& py : vos.pyramids)
+        if (py.inside && under_top(py)) return true;
+    return false;
+}
+
 inline LimitRows qp_limit_rows(const LimitRows& limits, const VOs& vos, double margin) {
     LimitRows L = limits;
-    for (const Pyramid& py : vos.pyramids) {
-        if (py.inside && under_top(py)) {
-            L.G.insert(L.G.end(), {0.0, 0.0, -1.0});
-            L.h.push_back(-margin);
-            break;  // one row for every such prism
-        }
+    if (under_a_top(vos)) {  // one row for every such prism
+        L.G.insert(L.G.end(), {0.0, 0.0, -1.0});
+        L.h.push_back(-margin);
     }
     return L;
 }

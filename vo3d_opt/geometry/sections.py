@@ -177,8 +177,8 @@ def pyramid_sections(pyramids: VOPyramids, planes: AvoidancePlanes) -> Sections:
     velocity origin, eq. 19), so a section is a triangle (apex and the two extreme points where
     C_pz's edges meet the plane; with the VO lines, the whole wedge), a line, or the apex point.
     Inside C_pz the section is the half-plane of the velocities with a horizontal component
-    towards its centre; just under its top the VO holds every descent as well
-    (``in_vo_pyramids``), which no one half-plane adds."""
+    towards its centre; under its top the VO holds every descent as well (``in_vo_pyramids``),
+    which the QPs hold by a row of their own (``qp_limit_rows`` in algorithm/limits.hpp)."""
     return Sections(*_core.pyramid_sections(pyramids, planes), np.zeros(0), Corrections())
 
 
