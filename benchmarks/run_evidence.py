@@ -52,11 +52,11 @@ NOTES = {
         "`benchmarks/speed_overshoot.py`); without avoidance the vehicles fly straight at their "
         "top speed.",
         "",
-        "Encounter 960's intrusion is into an obstacle's zone, not a vehicle's: a vehicle "
-        "skimming the top of a cylinder's planning prism lags a small climb, ends 2 mm inside "
-        "it, and the least-bad velocity, which inside a prism counts only a horizontal escape, "
-        "brakes and sinks into the zone (1.36 m from the surface; the zone is 2 m). Open: "
-        "`tests/test_sweep_failures.py` flies it as recorded.",
+        "Encounter 960, a vehicle skimming the top of a cylinder's planning prism that lags a "
+        "small climb and ends 2 mm inside it, entered the obstacle's zone on `400cae0` (inside "
+        "a prism only a horizontal approach closed in, so the least-bad velocity braked and "
+        "sank, 1.36 m from the surface of a 2 m zone). Under a prism's top a descent now closes "
+        "in too: it flies clean (`tests/test_sweep_failures.py`).",
         "",
     ],
 }
