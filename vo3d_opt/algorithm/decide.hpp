@@ -151,7 +151,7 @@ inline Decision decide_one(const double* p, const double* v_now, const double* v
     const Config& pc = hazard && cfg.fine ? *cfg.fine : cfg;
     Planes planes = decision_planes(vos, v_now, pc);
     thread_local QPBuffers buffers;
-    // the QPs' limits with the climb row: copied only under a prism's top, which few are
+    // the QPs' limits with the climb row (a copy, made only under a prism's top)
     bool climb = under_a_top(vos);
     LimitRows climbing = climb ? qp_limit_rows(limits, vos, pc.margin) : LimitRows{};
     PlaneQPs qps(vos, planes, climb ? climbing : limits, initial, pc, true, buffers);

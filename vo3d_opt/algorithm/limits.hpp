@@ -104,16 +104,17 @@ inline LimitRows limit_rows(const double* p, const double* v_now, const Rows& nb
     return L;
 }
 
-// The plane QPs' limits: ``limits`` and, inside a prism under its top (prism_rates), the
-// escape's second row -v_z <= -margin. The side's half-plane is the prism's own row
-// (sections.hpp); with this one the QPs hold the escape set {h . v <= 0, v_z >= 0}, by the
-// margin as every VO row. Not a limit of the fallbacks: the clearance checks their candidates.
+// Whether A is inside some prism under its top (prism_rates).
 inline bool under_a_top(const VOs& vos) {
     for (const Pyramid& py : vos.pyramids)
         if (py.inside && under_top(py)) return true;
     return false;
 }
 
+// The plane QPs' limits: ``limits`` and, inside a prism under its top, the escape's second
+// row -v_z <= -margin. The side's half-plane is the prism's own row (sections.hpp); with this
+// one the QPs hold the escape set {h . v <= 0, v_z >= 0}, by the margin as every VO row. Not a
+// limit of the fallbacks: the clearance checks their candidates.
 inline LimitRows qp_limit_rows(const LimitRows& limits, const VOs& vos, double margin) {
     LimitRows L = limits;
     if (under_a_top(vos)) {  // one row for every such prism

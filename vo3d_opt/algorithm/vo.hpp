@@ -209,7 +209,7 @@ inline Pyramid build_pyramid(const double* p_A, double x, double y, double L, do
 
 // Inside C_pz, the rates (m/s) at which v goes deeper from its side (towards the centre
 // horizontally, h . v) and from its top (down, -v_z; -inf unless the top is nearer than the
-// side, H - z_A < L/2 - dist): a vehicle just under the top must not sink, its way out is up
+// side, H - z_A < L/2 - dist): a vehicle under the top must not sink, its way out is up
 // or back. The side counts under the top too: the obstacle's own walls are not known here (the
 // turned square reaches beyond a box's), so going towards the centre closes in everywhere.
 struct PrismRates {
