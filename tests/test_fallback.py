@@ -321,13 +321,13 @@ def test_time_bound_near_a_tangent_holds_as_computed():
     ball (exactly within rho) is computed never to enter. The bound must then be inf, not a
     time (a fresh reviewer's case)."""
     from vo3d_opt.formulations.common import VOs
+    from vo3d_opt.geometry import VOPyramids
     from vo3d_opt.geometry.cone import vo_cones
-    from vo3d_opt.geometry.membership import _no_pyramids
 
     rel = np.array([-37.91702773376036, 18.35885856840399, 41.07263569166567])
     apex = np.array([-0.022728666465307645, 0.16346027022509538, 0.004123117819953033])
     cones = vo_cones(np.zeros(3), rel[None], apex[None], 58.83629902328598, virtual_sphere=False)
-    vos = VOs(cones, _no_pyramids(), np.zeros(3))
+    vos = VOs(cones, VOPyramids.empty(), np.zeros(3))
     c = np.array([26.799554736298717, -24.69884877053471, 35.878752010620246])
     v = np.array([26.79955473694235, -24.698848770846762, 35.87875200992142])
     rho = 1e-9
@@ -414,7 +414,7 @@ def test_clearance_floor_bounds_each_cones_clearance(seed):
     clears the margin; the floor must then lie below that cone's clearance as computed, with
     or without a horizon, next to a zone too, and be close to it often enough to skip
     something."""
-    from vo3d_opt.geometry.membership import _no_pyramids, clearance_floors, clearances
+    from vo3d_opt.geometry import VOPyramids, clearance_floors, clearances
 
     rng = np.random.default_rng(seed)
     kw = (_next_to_zone(seed, EDGES[seed - 4]) if seed >= 4
@@ -431,7 +431,7 @@ def test_clearance_floor_bounds_each_cones_clearance(seed):
             continue
         one = cones.subset(np.array([k]))
         for horizon in (None, 1.0, 6.0):
-            exact = clearances(one, _no_pyramids(), v, horizon=horizon)
+            exact = clearances(one, VOPyramids.empty(), v, horizon=horizon)
             assert (floors[k] <= exact).all()
             close += int(((floors[k] >= 0.5 * exact) & (exact > 1e-3)).sum())
     assert close > 100

@@ -12,11 +12,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from vo3d_opt import AgentState, Limits, VelocitySelector
+from vo3d_opt.formulations.common import Options, prepare
 from vo3d_opt.geometry import (
     CORRECTIONS,
     KINDS,
+    VOCones,
     avoidance_frame,
     avoidance_planes,
+    clearances,
     cone_penetration,
     cone_sections,
     default_phis,
@@ -27,10 +31,7 @@ from vo3d_opt.geometry import (
     vo_cones,
     vo_pyramids,
 )
-from vo3d_opt.formulations.common import Options, prepare
 from vo3d_opt.geometry.cone import outward_normals
-from vo3d_opt.geometry.membership import _no_cones, clearances
-from vo3d_opt import AgentState, Limits, VelocitySelector
 from vo3d_opt.types import Box, Cylinder
 
 REACH = 6.0  # largest own speed of interest (m/s) in these tests
@@ -438,7 +439,7 @@ def test_inside_a_prism_the_vo_is_closing_in_by_brute_force():
         deeper = np.maximum(from_side, 0.0) + np.maximum(from_top, 0.0)  # both ways summed
         np.testing.assert_allclose(enc.closing_rate(v), deeper, atol=1e-9)
         assert np.array_equal(enc.time_to_intrusion(v)[keep] == 0.0, closing)
-        np.testing.assert_allclose(clearances(_no_cones(), pyr, v), -rate, atol=1e-9)
+        np.testing.assert_allclose(clearances(VOCones.empty(), pyr, v), -rate, atol=1e-9)
     assert min(faces.values()) > 50
 
 

@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from vo3d_opt import AgentState, Box, Limits, Neighbor, VelocitySelector
-from vo3d_opt.geometry import build_pyramids, prism_rows
-from vo3d_opt.geometry.membership import _no_cones, in_vos
+from vo3d_opt.geometry import VOCones, build_pyramids, in_vos, prism_rows
 
 
 def _towards_a_box(distance: float) -> dict:
@@ -40,9 +39,9 @@ def test_the_exact_check_takes_the_obstacle_horizon():
     d = VelocitySelector(horizon=2.0).select(**call)
     pyramids = build_pyramids(np.array([0.0, 0.0, 20.0]), prism_rows(call["obstacles"]))
     straight = np.array([[4.0, 0.0, 0.0]])
-    assert in_vos(_no_cones(), pyramids, straight, horizon=2.0, obstacle_horizon=None).all()
-    assert not in_vos(_no_cones(), pyramids, straight, horizon=2.0).any()  # "same"
-    assert not in_vos(_no_cones(), pyramids, d.velocity[None], obstacle_horizon=None).any()
+    assert in_vos(VOCones.empty(), pyramids, straight, horizon=2.0, obstacle_horizon=None).all()
+    assert not in_vos(VOCones.empty(), pyramids, straight, horizon=2.0).any()  # "same"
+    assert not in_vos(VOCones.empty(), pyramids, d.velocity[None], obstacle_horizon=None).any()
 
 
 def test_swarm_preset_neighbours_keep_their_horizon():

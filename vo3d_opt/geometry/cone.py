@@ -36,6 +36,24 @@ class VOCones(NamedTuple):
     sin_alpha: np.ndarray  # (n,) sine of the half-angle alpha: r_pz / d_oi (1 inside the zone)
     inside: np.ndarray  # (n,) bool: A is already inside B's protected zone (d_oi <= r_pz)
 
+    @classmethod
+    def empty(cls) -> VOCones:
+        """No cones: for a test of obstacles alone."""
+        return cls(
+            rel=np.zeros((0, 3)),
+            apex=np.zeros((0, 3)),
+            r_pz=np.zeros(0),
+            d_oi=np.zeros(0),
+            theta_el=np.zeros(0),
+            psi_az=np.zeros(0),
+            R=np.zeros((0, 3, 3)),
+            d_vo=np.zeros(0),
+            r_vo=np.zeros(0),
+            tau=np.zeros(0),
+            sin_alpha=np.zeros(0),
+            inside=np.zeros(0, dtype=bool),
+        )
+
     @property
     def n(self) -> int:
         return int(self.d_oi.shape[0])

@@ -44,35 +44,6 @@ def _obstacle_horizon(obstacle_horizon: float | None | str) -> float:
     return SAME_HORIZON if obstacle_horizon == "same" else _horizon(obstacle_horizon)  # type: ignore[arg-type]
 
 
-def _no_pyramids() -> VOPyramids:
-    return VOPyramids(
-        np.zeros((0, 3, 3)),
-        np.zeros((0, 3)),
-        np.zeros((0, 3)),
-        np.zeros(0),
-        np.zeros(0),
-        np.zeros(0, dtype=bool),
-    )
-
-
-def _no_cones() -> VOCones:
-    none = np.zeros(0)
-    return VOCones(
-        np.zeros((0, 3)),
-        np.zeros((0, 3)),
-        none,
-        none,
-        none,
-        none,
-        np.zeros((0, 3, 3)),
-        none,
-        none,
-        none,
-        none,
-        np.zeros(0, dtype=bool),
-    )
-
-
 def in_vos(
     cones: VOCones,
     pyramids: VOPyramids,
@@ -98,14 +69,14 @@ def in_vo_cones(
 ) -> np.ndarray:
     """Boolean (n, M): velocity m lies in VO cone n. ``tol`` (m) widens (>0) or shrinks (<0)
     the protected sphere, e.g. to accept boundary velocities."""
-    return _core.in_vos(cones, _no_pyramids(), _velocities(v), _horizon(horizon), float(tol))
+    return _core.in_vos(cones, VOPyramids.empty(), _velocities(v), _horizon(horizon), float(tol))
 
 
 def in_vo_pyramids(
     pyramids: VOPyramids, v: np.ndarray, *, horizon: float | None = None
 ) -> np.ndarray:
     """Boolean (m, M): velocity k lies in VO pyramid m (its ray enters C_pz)."""
-    return _core.in_vos(_no_cones(), pyramids, _velocities(v), _horizon(horizon), 0.0)
+    return _core.in_vos(VOCones.empty(), pyramids, _velocities(v), _horizon(horizon), 0.0)
 
 
 def cone_penetration(cones: VOCones, v: np.ndarray) -> np.ndarray:

@@ -37,6 +37,18 @@ class VOPyramids(NamedTuple):
     h_pz: np.ndarray  # (m,)
     inside: np.ndarray  # (m,) bool: A already inside C_pz
 
+    @classmethod
+    def empty(cls) -> VOPyramids:
+        """No pyramids: for a test of neighbours alone."""
+        return cls(
+            frame=np.zeros((0, 3, 3)),
+            lo=np.zeros((0, 3)),
+            hi=np.zeros((0, 3)),
+            L_pz=np.zeros(0),
+            h_pz=np.zeros(0),
+            inside=np.zeros(0, dtype=bool),
+        )
+
     @property
     def n(self) -> int:
         return int(self.L_pz.shape[0])
