@@ -1,6 +1,7 @@
 """The paper's geometry: VO cones (eqs 1–6), VO pyramids (section 4), avoidance planes (eq. 8),
 conic sections with the corrections of section 3.1, and exact 3D membership. The shapes are
-NamedTuples of arrays, read by name in Python and in compiled code alike."""
+NamedTuples of arrays, read by name in Python and by position in compiled code
+(``vo3d_opt/algorithm/convert.hpp``): their fields' order is part of the core's interface."""
 
 from .cone import TAU_MIN, VOCones, build_cones, vo_cones
 from .frames import AvoidancePlanes, avoidance_frame, avoidance_planes, build_planes, default_phis

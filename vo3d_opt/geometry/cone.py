@@ -38,7 +38,7 @@ class VOCones(NamedTuple):
 
     @classmethod
     def empty(cls) -> VOCones:
-        """No cones: for a test of obstacles alone."""
+        """No cones: membership and clearance of obstacles alone."""
         return cls(
             rel=np.zeros((0, 3)),
             apex=np.zeros((0, 3)),

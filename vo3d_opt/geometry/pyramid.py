@@ -39,7 +39,7 @@ class VOPyramids(NamedTuple):
 
     @classmethod
     def empty(cls) -> VOPyramids:
-        """No pyramids: for a test of neighbours alone."""
+        """No pyramids: membership and clearance of neighbours alone."""
         return cls(
             frame=np.zeros((0, 3, 3)),
             lo=np.zeros((0, 3)),
