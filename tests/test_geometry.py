@@ -1023,3 +1023,21 @@ def test_under_a_prisms_top_answers_clear_both_ways_out_by_the_margin(formulatio
                             limits=Limits(speed=(0, 4), altitude=(0, 60)), dt=0.1)
         assert d.status == "inside_protected_zone", pref
         assert d.velocity[0] <= -margin * (1 - 1e-6) and d.velocity[2] >= margin * (1 - 1e-6)
+
+
+@pytest.mark.xfail(strict=True, reason="the prism row has no obstacle height: with a top margin "
+                   "larger than the side's, the roof's edge counts as beside (geometry notes §6)")
+@pytest.mark.parametrize("formulation", ["plane_qp", "sampled"])
+def test_over_a_roofs_edge_under_a_raised_top_no_answer_sinks(formulation):
+    """Over a cylinder's roof, 0.5 m inside its rim and 0.5 m above it, in a prism whose top
+    margin (4 m) exceeds its side margin (2 m), asked straight down: the answer should not sink
+    onto the roof. The top-nearer rule counts this vehicle as beside the obstacle (side gap
+    2.5 m, top gap 3.5 m), so a descent is allowed: a known limit, strict so that a fix shows."""
+    ob = Cylinder(center=(0.0, 0.0), radius=3.0, height=20.0, L_pz=10.0, h_pz=24.0)
+    own = AgentState(position=(-2.5, 0.0, 20.5), velocity=np.zeros(3))
+    limits = Limits(speed=(0, 4), altitude=(0, 60))
+    pyr = prepare(own, np.zeros(3), [], [ob], limits, 0.1, Options()).vos.pyramids
+    assert pyr.inside[0] and not pyr.hi[0, 2] < -pyr.lo[0, 0]  # inside, counted beside
+    d = VelocitySelector(formulation).select(own=own, preferred_velocity=(0.0, 0.0, -2.0),
+                                             neighbors=[], obstacles=[ob], limits=limits, dt=0.1)
+    assert d.velocity[2] >= 0.0
