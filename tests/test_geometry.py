@@ -1025,19 +1025,84 @@ def test_under_a_prisms_top_answers_clear_both_ways_out_by_the_margin(formulatio
         assert d.velocity[0] <= -margin * (1 - 1e-6) and d.velocity[2] >= margin * (1 - 1e-6)
 
 
-@pytest.mark.xfail(strict=True, reason="the prism row has no obstacle height: with a top margin "
-                   "larger than the side's, the roof's edge counts as beside (geometry notes §6)")
 @pytest.mark.parametrize("formulation", ["plane_qp", "sampled"])
 def test_over_a_roofs_edge_under_a_raised_top_no_answer_sinks(formulation):
     """Over a cylinder's roof, 0.5 m inside its rim and 0.5 m above it, in a prism whose top
-    margin (4 m) exceeds its side margin (2 m), asked straight down: the answer should not sink
-    onto the roof. The top-nearer rule counts this vehicle as beside the obstacle (side gap
-    2.5 m, top gap 3.5 m), so a descent is allowed: a known limit, strict so that a fix shows."""
+    margin (4 m) exceeds its side margin (2 m), asked straight down: the answer does not sink
+    onto the roof, though the side (gap 2.5 m) is nearer than the top (3.5 m)."""
     ob = Cylinder(center=(0.0, 0.0), radius=3.0, height=20.0, L_pz=10.0, h_pz=24.0)
     own = AgentState(position=(-2.5, 0.0, 20.5), velocity=np.zeros(3))
     limits = Limits(speed=(0, 4), altitude=(0, 60))
     pyr = prepare(own, np.zeros(3), [], [ob], limits, 0.1, Options()).vos.pyramids
-    assert pyr.inside[0] and not pyr.hi[0, 2] < -pyr.lo[0, 0]  # inside, counted beside
+    assert pyr.inside[0] and not pyr.hi[0, 2] < -pyr.lo[0, 0]  # inside, the side nearer
+    assert pyr.over_roof[0]
     d = VelocitySelector(formulation).select(own=own, preferred_velocity=(0.0, 0.0, -2.0),
                                              neighbors=[], obstacles=[ob], limits=limits, dt=0.1)
     assert d.velocity[2] >= 0.0
+
+
+def _roof_case(rng: np.random.Generator) -> tuple[Cylinder | Box, np.ndarray]:
+    """A cylinder or a turned box whose prism's top margin (1-5 m) may exceed its side margin
+    (0.5-3 m), and a point inside the prism over the roof: above the footprint, between the
+    obstacle's height and the prism's top."""
+    height, side, top = rng.uniform(5, 30), rng.uniform(0.5, 3), rng.uniform(1, 5)
+    if rng.random() < 0.5:
+        r = rng.uniform(1, 6)
+        ob: Cylinder | Box = Cylinder(center=(0.0, 0.0), radius=r, height=height,
+                                      L_pz=2 * (r + side), h_pz=height + top)
+        xy = r * np.sqrt(rng.random()) * np.array([np.cos(a := rng.uniform(0, 2 * np.pi)),
+                                                    np.sin(a)])
+    else:
+        size = rng.uniform(1, 10, 2)
+        ob = Box(center=(0.0, 0.0), size=tuple(size), height=height, yaw=rng.uniform(0, np.pi),
+                 L_pz=float(np.hypot(*size)) + 2 * side, h_pz=height + top)
+        c, s = np.cos(ob.yaw), np.sin(ob.yaw)
+        local = rng.uniform(-0.5, 0.5, 2) * size
+        xy = np.array([c * local[0] - s * local[1], s * local[0] + c * local[1]])
+    return ob, np.array([*xy, rng.uniform(height, height + top)])
+
+
+@pytest.mark.parametrize("formulation", ["plane_qp", "sampled"])
+def test_over_any_roof_inside_the_prism_no_answer_sinks(formulation):
+    """Anywhere over a cylinder's or a box's roof inside its prism, whichever of the prism's
+    side and top is nearer, asked anywhere (down among them): the answer never sinks, and a
+    vehicle counted beside the obstacle by the top-nearer rule alone is among the cases."""
+    rng, beside = np.random.default_rng(11), 0
+    selector, limits = VelocitySelector(formulation), Limits(speed=(0, 4), altitude=(0, 60))
+    for _ in range(40):
+        ob, p = _roof_case(rng)
+        own = AgentState(position=p, velocity=np.zeros(3))
+        pyr = prepare(own, np.zeros(3), [], [ob], limits, 0.1, Options()).vos.pyramids
+        assert pyr.inside[0] and pyr.over_roof[0]
+        beside += not pyr.hi[0, 2] < -pyr.lo[0, 0]
+        pref = rng.normal(size=3) * (2.0, 2.0, 1.0) - (0.0, 0.0, 1.0)
+        d = selector.select(own=own, preferred_velocity=pref, neighbors=[], obstacles=[ob],
+                            limits=limits, dt=0.1)
+        assert d.velocity[2] >= 0.0, (ob, p, pref)
+    assert beside >= 5
+
+
+def test_prism_rows_without_a_roof_decide_as_before_off_the_roof():
+    """Off the roof (beside the obstacle, or below its height) a prism row of four columns and
+    one of six give the same answer bit for bit; over the roof with the side nearer, only the
+    six columns keep the vehicle from sinking."""
+    rng, selector = np.random.default_rng(5), VelocitySelector()
+    limits, differ = Limits(speed=(0, 4), altitude=(0, 60)), 0
+    for _ in range(60):
+        ob, p = _roof_case(rng)
+        if rng.random() < 0.5:  # beside: past the rim, inside the prism
+            rim, half = ob.prism[5], ob.side / 2
+            p[:2] = rng.uniform(rim, half) * p[:2] / max(np.linalg.norm(p[:2]), 1e-9)
+        row = np.array([ob.prism])
+        pref = np.array([0.3, -0.2, -2.0])
+        args = dict(position=p, velocity=np.zeros(3), preferred_velocity=pref, limits=limits,
+                    dt=0.1)
+        six = selector.select_arrays(obstacles=row, **args)
+        four = selector.select_arrays(obstacles=row[:, :4], **args)
+        over = np.linalg.norm(p[:2]) < ob.prism[5] and p[2] >= ob.height
+        if not over:
+            np.testing.assert_array_equal(six.velocity, four.velocity)
+        else:
+            assert six.velocity[2] >= 0.0
+            differ += four.velocity[2] < 0.0
+    assert differ >= 1

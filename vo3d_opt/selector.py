@@ -25,6 +25,7 @@ from .formulations import inputs, kernel
 from .formulations.common import Bounds, Encounter, Options, planning_options, py_build_vos
 from .formulations.outside import PythonPath, backend_for, qp_backend
 from .formulations.sampled import check_grid
+from .geometry.pyramid import PRISM_WIDTH
 from .solvers import available_solvers
 from .status import DECISION_STATUSES, Status
 from .swarm import SwarmDecision, SwarmInputs, thread_count
@@ -183,7 +184,7 @@ class VelocitySelector:
             own.velocity,
             np.asarray(v_pref, dtype=float),
             np.array(nbrs, dtype=float).reshape(-1, 8),
-            np.array(prisms, dtype=float).reshape(-1, 4),
+            np.array(prisms, dtype=float).reshape(-1, PRISM_WIDTH),
             limits,
             dt,
             sensing_range,
@@ -210,12 +211,14 @@ class VelocitySelector:
         ``position``, ``velocity``, ``preferred_velocity``: (3,) m, m/s (the own vehicle's
         ``AgentState`` and the preferred velocity); ``neighbors``: (N, 7) px, py, pz, vx, vy,
         vz, r_pz, one row per ``Neighbor`` (None: none); ``cooperative``: (N,) booleans, each
-        neighbour's ``Neighbor.cooperative`` (None: all True); ``obstacles``: (M, 4) x, y, L_pz,
-        h_pz of each protected prism (``Cylinder.prism``, ``Box.prism``), or the ``Cylinder`` and
-        ``Box`` objects themselves (None: none); ``limits``, ``dt``, ``sensing_range``: as for
-        ``select``. Real numbers only, finite, at most 1e7 in magnitude, r_pz, L_pz and h_pz
-        positive: anything else is a ``ValueError`` naming the argument, and for an array the
-        row and the column.
+        neighbour's ``Neighbor.cooperative`` (None: all True); ``obstacles``: (M, 6) x, y, L_pz,
+        h_pz of each protected prism and the obstacle's height and rim (``Cylinder.prism``,
+        ``Box.prism``; (M, 4) without the last two: no roof, a vehicle inside C_pz and over
+        the obstacle is then kept from sinking only where the top is nearer than the side), or
+        the ``Cylinder`` and ``Box`` objects themselves (None: none); ``limits``, ``dt``,
+        ``sensing_range``: as for ``select``. Real numbers only, finite, at most 1e7 in
+        magnitude, r_pz, L_pz, h_pz, height and rim positive: anything else is a
+        ``ValueError`` naming the argument, and for an array the row and the column.
         """
         t0 = _clock()
         p = inputs.array_vector(position, "position")

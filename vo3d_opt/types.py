@@ -311,10 +311,20 @@ class _StaticObstacle(Model):
         return self.h_pz if self.h_pz is not None else self.height + self.margin
 
     @cached_property
-    def prism(self) -> tuple[float, float, float, float]:
-        """(x, y, L_pz, h_pz) of the protected prism C_pz, as plain floats (cached: static
-        obstacles are usually the same objects from one control step to the next)."""
-        return (*self.center.tolist(), float(self.side), float(self.prism_height))
+    def prism(self) -> tuple[float, float, float, float, float, float]:
+        """(x, y, L_pz, h_pz) of the protected prism C_pz and the obstacle's height and rim
+        (``footprint_extent() / 2``), as plain floats: a vehicle inside C_pz and over the roof
+        must not sink, whichever margin is nearer. Cached: static obstacles are usually the same
+        objects from one control step to the next."""
+        x, y = self.center.tolist()
+        return (
+            x,
+            y,
+            float(self.side),
+            float(self.prism_height),
+            float(self.height),
+            0.5 * self.footprint_extent(),
+        )
 
     @model_validator(mode="after")
     def _prism_covers_obstacle(self) -> _StaticObstacle:

@@ -85,8 +85,7 @@ NB_MODULE(_core, m) {
               double P_[3], V[3], W[3];
               vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
               In<double> nb_ = arr<double>(nbrs, "nbrs", {ANY, 8});
-              In<double> pr = arr<double>(prisms, "prisms", {ANY, 4});
-              decide_into(P_, V, W, rows_of(nb_), rows_of(pr), bounds_of_array(limits), cfg, out);
+              decide_into(P_, V, W, rows_of(nb_), prism_rows_of(prisms), bounds_of_array(limits), cfg, out);
           },
           "p"_a, "v_now"_a, "v_pref"_a, "nbrs"_a, "prisms"_a, "limits"_a, "cfg"_a, "out"_a,
           "One decision (decide.hpp) into out (7,): velocity, status, phi, round, solved.");
@@ -98,13 +97,13 @@ NB_MODULE(_core, m) {
               double P_[3], V[3], W[3];
               vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3_of(v_pref, "v_pref", W);
               std::vector<double> nb_buf, pr_buf;
-              Rows nb_ = rows_of_tuples(nbrs, "nbrs", 8, nb_buf), pr = rows_of_tuples(prisms, "prisms", 4, pr_buf);
+              Rows nb_ = rows_of_tuples(nbrs, "nbrs", 8, nb_buf), pr = prism_rows_of_tuples(prisms, pr_buf);
               decide_into(P_, V, W, nb_, pr, bounds_of(limits), cfg, out);
           },
           "p"_a, "v_now"_a, "v_pref"_a, "nbrs"_a, "prisms"_a, "limits"_a, "cfg"_a, "out"_a,
           "decide with the rows as select holds them: v_pref a tuple of 3 numbers (or an array),\n"
-          "nbrs a list of 8-tuples (Neighbor.row) or an (n, 8) array, prisms a list of 4-tuples\n"
-          "(an obstacle's prism) or an (m, 4) array, limits a tuple of 6 (Bounds).");
+          "nbrs a list of 8-tuples (Neighbor.row) or an (n, 8) array, prisms a list of 6- or 4-tuples\n"
+          "(an obstacle's prism) or an (m, 6) or (m, 4) array, limits a tuple of 6 (Bounds).");
 
     m.def("decide_many",
           [](nb::handle swarm, const Config& cfg_in, int64_t threads, nb::handle out, int64_t lo,
@@ -119,7 +118,7 @@ NB_MODULE(_core, m) {
               In<int64_t> nb_span = arr<int64_t>(t[3], "nb_span", {D, 2}), nb_idx = arr<int64_t>(t[4], "nb_idx", {ANY});
               In<double> spheres = arr<double>(t[5], "spheres", {ANY, 4});
               In<int64_t> sp_span = arr<int64_t>(t[6], "sp_span", {D, 2}), sp_idx = arr<int64_t>(t[7], "sp_idx", {ANY});
-              In<double> prisms = arr<double>(t[8], "prisms", {ANY, 4});
+              Rows prisms = prism_rows_of(t[8]);
               In<int64_t> ob_span = arr<int64_t>(t[9], "ob_span", {D, 2}), ob_idx = arr<int64_t>(t[10], "ob_idx", {ANY});
               Out<double> o = out_arr<double>(out, "out", {D, MANY_OUT_SIZE});
               if (!c_contig(o) || !c_contig(who))
@@ -128,11 +127,11 @@ NB_MODULE(_core, m) {
                   if (who.data()[d] < 0 || who.data()[d] >= N) throw nb::value_error("who: index out of range");
               Swarm sw{rows_of(agents), rows_of(limits), who.data(), D,
                        links_of(nb_span, nb_idx, D, "nb_span"), rows_of(spheres),
-                       links_of(sp_span, sp_idx, D, "sp_span"), rows_of(prisms),
+                       links_of(sp_span, sp_idx, D, "sp_span"), prisms,
                        links_of(ob_span, ob_idx, D, "ob_span")};
               check_indices(nb_span, nb_idx, N, "nb_idx");
               check_indices(sp_span, sp_idx, int64_t(spheres.shape(0)), "sp_idx");
-              check_indices(ob_span, ob_idx, int64_t(prisms.shape(0)), "ob_idx");
+              check_indices(ob_span, ob_idx, prisms.n, "ob_idx");
               if (hi < 0) hi = D;
               if (lo < 0 || lo > hi || hi > D) throw nb::value_error("lo, hi: not a range of the deciding vehicles");
               if (threads < 1) throw nb::value_error("threads: expected at least 1");
@@ -235,9 +234,9 @@ NB_MODULE(_core, m) {
     m.def("build_pyramids", [](nb::handle p_A, nb::handle prisms) {
         double pa[3];
         vec3(p_A, "p_A", pa);
-        Rows pr = rows_of(arr<double>(prisms, "prisms", {ANY, 4}));
+        Rows pr = prism_rows_of(prisms);
         std::vector<Pyramid> out;
-        for (int64_t j = 0; j < pr.n; ++j) out.push_back(build_pyramid(pa, pr(j, 0), pr(j, 1), pr(j, 2), pr(j, 3)));
+        for (int64_t j = 0; j < pr.n; ++j) out.push_back(pyramid_of_row(pa, pr, j, pr(j, 3)));
         return pyramids_to_py(out);
     });
     m.def("prism_corners", [](nb::handle frame, nb::handle lo, nb::handle hi) {
@@ -397,7 +396,7 @@ NB_MODULE(_core, m) {
         const Config& cfg = checked(cfg_in);
         double P_[3], V[3], W[3];
         vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
-        Rows nb_ = rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), pr = rows_of(arr<double>(prisms, "prisms", {ANY, 4}));
+        Rows nb_ = rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), pr = prism_rows_of(prisms);
         return vos_to_py(build_vos(P_, V, W, nb_, pr, bounds_of(bounds), cfg));
     });
     m.def("pref_clear", [](nb::handle p, nb::handle v_now, nb::handle v_pref, nb::handle nbrs,
@@ -405,7 +404,7 @@ NB_MODULE(_core, m) {
         const Config& cfg = checked(cfg_in);
         double P_[3], V[3], W[3], pref[3];
         vec3(p, "p", P_), vec3(v_now, "v_now", V), vec3(v_pref, "v_pref", W);
-        Rows nb_ = rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), pr = rows_of(arr<double>(prisms, "prisms", {ANY, 4}));
+        Rows nb_ = rows_of(arr<double>(nbrs, "nbrs", {ANY, 8})), pr = prism_rows_of(prisms);
         Bounds b = bounds_of(bounds);
         aimed(W, b, pref);
         return pref_clear(P_, cone_rows(P_, V, nb_, b, cfg), pyramids_in_reach(P_, pr, b, cfg), pref, cfg.horizon,

@@ -157,6 +157,26 @@ Rows rows_of_tuples(nb::handle h, const char* name, int64_t width, std::vector<d
     return Rows::of(buf, width);
 }
 
+// Prism rows: a float64 array of shape (m, 4) or (m, 6) (with the obstacles' height and rim,
+// PRISM_ROOF_ROW), as it is.
+Rows prism_rows_of(nb::handle h) {
+    In<double> a = arr<double>(h, "prisms", {ANY, ANY});
+    if (a.shape(1) != PRISM_ROW && a.shape(1) != PRISM_ROOF_ROW)
+        throw nb::value_error("prisms: expected a float64 array of shape (n, 4) or (n, 6)");
+    return rows_of(a);
+}
+
+// Prism rows as select() holds them: a list (or tuple) of obstacles' prisms, tuples of 4 or
+// 6 numbers (the first one's width for all) over ``buf``; or an array as prism_rows_of.
+Rows prism_rows_of_tuples(nb::handle h, std::vector<double>& buf) {
+    PyObject* seq = h.ptr();
+    if (!PyList_Check(seq) && !PyTuple_Check(seq)) return prism_rows_of(h);
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(seq);
+    PyObject* first = n ? PySequence_Fast_ITEMS(seq)[0] : nullptr;
+    bool roofed = first && PyTuple_Check(first) && PyTuple_GET_SIZE(first) == PRISM_ROOF_ROW;
+    return rows_of_tuples(h, "prisms", roofed ? PRISM_ROOF_ROW : PRISM_ROW, buf);
+}
+
 // A 3-vector from a tuple of three numbers or a float64 array of shape (3,).
 void vec3_of(nb::handle h, const char* name, double* out) {
     if (PyTuple_Check(h.ptr())) return tuple_into(h.ptr(), name, 3, out);
@@ -230,12 +250,12 @@ nb::tuple cones_to_py(const std::vector<Cone>& cones) {
 }
 
 std::vector<Pyramid> pyramids_of(nb::handle h) {
-    nb::tuple t = fields(h, "pyramids", 6);
+    nb::tuple t = fields(h, "pyramids", 7);
     In<double> frame = arr<double>(t[0], "pyramids.frame", {ANY, 3, 3});
     int64_t m = frame.shape(0);
     In<double> lo = arr<double>(t[1], "pyramids.lo", {m, 3}), hi = arr<double>(t[2], "pyramids.hi", {m, 3}),
                L = arr<double>(t[3], "pyramids.L_pz", {m}), H = arr<double>(t[4], "pyramids.h_pz", {m});
-    In<bool> inside = arr<bool>(t[5], "pyramids.inside", {m});
+    In<bool> inside = arr<bool>(t[5], "pyramids.inside", {m}), roof = arr<bool>(t[6], "pyramids.over_roof", {m});
     std::vector<Pyramid> out(m);
     for (int64_t j = 0; j < m; ++j) {
         Pyramid& py = out[j];
@@ -246,6 +266,7 @@ std::vector<Pyramid> pyramids_of(nb::handle h) {
                 py.frame[a][c] = frame.data()[j * frame.stride(0) + a * frame.stride(1) + c * frame.stride(2)];
         }
         py.L_pz = at(L, j), py.h_pz = at(H, j), py.inside = inside.data()[j * inside.stride(0)];
+        py.over_roof = roof.data()[j * roof.stride(0)];
     }
     return out;
 }
@@ -253,17 +274,17 @@ std::vector<Pyramid> pyramids_of(nb::handle h) {
 nb::tuple pyramids_to_py(const std::vector<Pyramid>& pyramids) {
     size_t m = pyramids.size();
     std::vector<double> frame(9 * m), lo(3 * m), hi(3 * m), L(m), H(m);
-    std::vector<uint8_t> inside(m);
+    std::vector<uint8_t> inside(m), roof(m);
     for (size_t j = 0; j < m; ++j) {
         const Pyramid& py = pyramids[j];
         for (int a = 0; a < 3; ++a) {
             lo[3 * j + a] = py.lo[a], hi[3 * j + a] = py.hi[a];
             for (int c = 0; c < 3; ++c) frame[9 * j + 3 * a + c] = py.frame[a][c];
         }
-        L[j] = py.L_pz, H[j] = py.h_pz, inside[j] = py.inside;
+        L[j] = py.L_pz, H[j] = py.h_pz, inside[j] = py.inside, roof[j] = py.over_roof;
     }
     return nb::make_tuple(numpy(frame, {m, 3, 3}), numpy(lo, {m, 3}), numpy(hi, {m, 3}),
-                          numpy(L, {m}), numpy(H, {m}), numpy_bool(inside, {m}));
+                          numpy(L, {m}), numpy(H, {m}), numpy_bool(inside, {m}), numpy_bool(roof, {m}));
 }
 
 VOs vos_of_py(nb::handle h) {

@@ -117,7 +117,7 @@ struct PlaneQPs {
 };
 
 // One decision (the steps of the header). ``nbrs`` (n, 8): position, velocity, r_pz,
-// cooperative (1/0); ``prisms`` (m, 4): x, y, L_pz, h_pz.
+// cooperative (1/0); ``prisms`` (m, 4 or 6): x, y, L_pz, h_pz (and the obstacle's height and rim).
 inline Decision decide_one(const double* p, const double* v_now, const double* v_pref,
                            const Rows& nbrs, const Rows& prisms, const Bounds& b,
                            const Config& cfg) {

@@ -54,7 +54,7 @@ struct Swarm {
     Links neighbours;     // vehicle indices
     Rows spheres;         // (S, 4): x, y, z, r_pz of static spheres (zero-velocity neighbours)
     Links sphere_links;
-    Rows prisms;          // (M, 4): the obstacles' prisms
+    Rows prisms;          // (M, 4 or 6): the obstacles' prisms
     Links obstacle_links;
 };
 
@@ -66,7 +66,8 @@ inline void decide_vehicle(const Swarm& sw, int64_t d, const Config& cfg, double
     int64_t i = sw.who[d];
     const Links &nb = sw.neighbours, &sp = sw.sphere_links, &ob = sw.obstacle_links;
     int64_t n_nb = nb.hi(d) - nb.lo(d), n_sp = sp.hi(d) - sp.lo(d), n_ob = ob.hi(d) - ob.lo(d);
-    std::vector<double> nbrs(8 * (n_nb + n_sp)), prisms(4 * n_ob);
+    int64_t w = sw.prisms.m;
+    std::vector<double> nbrs(8 * (n_nb + n_sp)), prisms(w * n_ob);
     for (int64_t e = nb.lo(d); e < nb.hi(d); ++e) {
         int64_t j = nb.idx[e];
         double* row = &nbrs[8 * (e - nb.lo(d))];
@@ -80,12 +81,12 @@ inline void decide_vehicle(const Swarm& sw, int64_t d, const Config& cfg, double
         row[6] = sw.spheres(s, 3), row[7] = 0.0;
     }
     for (int64_t e = ob.lo(d); e < ob.hi(d); ++e)
-        for (int c = 0; c < 4; ++c) prisms[4 * (e - ob.lo(d)) + c] = sw.prisms(ob.idx[e], c);
+        for (int64_t c = 0; c < w; ++c) prisms[w * (e - ob.lo(d)) + c] = sw.prisms(ob.idx[e], c);
     double p[3], v_now[3], v_pref[3];
     for (int c = 0; c < 3; ++c) p[c] = a(i, c), v_now[c] = a(i, 3 + c), v_pref[c] = a(i, 6 + c);
     Bounds b{sw.limits(i, 0), sw.limits(i, 1), sw.limits(i, 2),
              sw.limits(i, 3), sw.limits(i, 4), sw.limits(i, 5)};
-    Decision res = decide_one(p, v_now, v_pref, Rows::of(nbrs, 8), Rows::of(prisms, 4), b, cfg);
+    Decision res = decide_one(p, v_now, v_pref, Rows::of(nbrs, 8), Rows::of(prisms, w), b, cfg);
     for (int c = 0; c < 3; ++c) out[c] = res.velocity[c];
     out[3] = double(res.status), out[4] = res.phi, out[5] = double(res.round);
     out[6] = double(res.solved), out[7] = double(n_nb), out[8] = double(n_sp + n_ob);

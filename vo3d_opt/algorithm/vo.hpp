@@ -180,17 +180,25 @@ struct Pyramid {
     double frame[3][3];
     double lo[3], hi[3];
     double L_pz, h_pz;
-    bool inside;  // A is already inside C_pz
+    bool inside;     // A is already inside C_pz
+    bool over_roof;  // ... and over the obstacle's roof: within its rim, at or above its height
 };
 
-// Section 4.1 for a prism (x, y, L_pz, h_pz).
+// A prism row: x, y, L_pz, h_pz and, when known (6 columns), the obstacle's height and rim (the
+// largest distance from its axis to its footprint's edge: a cylinder's radius, half a box's
+// diagonal).
+constexpr int64_t PRISM_ROW = 4, PRISM_ROOF_ROW = 6;
+
 //: How far C_pz reaches below the ground (m). An obstacle stands on the ground: a velocity
 //: whose ray would pass under it, below the floor, does not pass it (the vehicle levels off at
 //: the floor and flies into it). Only a ray falling more than (D + z_A) / (dist - L/2) metres
 //: per metre it closes in (over 500 at 20 m) still passes under (formulations/geometry.md).
 constexpr double UNDERGROUND = 1e4;
 
-inline Pyramid build_pyramid(const double* p_A, double x, double y, double L, double H) {
+// Section 4.1 for a prism (x, y, L_pz, h_pz); ``roof`` and ``rim`` the obstacle's height and rim
+// (inf and 0 when unknown: never over the roof).
+inline Pyramid build_pyramid(const double* p_A, double x, double y, double L, double H,
+                             double roof = kInf, double rim = 0.0) {
     Pyramid py{};
     double dx = x - p_A[0], dy = y - p_A[1];
     double dist = std::sqrt(dx * dx + dy * dy);
@@ -204,19 +212,28 @@ inline Pyramid build_pyramid(const double* p_A, double x, double y, double L, do
     py.L_pz = L, py.h_pz = H;
     // Turned to face A, the square contains A exactly when A is within its apothem L/2.
     py.inside = dist < L / 2 && p_A[2] < H;
+    py.over_roof = py.inside && dist < rim && p_A[2] >= roof;
     return py;
 }
 
+// Row j of ``prisms`` (4 or 6 columns) as a pyramid seen from p_A, its top at H (m).
+inline Pyramid pyramid_of_row(const double* p_A, const Rows& prisms, int64_t j, double H) {
+    bool roofed = prisms.m >= PRISM_ROOF_ROW;
+    return build_pyramid(p_A, prisms(j, 0), prisms(j, 1), prisms(j, 2), H,
+                         roofed ? prisms(j, 4) : kInf, roofed ? prisms(j, 5) : 0.0);
+}
+
 // Inside C_pz, the rates (m/s) at which v goes deeper from its side (towards the centre
-// horizontally, h . v) and from its top (down, -v_z; -inf unless the top is nearer than the
-// side, H - z_A < L/2 - dist): a vehicle under the top must not sink, its way out is up
-// or back. The side counts under the top too: the obstacle's own walls are not known here (the
+// horizontally, h . v) and from its top (down, -v_z; -inf unless A is under the top: the top
+// nearer than the side, H - z_A < L/2 - dist, or A over the obstacle's roof, where a descent
+// meets the roof whichever margin is nearer): a vehicle under the top must not sink, its way
+// out is up or back. The side counts under the top too: the obstacle's own walls are not known here (the
 // turned square reaches beyond a box's), so going towards the centre closes in everywhere.
 struct PrismRates {
     double side, top;
 };
 
-inline bool under_top(const Pyramid& py) { return py.hi[2] < -py.lo[0]; }
+inline bool under_top(const Pyramid& py) { return py.hi[2] < -py.lo[0] || py.over_roof; }
 
 inline PrismRates prism_rates(const Pyramid& py, const double* v) {
     const double* h = py.frame[0];
@@ -468,9 +485,9 @@ inline std::vector<NeighbourRow> cone_rows(const double* p, const double* v_now,
     return rows;
 }
 
-// The VO pyramids of the prisms (x, y, L_pz, h_pz) within reach (all without an obstacle
-// horizon); a
-// prism whose top reaches the ceiling cannot be flown over: planned as reaching far above.
+// The VO pyramids of the prisms (PRISM_ROW or PRISM_ROOF_ROW columns) within reach (all without
+// an obstacle horizon); a prism whose top reaches the ceiling cannot be flown over: planned as
+// reaching far above, with no roof to be over.
 inline std::vector<Pyramid> pyramids_in_reach(const double* p, const Rows& prisms, const Bounds& b,
                                               const Config& cfg) {
     std::vector<Pyramid> out;
@@ -480,8 +497,12 @@ inline std::vector<Pyramid> pyramids_in_reach(const double* p, const Rows& prism
         double reach = cfg.obstacle_horizon;
         if (reach < 0.0 || dist - prisms(j, 2) / std::sqrt(2.0) <= reach * b.v_max) {
             double H = prisms(j, 3);
-            if (H >= b.z_max) H = std::max(H, p[2]) + OVER_THE_CEILING;
-            out.push_back(build_pyramid(p, prisms(j, 0), prisms(j, 1), prisms(j, 2), H));
+            if (H < b.z_max) {
+                out.push_back(pyramid_of_row(p, prisms, j, H));
+            } else {
+                H = std::max(H, p[2]) + OVER_THE_CEILING;
+                out.push_back(build_pyramid(p, prisms(j, 0), prisms(j, 1), prisms(j, 2), H));
+            }
         }
     }
     return out;
@@ -521,7 +542,7 @@ inline bool pref_clear(const double* p, const std::vector<NeighbourRow>& rows,
     return true;
 }
 
-// build_vos: the VOs of one decision (nbrs (n, 8), prisms (m, 4)).
+// build_vos: the VOs of one decision (nbrs (n, 8), prisms (m, 4 or 6)).
 inline VOs build_vos(const double* p, const double* v_now, const double* v_pref, const Rows& nbrs,
                      const Rows& prisms, const Bounds& b, const Config& cfg) {
     double pref[3];

@@ -227,7 +227,7 @@ def py_build_vos(
     cfg: Config,
 ) -> VOs:
     """The VOs of one decision (compiled: ``build_vos``). ``nbrs`` (n, 8): position, velocity,
-    r_pz, cooperative (1/0); ``prisms`` (m, 4): x, y, L_pz, h_pz of the protected prisms.
+    r_pz, cooperative (1/0); ``prisms`` (m, 6): ``prism_rows`` (or (m, 4): no roofs).
 
     - The preferred velocity beyond reach is aimed at the reachable one (clamped to v_max).
     - With a horizon, zones that cannot be reached in time have an empty VO: dropped.

@@ -35,8 +35,9 @@ DEFAULT_LIMITS = Limits()
 #: The columns of ``select_arrays``' neighbour array: ``Neighbor``'s fields but ``cooperative``,
 #: which is an array of its own.
 NEIGHBOR_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "r_pz")
-#: The columns of ``select_arrays``' obstacle array: each protected prism (``Cylinder.prism``).
-PRISM_COLUMNS = ("x", "y", "L_pz", "h_pz")
+#: The columns of ``select_arrays``' obstacle array: each obstacle's prism row
+#: (``Cylinder.prism``); the first four alone (no roof) are accepted too.
+PRISM_COLUMNS = ("x", "y", "L_pz", "h_pz", "height", "rim")
 
 Vector3 = tuple[float, float, float] | np.ndarray
 Row = tuple[float, ...]
@@ -98,7 +99,7 @@ def neighbor_tuples(neighbors: Any) -> list[Row]:
 
 
 def prism_tuples(obstacles: Any) -> list[Row]:
-    """Each obstacle's protected prism (x, y, L_pz, h_pz)."""
+    """Each obstacle's prism row (``Cylinder.prism``)."""
     items = _listed(obstacles)
     rows: list[Row] = [o.prism for o in items if type(o) is Cylinder or type(o) is Box]
     if len(rows) != len(items):
@@ -202,12 +203,20 @@ def _flags(value: Any, n: int) -> np.ndarray:
 
 
 def prism_array(obstacles: Any) -> np.ndarray:
-    """(M, 4) protected prisms: an array of ``PRISM_COLUMNS`` (L_pz and h_pz positive), or
-    Cylinder and Box objects."""
+    """(M, 6) or (M, 4) prism rows: an array of ``PRISM_COLUMNS`` or of their first four (all
+    but x and y positive), or Cylinder and Box objects."""
     if obstacles is None:
-        return np.zeros((0, 4))
+        return np.zeros((0, len(PRISM_COLUMNS)))
     if isinstance(obstacles, (list, tuple)) and all(
         isinstance(o, (Cylinder, Box)) for o in obstacles
     ):
         return prism_rows(obstacles)
+    shape = np.shape(obstacles)
+    if len(shape) == 2 and shape[1] == 4:
+        return _table(obstacles, "obstacles", PRISM_COLUMNS[:4], 2)
+    if len(shape) == 2 and shape[0] and shape[1] != len(PRISM_COLUMNS):
+        raise ValueError(
+            f"obstacles: expected shape (N, 6) ({', '.join(PRISM_COLUMNS)}) or (N, 4) (the "
+            f"first four: no roof), got {shape}"
+        )
     return _table(obstacles, "obstacles", PRISM_COLUMNS, 2)

@@ -35,12 +35,13 @@ OUT_STATUS, OUT_PHI, OUT_ROUND, OUT_SOLVED = 3, 4, 5, 6
 
 #: One decision from arrays into ``out`` (OUT_SIZE,): ``decide(p, v_now, v_pref, nbrs, prisms,
 #: limits, cfg, out)``; ``nbrs`` (n, 8): position, velocity, r_pz, cooperative (1/0);
-#: ``prisms`` (m, 4): x, y, L_pz, h_pz; ``limits``: ``bounds_array``; ``cfg``: ``Options.config``.
+#: ``prisms`` (m, 6) ``prism_rows`` (or (m, 4): no roofs); ``limits``: ``bounds_array``;
+#: ``cfg``: ``Options.config``.
 #: Arrays of another dtype or shape raise ValueError naming the argument.
 decide = _core.decide
 #: ``decide`` from the rows as ``select`` holds them (``formulations.inputs``): the preferred
 #: velocity a tuple of 3 numbers (or an array), ``nbrs`` a list of ``Neighbor.row`` (or an (n, 8)
-#: array), ``prisms`` a list of obstacles' ``prism`` (or an (m, 4) array), ``limits``
+#: array), ``prisms`` a list of obstacles' ``prism`` (or an (m, 6) or (m, 4) array), ``limits``
 #: ``inputs.bounds_row``. The same numbers give the same answer as ``decide``; a row of another
 #: length raises ValueError naming it.
 decide_rows = _core.decide_rows

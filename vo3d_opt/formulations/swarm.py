@@ -41,7 +41,7 @@ class Swarm(NamedTuple):
     spheres: np.ndarray  # (S, 4): x, y, z, r_pz of static spheres (zero-velocity neighbours)
     sp_span: np.ndarray  # (D, 2) int64 into sp_idx
     sp_idx: np.ndarray  # (F,) int64
-    prisms: np.ndarray  # (M, 4): ``prism_rows`` of the obstacles
+    prisms: np.ndarray  # (M, 6): ``prism_rows`` of the obstacles
     ob_span: np.ndarray  # (D, 2) int64 into ob_idx
     ob_idx: np.ndarray  # (G,) int64
 

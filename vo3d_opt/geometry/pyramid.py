@@ -36,6 +36,7 @@ class VOPyramids(NamedTuple):
     L_pz: np.ndarray  # (m,)
     h_pz: np.ndarray  # (m,)
     inside: np.ndarray  # (m,) bool: A already inside C_pz
+    over_roof: np.ndarray  # (m,) bool: ... and over the obstacle's roof (within its rim, above it)
 
     @classmethod
     def empty(cls) -> VOPyramids:
@@ -47,6 +48,7 @@ class VOPyramids(NamedTuple):
             L_pz=np.zeros(0),
             h_pz=np.zeros(0),
             inside=np.zeros(0, dtype=bool),
+            over_roof=np.zeros(0, dtype=bool),
         )
 
     @property
@@ -73,9 +75,14 @@ def prism_corners(frame: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarr
     return _core.prism_corners(frame, lo, hi)
 
 
+#: The width of an obstacle's prism row: x, y, L_pz, h_pz, the obstacle's height and its rim
+#: (``Cylinder.prism``); rows of the first four alone are read as having no roof.
+PRISM_WIDTH = 6
+
+
 def prism_rows(obstacles: Sequence[Cylinder | Box]) -> np.ndarray:
-    """(m, 4) the protected prisms (x, y, L_pz, h_pz) of static cylinders and boxes."""
-    return np.array([o.prism for o in obstacles], dtype=float).reshape(-1, 4)
+    """(m, 6) the prism rows (``PRISM_WIDTH``) of static cylinders and boxes."""
+    return np.array([o.prism for o in obstacles], dtype=float).reshape(-1, PRISM_WIDTH)
 
 
 def vo_pyramids(p_A: np.ndarray, obstacles: Sequence[Cylinder | Box]) -> VOPyramids:
@@ -84,8 +91,9 @@ def vo_pyramids(p_A: np.ndarray, obstacles: Sequence[Cylinder | Box]) -> VOPyram
 
 
 def py_build_pyramids(p_A: np.ndarray, prisms: np.ndarray) -> VOPyramids:
-    """Section 4.1 for prisms (x, y, L_pz, h_pz): C_pz turned square to the line of sight
-    (compiled: ``build_pyramid``)."""
+    """Section 4.1 for prisms (m, 4) x, y, L_pz, h_pz, or (m, 6) with the obstacles' height
+    and rim (``prism_rows``): C_pz turned square to the line of sight (compiled:
+    ``build_pyramid``)."""
     return VOPyramids(*_core.build_pyramids(p_A, prisms))
 
 

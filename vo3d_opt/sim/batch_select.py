@@ -36,7 +36,7 @@ from vo3d_opt.formulations.swarm import (
     decide_range,
     neighbor_lists,
 )
-from vo3d_opt.geometry.pyramid import prism_rows
+from vo3d_opt.geometry.pyramid import PRISM_WIDTH, prism_rows
 from vo3d_opt.sim.deciders import PerAgentSelect, SwarmSelect
 from vo3d_opt.sim.scenario import Scenario
 from vo3d_opt.sim.sensed_batch import Fleet, Observer, decide_sensed
@@ -114,7 +114,7 @@ class BatchSelect:
         self.pair_a = np.concatenate(pairs_a).astype(np.int64)
         self.pair_b = np.concatenate(pairs_b).astype(np.int64)
         self.pair_range = np.concatenate(ranges)
-        self.prisms = np.ascontiguousarray(np.concatenate(prisms).reshape(-1, 4))
+        self.prisms = np.ascontiguousarray(np.concatenate(prisms).reshape(-1, PRISM_WIDTH))
         self.spheres = np.ascontiguousarray(np.concatenate(spheres).reshape(-1, 4))
         self.member_of = np.zeros(n, dtype=np.int64)
         for f, mem in enumerate(self.members):
@@ -332,7 +332,7 @@ class SensedBatch:
             spheres.append(mem.step.sphere_rows)
             prisms.append(mem.step.prism_rows)
         self.spheres = np.ascontiguousarray(np.concatenate(spheres).reshape(-1, 4))
-        self.prisms = np.ascontiguousarray(np.concatenate(prisms).reshape(-1, 4))
+        self.prisms = np.ascontiguousarray(np.concatenate(prisms).reshape(-1, PRISM_WIDTH))
         self.retired: set[int] = set()
 
     def retire(self, members: Sequence[int]) -> None:

@@ -78,7 +78,7 @@ def sensed_swarm(
     fleet: Fleet, observers: Sequence[Observer], spheres: np.ndarray, prisms: np.ndarray
 ) -> Swarm:
     """The kernel's arrays: the vehicles' rows, then each observer's sensed rows (its
-    neighbours); ``spheres`` (S, 4) x, y, z, r_pz; ``prisms`` (M, 4)."""
+    neighbours); ``spheres`` (S, 4) x, y, z, r_pz; ``prisms`` (M, 6)."""
     n = fleet.positions.shape[0]
     counts = [len(o.sensed) for o in observers]
     rows = n + sum(counts)
