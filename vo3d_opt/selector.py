@@ -211,11 +211,9 @@ class VelocitySelector:
         ``position``, ``velocity``, ``preferred_velocity``: (3,) m, m/s (the own vehicle's
         ``AgentState`` and the preferred velocity); ``neighbors``: (N, 7) px, py, pz, vx, vy,
         vz, r_pz, one row per ``Neighbor`` (None: none); ``cooperative``: (N,) booleans, each
-        neighbour's ``Neighbor.cooperative`` (None: all True); ``obstacles``: (M, 6) x, y, L_pz,
-        h_pz of each protected prism and the obstacle's height and rim (``Cylinder.prism``,
-        ``Box.prism``; (M, 4) without the last two: no roof, a vehicle inside C_pz and over
-        the obstacle is then kept from sinking only where the top is nearer than the side), or
-        the ``Cylinder`` and ``Box`` objects themselves (None: none); ``limits``, ``dt``,
+        neighbour's ``Neighbor.cooperative`` (None: all True); ``obstacles``: (M, 6) prism rows
+        (``Cylinder.prism``: x, y, L_pz, h_pz, the obstacle's height and rim; (M, 4): no
+        roof), or the ``Cylinder`` and ``Box`` objects themselves (None: none); ``limits``, ``dt``,
         ``sensing_range``: as for ``select``. Real numbers only, finite, at most 1e7 in
         magnitude, r_pz, L_pz, h_pz, height and rim positive: anything else is a
         ``ValueError`` naming the argument, and for an array the row and the column.
