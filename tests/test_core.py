@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from vo3d_opt import AgentState, Box, Cylinder, Limits, Neighbor, VelocitySelector, _core
-from vo3d_opt.formulations import kernel
+from vo3d_opt.formulations import inputs, kernel
 from vo3d_opt.formulations.common import (
     FINE_HEADING_STEP,
     FINE_SPEED_LEVELS,
@@ -107,6 +107,28 @@ def test_bad_arrays_raise_a_value_error_naming_them():
     frozen.setflags(write=False)
     with pytest.raises(ValueError, match="out"):
         kernel.decide(*args, cfg, frozen)
+
+
+def test_prism_rows_of_four_or_six_as_tuples_or_arrays_decide_alike():
+    """``decide_rows`` reads the prism tuples as ``decide`` reads the arrays, of 4 columns (no
+    roof) or 6; tuples of another width, or of mixed widths, are refused naming the row."""
+    rng, cfg = np.random.default_rng(4), Options().config
+    for _ in range(10):
+        kw = _encounter(rng)
+        args = _arrays(kw)
+        bounds = inputs.bounds_row(kw["limits"], kw["dt"])
+        for width in (4, 6):
+            rows = args[4][:, :width]
+            want = _decide([*args[:4], np.ascontiguousarray(rows), args[5]], cfg)
+            got = np.empty(kernel.OUT_SIZE)
+            kernel.decide_rows(*args[:3], neighbor_rows(kw["neighbors"]),
+                               [tuple(r) for r in rows.tolist()], bounds, cfg, got)
+            assert np.array_equal(got, want, equal_nan=True)
+    prisms = [tuple(r) for r in args[4].tolist()]
+    for bad in ([prisms[0], prisms[1][:4]], [p[:5] for p in prisms], [list(p) for p in prisms]):
+        with pytest.raises(ValueError, match=r"prisms\[[01]\]: expected tuples of 4 or 6"):
+            kernel.decide_rows(*args[:3], neighbor_rows(kw["neighbors"]), bad, bounds, cfg,
+                               np.empty(kernel.OUT_SIZE))
 
 
 def test_bad_shapes_of_the_python_side_raise_value_errors():

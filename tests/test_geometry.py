@@ -398,14 +398,18 @@ def test_pyramid_inside_kind(z, top):
     assert (exact & ~got).any() == top
 
 
-def test_inside_a_prism_the_vo_is_closing_in_by_brute_force():
+@pytest.mark.parametrize("raised", [False, True])
+def test_inside_a_prism_the_vo_is_closing_in_by_brute_force(raised):
     """Inside C_pz, anywhere in it (near the side, the top, or the edge between them): a
     velocity is in the VO, closes on the zone (``closing_rate``) and intrudes at once
     (``time_to_intrusion`` 0) exactly when a short step along it takes A deeper from the side
-    or, where the top is the nearer face, from the top; the closing rate is the sum of both
-    ways in, the clearance the slower of the two ways out."""
+    or, under the top (the top the nearer face, or A over the roof), from the top; the closing
+    rate is the sum of both ways in, the clearance the slower of the two ways out. ``raised``:
+    a prism whose top margin (4 m) exceeds its side margin (2 m), so that the roof's edge has
+    points where the side is nearer."""
     rng = np.random.default_rng(11)
-    ob = Cylinder(center=(0.0, 0.0), radius=3.0, height=20.0)
+    ob = Cylinder(center=(0.0, 0.0), radius=3.0, height=20.0,
+                  **(dict(L_pz=10.0, h_pz=24.0) if raised else {}))
 
     def encounter(p_a: np.ndarray):  # the decision's planning prism, with its buffer
         return prepare(AgentState(position=p_a, velocity=np.zeros(3)), np.zeros(3), [], [ob],
@@ -414,6 +418,7 @@ def test_inside_a_prism_the_vo_is_closing_in_by_brute_force():
     pyr0 = encounter(np.zeros(3)).vos.pyramids
     half, top = pyr0.L_pz[0] / 2, pyr0.h_pz[0]
     faces = {True: 0, False: 0}  # top nearer, side nearer
+    roof_edge = 0  # over the roof, the side nearer
     for _ in range(300):
         r, a = half * rng.uniform(0.0, 0.98), rng.uniform(0, 2 * np.pi)
         p_a = np.array([r * np.cos(a), r * np.sin(a), top - rng.uniform(0.01, 1.2 * half)])
@@ -424,6 +429,9 @@ def test_inside_a_prism_the_vo_is_closing_in_by_brute_force():
         pyr = enc.vos.pyramids
         assert pyr.inside[0]
         faces[bool(gap > 0)] += 1
+        over_roof = r < ob.radius and p_a[2] >= ob.height
+        roof_edge += over_roof and gap < 0
+        assert pyr.over_roof[0] == over_roof
         v = rng.uniform(-4.0, 4.0, (40, 3))
         # a step short enough that the nearest wall (the near one, by r nearer than the
         # others) and the top stay the nearest of their kinds
@@ -431,7 +439,7 @@ def test_inside_a_prism_the_vo_is_closing_in_by_brute_force():
         side0, top0 = _depths(pyr, np.zeros((1, 3)))
         side1, top1 = _depths(pyr, eps * v)
         from_side = (side1 - side0) / eps
-        from_top = (top1 - top0) / eps if gap > 0 else np.full(len(v), -np.inf)
+        from_top = (top1 - top0) / eps if gap > 0 or over_roof else np.full(len(v), -np.inf)
         rate = np.maximum(from_side, from_top)
         keep = np.abs(rate) > 1e-6  # not along a face
         closing = rate[keep] > 0
@@ -441,6 +449,7 @@ def test_inside_a_prism_the_vo_is_closing_in_by_brute_force():
         assert np.array_equal(enc.time_to_intrusion(v)[keep] == 0.0, closing)
         np.testing.assert_allclose(clearances(VOCones.empty(), pyr, v), -rate, atol=1e-9)
     assert min(faces.values()) > 50
+    assert roof_edge > 10 if raised else roof_edge == 0
 
 
 @pytest.mark.parametrize("formulation", ["plane_qp", "cone_qp", "sampled"])
@@ -1062,11 +1071,13 @@ def _roof_case(rng: np.random.Generator) -> tuple[Cylinder | Box, np.ndarray]:
     return ob, np.array([*xy, rng.uniform(height, height + top)])
 
 
-@pytest.mark.parametrize("formulation", ["plane_qp", "sampled"])
+@pytest.mark.parametrize("formulation", ["plane_qp", "cone_qp", "nlp", "sampled"])
 def test_over_any_roof_inside_the_prism_no_answer_sinks(formulation):
     """Anywhere over a cylinder's or a box's roof inside its prism, whichever of the prism's
     side and top is nearer, asked anywhere (down among them): the answer never sinks, and a
     vehicle counted beside the obstacle by the top-nearer rule alone is among the cases."""
+    if formulation == "nlp":
+        pytest.importorskip("casadi")
     rng, beside = np.random.default_rng(11), 0
     selector, limits = VelocitySelector(formulation), Limits(speed=(0, 4), altitude=(0, 60))
     for _ in range(40):
@@ -1083,16 +1094,19 @@ def test_over_any_roof_inside_the_prism_no_answer_sinks(formulation):
 
 
 def test_prism_rows_without_a_roof_decide_as_before_off_the_roof():
-    """Off the roof (beside the obstacle, or below its height) a prism row of four columns and
-    one of six give the same answer bit for bit; over the roof with the side nearer, only the
-    six columns keep the vehicle from sinking."""
+    """Off the roof (past its rim, or below its height) a prism row of four columns and one of
+    six give the same answer bit for bit; over the roof with the side nearer, only the six
+    columns keep the vehicle from sinking."""
     rng, selector = np.random.default_rng(5), VelocitySelector()
     limits, differ = Limits(speed=(0, 4), altitude=(0, 60)), 0
     for _ in range(60):
         ob, p = _roof_case(rng)
-        if rng.random() < 0.5:  # beside: past the rim, inside the prism
+        off = rng.random()
+        if off < 0.3:  # past the rim, inside the prism
             rim, half = ob.prism[5], ob.side / 2
             p[:2] = rng.uniform(rim, half) * p[:2] / max(np.linalg.norm(p[:2]), 1e-9)
+        elif off < 0.5:  # below the roof
+            p[2] = rng.uniform(0.5, ob.height)
         row = np.array([ob.prism])
         pref = np.array([0.3, -0.2, -2.0])
         args = dict(position=p, velocity=np.zeros(3), preferred_velocity=pref, limits=limits,
@@ -1106,3 +1120,20 @@ def test_prism_rows_without_a_roof_decide_as_before_off_the_roof():
             assert six.velocity[2] >= 0.0
             differ += four.velocity[2] < 0.0
     assert differ >= 1
+
+
+def test_select_many_over_a_roof_decides_as_select():
+    """The compiled swarm path reads the prism rows' roofs as ``select`` does: vehicles over
+    roofs inside their prisms, asked down, get ``select``'s answers bit for bit, none sinking."""
+    rng, selector = np.random.default_rng(7), VelocitySelector()
+    limits = Limits(speed=(0, 4), altitude=(0, 60))
+    for _ in range(10):
+        ob, p = _roof_case(rng)
+        far = p + (200.0, 0.0, 0.0)  # a second vehicle out of sensing range
+        pref = np.array([[0.2, 0.1, -2.0], [1.0, 0.0, 0.0]])
+        many = selector.select_many(np.array([p, far]), np.zeros((2, 3)), pref, 5.0, [ob],
+                                    limits, 0.1)
+        one = selector.select(own=AgentState(position=p, velocity=np.zeros(3)),
+                              preferred_velocity=pref[0], obstacles=[ob], limits=limits, dt=0.1)
+        np.testing.assert_array_equal(many.velocities[0], one.velocity)
+        assert one.velocity[2] >= 0.0

@@ -160,21 +160,28 @@ Rows rows_of_tuples(nb::handle h, const char* name, int64_t width, std::vector<d
 // Prism rows: a float64 array of shape (m, 4) or (m, 6) (with the obstacles' height and rim,
 // PRISM_ROOF_ROW), as it is.
 Rows prism_rows_of(nb::handle h) {
-    In<double> a = arr<double>(h, "prisms", {ANY, ANY});
-    if (a.shape(1) != PRISM_ROW && a.shape(1) != PRISM_ROOF_ROW)
+    In<double> a;
+    if (!nb::try_cast(h, a, false) || a.ndim() != 2 ||
+        (a.shape(1) != PRISM_ROW && a.shape(1) != PRISM_ROOF_ROW))
         throw nb::value_error("prisms: expected a float64 array of shape (n, 4) or (n, 6)");
     return rows_of(a);
 }
 
 // Prism rows as select() holds them: a list (or tuple) of obstacles' prisms, tuples of 4 or
-// 6 numbers (the first one's width for all) over ``buf``; or an array as prism_rows_of.
+// 6 numbers, all of one width, over ``buf``; or an array as prism_rows_of.
 Rows prism_rows_of_tuples(nb::handle h, std::vector<double>& buf) {
     PyObject* seq = h.ptr();
     if (!PyList_Check(seq) && !PyTuple_Check(seq)) return prism_rows_of(h);
     Py_ssize_t n = PySequence_Fast_GET_SIZE(seq);
-    PyObject* first = n ? PySequence_Fast_ITEMS(seq)[0] : nullptr;
-    bool roofed = first && PyTuple_Check(first) && PyTuple_GET_SIZE(first) == PRISM_ROOF_ROW;
-    return rows_of_tuples(h, "prisms", roofed ? PRISM_ROOF_ROW : PRISM_ROW, buf);
+    PyObject** items = PySequence_Fast_ITEMS(seq);
+    Py_ssize_t width = n && PyTuple_Check(items[0]) ? PyTuple_GET_SIZE(items[0]) : PRISM_ROW;
+    for (Py_ssize_t i = 0; i < n; ++i)
+        if (!PyTuple_Check(items[i]) || PyTuple_GET_SIZE(items[i]) != width ||
+            (width != PRISM_ROW && width != PRISM_ROOF_ROW))
+            throw nb::value_error(("prisms[" + std::to_string(i) +
+                                   "]: expected tuples of 4 or 6 numbers, all of one width")
+                                      .c_str());
+    return rows_of_tuples(h, "prisms", width, buf);
 }
 
 // A 3-vector from a tuple of three numbers or a float64 array of shape (3,).

@@ -227,8 +227,9 @@ inline Pyramid pyramid_of_row(const double* p_A, const Rows& prisms, int64_t j, 
 // horizontally, h . v) and from its top (down, -v_z; -inf unless A is under the top: the top
 // nearer than the side, H - z_A < L/2 - dist, or A over the obstacle's roof, where a descent
 // meets the roof whichever margin is nearer): a vehicle under the top must not sink, its way
-// out is up or back. The side counts under the top too: the obstacle's own walls are not known here (the
-// turned square reaches beyond a box's), so going towards the centre closes in everywhere.
+// out is up or back. The side counts under the top too: the turned square reaches beyond a
+// box's walls and the rim's circle beyond its sides, so a vehicle under the top may still be
+// beside the obstacle, and going towards the centre closes in everywhere.
 struct PrismRates {
     double side, top;
 };
