@@ -135,7 +135,8 @@ def test_unreadable_scenario_exits_2(tmp_path):
     "args, fragment",
     [
         pytest.param(["--formulation", "magic"], "magic", id="unknown-formulation"),
-        pytest.param(["--solver", "no-such-solver"], "no-such-solver", id="unknown-solver"),
+        pytest.param(["--solver", "no-such-solver"], "formulation 'plane_qp', solver "
+                     "'no-such-solver'", id="unknown-solver"),
     ],
 )
 def test_unknown_formulation_or_solver_exits_2(small, args, fragment):

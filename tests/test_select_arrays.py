@@ -108,6 +108,8 @@ def _bad(args: dict) -> list[tuple[str, object, str]]:
         ("cooperative", np.full(nbrs.shape[0], 2), "cooperative: expected booleans"),
         ("obstacles", obs[:, :3], r"obstacles: expected shape \(N, 6\) .* or \(N, 4\)"),
         ("obstacles", put(obs, (1, 4), 0.0), r"obstacles\[1, 4\] \(height\): must be positive"),
+        ("obstacles", obs[0], r"obstacles: expected shape \(N, 6\) .* or \(N, 4\) .*got \(6,\)"),
+        ("obstacles", [list(obs[0]), list(obs[1, :4])], r"obstacles: .* got rows of different"),
         ("obstacles", put(obs, (0, 5), np.nan), r"obstacles\[0, 5\] \(rim\)"),
         ("obstacles", put(obs[:, :4], (1, 3), np.inf), r"obstacles\[1, 3\] \(h_pz\)"),
         ("obstacles", put(obs, (0, 2), -1.0), r"obstacles\[0, 2\] \(L_pz\)"),

@@ -27,7 +27,8 @@ from vo3d_opt.sim.scenario import (
     parse_option,
     scenario_variant,
 )
-from vo3d_opt.sim.simulator import scenario_selector
+from vo3d_opt.selector import DEFAULT_SOLVERS
+from vo3d_opt.sim.simulator import DEFAULT_FORMULATION, scenario_selector
 from vo3d_opt.types import one_line
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
@@ -198,8 +199,9 @@ def selector(sc: Scenario, formulation: str | None, solver: str | None) -> tuple
     except MissingExtra:  # its own line, naming the extra (exit 2 all the same)
         raise
     except (ValueError, TypeError) as exc:
-        f, s = formulation or sc.formulation, solver or sc.solver
-        what = f"formulation {f or 'default'!r}, solver {s or 'default'!r}"
+        f = formulation or sc.formulation or DEFAULT_FORMULATION
+        s = solver or sc.solver or DEFAULT_SOLVERS.get(f)
+        what = f"formulation {f!r}" + (f", solver {s!r}" if s else "")
         raise UsageError(f"{what}: {exc}") from None
 
 

@@ -391,7 +391,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
     if args.list:
         return _list(args.json)
-    check("sweep", "vo3d sweep")  # before anything is said: one line if it is missing
+    check("sweep", "the sweep command")  # before anything is said: one line if it is missing
     _check_flags(args)
     without = None
     if args.against is not None:

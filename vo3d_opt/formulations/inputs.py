@@ -211,10 +211,14 @@ def prism_array(obstacles: Any) -> np.ndarray:
         isinstance(o, (Cylinder, Box)) for o in obstacles
     ):
         return prism_rows(obstacles)
-    shape = np.shape(obstacles)
+    width = len(PRISM_COLUMNS)
+    try:
+        shape: Any = np.shape(obstacles)
+    except ValueError:  # a ragged sequence
+        shape = "rows of different lengths"
     if len(shape) == 2 and shape[1] == 4:
         return _table(obstacles, "obstacles", PRISM_COLUMNS[:4], 2)
-    if len(shape) == 2 and shape[0] and shape[1] != len(PRISM_COLUMNS):
+    if shape not in ((0,), (0, width)) and (len(shape) != 2 or shape[1] != width):
         raise ValueError(
             f"obstacles: expected shape (N, 6) ({', '.join(PRISM_COLUMNS)}) or (N, 4) (the "
             f"first four: no roof), got {shape}"
