@@ -19,6 +19,7 @@ from typing import Any
 from vo3d_opt.config import PRESETS, describe
 from vo3d_opt.extras import MissingExtra
 from vo3d_opt.report import rounded
+from vo3d_opt.selector import DEFAULT_SOLVERS
 from vo3d_opt.sim.scenario import (
     Scenario,
     ScenarioError,
@@ -27,7 +28,6 @@ from vo3d_opt.sim.scenario import (
     parse_option,
     scenario_variant,
 )
-from vo3d_opt.selector import DEFAULT_SOLVERS
 from vo3d_opt.sim.simulator import DEFAULT_FORMULATION, scenario_selector
 from vo3d_opt.types import one_line
 

@@ -34,7 +34,8 @@ from .common import (
 from .flight import fly_and_summarize, print_summary
 
 SOLVER_HELP = (
-    f"exact2d (plane_qp) | osqp | clarabel | daqp | cvxpy[:SOLVER] | qpsolvers:NAME | casadi[:PLUGIN]; "
+    f"exact2d (plane_qp) | osqp | clarabel | daqp | cvxpy[:SOLVER] | qpsolvers:NAME | "
+    f"casadi[:PLUGIN]; "
     f"default: the scenario's `solver`, else {DEFAULT_QP_SOLVER} for the QP "
     f"formulations and {DEFAULT_NLP_SOLVER} for nlp (sampled uses none)"
 )
