@@ -211,16 +211,14 @@ def prism_array(obstacles: Any) -> np.ndarray:
         isinstance(o, (Cylinder, Box)) for o in obstacles
     ):
         return prism_rows(obstacles)
-    width = len(PRISM_COLUMNS)
-    try:
-        shape: Any = np.shape(obstacles)
+    expected = f"expected shape (N, 6) ({', '.join(PRISM_COLUMNS)}) or (N, 4) (no roof)"
+    try:  # converted once: _table takes an array as it is
+        raw = obstacles if type(obstacles) is np.ndarray else np.asarray(obstacles)
     except ValueError:  # a ragged sequence
-        shape = "rows of different lengths"
-    if len(shape) == 2 and shape[1] == 4:
-        return _table(obstacles, "obstacles", PRISM_COLUMNS[:4], 2)
-    if shape not in ((0,), (0, width)) and (len(shape) != 2 or shape[1] != width):
-        raise ValueError(
-            f"obstacles: expected shape (N, 6) ({', '.join(PRISM_COLUMNS)}) or (N, 4) (the "
-            f"first four: no roof), got {shape}"
-        )
-    return _table(obstacles, "obstacles", PRISM_COLUMNS, 2)
+        raise ValueError(f"obstacles: {expected}, got rows of different lengths") from None
+    width = raw.shape[1] if raw.ndim == 2 else None
+    if width == 4:
+        return _table(raw, "obstacles", PRISM_COLUMNS[:4], 2)
+    if raw.shape != (0,) and width != len(PRISM_COLUMNS):
+        raise ValueError(f"obstacles: {expected}, got {raw.shape}")
+    return _table(raw, "obstacles", PRISM_COLUMNS, 2)
