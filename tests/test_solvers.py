@@ -355,7 +355,7 @@ def test_read_only_problem_data_is_accepted(name):
     assert np.allclose(res.x, get_backend(REFERENCE).solve(qp).x, atol=1e-4)
 
 
-# ----------------------------------------------------------------- (f) DAQP's short path
+# ------------------------------------------------------- (f) DAQP's and OSQP's short paths
 
 
 def _plane_like_qps(count: int) -> list[QP]:
@@ -370,23 +370,45 @@ def _plane_like_qps(count: int) -> list[QP]:
     return qps
 
 
-def test_daqp_short_path_answers_as_the_standard_form() -> None:
-    """``G x <= h`` alone goes to DAQP as it is: the same status and answer (to rounding) as
-    through the standard form, feasible or not, and the caller's arrays untouched."""
-    daqp_backend = get_backend("daqp")
-    statuses = set()
+@pytest.mark.parametrize(("name", "atol"), [("daqp", 1e-9), ("osqp", 1e-6)])
+def test_short_path_answers_as_the_standard_form(name: str, atol: float) -> None:
+    """``G x <= h`` alone goes to DAQP (OSQP) as it is: the same status and answer (to
+    rounding; to OSQP's tolerance) as through the standard form, feasible or not, the
+    unconstrained optimum among them, and the caller's arrays untouched."""
+    backend = get_backend(name)
+    statuses, infos = set(), set()
     for qp in _plane_like_qps(300):
         kept = [a.copy() for a in (qp.P, qp.q, qp.G, qp.h)]
-        short, standard = daqp_backend.solve(qp), Backend.solve(daqp_backend, qp)
+        short, standard = backend.solve(qp), Backend.solve(backend, qp)
         assert short.status == standard.status, (short, standard)
         statuses.add(short.status)
+        infos.add(short.info)
         if standard.x is not None:
-            assert np.allclose(short.x, standard.x, atol=1e-9)
+            assert np.allclose(short.x, standard.x, atol=atol)
         assert all(np.array_equal(a, b) for a, b in zip((qp.P, qp.q, qp.G, qp.h), kept))
     assert statuses == {"optimal", "infeasible"}  # both kinds were met
+    if name == "osqp":
+        assert "unconstrained optimum is feasible" in infos and "solved" in infos
 
 
-def test_daqp_short_path_only_for_arrays_it_can_take() -> None:
+def test_osqp_minimiser_in_closed_form() -> None:
+    """The unconstrained minimiser -P⁻¹q: two variables in closed form, as numpy solves it;
+    None unless P is positive definite; more variables through numpy."""
+    from vo3d_opt.solvers.osqp_backend import minimiser
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        M = rng.normal(size=(2, 2))
+        P, q = M @ M.T + 1e-3 * np.eye(2), rng.normal(size=2)
+        assert np.allclose(minimiser(P, q), np.linalg.solve(P, -q), rtol=1e-9, atol=1e-12)
+    for P in (np.diag([1.0, -1.0]), np.zeros((2, 2)), np.array([[1.0, 2.0], [2.0, 1.0]]),
+              -np.eye(3), np.array([[1.0, 1.0], [1.0, 1.0]])):
+        assert minimiser(P, np.ones(P.shape[0])) is None
+    P3 = 3.0 * np.eye(3)
+    assert np.allclose(minimiser(P3, np.ones(3)), -np.ones(3) / 3.0)
+
+
+def test_short_path_only_for_arrays_it_can_take() -> None:
     """The compiled check sends only C-contiguous, finite float arrays with a symmetric P
     as they are (2: copies for read-only ones); everything else takes the standard form,
     whose answers it still matches."""
@@ -408,12 +430,13 @@ def test_daqp_short_path_only_for_arrays_it_can_take() -> None:
     ]
     for args in others:
         assert _core.qp_rows_form(*args) == 1, args
-    backend = get_backend("daqp")
-    for args in [(P, q, ro, h), (skew, q, G, h), (P, q, G, h_inf)]:
-        case = QP(P=args[0], q=args[1], G=args[2], h=args[3])
-        short, standard = backend.solve(case), Backend.solve(backend, case)
-        assert short.status == standard.status
-        assert short.x is None or np.allclose(short.x, standard.x, atol=1e-9)
+    for name, atol in (("daqp", 1e-9), ("osqp", 1e-6)):
+        backend = get_backend(name)
+        for args in [(P, q, ro, h), (skew, q, G, h), (P, q, G, h_inf)]:
+            case = QP(P=args[0], q=args[1], G=args[2], h=args[3])
+            short, standard = backend.solve(case), Backend.solve(backend, case)
+            assert short.status == standard.status
+            assert short.x is None or np.allclose(short.x, standard.x, atol=atol)
 
 
 def test_daqp_short_path_shares_its_bounds_unchanged() -> None:

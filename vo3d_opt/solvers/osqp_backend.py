@@ -8,15 +8,31 @@ from its last answer for the next, through OSQP's public ``update`` and ``solve`
 OSQP 1.x prints "Polishing not needed" whatever ``verbose`` says when the optimum has no active
 constraint (osqp/osqp#785). Such problems are answered before OSQP runs: when P is positive
 definite and the unconstrained minimiser -P⁻¹q satisfies every constraint, it is the optimum.
+
+The standard form costs more in Python than the update of a warm solver: a QP of the
+formulations' usual kind (``G x <= h`` alone, float arrays, finite, P symmetric: one compiled
+check, as for DAQP) goes to OSQP as its rows alone, and its answer is checked against
+``G x <= h`` in one compiled call; anything else, and any answer that check does not pass at
+once, takes the standard form.
 """
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import osqp
 
+from vo3d_opt import _core
 from vo3d_opt.solvers._sparse import dense_csc, triu_csc, triu_index
-from vo3d_opt.solvers.base import Backend, Standard, make_result
+from vo3d_opt.solvers.base import (
+    FEAS_TOL,
+    Backend,
+    Standard,
+    failure,
+    make_result,
+    standardise,
+)
 from vo3d_opt.solvers.problem import QP, Result
 from vo3d_opt.status import Status
 
@@ -35,16 +51,28 @@ _STATUS = {
 }
 
 
+def minimiser(P: np.ndarray, q: np.ndarray) -> np.ndarray | None:
+    """-P⁻¹q when P (symmetric) is positive definite, else None; in closed form for two
+    variables (the plane QPs), where numpy's solve and Cholesky would cost more than OSQP's
+    update."""
+    if q.shape[0] != 2:
+        try:
+            np.linalg.cholesky(P)  # raises unless positive definite
+            return np.linalg.solve(P, -q)
+        except np.linalg.LinAlgError:
+            return None
+    (a, b), (_, d) = P.tolist()
+    q0, q1 = q.tolist()
+    det = a * d - b * b
+    if not (a > 0.0 and det > 0.0):
+        return None
+    return np.array([(b * q1 - d * q0) / det, (b * q0 - a * q1) / det])
+
+
 def unconstrained_optimum(std: Standard) -> np.ndarray | None:
     """-P⁻¹q when it satisfies every constraint and P is positive definite, else None."""
-    try:
-        x = np.linalg.solve(std.P, -std.q)
-        if std.violation(x) > 0.0:
-            return None
-        np.linalg.cholesky(std.P)  # raises unless positive definite
-    except np.linalg.LinAlgError:
-        return None
-    return x
+    x = minimiser(std.P, std.q)
+    return None if x is None or std.violation(x) > 0.0 else x
 
 
 class OsqpBackend(Backend):
@@ -56,25 +84,66 @@ class OsqpBackend(Backend):
     checks_answers = True
 
     def __init__(self) -> None:
-        self._solvers: dict[tuple[int, int], osqp.OSQP] = {}
+        self._solvers: dict[tuple[str, int, int], osqp.OSQP] = {}
+
+    def solve(self, qp: QP) -> Result:
+        """The short path for ``G x <= h`` alone (the module's docstring), else the standard
+        form's (:meth:`Backend.solve`)."""
+        plain = qp.A is None and qp.b is None and qp.lb is None and qp.ub is None
+        form = _core.qp_rows_form(qp.P, qp.q, qp.G, qp.h) if plain and qp.soc_radius is None else 1
+        P, q, G, h = qp.P, qp.q, qp.G, qp.h
+        if form == 1 or G is None or h is None:
+            return super().solve(qp)
+        try:
+            x = minimiser(P, q)
+            if x is not None and _core.qp_rows_gap(G, h, x) <= 0.0:
+                return Result(x, Status.OPTIMAL, self.name, "unconstrained optimum is feasible")
+            x, status, info = self._run("rows", P, q, G, _lowest(h.shape[0]), h)
+        except Exception as exc:  # noqa: BLE001 - a backend never raises on a well-formed QP
+            return failure(self.name, exc)
+        if status == Status.OPTIMAL and _core.qp_rows_gap(G, h, x) <= FEAS_TOL:
+            return Result(np.array(x), Status.OPTIMAL, self.name, info)  # ours, not OSQP's
+        return make_result(self.name, standardise(qp), x, status, info)
 
     def _solve(self, qp: QP, std: Standard) -> Result:
         if (x := unconstrained_optimum(std)) is not None:
             return Result(x, Status.OPTIMAL, self.name, "unconstrained optimum is feasible")
-        key = std.C.shape
         l, u = np.maximum(std.l, -INFTY), np.minimum(std.u, INFTY)  # noqa: E741 - as in Standard
+        x, status, info = self._run("standard", std.P, std.q, std.C, l, u)
+        return make_result(self.name, std, x, status, info)
+
+    def _run(
+        self,
+        form: str,
+        P: np.ndarray,
+        q: np.ndarray,
+        C: np.ndarray,
+        l: np.ndarray,  # noqa: E741 - l <= C x <= u, as in Standard
+        u: np.ndarray,
+    ) -> tuple[np.ndarray | None, Status, str]:
+        """OSQP on ``l <= C x <= u``: the persistent solver of this form and shape updated and
+        warm-started (set up for the first), its answer (OSQP's own array), status and word."""
+        key = (form, *C.shape)
         solver = self._solvers.get(key)
         if solver is None:
             if len(self._solvers) >= MAX_CACHED:
                 self._solvers.clear()
             solver = osqp.OSQP()
-            solver.setup(triu_csc(std.P), std.q, dense_csc(std.C), l, u, **SETTINGS)
+            solver.setup(triu_csc(P), q, dense_csc(C), l, u, **SETTINGS)
             self._solvers[key] = solver
         else:
-            rows, cols = triu_index(std.n)
-            solver.update(q=std.q, l=l, u=u, Px=std.P[rows, cols], Ax=std.C.ravel(order="F"))
+            rows, cols = triu_index(q.shape[0])
+            solver.update(q=q, l=l, u=u, Px=P[rows, cols], Ax=C.ravel(order="F"))
         res = solver.solve(raise_error=False)
         status = _STATUS.get(res.info.status_val, Status.FAILED)
         if status != Status.OPTIMAL:
             del self._solvers[key]  # its iterates would be a poor warm start for the next call
-        return make_result(self.name, std, res.x, status, res.info.status)
+        return res.x, status, res.info.status
+
+
+@functools.lru_cache(maxsize=256)
+def _lowest(m: int) -> np.ndarray:
+    """m times OSQP's minus infinity: the lower bounds of m rows ``G x <= h`` (read-only)."""
+    lower = np.full(m, -INFTY)
+    lower.setflags(write=False)
+    return lower
