@@ -183,3 +183,99 @@ def test_a_bad_sensing_range_is_a_value_error_naming_it(bad, formulation):
                           np.array([[12.0, 0, 20, -1, 0, 0, 3]]), sensing_range=bad)
     far = sel.select(own, (1.0, 0.0, 0.0), [nb], sensing_range=math.inf)
     assert far.velocity.shape == (3,) and np.all(np.isfinite(far.velocity))
+
+
+# ------------------------------------------------- select() of plain inputs in one compiled call
+
+
+def _counting(monkeypatch) -> list[int]:
+    """Counts the calls of select()'s Python check of the neighbours (kept as it was)."""
+    from vo3d_opt.formulations import inputs
+
+    calls, real = [0], inputs.neighbor_tuples
+
+    def counted(neighbors):
+        calls[0] += 1
+        return real(neighbors)
+
+    monkeypatch.setattr(inputs, "neighbor_tuples", counted)
+    return calls
+
+
+@pytest.mark.parametrize("preset", ["safe", "paper", "fast"])
+def test_plain_inputs_decide_in_one_call_as_the_checked_path(preset, monkeypatch) -> None:
+    """Lists of the user's own objects, a float dt and a tuple, list or array for the preferred
+    velocity are read and decided in one compiled call, without select()'s Python checks; any
+    other form of the same numbers takes those checks: the same Decision, bit for bit, over the
+    recorded encounters."""
+    calls = _counting(monkeypatch)
+    sel = VelocitySelector(preset=preset)
+    for seed in SEEDS[::3]:
+        kw = select_kwargs(encounter(seed))
+        kw["neighbors"], kw["obstacles"] = list(kw["neighbors"]), list(kw["obstacles"])
+        pref = tuple(float(x) for x in kw["preferred_velocity"])
+        fast = [sel.select(**{**kw, "preferred_velocity": form})
+                for form in (pref, list(pref), np.array(pref))]
+        assert calls[0] == 0, seed
+        checked = sel.select(**{**kw, "preferred_velocity": pref, "neighbors": iter(kw["neighbors"])})
+        assert calls[0] == 1, seed
+        calls[0] = 0
+        assert all(same(d, checked) for d in fast), seed
+        assert all(type(d.velocity) is np.ndarray and d.velocity.shape == (3,) for d in fast)
+        assert (fast[0].formulation, fast[0].solver) == (checked.formulation, checked.solver)
+        assert 0.0 < fast[0].solve_time < 1.0
+
+
+def test_other_forms_of_the_inputs_take_the_checks(monkeypatch) -> None:
+    """A subclass, an int dt, a NumPy scalar, a generator, limits=None: select()'s checks decide
+    (or, for None limits, the default limits in one call), with the same answer."""
+    calls = _counting(monkeypatch)
+    sel = VelocitySelector()
+    kw = select_kwargs(encounter(12))
+    kw["neighbors"] = list(kw["neighbors"])
+    want = sel.select(**kw)
+
+    class Mine(Neighbor):
+        pass
+
+    mine = [Mine(**nb.model_dump()) for nb in kw["neighbors"]]
+    for change in ({"neighbors": mine}, {"dt": np.float64(kw["dt"])},
+                   {"neighbors": (nb for nb in kw["neighbors"])}):
+        before = calls[0]
+        assert same(sel.select(**{**kw, **change}), want), change
+        assert calls[0] == before + 1, change
+    assert len(kw["neighbors"]) > 0
+    default = dict(kw, limits=Limits())
+    before = calls[0]
+    assert same(sel.select(**{**default, "limits": None}), sel.select(**default))
+    assert calls[0] == before
+    assert same(sel.select(**{**kw, "dt": 1}), sel.select(**{**kw, "dt": 1.0}))
+
+
+def test_one_selector_decides_for_many_threads_at_once() -> None:
+    """The compiled call runs without the interpreter lock: threads deciding with one selector
+    (and limits and periods of their own) get each its own answer."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    sel = VelocitySelector()
+    cases = [select_kwargs(encounter(seed)) for seed in SEEDS[:60]]
+    for i, kw in enumerate(cases):
+        kw["dt"] = (0.1, 0.2)[i % 2]
+    want = [VelocitySelector().select(**kw) for kw in cases]
+    with ThreadPoolExecutor(4) as pool:
+        for _ in range(3):
+            got = list(pool.map(lambda kw: sel.select(**kw), cases))
+            assert all(same(g, w) for g, w in zip(got, want, strict=True))
+
+
+def test_a_selector_is_collected_when_dropped() -> None:
+    """The compiled path holds its selector's method: the cycle is the collector's to free."""
+    import gc
+    import weakref
+
+    sel = VelocitySelector()
+    sel.select(AgentState(position=(0.0, 0.0, 20.0)), (1.0, 0.0, 0.0))
+    ref = weakref.ref(sel)
+    del sel
+    gc.collect()
+    assert ref() is None

@@ -55,6 +55,19 @@ class Config:
     fine_fallback: bool
     def __init__(self) -> None: ...
 
+class ObjectPath:
+    def __init__(self, types: dict[str, Any]) -> None: ...
+    def decide(
+        self,
+        own: Any,
+        v_pref: Any,
+        neighbors: Any,
+        obstacles: Any,
+        limits: Any,
+        dt: Any,
+        t0: float,
+    ) -> Any: ...
+
 class PlaneQPs:
     def __init__(
         self,

@@ -4,7 +4,9 @@ swarm in one call.
 
 With the default formulation and solver (``plane_qp`` on ``exact2d``) a decision is: the inputs
 checked (``formulations.inputs``) → one call of the compiled core (``vo3d_opt._core``; the
-algorithm reads in ``vo3d_opt/algorithm/decide.hpp``) → ``Decision``. The other formulations
+algorithm reads in ``vo3d_opt/algorithm/decide.hpp``) → ``Decision``; inputs of the plain kind
+(lists of the user's objects, a float dt) are checked, decided and answered in that one call
+(``kernel.object_path``), with the same answer. The other formulations
 and backends run on the Python path (``formulations.outside``) over the same compiled geometry;
 ``select_many`` is ``vo3d_opt.swarm``. Statuses: ``vo3d_opt.status.Status`` (documented in
 docs/guide/statuses.md).
@@ -27,7 +29,7 @@ from .formulations.outside import PythonPath, backend_for, qp_backend
 from .formulations.sampled import check_grid
 from .geometry.pyramid import PRISM_WIDTH
 from .solvers import available_solvers
-from .status import DECISION_STATUSES, Status
+from .status import Status
 from .swarm import SwarmDecision, SwarmInputs, thread_count
 from .swarm.checks import distance
 from .swarm.many import options_by_vehicle, select_many_compiled, select_many_loop
@@ -42,9 +44,6 @@ FORMULATIONS = ("sampled", "plane_qp", "cone_qp", "nlp")
 DEFAULT_SOLVERS = {"plane_qp": "exact2d", "cone_qp": "daqp", "nlp": "casadi"}
 DEFAULT_QP_SOLVER = DEFAULT_SOLVERS["plane_qp"]
 DEFAULT_NLP_SOLVER = DEFAULT_SOLVERS["nlp"]
-#: The statuses and the rounds by their codes in the compiled decision's output (floats there).
-_STATUS_OF = {float(code): status for code, status in enumerate(DECISION_STATUSES)}
-_ROUND_OF = {float(code): name for code, name in enumerate(kernel.ROUND_NAMES)}
 _clock = time.perf_counter
 
 
@@ -129,6 +128,8 @@ class VelocitySelector:
             if formulation == "plane_qp" and qp is not None and qp.name == "exact2d"
             else PythonPath(formulation, qp, nlp)
         )
+        #: select() in one compiled call for inputs of the plain kind (None: the Python path).
+        self._objects = None if self._python else kernel.object_path(Decision, self, _clock)
 
     def options_for(
         self,
@@ -169,6 +170,11 @@ class VelocitySelector:
         ``a dt < 2 v_max``) is derived from when the configuration holds none;
         positive, at most 1e7 or inf (no horizon), else a ``ValueError`` naming it."""
         t0 = _clock()
+        fast = self._objects if sensing_range is None else None
+        if fast and (
+            d := fast.decide(own, preferred_velocity, neighbors, obstacles, limits, dt, t0)
+        ):
+            return d  # the inputs of the plain kind, checked and decided in one compiled call
         own = inputs.agent(own)
         v_pref = inputs.vector3(preferred_velocity, "preferred_velocity")
         nbrs = inputs.neighbor_tuples(neighbors)
@@ -247,7 +253,7 @@ class VelocitySelector:
         bounds, config = self._bounds_and_config(limits, dt, sensing_range)
         out = np.empty(kernel.OUT_SIZE)
         kernel.decide_rows(p, v_now, v_pref, nbrs, prisms, bounds, config, out)
-        return self._answer(out, t0)
+        return kernel.answer(out, t0, Decision, self, _clock)
 
     def _bounds_and_config(
         self, limits: Limits, dt: float, sensing_range: float | None
@@ -260,23 +266,6 @@ class VelocitySelector:
         config = self.options_for(limits.speed[1], dt, sensing_range, limits.acceleration).config
         self._last = (limits, dt, sensing_range, bounds, config)
         return bounds, config
-
-    def _answer(self, out: np.ndarray, t0: float) -> Decision:
-        """The ``Decision`` of the compiled decision's output ``out`` (``kernel.OUT_SIZE``)."""
-        values = out.tolist()
-        phi = values[kernel.OUT_PHI]
-        return Decision(  # by position: a keyword each costs a decision 40 ns
-            out[:3],
-            _STATUS_OF[values[kernel.OUT_STATUS]],
-            _clock() - t0,
-            self.formulation,
-            self.solver,
-            None if phi != phi else phi,  # NaN: no plane
-            {
-                "round": _ROUND_OF[values[kernel.OUT_ROUND]],
-                "solved": int(values[kernel.OUT_SOLVED]),
-            },
-        )
 
     def _select_python(
         self,

@@ -13,6 +13,7 @@
 #include <nanobind/stl/vector.h>
 
 #include "convert.hpp"
+#include "objects.hpp"
 
 namespace nb = nanobind;
 using namespace nb::literals;
@@ -104,6 +105,20 @@ NB_MODULE(_core, m) {
           "decide with the rows as select holds them: v_pref a tuple of 3 numbers (or an array),\n"
           "nbrs a list of 8-tuples (Neighbor.row) or an (n, 8) array, prisms a list of 6- or 4-tuples\n"
           "(an obstacle's prism) or an (m, 6) or (m, 4) array, limits a tuple of 6 (Bounds).");
+
+    nb::class_<ObjectPath>(m, "ObjectPath", "select() on the default path in one call (objects.hpp).",
+                           nb::type_slots(object_path_slots))
+        .def("__init__",
+             [](ObjectPath* self, nb::dict t) {
+                 new (self) ObjectPath(ObjectTypes{
+                     t["agent"], t["neighbor"], t["cylinder"], t["box"], t["limits"], t["decision"],
+                     t["default_limits"], t["statuses"], t["rounds"], t["formulation"], t["solver"],
+                     t["clock"], t["bounds_and_config"]});
+             },
+             "types"_a)
+        .def("decide", &ObjectPath::decide, "own"_a, "v_pref"_a, "neighbors"_a, "obstacles"_a,
+             "limits"_a.none(), "dt"_a.none(), "t0"_a,
+             "The Decision of select(), or None when an input is not of the plain kind.");
 
     m.def("decide_many",
           [](nb::handle swarm, const Config& cfg_in, int64_t threads, nb::handle out, int64_t lo,

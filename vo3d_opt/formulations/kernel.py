@@ -8,19 +8,25 @@ plane and in each linearisation round, one QP solved exactly; a best-first searc
 QPs with constraint generation and the exact 3D check; the fallbacks' grid and the least-bad
 velocity when no QP gives a safe answer; the limits, whatever came before.
 
-Here: the names of its answer's fields, the entry ``decide``, and the plane QPs for the Python
-search on outside backends (``plane_qp.py``: ``PlaneQPs``, whose arrays are numpy views of the
-compiled state).
+Here: the names of its answer's fields, the entries ``decide`` and ``object_path`` (select()
+in one call), and the plane QPs for the Python search on outside backends (``plane_qp.py``:
+``PlaneQPs``, whose arrays are numpy views of the compiled state).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 import vo3d_opt._core as _core
 
 from ..geometry import AvoidancePlanes
+from ..status import DECISION_STATUSES
+from ..types import AgentState, Box, Cylinder, Limits, Neighbor
 from .common import Bounds, Config, VOs
+from .inputs import DEFAULT_LIMITS
 from .rows import ROUNDS
 
 #: How a decision's velocity was found (``info["round"]``): the preferred velocity, a QP round,
@@ -32,6 +38,9 @@ OPTIMAL, INSIDE_PROTECTED_ZONE, INFEASIBLE_MIN_VIOLATION = 0, 1, 2
 #: The entries of ``decide``'s output array: velocity (3), status, phi, round, solved.
 OUT_SIZE: int = _core.OUT_SIZE
 OUT_STATUS, OUT_PHI, OUT_ROUND, OUT_SOLVED = 3, 4, 5, 6
+#: The statuses and the rounds by their codes in ``decide``'s output (floats there).
+_STATUS_OF = {float(code): status for code, status in enumerate(DECISION_STATUSES)}
+_ROUND_OF = {float(code): name for code, name in enumerate(ROUND_NAMES)}
 
 #: One decision from arrays into ``out`` (OUT_SIZE,): ``decide(p, v_now, v_pref, nbrs, prisms,
 #: limits, cfg, out)``; ``nbrs`` (n, 8): position, velocity, r_pz, cooperative (1/0);
@@ -55,6 +64,48 @@ decide_rows = _core.decide_rows
 #: infeasible); ``gather(r, p)`` its rows into ``rows`` / ``rhs`` (how many); ``add_rows(k, p)``
 #: builds VO k's rows on plane p; ``search(bounds, tried)`` is the compiled best-first search.
 PlaneQPs = _core.PlaneQPs
+
+
+def answer(
+    out: np.ndarray, t0: float, decision: type, selector: Any, clock: Callable[[], float]
+) -> Any:
+    """select()'s ``decision`` of ``decide``'s output ``out`` (``OUT_SIZE``), for ``selector``
+    (its formulation and solver), its solve time ``clock() - t0``."""
+    values = out.tolist()
+    phi = values[OUT_PHI]
+    return decision(  # by position: a keyword each costs a decision 40 ns
+        out[:3],
+        _STATUS_OF[values[OUT_STATUS]],
+        clock() - t0,
+        selector.formulation,
+        selector.solver,
+        None if phi != phi else phi,  # NaN: no plane
+        {"round": _ROUND_OF[values[OUT_ROUND]], "solved": int(values[OUT_SOLVED])},
+    )
+
+
+def object_path(decision: type, selector: Any, clock: Callable[[], float]) -> _core.ObjectPath:
+    """``selector.select()`` on the default path in one compiled call (algorithm/objects.hpp):
+    ``decide(own, preferred_velocity, neighbors, obstacles, limits, dt, t0)`` reads the
+    ``AgentState``, ``Neighbor``, ``Cylinder`` and ``Box`` objects where they lie (their cached
+    rows), decides, and builds ``decision`` as select() does (``clock() - t0`` its solve time);
+    it returns None for inputs of any other kind, which then take select()'s own checks. The
+    limits and the period are planned with ``selector._bounds_and_config``'s bounds and Config.
+    """
+    kinds = dict(agent=AgentState, neighbor=Neighbor, cylinder=Cylinder, box=Box, limits=Limits)
+    return _core.ObjectPath(
+        dict(
+            **kinds,
+            decision=decision,
+            default_limits=DEFAULT_LIMITS,
+            statuses=DECISION_STATUSES,
+            rounds=ROUND_NAMES,
+            formulation=selector.formulation,
+            solver=selector.solver,
+            clock=clock,
+            bounds_and_config=selector._bounds_and_config,
+        )
+    )
 
 
 def py_plane_qps(

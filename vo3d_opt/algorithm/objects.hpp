@@ -1,0 +1,165 @@
+// select() on the default path in one call (nanobind glue, not the algorithm): the user's own
+// objects read where they lie (AgentState's arrays, each Neighbor's row, each obstacle's prism,
+// all cached on the objects), one decide_one, and the Decision built here. A decision takes
+// about as long as the Python that would check and convert its inputs, so that Python is
+// left out whenever the inputs are of the plain kind; anything else (a subclass, a generator,
+// an int dt, a non-finite number, a sensing range) makes ``decide`` return None and select()
+// takes its Python path, which gives the same answer or words the error.
+#pragma once
+
+#include <cmath>
+
+#include "convert.hpp"
+
+namespace vo3d::glue {
+
+// The Python objects select() is given and builds: the exact types read here (a subclass may
+// override what is read), the default limits, Decision and its fields' values.
+struct ObjectTypes {
+    nb::object agent, neighbor, cylinder, box, limits, decision;
+    nb::object default_limits, statuses, rounds, formulation, solver, clock, bounds_and_config;
+};
+
+class ObjectPath {
+  public:
+    explicit ObjectPath(ObjectTypes t) : t_(std::move(t)) {}
+
+    // Every object held, for Python's cycle collector: the selector holds this path, which
+    // holds the selector's bound method (traverse_objects, clear_objects below).
+    template <class F>
+    void each_object(F f) {
+        for (nb::object* o : {&t_.agent, &t_.neighbor, &t_.cylinder, &t_.box, &t_.limits,
+                              &t_.decision, &t_.default_limits, &t_.statuses, &t_.rounds,
+                              &t_.formulation, &t_.solver, &t_.clock, &t_.bounds_and_config,
+                              &last_limits_, &config_obj_})
+            f(*o);
+    }
+
+    // The Decision of one select(), or None when an input is not of the plain kind.
+    nb::object decide(nb::handle own, nb::handle v_pref, nb::handle neighbors, nb::handle obstacles,
+                      nb::handle limits, nb::handle dt, double t0) {
+        double p[3], v_now[3], w[3];
+        if (!t_.bounds_and_config.is_valid()) return nb::none();  // cleared by the collector
+        if (!own.type().is(t_.agent) || !array3(own.attr("position"), p) ||
+            !array3(own.attr("velocity"), v_now) || !vector3(v_pref, w))
+            return nb::none();
+        std::vector<double> nbrs, prisms;  // per call: another thread may decide meanwhile
+        if (!rows(neighbors, t_.neighbor, t_.neighbor, "row", 8, nbrs) ||
+            !rows(obstacles, t_.cylinder, t_.box, "prism", PRISM_ROOF_ROW, prisms))
+            return nb::none();
+        nb::handle lim = limits.is_none() ? t_.default_limits : limits;
+        if (!lim.type().is(t_.limits) || !PyFloat_CheckExact(dt.ptr())) return nb::none();
+        double period = PyFloat_AS_DOUBLE(dt.ptr());
+        if (!(period > 0.0 && period <= MAX_MAGNITUDE)) return nb::none();
+        if (!last_limits_.is(lim) || period != last_dt_) remember(lim, dt, period);
+        nb::object held = config_obj_;  // kept alive, whatever another thread remembers
+        const Config& cfg = nb::cast<const Config&>(held);
+        Bounds b = bounds_;
+        Decision d;
+        {
+            nb::gil_scoped_release free;
+            d = decide_one(p, v_now, w, Rows::of(nbrs, 8), Rows::of(prisms, PRISM_ROOF_ROW), b, cfg);
+        }
+        return answer(d, t0);
+    }
+
+  private:
+    static constexpr double MAX_MAGNITUDE = 1e7;  // vo3d_opt.types.MAX_MAGNITUDE
+
+    ObjectTypes t_;
+    nb::object last_limits_, config_obj_;  // the last limits asked with, and their Config
+    double last_dt_ = kNaN;
+    Bounds bounds_{};
+
+    static bool plain(double x) { return std::fabs(x) <= MAX_MAGNITUDE; }  // NaN fails
+
+    // A float64 array of shape (3,), finite and within MAX_MAGNITUDE (AgentState's fields).
+    static bool array3(nb::handle h, double* out) {
+        In<double> a;
+        if (!nb::try_cast(h, a, false) || a.ndim() != 1 || a.shape(0) != 3) return false;
+        for (int64_t k = 0; k < 3; ++k) out[k] = at(a, k);
+        return plain(out[0]) && plain(out[1]) && plain(out[2]);
+    }
+
+    // As inputs.vector3 takes it at once: a tuple or list of three floats or ints (not bools)
+    // within MAX_MAGNITUDE, or a float64 array of shape (3,).
+    static bool vector3(nb::handle h, double* out) {
+        PyObject* x = h.ptr();
+        if (!PyTuple_CheckExact(x) && !PyList_CheckExact(x)) return array3(h, out);
+        if (PySequence_Fast_GET_SIZE(x) != 3) return false;
+        PyObject** items = PySequence_Fast_ITEMS(x);
+        for (int k = 0; k < 3; ++k) {
+            PyObject* item = items[k];
+            if (PyFloat_CheckExact(item)) {
+                out[k] = PyFloat_AS_DOUBLE(item);
+            } else if (PyLong_CheckExact(item)) {
+                out[k] = PyLong_AsDouble(item);
+                if (out[k] == -1.0 && PyErr_Occurred()) return PyErr_Clear(), false;
+            } else {
+                return false;
+            }
+            if (!plain(out[k])) return false;
+        }
+        return true;
+    }
+
+    // Each item's cached row (``attr``: a tuple of ``width`` floats) into buf; the items a
+    // list or tuple of objects of type a or b exactly.
+    static bool rows(nb::handle seq, const nb::object& a, const nb::object& b, const char* attr,
+                     int64_t width, std::vector<double>& buf) {
+        PyObject* s = seq.ptr();
+        if (!PyList_CheckExact(s) && !PyTuple_CheckExact(s)) return false;
+        Py_ssize_t n = PySequence_Fast_GET_SIZE(s);
+        buf.resize(size_t(n * width));
+        for (Py_ssize_t i = 0; i < n; ++i) {
+            nb::handle item = PySequence_Fast_ITEMS(s)[i];
+            if (!item.type().is(a) && !item.type().is(b)) return false;
+            nb::object row = item.attr(attr);
+            if (!PyTuple_CheckExact(row.ptr()) || PyTuple_GET_SIZE(row.ptr()) != width) return false;
+            for (int64_t k = 0; k < width; ++k) {
+                PyObject* x = PyTuple_GET_ITEM(row.ptr(), k);
+                if (!PyFloat_CheckExact(x)) return false;
+                buf[size_t(i * width + k)] = PyFloat_AS_DOUBLE(x);
+            }
+        }
+        return true;
+    }
+
+    // The bounds and the Config of these limits and this period (the selector's own).
+    void remember(nb::handle lim, nb::handle dt, double period) {
+        nb::tuple got = nb::borrow<nb::tuple>(t_.bounds_and_config(lim, dt, nb::none()));
+        checked(nb::cast<const Config&>(got[1]));
+        bounds_ = bounds_of(got[0]), config_obj_ = got[1];
+        last_limits_ = nb::borrow(lim), last_dt_ = period;
+    }
+
+    nb::object answer(const Decision& d, double t0) {
+        nb::object velocity = numpy(std::vector<double>(d.velocity, d.velocity + 3), {3});
+        nb::dict info;
+        info["round"] = t_.rounds[d.round];
+        info["solved"] = d.solved;
+        double elapsed = nb::cast<double>(t_.clock()) - t0;
+        nb::object phi = std::isnan(d.phi) ? nb::none() : nb::cast(d.phi);
+        return t_.decision(velocity, t_.statuses[d.status], elapsed, t_.formulation, t_.solver,
+                           phi, info);
+    }
+};
+
+int traverse_objects(PyObject* self, visitproc visit, void* arg) {
+    int failed = 0;
+    nb::inst_ptr<ObjectPath>(self)->each_object([&](nb::object& o) {
+        if (!failed && o.ptr()) failed = visit(o.ptr(), arg);
+    });
+    return failed ? failed : visit(reinterpret_cast<PyObject*>(Py_TYPE(self)), arg);
+}
+
+int clear_objects(PyObject* self) {
+    nb::inst_ptr<ObjectPath>(self)->each_object([](nb::object& o) { o.reset(); });
+    return 0;
+}
+
+PyType_Slot object_path_slots[] = {{Py_tp_traverse, (void*)traverse_objects},
+                                   {Py_tp_clear, (void*)clear_objects},
+                                   {0, nullptr}};
+
+}  // namespace vo3d::glue
