@@ -205,9 +205,9 @@ def _counting(monkeypatch) -> list[int]:
 @pytest.mark.parametrize("preset", ["safe", "paper", "fast"])
 def test_plain_inputs_decide_in_one_call_as_the_checked_path(preset, monkeypatch) -> None:
     """Lists of the user's own objects, a float dt and a tuple, list or array for the preferred
-    velocity are read and decided in one compiled call, without select()'s Python checks; any
-    other form of the same numbers takes those checks: the same Decision, bit for bit, over the
-    recorded encounters."""
+    velocity are read and decided in one compiled call, without select()'s Python checks (each
+    neighbour's fields read as they lie, or its row once cached); any other form of the same
+    numbers takes those checks: the same Decision, bit for bit, over the recorded encounters."""
     calls = _counting(monkeypatch)
     sel = VelocitySelector(preset=preset)
     for seed in SEEDS[::3]:
@@ -218,6 +218,8 @@ def test_plain_inputs_decide_in_one_call_as_the_checked_path(preset, monkeypatch
                 for form in (pref, list(pref), np.array(pref))]
         assert calls[0] == 0, seed
         checked = sel.select(**{**kw, "preferred_velocity": pref, "neighbors": iter(kw["neighbors"])})
+        assert calls[0] == 1, seed
+        fast.append(sel.select(**{**kw, "preferred_velocity": pref}))  # rows cached by now
         assert calls[0] == 1, seed
         calls[0] = 0
         assert all(same(d, checked) for d in fast), seed

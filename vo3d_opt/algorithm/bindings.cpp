@@ -111,7 +111,7 @@ NB_MODULE(_core, m) {
         .def("__init__",
              [](ObjectPath* self, nb::dict t) {
                  new (self) ObjectPath(ObjectTypes{
-                     t["agent"], t["neighbor"], t["cylinder"], t["box"], t["limits"], t["decision"],
+                     t["agent"], t["neighbor"], t["cylinder"], t["box"], t["limits"], t["decision"], t["ndarray"], t["empty"],
                      t["default_limits"], t["statuses"], t["rounds"], t["formulation"], t["solver"],
                      t["clock"], t["bounds_and_config"]});
              },

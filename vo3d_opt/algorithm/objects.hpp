@@ -1,6 +1,6 @@
 // select() on the default path in one call (nanobind glue, not the algorithm): the user's own
-// objects read where they lie (AgentState's arrays, each Neighbor's row, each obstacle's prism,
-// all cached on the objects), one decide_one, and the Decision built here. A decision takes
+// objects read where they lie (AgentState's arrays, each Neighbor's fields, each obstacle's
+// cached prism), one decide_one, and the Decision built here. A decision takes
 // about as long as the Python that would check and convert its inputs, so that Python is
 // left out whenever the inputs are of the plain kind; anything else (a subclass, a generator,
 // an int dt, a non-finite number, a sensing range) makes ``decide`` return None and select()
@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstring>
 
 #include "convert.hpp"
 
@@ -16,7 +17,7 @@ namespace vo3d::glue {
 // The Python objects select() is given and builds: the exact types read here (a subclass may
 // override what is read), the default limits, Decision and its fields' values.
 struct ObjectTypes {
-    nb::object agent, neighbor, cylinder, box, limits, decision;
+    nb::object agent, neighbor, cylinder, box, limits, decision, ndarray, empty;
     nb::object default_limits, statuses, rounds, formulation, solver, clock, bounds_and_config;
 };
 
@@ -29,7 +30,7 @@ class ObjectPath {
     template <class F>
     void each_object(F f) {
         for (nb::object* o : {&t_.agent, &t_.neighbor, &t_.cylinder, &t_.box, &t_.limits,
-                              &t_.decision, &t_.default_limits, &t_.statuses, &t_.rounds,
+                              &t_.decision, &t_.ndarray, &t_.empty, &t_.default_limits, &t_.statuses, &t_.rounds,
                               &t_.formulation, &t_.solver, &t_.clock, &t_.bounds_and_config,
                               &last_limits_, &config_obj_})
             f(*o);
@@ -44,8 +45,9 @@ class ObjectPath {
             !array3(own.attr("velocity"), v_now) || !vector3(v_pref, w))
             return nb::none();
         std::vector<double> nbrs, prisms;  // per call: another thread may decide meanwhile
-        if (!rows(neighbors, t_.neighbor, t_.neighbor, "row", 8, nbrs) ||
-            !rows(obstacles, t_.cylinder, t_.box, "prism", PRISM_ROOF_ROW, prisms))
+        auto fields = [this](nb::handle item, double* row) { return neighbour_row(item, row); };
+        if (!rows(neighbors, t_.neighbor, t_.neighbor, fields, 8, nbrs) ||
+            !rows(obstacles, t_.cylinder, t_.box, prism_row, PRISM_ROOF_ROW, prisms))
             return nb::none();
         nb::handle lim = limits.is_none() ? t_.default_limits : limits;
         if (!lim.type().is(t_.limits) || !PyFloat_CheckExact(dt.ptr())) return nb::none();
@@ -67,23 +69,34 @@ class ObjectPath {
     static constexpr double MAX_MAGNITUDE = 1e7;  // vo3d_opt.types.MAX_MAGNITUDE
 
     ObjectTypes t_;
+    // Neighbor's row and fields by name, made once (their hashes kept)
+    nb::str keys_[5] = {nb::str("row"), nb::str("position"), nb::str("velocity"), nb::str("r_pz"),
+                        nb::str("cooperative")};
     nb::object last_limits_, config_obj_;  // the last limits asked with, and their Config
     double last_dt_ = kNaN;
     Bounds bounds_{};
 
     static bool plain(double x) { return std::fabs(x) <= MAX_MAGNITUDE; }  // NaN fails
 
-    // A float64 array of shape (3,), finite and within MAX_MAGNITUDE (AgentState's fields).
-    static bool array3(nb::handle h, double* out) {
-        In<double> a;
-        if (!nb::try_cast(h, a, false) || a.ndim() != 1 || a.shape(0) != 3) return false;
-        for (int64_t k = 0; k < 3; ++k) out[k] = at(a, k);
-        return plain(out[0]) && plain(out[1]) && plain(out[2]);
+    // A float64 numpy array of shape (3,), finite and within MAX_MAGNITUDE (AgentState's
+    // fields), read through the buffer protocol: a cast to nb::ndarray asks for DLPack first,
+    // several times the cost.
+    bool array3(nb::handle h, double* out) const {
+        if (!h.type().is(t_.ndarray)) return false;
+        Py_buffer view;
+        if (PyObject_GetBuffer(h.ptr(), &view, PyBUF_STRIDES | PyBUF_FORMAT) != 0)
+            return PyErr_Clear(), false;
+        bool ok = view.ndim == 1 && view.shape[0] == 3 && view.itemsize == 8 && view.format &&
+                  std::strcmp(view.format, "d") == 0;
+        for (int k = 0; ok && k < 3; ++k)
+            std::memcpy(out + k, static_cast<const char*>(view.buf) + k * view.strides[0], 8);
+        PyBuffer_Release(&view);
+        return ok && plain(out[0]) && plain(out[1]) && plain(out[2]);
     }
 
     // As inputs.vector3 takes it at once: a tuple or list of three floats or ints (not bools)
     // within MAX_MAGNITUDE, or a float64 array of shape (3,).
-    static bool vector3(nb::handle h, double* out) {
+    bool vector3(nb::handle h, double* out) const {
         PyObject* x = h.ptr();
         if (!PyTuple_CheckExact(x) && !PyList_CheckExact(x)) return array3(h, out);
         if (PySequence_Fast_GET_SIZE(x) != 3) return false;
@@ -103,9 +116,45 @@ class ObjectPath {
         return true;
     }
 
-    // Each item's cached row (``attr``: a tuple of ``width`` floats) into buf; the items a
-    // list or tuple of objects of type a or b exactly.
-    static bool rows(nb::handle seq, const nb::object& a, const nb::object& b, const char* attr,
+    // A tuple of ``width`` floats into out.
+    static bool floats(PyObject* row, int64_t width, double* out) {
+        if (!PyTuple_CheckExact(row) || PyTuple_GET_SIZE(row) != width) return false;
+        for (int64_t k = 0; k < width; ++k) {
+            PyObject* x = PyTuple_GET_ITEM(row, k);
+            if (!PyFloat_CheckExact(x)) return false;
+            out[k] = PyFloat_AS_DOUBLE(x);
+        }
+        return true;
+    }
+
+    // An obstacle's cached prism (Cylinder.prism, Box.prism: six floats).
+    static bool prism_row(nb::handle item, double* out) {
+        return floats(item.attr("prism").ptr(), PRISM_ROOF_ROW, out);
+    }
+
+    // Neighbor.row without building it: its cached row when it has one, else its fields as
+    // they lie in its __dict__ (a neighbour is usually made anew each step, and its row costs
+    // the interpreter a microsecond); the same numbers either way.
+    bool neighbour_row(nb::handle item, double* out) const {
+        nb::object dict = nb::steal(PyObject_GenericGetDict(item.ptr(), nullptr));
+        if (!dict.is_valid()) return PyErr_Clear(), false;
+        PyObject* d = dict.ptr();
+        if (PyObject* row = PyDict_GetItem(d, keys_[0].ptr())) return floats(row, 8, out);
+        PyObject* position = PyDict_GetItem(d, keys_[1].ptr());
+        PyObject* velocity = PyDict_GetItem(d, keys_[2].ptr());
+        PyObject* r_pz = PyDict_GetItem(d, keys_[3].ptr());
+        PyObject* cooperative = PyDict_GetItem(d, keys_[4].ptr());
+        if (!position || !velocity || !r_pz || !PyFloat_CheckExact(r_pz) || !cooperative ||
+            !PyBool_Check(cooperative))
+            return false;
+        out[6] = PyFloat_AS_DOUBLE(r_pz), out[7] = cooperative == Py_True ? 1.0 : 0.0;
+        return array3(position, out) && array3(velocity, out + 3);
+    }
+
+    // Each item's row (``read``: ``width`` numbers) into buf; the items a list or tuple of
+    // objects of type a or b exactly.
+    template <class Read>
+    static bool rows(nb::handle seq, const nb::object& a, const nb::object& b, Read read,
                      int64_t width, std::vector<double>& buf) {
         PyObject* s = seq.ptr();
         if (!PyList_CheckExact(s) && !PyTuple_CheckExact(s)) return false;
@@ -114,13 +163,7 @@ class ObjectPath {
         for (Py_ssize_t i = 0; i < n; ++i) {
             nb::handle item = PySequence_Fast_ITEMS(s)[i];
             if (!item.type().is(a) && !item.type().is(b)) return false;
-            nb::object row = item.attr(attr);
-            if (!PyTuple_CheckExact(row.ptr()) || PyTuple_GET_SIZE(row.ptr()) != width) return false;
-            for (int64_t k = 0; k < width; ++k) {
-                PyObject* x = PyTuple_GET_ITEM(row.ptr(), k);
-                if (!PyFloat_CheckExact(x)) return false;
-                buf[size_t(i * width + k)] = PyFloat_AS_DOUBLE(x);
-            }
+            if (!read(item, buf.data() + i * width)) return false;
         }
         return true;
     }
@@ -134,7 +177,14 @@ class ObjectPath {
     }
 
     nb::object answer(const Decision& d, double t0) {
-        nb::object velocity = numpy(std::vector<double>(d.velocity, d.velocity + 3), {3});
+        // numpy.empty(3) written through the buffer protocol: half the cost of an export
+        nb::object velocity = t_.empty(3);
+        Py_buffer view;
+        if (PyObject_GetBuffer(velocity.ptr(), &view, PyBUF_WRITABLE | PyBUF_STRIDES) != 0)
+            throw nb::python_error();
+        for (int k = 0; k < 3; ++k)
+            std::memcpy(static_cast<char*>(view.buf) + k * view.strides[0], d.velocity + k, 8);
+        PyBuffer_Release(&view);
         nb::dict info;
         info["round"] = t_.rounds[d.round];
         info["solved"] = d.solved;

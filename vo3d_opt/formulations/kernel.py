@@ -97,6 +97,8 @@ def object_path(decision: type, selector: Any, clock: Callable[[], float]) -> _c
         dict(
             **kinds,
             decision=decision,
+            ndarray=np.ndarray,
+            empty=np.empty,
             default_limits=DEFAULT_LIMITS,
             statuses=DECISION_STATUSES,
             rounds=ROUND_NAMES,
