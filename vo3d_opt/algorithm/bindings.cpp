@@ -643,6 +643,13 @@ NB_MODULE(_core, m) {
                  s.qps->solve(r, p, bounds_of(bounds));
              },
              "r"_a, "p"_a, "bounds"_a, "QP (r, p) solved exactly: its optimum into sol, its deviation into key.")
+        .def("solve_all",
+             [](PyPlaneQPs& s, nb::handle bounds) {
+                 Bounds b = bounds_of(bounds);
+                 for (int64_t r = 0; r < ROUNDS; ++r)
+                     for (int64_t p = 0; p < s.qps->P; ++p) s.qps->solve(r, p, b);
+             },
+             "bounds"_a, "Every QP solved exactly, as solve(r, p) for each in turn.")
         .def("search",
              [](PyPlaneQPs& s, nb::handle bounds, nb::handle tried) {
                  Out<double> t = out_arr<double>(tried, "tried", {ANY, 3});

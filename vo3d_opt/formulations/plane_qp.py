@@ -51,10 +51,8 @@ def select_plane_qp(enc: Encounter, solve: Solve, has_cones: bool) -> Outcome:
     G3, h3 = enc.qp_bounds()
     qps = py_plane_qps(enc.vos, planes, G3, h3, enc.pref_in | enc.inside, cfg, False)
     key, included = qps.key, qps.included  # views of the compiled state, fixed in size
-    R, P = key.shape
-    for r in range(R):
-        for p in range(P):
-            qps.solve(r, p, bounds)  # the exact optimum: a lower bound of the backend's
+    P = key.shape[1]
+    qps.solve_all(bounds)  # each QP's exact optimum: a lower bound of the backend's
     G_speed, h_speed = (
         (np.zeros((0, 2)), np.zeros(0))
         if has_cones
