@@ -281,3 +281,41 @@ def test_a_selector_is_collected_when_dropped() -> None:
     del sel
     gc.collect()
     assert ref() is None
+
+
+def test_arrays_decide_in_one_call_as_the_checked_path(monkeypatch) -> None:
+    """float64 arrays of the usual shapes (any strides), boolean flags and obstacle rows of six
+    or four columns (or the objects) are checked and decided in one compiled call; lists, ints
+    and 0/1 flags take select_arrays' Python checks: the same Decision, bit for bit."""
+    from vo3d_opt.formulations import inputs
+
+    calls, real = [0], inputs.neighbor_array
+
+    def counted(neighbors, cooperative):
+        calls[0] += 1
+        return real(neighbors, cooperative)
+
+    monkeypatch.setattr(inputs, "neighbor_array", counted)
+    sel = VelocitySelector()
+    some = 0
+    for seed in SEEDS[::4]:
+        kw = select_kwargs(encounter(seed))
+        args = arrays_of(kw)
+        some += args["neighbors"].shape[0] > 0 and args["obstacles"].shape[0] > 0
+        nb = args["neighbors"]
+        fast = [
+            sel.select_arrays(**args),
+            sel.select_arrays(**{**args, "neighbors": np.asfortranarray(nb)}),
+            sel.select_arrays(**{**args, "neighbors": np.hstack([nb, nb])[:, :7]}),
+            sel.select_arrays(**{**args, "neighbors": np.repeat(nb, 2, axis=0)[::2]}),
+        ]
+        short = sel.select_arrays(**{**args, "obstacles": args["obstacles"][:, :4]})
+        assert calls[0] == 0, seed
+        checked = sel.select_arrays(**{**args, "neighbors": nb.tolist(),
+                                       "cooperative": args["cooperative"].astype(int)})
+        short_checked = sel.select_arrays(**{**args, "obstacles": args["obstacles"][:, :4].tolist()})
+        assert calls[0] == 1 + (args["obstacles"].shape[0] > 0), seed  # [] is no obstacle
+        calls[0] = 0
+        assert all(same(d, checked) for d in fast), seed
+        assert same(short, short_checked), seed
+    assert some > 10

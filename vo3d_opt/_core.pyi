@@ -67,6 +67,18 @@ class ObjectPath:
         dt: Any,
         t0: float,
     ) -> Any: ...
+    def decide_arrays(
+        self,
+        position: Any,
+        velocity: Any,
+        v_pref: Any,
+        neighbors: Any,
+        cooperative: Any,
+        obstacles: Any,
+        limits: Any,
+        dt: Any,
+        t0: float,
+    ) -> Any: ...
 
 class PlaneQPs:
     def __init__(

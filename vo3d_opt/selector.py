@@ -5,8 +5,8 @@ swarm in one call.
 With the default formulation and solver (``plane_qp`` on ``exact2d``) a decision is: the inputs
 checked (``formulations.inputs``) → one call of the compiled core (``vo3d_opt._core``; the
 algorithm reads in ``vo3d_opt/algorithm/decide.hpp``) → ``Decision``; inputs of the plain kind
-(lists of the user's objects, a float dt) are checked, decided and answered in that one call
-(``kernel.object_path``), with the same answer. The other formulations
+(lists of the user's objects or float64 arrays, a float dt) are checked, decided and answered
+in that one call (``kernel.object_path``), with the same answer. The other formulations
 and backends run on the Python path (``formulations.outside``) over the same compiled geometry;
 ``select_many`` is ``vo3d_opt.swarm``. Statuses: ``vo3d_opt.status.Status`` (documented in
 docs/guide/statuses.md).
@@ -182,20 +182,13 @@ class VelocitySelector:
         limits = inputs.limits_of(limits)
         dt = inputs.period(dt)
         sensing_range = _sensing_range(sensing_range)
+        p, v_now = own.position, own.velocity
         if self._python is None:
-            p, v_now = own.position, own.velocity
             return self._compiled(p, v_now, v_pref, nbrs, prisms, limits, dt, sensing_range, t0)
-        return self._select_python(
-            own.position,
-            own.velocity,
-            np.asarray(v_pref, dtype=float),
-            np.array(nbrs, dtype=float).reshape(-1, 8),
-            np.array(prisms, dtype=float).reshape(-1, PRISM_WIDTH),
-            limits,
-            dt,
-            sensing_range,
-            t0,
-        )
+        rows = np.array(nbrs, dtype=float).reshape(-1, 8)
+        table = np.array(prisms, dtype=float).reshape(-1, PRISM_WIDTH)
+        v = np.asarray(v_pref, dtype=float)
+        return self._select_python(p, v_now, v, rows, table, limits, dt, sensing_range, t0)
 
     def select_arrays(
         self,
@@ -225,6 +218,12 @@ class VelocitySelector:
         ``ValueError`` naming the argument, and for an array the row and the column.
         """
         t0 = _clock()
+        fast = self._objects if sensing_range is None else None
+        vectors = (position, velocity, preferred_velocity)
+        if fast and (
+            d := fast.decide_arrays(*vectors, neighbors, cooperative, obstacles, limits, dt, t0)
+        ):
+            return d  # float64 arrays of the usual shapes: checked and decided in one call
         p = inputs.array_vector(position, "position")
         v_now = inputs.array_vector(velocity, "velocity")
         v_pref = inputs.array_vector(preferred_velocity, "preferred_velocity")

@@ -118,7 +118,10 @@ NB_MODULE(_core, m) {
              "types"_a)
         .def("decide", &ObjectPath::decide, "own"_a, "v_pref"_a, "neighbors"_a, "obstacles"_a,
              "limits"_a.none(), "dt"_a.none(), "t0"_a,
-             "The Decision of select(), or None when an input is not of the plain kind.");
+             "The Decision of select(), or None when an input is not of the plain kind.")
+        .def("decide_arrays", &ObjectPath::decide_arrays, "position"_a, "velocity"_a, "v_pref"_a,
+             "neighbors"_a.none(), "cooperative"_a.none(), "obstacles"_a.none(), "limits"_a.none(),
+             "dt"_a.none(), "t0"_a, "The Decision of select_arrays(), or None (decide's rule).");
 
     m.def("decide_many",
           [](nb::handle swarm, const Config& cfg_in, int64_t threads, nb::handle out, int64_t lo,

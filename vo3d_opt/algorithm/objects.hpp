@@ -1,12 +1,14 @@
-// select() on the default path in one call (nanobind glue, not the algorithm): the user's own
-// objects read where they lie (AgentState's arrays, each Neighbor's fields, each obstacle's
-// cached prism), one decide_one, and the Decision built here. A decision takes
-// about as long as the Python that would check and convert its inputs, so that Python is
-// left out whenever the inputs are of the plain kind; anything else (a subclass, a generator,
-// an int dt, a non-finite number, a sensing range) makes ``decide`` return None and select()
-// takes its Python path, which gives the same answer or words the error.
+// select() and select_arrays() on the default path in one call (nanobind glue, not the
+// algorithm): the user's own objects or arrays read where they lie (AgentState's arrays, each
+// Neighbor's fields, each obstacle's cached prism, float64 arrays through the buffer protocol),
+// one decide_one, and the Decision built here. A decision takes about as long as the Python
+// that would check and convert its inputs, so that Python is left out whenever the inputs are
+// of the plain kind; anything else (a subclass, a generator, an int dt or int array, a
+// non-finite number, a sensing range) makes ``decide`` return None and select() takes its
+// Python path, which gives the same answer or words the error.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 
@@ -49,6 +51,44 @@ class ObjectPath {
         if (!rows(neighbors, t_.neighbor, t_.neighbor, fields, 8, nbrs) ||
             !rows(obstacles, t_.cylinder, t_.box, prism_row, PRISM_ROOF_ROW, prisms))
             return nb::none();
+        return decided(p, v_now, w, Rows::of(nbrs, 8), Rows::of(prisms, PRISM_ROOF_ROW), limits, dt, t0);
+    }
+
+    // The Decision of one select_arrays(), or None when an input is not of the plain kind:
+    // float64 numpy arrays (3,), (N, 7) neighbours, cooperative None or (N,) booleans, obstacles
+    // None, (M, 6) or (M, 4) rows or a list of Cylinder and Box objects.
+    nb::object decide_arrays(nb::handle position, nb::handle velocity, nb::handle v_pref,
+                             nb::handle neighbors, nb::handle cooperative, nb::handle obstacles,
+                             nb::handle limits, nb::handle dt, double t0) {
+        double p[3], v_now[3], w[3];
+        if (!t_.bounds_and_config.is_valid()) return nb::none();  // cleared by the collector
+        if (!array3(position, p) || !array3(velocity, v_now) || !array3(v_pref, w)) return nb::none();
+        std::vector<double> table, nbrs, prisms;
+        int64_t width = PRISM_ROOF_ROW;
+        if (!neighbors.is_none() && !floats_table(neighbors, 7, 6, table)) return nb::none();
+        int64_t n = int64_t(table.size()) / 7;
+        nbrs.resize(size_t(8 * n));
+        for (int64_t i = 0; i < n; ++i) {
+            std::copy_n(&table[size_t(7 * i)], 7, &nbrs[size_t(8 * i)]);
+            nbrs[size_t(8 * i + 7)] = 1.0;
+        }
+        if (!cooperative.is_none() && !flags(cooperative, n, nbrs)) return nb::none();
+        if (PyList_CheckExact(obstacles.ptr()) || PyTuple_CheckExact(obstacles.ptr())) {
+            if (!rows(obstacles, t_.cylinder, t_.box, prism_row, PRISM_ROOF_ROW, prisms)) return nb::none();
+        } else if (!obstacles.is_none()) {
+            width = obstacle_width(obstacles);
+            if (!width || !floats_table(obstacles, width, 2, prisms)) return nb::none();
+        }
+        return decided(p, v_now, w, Rows::of(nbrs, 8), Rows::of(prisms, width), limits, dt, t0);
+    }
+
+  private:
+    static constexpr double MAX_MAGNITUDE = 1e7;  // vo3d_opt.types.MAX_MAGNITUDE
+
+    // The limits and the period checked, one decide_one without the interpreter lock, the
+    // Decision; None for limits of another kind or a period that is not a positive float.
+    nb::object decided(const double* p, const double* v_now, const double* w, Rows nbrs,
+                       Rows prisms, nb::handle limits, nb::handle dt, double t0) {
         nb::handle lim = limits.is_none() ? t_.default_limits : limits;
         if (!lim.type().is(t_.limits) || !PyFloat_CheckExact(dt.ptr())) return nb::none();
         double period = PyFloat_AS_DOUBLE(dt.ptr());
@@ -60,13 +100,58 @@ class ObjectPath {
         Decision d;
         {
             nb::gil_scoped_release free;
-            d = decide_one(p, v_now, w, Rows::of(nbrs, 8), Rows::of(prisms, PRISM_ROOF_ROW), b, cfg);
+            d = decide_one(p, v_now, w, nbrs, prisms, b, cfg);
         }
         return answer(d, t0);
     }
 
-  private:
-    static constexpr double MAX_MAGNITUDE = 1e7;  // vo3d_opt.types.MAX_MAGNITUDE
+    // A float64 numpy array (N, width) into buf row by row: every entry finite and within
+    // MAX_MAGNITUDE, positive in the columns from positive_from on (inputs._table's rules).
+    bool floats_table(nb::handle h, int64_t width, int64_t positive_from,
+                      std::vector<double>& buf) const {
+        if (!h.type().is(t_.ndarray)) return false;
+        Py_buffer view;
+        if (PyObject_GetBuffer(h.ptr(), &view, PyBUF_STRIDES | PyBUF_FORMAT) != 0)
+            return PyErr_Clear(), false;
+        bool ok = view.ndim == 2 && view.shape[1] == width && view.itemsize == 8 && view.format &&
+                  std::strcmp(view.format, "d") == 0;
+        int64_t n = ok ? int64_t(view.shape[0]) : 0;
+        buf.resize(size_t(n * width));
+        for (int64_t i = 0; ok && i < n; ++i)
+            for (int64_t j = 0; ok && j < width; ++j) {
+                double x;
+                std::memcpy(&x, static_cast<const char*>(view.buf) + i * view.strides[0] +
+                                    j * view.strides[1], 8);
+                ok = plain(x) && (j < positive_from || x > 0.0);
+                buf[size_t(i * width + j)] = x;
+            }
+        PyBuffer_Release(&view);
+        return ok;
+    }
+
+    // The width of a float64 array of obstacle rows, 6 or 4 (no roof); 0 for anything else.
+    int64_t obstacle_width(nb::handle h) const {
+        if (!h.type().is(t_.ndarray)) return 0;
+        Py_buffer view;
+        if (PyObject_GetBuffer(h.ptr(), &view, PyBUF_STRIDES) != 0) return PyErr_Clear(), 0;
+        int64_t width = view.ndim == 2 ? int64_t(view.shape[1]) : 0;
+        PyBuffer_Release(&view);
+        return width == PRISM_ROOF_ROW || width == PRISM_ROW ? width : 0;
+    }
+
+    // A numpy bool array (n,) as the neighbours' cooperative column (8th of each row).
+    bool flags(nb::handle h, int64_t n, std::vector<double>& nbrs) const {
+        if (!h.type().is(t_.ndarray)) return false;
+        Py_buffer view;
+        if (PyObject_GetBuffer(h.ptr(), &view, PyBUF_STRIDES | PyBUF_FORMAT) != 0)
+            return PyErr_Clear(), false;
+        bool ok = view.ndim == 1 && view.shape[0] == n && view.itemsize == 1 && view.format &&
+                  std::strcmp(view.format, "?") == 0;
+        for (int64_t i = 0; ok && i < n; ++i)
+            nbrs[size_t(8 * i + 7)] = static_cast<const char*>(view.buf)[i * view.strides[0]] ? 1.0 : 0.0;
+        PyBuffer_Release(&view);
+        return ok;
+    }
 
     ObjectTypes t_;
     // Neighbor's row and fields by name, made once (their hashes kept)

@@ -89,8 +89,9 @@ def object_path(decision: type, selector: Any, clock: Callable[[], float]) -> _c
     ``decide(own, preferred_velocity, neighbors, obstacles, limits, dt, t0)`` reads the
     ``AgentState``, ``Neighbor``, ``Cylinder`` and ``Box`` objects where they lie (their cached
     rows), decides, and builds ``decision`` as select() does (``clock() - t0`` its solve time);
-    it returns None for inputs of any other kind, which then take select()'s own checks. The
-    limits and the period are planned with ``selector._bounds_and_config``'s bounds and Config.
+    it returns None for inputs of any other kind, which then take select()'s own checks;
+    ``decide_arrays`` is the same for ``select_arrays``. The limits and the period are planned
+    with ``selector._bounds_and_config``'s bounds and Config.
     """
     kinds = dict(agent=AgentState, neighbor=Neighbor, cylinder=Cylinder, box=Box, limits=Limits)
     return _core.ObjectPath(
