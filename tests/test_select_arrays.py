@@ -38,7 +38,7 @@ def same(a, b) -> bool:
     plane_a = math.nan if a.plane is None else a.plane
     plane_b = math.nan if b.plane is None else b.plane
     return (
-        np.array_equal(a.velocity, b.velocity)
+        a.velocity.tobytes() == b.velocity.tobytes()  # -0.0 and 0.0 apart
         and a.status == b.status
         and (plane_a == plane_b or (math.isnan(plane_a) and math.isnan(plane_b)))
         and a.info.keys() == b.info.keys()
@@ -189,7 +189,7 @@ def test_a_bad_sensing_range_is_a_value_error_naming_it(bad, formulation):
 
 
 def _counting(monkeypatch) -> list[int]:
-    """Counts the calls of select()'s Python check of the neighbours (kept as it was)."""
+    """Counts the calls of select()'s Python check of the neighbours."""
     from vo3d_opt.formulations import inputs
 
     calls, real = [0], inputs.neighbor_tuples
@@ -206,17 +206,22 @@ def _counting(monkeypatch) -> list[int]:
 def test_plain_inputs_decide_in_one_call_as_the_checked_path(preset, monkeypatch) -> None:
     """Lists of the user's own objects, a float dt and a tuple, list or array for the preferred
     velocity are read and decided in one compiled call, without select()'s Python checks (each
-    neighbour's fields read as they lie, or its row once cached); any other form of the same
-    numbers takes those checks: the same Decision, bit for bit, over the recorded encounters."""
+    neighbour's fields read as they lie, or its row once cached; the obstacles' prisms once
+    cached); any other form of the same numbers takes those checks: the same Decision, bit for
+    bit, over the recorded encounters."""
     calls = _counting(monkeypatch)
     sel = VelocitySelector(preset=preset)
     for seed in SEEDS[::3]:
         kw = select_kwargs(encounter(seed))
         kw["neighbors"], kw["obstacles"] = list(kw["neighbors"]), list(kw["obstacles"])
         pref = tuple(float(x) for x in kw["preferred_velocity"])
+        first = sel.select(**{**kw, "preferred_velocity": pref})  # caches the obstacles' prisms
+        assert calls[0] == (len(kw["obstacles"]) > 0), seed  # a prism not cached: the checks
+        calls[0] = 0
         fast = [sel.select(**{**kw, "preferred_velocity": form})
                 for form in (pref, list(pref), np.array(pref))]
         assert calls[0] == 0, seed
+        fast.append(first)
         checked = sel.select(**{**kw, "preferred_velocity": pref, "neighbors": iter(kw["neighbors"])})
         assert calls[0] == 1, seed
         fast.append(sel.select(**{**kw, "preferred_velocity": pref}))  # rows cached by now
@@ -255,8 +260,8 @@ def test_other_forms_of_the_inputs_take_the_checks(monkeypatch) -> None:
 
 
 def test_one_selector_decides_for_many_threads_at_once() -> None:
-    """The compiled call runs without the interpreter lock: threads deciding with one selector
-    (and limits and periods of their own) get each its own answer."""
+    """Threads deciding with one selector (with periods of their own) get each its own
+    answer."""
     from concurrent.futures import ThreadPoolExecutor
 
     sel = VelocitySelector()
@@ -319,3 +324,27 @@ def test_arrays_decide_in_one_call_as_the_checked_path(monkeypatch) -> None:
         assert all(same(d, checked) for d in fast), seed
         assert same(short, short_checked), seed
     assert some > 10
+
+
+def test_none_for_any_argument_is_none_or_a_value_error_naming_it() -> None:
+    """None where a list or the limits may be None means none (the default limits); anywhere
+    else it is a ValueError naming the argument, as before select() had its one-call path."""
+    sel = VelocitySelector()
+    own = AgentState(position=(0.0, 0.0, 20.0), velocity=(1.0, 0.0, 0.0))
+    kw = dict(own=own, preferred_velocity=(1.0, 0.0, 0.0), neighbors=[], obstacles=[],
+              limits=Limits(), dt=0.2)
+    want = sel.select(**kw)
+    for name in ("neighbors", "obstacles", "limits"):
+        assert same(sel.select(**{**kw, name: None}), want), name
+    for name in ("own", "preferred_velocity", "dt"):
+        with pytest.raises(ValueError, match=name):
+            sel.select(**{**kw, name: None})
+    args = dict(position=np.array([0.0, 0.0, 20.0]), velocity=np.array([1.0, 0.0, 0.0]),
+                preferred_velocity=np.array([1.0, 0.0, 0.0]), neighbors=np.zeros((0, 7)),
+                obstacles=np.zeros((0, 6)), limits=Limits(), dt=0.2)
+    assert same(sel.select_arrays(**args), want)
+    for name in ("neighbors", "obstacles", "limits", "cooperative"):
+        assert same(sel.select_arrays(**{**args, name: None}), want), name
+    for name in ("position", "velocity", "preferred_velocity", "dt"):
+        with pytest.raises(ValueError, match=name):
+            sel.select_arrays(**{**args, name: None})

@@ -370,16 +370,45 @@ def _plane_like_qps(count: int) -> list[QP]:
     return qps
 
 
+def _short_path_calls(name: str, monkeypatch) -> list[int]:
+    """Counts the calls of the short path's own step (DAQP's open rows, OSQP's rows form)."""
+    from vo3d_opt.solvers import daqp_backend, osqp_backend
+
+    calls = [0]
+    if name == "daqp":
+        real = daqp_backend._open_rows
+
+        def counted(m):
+            calls[0] += 1
+            return real(m)
+
+        monkeypatch.setattr(daqp_backend, "_open_rows", counted)
+    else:
+        real_run = osqp_backend.OsqpBackend._run
+
+        def counted_run(self, form, *args):
+            calls[0] += form == "rows"
+            return real_run(self, form, *args)
+
+        monkeypatch.setattr(osqp_backend.OsqpBackend, "_run", counted_run)
+    return calls
+
+
 @pytest.mark.parametrize(("name", "atol"), [("daqp", 1e-9), ("osqp", 1e-6)])
-def test_short_path_answers_as_the_standard_form(name: str, atol: float) -> None:
+def test_short_path_answers_as_the_standard_form(name: str, atol: float, monkeypatch) -> None:
     """``G x <= h`` alone goes to DAQP (OSQP) as it is: the same status and answer (to
     rounding; to OSQP's tolerance) as through the standard form, feasible or not, the
     unconstrained optimum among them, and the caller's arrays untouched."""
     backend = get_backend(name)
+    calls = _short_path_calls(name, monkeypatch)
     statuses, infos = set(), set()
     for qp in _plane_like_qps(300):
         kept = [a.copy() for a in (qp.P, qp.q, qp.G, qp.h)]
-        short, standard = backend.solve(qp), Backend.solve(backend, qp)
+        before = calls[0]
+        short = backend.solve(qp)
+        assert calls[0] == before + (short.info != "unconstrained optimum is feasible")
+        standard = Backend.solve(backend, qp)
+        assert calls[0] == before + (short.info != "unconstrained optimum is feasible")
         assert short.status == standard.status, (short, standard)
         statuses.add(short.status)
         infos.add(short.info)
@@ -406,6 +435,9 @@ def test_osqp_minimiser_in_closed_form() -> None:
         assert minimiser(P, np.ones(P.shape[0])) is None
     P3 = 3.0 * np.eye(3)
     assert np.allclose(minimiser(P3, np.ones(3)), -np.ones(3) / 3.0)
+    tiny = np.diag([1e-150, 1e-150])  # positive definite, its minimiser beyond the floats
+    assert minimiser(tiny, np.array([1e300, 0.0])) is None
+    assert minimiser(np.diag([1e-300] * 3), np.full(3, 1e300)) is None
 
 
 def test_short_path_only_for_arrays_it_can_take() -> None:

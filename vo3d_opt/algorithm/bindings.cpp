@@ -111,17 +111,20 @@ NB_MODULE(_core, m) {
         .def("__init__",
              [](ObjectPath* self, nb::dict t) {
                  new (self) ObjectPath(ObjectTypes{
-                     t["agent"], t["neighbor"], t["cylinder"], t["box"], t["limits"], t["decision"], t["ndarray"], t["empty"],
-                     t["default_limits"], t["statuses"], t["rounds"], t["formulation"], t["solver"],
-                     t["clock"], t["bounds_and_config"]});
+                     t["agent"], t["neighbor"], t["cylinder"], t["box"], t["limits"], t["decision"],
+                     t["ndarray"], t["empty"], t["default_limits"], t["statuses"], t["rounds"],
+                     t["formulation"], t["solver"], t["clock"], t["bounds_and_config"],
+                     nb::cast<double>(t["max_magnitude"])});
              },
              "types"_a)
-        .def("decide", &ObjectPath::decide, "own"_a, "v_pref"_a, "neighbors"_a, "obstacles"_a,
-             "limits"_a.none(), "dt"_a.none(), "t0"_a,
+        // every argument may be None: None is not of the plain kind, and select() words the error
+        .def("decide", &ObjectPath::decide, "own"_a.none(), "v_pref"_a.none(), "neighbors"_a.none(),
+             "obstacles"_a.none(), "limits"_a.none(), "dt"_a.none(), "t0"_a,
              "The Decision of select(), or None when an input is not of the plain kind.")
-        .def("decide_arrays", &ObjectPath::decide_arrays, "position"_a, "velocity"_a, "v_pref"_a,
-             "neighbors"_a.none(), "cooperative"_a.none(), "obstacles"_a.none(), "limits"_a.none(),
-             "dt"_a.none(), "t0"_a, "The Decision of select_arrays(), or None (decide's rule).");
+        .def("decide_arrays", &ObjectPath::decide_arrays, "position"_a.none(), "velocity"_a.none(),
+             "v_pref"_a.none(), "neighbors"_a.none(), "cooperative"_a.none(), "obstacles"_a.none(),
+             "limits"_a.none(), "dt"_a.none(), "t0"_a,
+             "The Decision of select_arrays(), or None (decide's rule).");
 
     m.def("decide_many",
           [](nb::handle swarm, const Config& cfg_in, int64_t threads, nb::handle out, int64_t lo,

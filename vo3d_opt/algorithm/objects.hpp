@@ -4,8 +4,9 @@
 // one decide_one, and the Decision built here. A decision takes about as long as the Python
 // that would check and convert its inputs, so that Python is left out whenever the inputs are
 // of the plain kind; anything else (a subclass, a generator, an int dt or int array, a
-// non-finite number, a sensing range) makes ``decide`` return None and select() takes its
-// Python path, which gives the same answer or words the error.
+// non-finite number, an obstacle whose prism is not cached yet, a sensing range) makes
+// ``decide`` return None and select() takes its Python path, which gives the same answer or
+// words the error. Nothing here runs Python code while it holds a borrowed reference.
 #pragma once
 
 #include <algorithm>
@@ -21,6 +22,36 @@ namespace vo3d::glue {
 struct ObjectTypes {
     nb::object agent, neighbor, cylinder, box, limits, decision, ndarray, empty;
     nb::object default_limits, statuses, rounds, formulation, solver, clock, bounds_and_config;
+    double max_magnitude;  // vo3d_opt.types.MAX_MAGNITUDE
+};
+
+// A numpy array's buffer (the buffer protocol), released however the scope is left.
+struct Buffer {
+    Py_buffer view{};
+    bool ok = false;
+    Buffer(nb::handle h, const nb::object& ndarray, int flags) {
+        if (h.type().is(ndarray)) ok = PyObject_GetBuffer(h.ptr(), &view, flags) == 0;
+        if (!ok) PyErr_Clear();
+    }
+    ~Buffer() {
+        if (ok) PyBuffer_Release(&view);
+    }
+    Buffer(const Buffer&) = delete;
+    Buffer& operator=(const Buffer&) = delete;
+    // Of dimension ndim, items of ``format`` ("d": float64, "?": bool, nullptr: any).
+    bool is(int ndim, const char* format) const {
+        return ok && view.ndim == ndim &&
+               (!format || (view.format && std::strcmp(view.format, format) == 0));
+    }
+    const char* at(int64_t i, int64_t j = 0) const {
+        return static_cast<const char*>(view.buf) + i * view.strides[0] +
+               (view.ndim > 1 ? j * view.strides[1] : 0);
+    }
+    double number(int64_t i, int64_t j = 0) const {
+        double x;
+        std::memcpy(&x, at(i, j), sizeof x);
+        return x;
+    }
 };
 
 class ObjectPath {
@@ -32,9 +63,9 @@ class ObjectPath {
     template <class F>
     void each_object(F f) {
         for (nb::object* o : {&t_.agent, &t_.neighbor, &t_.cylinder, &t_.box, &t_.limits,
-                              &t_.decision, &t_.ndarray, &t_.empty, &t_.default_limits, &t_.statuses, &t_.rounds,
-                              &t_.formulation, &t_.solver, &t_.clock, &t_.bounds_and_config,
-                              &last_limits_, &config_obj_})
+                              &t_.decision, &t_.ndarray, &t_.empty, &t_.default_limits,
+                              &t_.statuses, &t_.rounds, &t_.formulation, &t_.solver, &t_.clock,
+                              &t_.bounds_and_config, &last_limits_, &config_obj_})
             f(*o);
     }
 
@@ -48,10 +79,12 @@ class ObjectPath {
             return nb::none();
         std::vector<double> nbrs, prisms;  // per call: another thread may decide meanwhile
         auto fields = [this](nb::handle item, double* row) { return neighbour_row(item, row); };
+        auto prism = [this](nb::handle item, double* row) { return prism_row(item, row); };
         if (!rows(neighbors, t_.neighbor, t_.neighbor, fields, 8, nbrs) ||
-            !rows(obstacles, t_.cylinder, t_.box, prism_row, PRISM_ROOF_ROW, prisms))
+            !rows(obstacles, t_.cylinder, t_.box, prism, PRISM_ROOF_ROW, prisms))
             return nb::none();
-        return decided(p, v_now, w, Rows::of(nbrs, 8), Rows::of(prisms, PRISM_ROOF_ROW), limits, dt, t0);
+        return decided(p, v_now, w, Rows::of(nbrs, 8), Rows::of(prisms, PRISM_ROOF_ROW), limits,
+                       dt, t0);
     }
 
     // The Decision of one select_arrays(), or None when an input is not of the plain kind:
@@ -62,9 +95,9 @@ class ObjectPath {
                              nb::handle limits, nb::handle dt, double t0) {
         double p[3], v_now[3], w[3];
         if (!t_.bounds_and_config.is_valid()) return nb::none();  // cleared by the collector
-        if (!array3(position, p) || !array3(velocity, v_now) || !array3(v_pref, w)) return nb::none();
+        if (!array3(position, p) || !array3(velocity, v_now) || !array3(v_pref, w))
+            return nb::none();
         std::vector<double> table, nbrs, prisms;
-        int64_t width = PRISM_ROOF_ROW;
         if (!neighbors.is_none() && !floats_table(neighbors, 7, 6, table)) return nb::none();
         int64_t n = int64_t(table.size()) / 7;
         nbrs.resize(size_t(8 * n));
@@ -73,8 +106,11 @@ class ObjectPath {
             nbrs[size_t(8 * i + 7)] = 1.0;
         }
         if (!cooperative.is_none() && !flags(cooperative, n, nbrs)) return nb::none();
+        int64_t width = PRISM_ROOF_ROW;
         if (PyList_CheckExact(obstacles.ptr()) || PyTuple_CheckExact(obstacles.ptr())) {
-            if (!rows(obstacles, t_.cylinder, t_.box, prism_row, PRISM_ROOF_ROW, prisms)) return nb::none();
+            auto prism = [this](nb::handle item, double* row) { return prism_row(item, row); };
+            if (!rows(obstacles, t_.cylinder, t_.box, prism, PRISM_ROOF_ROW, prisms))
+                return nb::none();
         } else if (!obstacles.is_none()) {
             width = obstacle_width(obstacles);
             if (!width || !floats_table(obstacles, width, 2, prisms)) return nb::none();
@@ -83,7 +119,15 @@ class ObjectPath {
     }
 
   private:
-    static constexpr double MAX_MAGNITUDE = 1e7;  // vo3d_opt.types.MAX_MAGNITUDE
+    ObjectTypes t_;
+    // Names looked up in an object's __dict__, made once (their hashes kept)
+    nb::str row_key_{"row"}, prism_key_{"prism"}, position_key_{"position"},
+        velocity_key_{"velocity"}, r_pz_key_{"r_pz"}, cooperative_key_{"cooperative"};
+    nb::object last_limits_, config_obj_;  // the last limits asked with, and their Config
+    double last_dt_ = kNaN;
+    Bounds bounds_{};
+
+    bool plain(double x) const { return std::fabs(x) <= t_.max_magnitude; }  // NaN fails
 
     // The limits and the period checked, one decide_one without the interpreter lock, the
     // Decision; None for limits of another kind or a period that is not a positive float.
@@ -92,10 +136,11 @@ class ObjectPath {
         nb::handle lim = limits.is_none() ? t_.default_limits : limits;
         if (!lim.type().is(t_.limits) || !PyFloat_CheckExact(dt.ptr())) return nb::none();
         double period = PyFloat_AS_DOUBLE(dt.ptr());
-        if (!(period > 0.0 && period <= MAX_MAGNITUDE)) return nb::none();
+        if (!(period > 0.0 && period <= t_.max_magnitude)) return nb::none();
         if (!last_limits_.is(lim) || period != last_dt_) remember(lim, dt, period);
         nb::object held = config_obj_;  // kept alive, whatever another thread remembers
-        const Config& cfg = nb::cast<const Config&>(held);
+        // checked at every call, as decide_rows does: a Config's fields can be set from Python
+        const Config& cfg = checked(nb::cast<const Config&>(held));
         Bounds b = bounds_;
         Decision d;
         {
@@ -109,74 +154,42 @@ class ObjectPath {
     // MAX_MAGNITUDE, positive in the columns from positive_from on (inputs._table's rules).
     bool floats_table(nb::handle h, int64_t width, int64_t positive_from,
                       std::vector<double>& buf) const {
-        if (!h.type().is(t_.ndarray)) return false;
-        Py_buffer view;
-        if (PyObject_GetBuffer(h.ptr(), &view, PyBUF_STRIDES | PyBUF_FORMAT) != 0)
-            return PyErr_Clear(), false;
-        bool ok = view.ndim == 2 && view.shape[1] == width && view.itemsize == 8 && view.format &&
-                  std::strcmp(view.format, "d") == 0;
-        int64_t n = ok ? int64_t(view.shape[0]) : 0;
+        Buffer a(h, t_.ndarray, PyBUF_STRIDES | PyBUF_FORMAT);
+        if (!a.is(2, "d") || a.view.shape[1] != width) return false;
+        int64_t n = int64_t(a.view.shape[0]);
         buf.resize(size_t(n * width));
-        for (int64_t i = 0; ok && i < n; ++i)
-            for (int64_t j = 0; ok && j < width; ++j) {
-                double x;
-                std::memcpy(&x, static_cast<const char*>(view.buf) + i * view.strides[0] +
-                                    j * view.strides[1], 8);
-                ok = plain(x) && (j < positive_from || x > 0.0);
+        for (int64_t i = 0; i < n; ++i)
+            for (int64_t j = 0; j < width; ++j) {
+                double x = a.number(i, j);
+                if (!plain(x) || (j >= positive_from && !(x > 0.0))) return false;
                 buf[size_t(i * width + j)] = x;
             }
-        PyBuffer_Release(&view);
-        return ok;
+        return true;
     }
 
-    // The width of a float64 array of obstacle rows, 6 or 4 (no roof); 0 for anything else.
+    // The width of a numpy array of obstacle rows, 6 or 4 (no roof); 0 for anything else.
     int64_t obstacle_width(nb::handle h) const {
-        if (!h.type().is(t_.ndarray)) return 0;
-        Py_buffer view;
-        if (PyObject_GetBuffer(h.ptr(), &view, PyBUF_STRIDES) != 0) return PyErr_Clear(), 0;
-        int64_t width = view.ndim == 2 ? int64_t(view.shape[1]) : 0;
-        PyBuffer_Release(&view);
+        Buffer a(h, t_.ndarray, PyBUF_STRIDES);
+        int64_t width = a.is(2, nullptr) ? int64_t(a.view.shape[1]) : 0;
         return width == PRISM_ROOF_ROW || width == PRISM_ROW ? width : 0;
     }
 
     // A numpy bool array (n,) as the neighbours' cooperative column (8th of each row).
     bool flags(nb::handle h, int64_t n, std::vector<double>& nbrs) const {
-        if (!h.type().is(t_.ndarray)) return false;
-        Py_buffer view;
-        if (PyObject_GetBuffer(h.ptr(), &view, PyBUF_STRIDES | PyBUF_FORMAT) != 0)
-            return PyErr_Clear(), false;
-        bool ok = view.ndim == 1 && view.shape[0] == n && view.itemsize == 1 && view.format &&
-                  std::strcmp(view.format, "?") == 0;
-        for (int64_t i = 0; ok && i < n; ++i)
-            nbrs[size_t(8 * i + 7)] = static_cast<const char*>(view.buf)[i * view.strides[0]] ? 1.0 : 0.0;
-        PyBuffer_Release(&view);
-        return ok;
+        Buffer a(h, t_.ndarray, PyBUF_STRIDES | PyBUF_FORMAT);
+        if (!a.is(1, "?") || a.view.shape[0] != n) return false;
+        for (int64_t i = 0; i < n; ++i) nbrs[size_t(8 * i + 7)] = *a.at(i) ? 1.0 : 0.0;
+        return true;
     }
-
-    ObjectTypes t_;
-    // Neighbor's row and fields by name, made once (their hashes kept)
-    nb::str keys_[5] = {nb::str("row"), nb::str("position"), nb::str("velocity"), nb::str("r_pz"),
-                        nb::str("cooperative")};
-    nb::object last_limits_, config_obj_;  // the last limits asked with, and their Config
-    double last_dt_ = kNaN;
-    Bounds bounds_{};
-
-    static bool plain(double x) { return std::fabs(x) <= MAX_MAGNITUDE; }  // NaN fails
 
     // A float64 numpy array of shape (3,), finite and within MAX_MAGNITUDE (AgentState's
     // fields), read through the buffer protocol: a cast to nb::ndarray asks for DLPack first,
     // several times the cost.
     bool array3(nb::handle h, double* out) const {
-        if (!h.type().is(t_.ndarray)) return false;
-        Py_buffer view;
-        if (PyObject_GetBuffer(h.ptr(), &view, PyBUF_STRIDES | PyBUF_FORMAT) != 0)
-            return PyErr_Clear(), false;
-        bool ok = view.ndim == 1 && view.shape[0] == 3 && view.itemsize == 8 && view.format &&
-                  std::strcmp(view.format, "d") == 0;
-        for (int k = 0; ok && k < 3; ++k)
-            std::memcpy(out + k, static_cast<const char*>(view.buf) + k * view.strides[0], 8);
-        PyBuffer_Release(&view);
-        return ok && plain(out[0]) && plain(out[1]) && plain(out[2]);
+        Buffer a(h, t_.ndarray, PyBUF_STRIDES | PyBUF_FORMAT);
+        if (!a.is(1, "d") || a.view.shape[0] != 3) return false;
+        for (int k = 0; k < 3; ++k) out[k] = a.number(k);
+        return plain(out[0]) && plain(out[1]) && plain(out[2]);
     }
 
     // As inputs.vector3 takes it at once: a tuple or list of three floats or ints (not bools)
@@ -203,7 +216,7 @@ class ObjectPath {
 
     // A tuple of ``width`` floats into out.
     static bool floats(PyObject* row, int64_t width, double* out) {
-        if (!PyTuple_CheckExact(row) || PyTuple_GET_SIZE(row) != width) return false;
+        if (!row || !PyTuple_CheckExact(row) || PyTuple_GET_SIZE(row) != width) return false;
         for (int64_t k = 0; k < width; ++k) {
             PyObject* x = PyTuple_GET_ITEM(row, k);
             if (!PyFloat_CheckExact(x)) return false;
@@ -212,23 +225,32 @@ class ObjectPath {
         return true;
     }
 
-    // An obstacle's cached prism (Cylinder.prism, Box.prism: six floats).
-    static bool prism_row(nb::handle item, double* out) {
-        return floats(item.attr("prism").ptr(), PRISM_ROOF_ROW, out);
+    // An object's __dict__ (a new reference), or an invalid object when it has none.
+    static nb::object dict_of(nb::handle item) {
+        nb::object dict = nb::steal(PyObject_GenericGetDict(item.ptr(), nullptr));
+        if (!dict.is_valid()) PyErr_Clear();
+        return dict;
+    }
+
+    // An obstacle's prism as cached on it (Cylinder.prism, Box.prism: six floats), read from
+    // its __dict__ without running Python; not cached yet: the Python path computes it.
+    bool prism_row(nb::handle item, double* out) const {
+        nb::object dict = dict_of(item);
+        return dict.is_valid() && floats(PyDict_GetItem(dict.ptr(), prism_key_.ptr()), PRISM_ROOF_ROW, out);
     }
 
     // Neighbor.row without building it: its cached row when it has one, else its fields as
     // they lie in its __dict__ (a neighbour is usually made anew each step, and its row costs
     // the interpreter a microsecond); the same numbers either way.
     bool neighbour_row(nb::handle item, double* out) const {
-        nb::object dict = nb::steal(PyObject_GenericGetDict(item.ptr(), nullptr));
-        if (!dict.is_valid()) return PyErr_Clear(), false;
+        nb::object dict = dict_of(item);
+        if (!dict.is_valid()) return false;
         PyObject* d = dict.ptr();
-        if (PyObject* row = PyDict_GetItem(d, keys_[0].ptr())) return floats(row, 8, out);
-        PyObject* position = PyDict_GetItem(d, keys_[1].ptr());
-        PyObject* velocity = PyDict_GetItem(d, keys_[2].ptr());
-        PyObject* r_pz = PyDict_GetItem(d, keys_[3].ptr());
-        PyObject* cooperative = PyDict_GetItem(d, keys_[4].ptr());
+        if (PyObject* row = PyDict_GetItem(d, row_key_.ptr())) return floats(row, 8, out);
+        PyObject* position = PyDict_GetItem(d, position_key_.ptr());
+        PyObject* velocity = PyDict_GetItem(d, velocity_key_.ptr());
+        PyObject* r_pz = PyDict_GetItem(d, r_pz_key_.ptr());
+        PyObject* cooperative = PyDict_GetItem(d, cooperative_key_.ptr());
         if (!position || !velocity || !r_pz || !PyFloat_CheckExact(r_pz) || !cooperative ||
             !PyBool_Check(cooperative))
             return false;
@@ -256,7 +278,6 @@ class ObjectPath {
     // The bounds and the Config of these limits and this period (the selector's own).
     void remember(nb::handle lim, nb::handle dt, double period) {
         nb::tuple got = nb::borrow<nb::tuple>(t_.bounds_and_config(lim, dt, nb::none()));
-        checked(nb::cast<const Config&>(got[1]));
         bounds_ = bounds_of(got[0]), config_obj_ = got[1];
         last_limits_ = nb::borrow(lim), last_dt_ = period;
     }
@@ -264,12 +285,11 @@ class ObjectPath {
     nb::object answer(const Decision& d, double t0) {
         // numpy.empty(3) written through the buffer protocol: half the cost of an export
         nb::object velocity = t_.empty(3);
-        Py_buffer view;
-        if (PyObject_GetBuffer(velocity.ptr(), &view, PyBUF_WRITABLE | PyBUF_STRIDES) != 0)
-            throw nb::python_error();
-        for (int k = 0; k < 3; ++k)
-            std::memcpy(static_cast<char*>(view.buf) + k * view.strides[0], d.velocity + k, 8);
-        PyBuffer_Release(&view);
+        {
+            Buffer v(velocity, t_.ndarray, PyBUF_WRITABLE | PyBUF_STRIDES);
+            if (!v.is(1, nullptr)) throw nb::type_error("numpy.empty(3): expected a writable array");
+            for (int k = 0; k < 3; ++k) std::memcpy(const_cast<char*>(v.at(k)), d.velocity + k, 8);
+        }
         nb::dict info;
         info["round"] = t_.rounds[d.round];
         info["solved"] = d.solved;
@@ -282,14 +302,16 @@ class ObjectPath {
 
 int traverse_objects(PyObject* self, visitproc visit, void* arg) {
     int failed = 0;
-    nb::inst_ptr<ObjectPath>(self)->each_object([&](nb::object& o) {
-        if (!failed && o.ptr()) failed = visit(o.ptr(), arg);
-    });
+    if (nb::inst_ready(self))  // the collector may look before __init__ has run
+        nb::inst_ptr<ObjectPath>(self)->each_object([&](nb::object& o) {
+            if (!failed && o.ptr()) failed = visit(o.ptr(), arg);
+        });
     return failed ? failed : visit(reinterpret_cast<PyObject*>(Py_TYPE(self)), arg);
 }
 
 int clear_objects(PyObject* self) {
-    nb::inst_ptr<ObjectPath>(self)->each_object([](nb::object& o) { o.reset(); });
+    if (nb::inst_ready(self))
+        nb::inst_ptr<ObjectPath>(self)->each_object([](nb::object& o) { o.reset(); });
     return 0;
 }
 

@@ -24,7 +24,7 @@ import vo3d_opt._core as _core
 
 from ..geometry import AvoidancePlanes
 from ..status import DECISION_STATUSES
-from ..types import AgentState, Box, Cylinder, Limits, Neighbor
+from ..types import MAX_MAGNITUDE, AgentState, Box, Cylinder, Limits, Neighbor
 from .common import Bounds, Config, VOs
 from .inputs import DEFAULT_LIMITS
 from .rows import ROUNDS
@@ -74,7 +74,7 @@ def answer(
     values = out.tolist()
     phi = values[OUT_PHI]
     return decision(  # by position: a keyword each costs a decision 40 ns
-        out[:3],
+        out[:3].copy(),  # an array of its own, as the one-call path gives
         _STATUS_OF[values[OUT_STATUS]],
         clock() - t0,
         selector.formulation,
@@ -87,9 +87,10 @@ def answer(
 def object_path(decision: type, selector: Any, clock: Callable[[], float]) -> _core.ObjectPath:
     """``selector.select()`` on the default path in one compiled call (algorithm/objects.hpp):
     ``decide(own, preferred_velocity, neighbors, obstacles, limits, dt, t0)`` reads the
-    ``AgentState``, ``Neighbor``, ``Cylinder`` and ``Box`` objects where they lie (their cached
-    rows), decides, and builds ``decision`` as select() does (``clock() - t0`` its solve time);
-    it returns None for inputs of any other kind, which then take select()'s own checks;
+    ``AgentState``, ``Neighbor``, ``Cylinder`` and ``Box`` objects where they lie (the
+    neighbours' fields, the obstacles' cached prisms), decides, and builds ``decision`` as
+    select() does (``clock() - t0`` its solve time); it returns None for inputs of any other
+    kind, which then take select()'s own checks;
     ``decide_arrays`` is the same for ``select_arrays``. The limits and the period are planned
     with ``selector._bounds_and_config``'s bounds and Config.
     """
@@ -107,6 +108,7 @@ def object_path(decision: type, selector: Any, clock: Callable[[], float]) -> _c
             solver=selector.solver,
             clock=clock,
             bounds_and_config=selector._bounds_and_config,
+            max_magnitude=MAX_MAGNITUDE,
         )
     )
 

@@ -52,21 +52,23 @@ _STATUS = {
 
 
 def minimiser(P: np.ndarray, q: np.ndarray) -> np.ndarray | None:
-    """-P⁻¹q when P (symmetric) is positive definite, else None; in closed form for two
-    variables (the plane QPs), where numpy's solve and Cholesky would cost more than OSQP's
-    update."""
+    """-P⁻¹q when P (symmetric) is positive definite and the answer finite, else None; in
+    closed form for two variables (the plane QPs), where numpy's solve and Cholesky would cost
+    more than OSQP's update."""
     if q.shape[0] != 2:
         try:
             np.linalg.cholesky(P)  # raises unless positive definite
-            return np.linalg.solve(P, -q)
+            x = np.linalg.solve(P, -q)
         except np.linalg.LinAlgError:
             return None
-    (a, b), (_, d) = P.tolist()
-    q0, q1 = q.tolist()
-    det = a * d - b * b
-    if not (a > 0.0 and det > 0.0):
-        return None
-    return np.array([(b * q1 - d * q0) / det, (b * q0 - a * q1) / det])
+    else:
+        (a, b), (_, d) = P.tolist()
+        q0, q1 = q.tolist()
+        det = a * d - b * b
+        if not (a > 0.0 and det > 0.0):
+            return None
+        x = np.array([(b * q1 - d * q0) / det, (b * q0 - a * q1) / det])
+    return x if np.isfinite(x).all() else None
 
 
 def unconstrained_optimum(std: Standard) -> np.ndarray | None:
