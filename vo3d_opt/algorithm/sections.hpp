@@ -129,8 +129,9 @@ inline int64_t cone_section(const Cone& cone, const Base& base, const double (&f
     sec.apex[0] = xA, sec.apex[1] = yA;
     double scale = 1.0 + std::sqrt(sq(apex[0]) + sq(apex[1]) + sq(apex[2])) + d_vo;
     bool on_apex = std::abs(zA) <= 1e-9 * scale;  // 3.1.3: A_vo lies on the plane
-    // Eqs (11)-(12): generator k meets the plane at parameter t_g. Without branches, on
-    // pointers that alias nothing, so that the compiler vectorises the loop.
+    // Eqs (11)-(12): generator k meets the plane at parameter t_g. (GCC does not vectorise
+    // this loop: its comparisons may trap; a vectorised loop of the arithmetic alone, followed
+    // by the comparisons, measured no faster.)
     const double* __restrict bx = &base.xyz[0];
     const double* __restrict by = bx + base.cols;
     const double* __restrict bz = by + base.cols;
@@ -330,11 +331,12 @@ inline bool triangle_rows(const double* apex, const double (&chord)[2][2], const
     double wx = w0[0] - apex[0], wy = w0[1] - apex[1];
     double s0 = std::max((wx * d0x + wy * d0y) / (d0x * d0x + d0y * d0y), 0.0);
     double s1 = std::max((wx * d1x + wy * d1y) / (d1x * d1x + d1y * d1y), 0.0);
-    double dist0 = std::sqrt(sq(wx - s0 * d0x) + sq(wy - s0 * d0y));
-    double dist1 = std::sqrt(sq(wx - s1 * d1x) + sq(wy - s1 * d1y));
-    if (!(std::isfinite(dist0) && std::isfinite(dist1))) return false;
+    // the squared distances decide as their roots do (sqrt is monotonic; the roots are taken
+    // only where two squares round to one root), without waiting on a root in most sections
+    double sq0 = sq(wx - s0 * d0x) + sq(wy - s0 * d0y), sq1 = sq(wx - s1 * d1x) + sq(wy - s1 * d1y);
+    if (!(std::isfinite(sq0) && std::isfinite(sq1))) return false;
     double centre = 0.5 * (chord[0][1] + chord[1][1]);
-    int near = dist0 <= dist1 ? 0 : 1;
+    int near = sq0 <= sq1 || std::sqrt(sq0) == std::sqrt(sq1) ? 0 : 1;
     for (int r = 0; r < ROUNDS; ++r) {
         int i = near;
         if (r > 0) {  // the nearest candidate on the round's side, if there is one
