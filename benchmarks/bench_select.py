@@ -18,7 +18,8 @@ the same encounters.
 
 ``--backends``: plane_qp on each Python-path backend (osqp, clarabel, daqp): the decision's
 median and mean, the QPs it hands the backend, the solver's own time per QP (inside the
-library's calls: DAQP's ``solve``, OSQP's ``setup``/``update``/``solve``, Clarabel's set-up,
+library's calls: DAQP's ``solve``, OSQP's ``setup``/``update``/``solve`` or its compiled solver's
+``update_data_vec``/``update_data_mat``/``solve``, Clarabel's set-up,
 ``update`` and ``solve``) and ours per QP: around the solver call (the problem standardised,
 screened and converted, the answer checked: ``Backend.solve`` less the solver's time) and over
 the whole decision ((decision - solver) / QPs); each per QP figure the median over the
@@ -160,7 +161,8 @@ def breakdown(rng: np.random.Generator, grid: list[tuple[int, int]], args: argpa
 
 class SolverClock:
     """Seconds spent inside the solver libraries' own calls (DAQP's ``solve``; OSQP's
-    ``setup``, ``update``, ``solve``; Clarabel's set-up, ``update``, ``solve``), by wrapping the
+    ``setup``, ``update``, ``solve`` or its compiled solver's ``update_data_vec``,
+    ``update_data_mat``, ``solve``; Clarabel's set-up, ``update``, ``solve``), by wrapping the
     names the backend modules call them by."""
 
     def __init__(self) -> None:
@@ -175,12 +177,16 @@ class SolverClock:
                 self.seconds += time.perf_counter() - t0
         return call
 
-    def wrapped(self, obj, methods: tuple[str, ...]):
+    def wrapped(self, obj, methods: tuple[str, ...], inner: dict | None = None):
+        """``obj`` with ``methods`` timed, and the objects named in ``inner`` wrapped in turn
+        (OSQP's compiled solver, ``OSQP._solver``, which the backend calls directly)."""
         clock = self
 
         class Timed:
             def __getattr__(self, name):  # once per name: kept, later lookups are plain
                 attr = getattr(obj, name)
+                if name in (inner or {}):
+                    attr = clock.wrapped(attr, inner[name])
                 attr = clock.timed(attr) if name in methods else attr
                 setattr(self, name, attr)
                 return attr
@@ -195,7 +201,8 @@ class SolverClock:
         osqp_mod, clarabel_mod = saved[1], saved[2]
 
         def new_osqp():
-            return self.wrapped(osqp_mod.OSQP(), ("setup", "update", "solve"))
+            return self.wrapped(osqp_mod.OSQP(), ("setup", "update", "solve"),
+                                {"_solver": ("update_data_vec", "update_data_mat", "solve")})
 
         osqp_proxy = self.wrapped(osqp_mod, ())
         osqp_proxy.__class__.OSQP = staticmethod(new_osqp)
