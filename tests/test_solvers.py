@@ -483,3 +483,30 @@ def test_daqp_short_path_shares_its_bounds_unchanged() -> None:
     for m in {qp.h.shape[0] for qp in qps}:
         lower, sense = daqp_backend._open_rows(m)
         assert np.all(lower == -daqp_backend.INF) and not sense.any()
+
+
+def test_osqp_compiled_solver_answers_as_its_wrapper(monkeypatch) -> None:
+    """Updates and solves through OSQP's compiled solver give what its Python wrapper gives,
+    to the last bit, warm starts and all."""
+    from vo3d_opt.solvers import osqp_backend
+
+    qps = _plane_like_qps(120)
+    one = osqp_backend.OsqpBackend()  # one per run: the QPs of a shape update its solver
+    direct = [one.solve(qp) for qp in qps]
+
+    def update(solver, q, l, u, Px, Ax):  # noqa: E741
+        solver.update(q=q, l=l, u=u, Px=Px, Ax=Ax)
+
+    def solve(solver):
+        res = solver.solve(raise_error=False)
+        return res.x, res.info
+
+    monkeypatch.setattr(osqp_backend, "_update", update)
+    monkeypatch.setattr(osqp_backend, "_solve", solve)
+    other = osqp_backend.OsqpBackend()
+    wrapped = [other.solve(qp) for qp in qps]
+    solved = [d for d in direct if d.info == "solved"]
+    assert len(solved) > 20
+    for d, w in zip(direct, wrapped, strict=True):
+        assert (d.status, d.info) == (w.status, w.info)
+        assert (d.x is None) == (w.x is None) and (d.x is None or d.x.tobytes() == w.x.tobytes())
