@@ -260,6 +260,22 @@ def _screen(
     return int(_core.qp_screen(P, q, C, l, u, r, has_r, m_ineq, m_eq))
 
 
+def plain_rows(qp: QP) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """P, q, G, h of ``qp`` when it is rows ``G x <= h`` alone that a solver can take as they
+    are (float arrays, finite, P symmetric: ``_core.qp_rows_form``; writable copies of
+    read-only ones), for the short paths of DAQP and OSQP; None: the standard form decides."""
+    plain = qp.A is None and qp.b is None and qp.lb is None and qp.ub is None
+    if not plain or qp.soc_radius is not None or qp.G is None or qp.h is None:
+        return None
+    form = _core.qp_rows_form(qp.P, qp.q, qp.G, qp.h)
+    if form == 1:
+        return None
+    P, q, G, h = qp.P, qp.q, qp.G, qp.h
+    if form == 2:  # DAQP's Python API takes no read-only buffer
+        return np.array(P), np.array(q), np.array(G), np.array(h)
+    return P, q, G, h
+
+
 def require_no_cone(backend: Backend, qp: QP) -> None:
     """Raise ValueError when a backend without cones is given a QP with ``soc_radius``."""
     if qp.soc_radius is not None:

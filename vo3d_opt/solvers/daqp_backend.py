@@ -21,7 +21,15 @@ import daqp
 import numpy as np
 
 from vo3d_opt import _core
-from vo3d_opt.solvers.base import FEAS_TOL, Backend, Standard, failure, make_result, standardise
+from vo3d_opt.solvers.base import (
+    FEAS_TOL,
+    Backend,
+    Standard,
+    failure,
+    make_result,
+    plain_rows,
+    standardise,
+)
 from vo3d_opt.solvers.problem import QP, Result
 from vo3d_opt.status import Status
 
@@ -51,15 +59,11 @@ class DaqpBackend(Backend):
     checks_answers = True
 
     def solve(self, qp: QP) -> Result:
-        """The short path for ``G x <= h`` alone (the module's docstring), else the standard
-        form's (:meth:`Backend.solve`)."""
-        plain = qp.A is None and qp.b is None and qp.lb is None and qp.ub is None
-        form = _core.qp_rows_form(qp.P, qp.q, qp.G, qp.h) if plain and qp.soc_radius is None else 1
-        P, q, G, h = qp.P, qp.q, qp.G, qp.h
-        if form == 1 or G is None or h is None:
+        """DAQP on the rows as they are when the QP is ``G x <= h`` alone (the module's
+        docstring), else on the standard form (:meth:`Backend.solve`)."""
+        if (rows := plain_rows(qp)) is None:
             return super().solve(qp)
-        if form == 2:  # DAQP's Python API takes no read-only buffer
-            P, q, G, h = np.array(P), np.array(q), np.array(G), np.array(h)
+        P, q, G, h = rows
         lower, sense = _open_rows(h.shape[0])
         try:
             x, _, flag, _ = daqp.solve(P, q, G, h, lower, sense)

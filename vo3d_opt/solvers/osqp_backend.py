@@ -3,7 +3,7 @@
 OSQP takes the :class:`~vo3d_opt.solvers.Standard` rows ``l <= C x <= u`` as they are. Every
 entry of C and of P's upper triangle is stored (dense pattern), so problems of the same shape
 share a sparsity pattern: the solver set up for the first is updated in place and warm-started
-from its last answer for the next, through OSQP's public ``update`` and ``solve``.
+from its last answer for the next (OSQP's ``update`` and ``solve``: see ``_update``).
 
 OSQP 1.x prints "Polishing not needed" whatever ``verbose`` says when the optimum has no active
 constraint (osqp/osqp#785). Such problems are answered before OSQP runs: when P is positive
@@ -32,6 +32,7 @@ from vo3d_opt.solvers.base import (
     Standard,
     failure,
     make_result,
+    plain_rows,
     standardise,
 )
 from vo3d_opt.solvers.problem import QP, Result
@@ -90,13 +91,11 @@ class OsqpBackend(Backend):
         self._solvers: dict[tuple[str, int, int], osqp.OSQP] = {}
 
     def solve(self, qp: QP) -> Result:
-        """The short path for ``G x <= h`` alone (the module's docstring), else the standard
-        form's (:meth:`Backend.solve`)."""
-        plain = qp.A is None and qp.b is None and qp.lb is None and qp.ub is None
-        form = _core.qp_rows_form(qp.P, qp.q, qp.G, qp.h) if plain and qp.soc_radius is None else 1
-        P, q, G, h = qp.P, qp.q, qp.G, qp.h
-        if form == 1 or G is None or h is None:
+        """OSQP on the rows alone when the QP is ``G x <= h`` alone (the module's docstring),
+        else on the standard form (:meth:`Backend.solve`)."""
+        if (rows := plain_rows(qp)) is None:
             return super().solve(qp)
+        P, q, G, h = rows
         try:
             x = minimiser(P, q)
             if x is not None and _core.qp_rows_gap(G, h, x) <= 0.0:
