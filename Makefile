@@ -22,7 +22,7 @@ $(PY):
 # The build requirements first (pyproject.toml's build-system.requires; cmake and ninja from
 # PyPI only where the machine has none), then the package, editable and built without
 # isolation, so that its persistent build directory (build/) stays valid between rebuilds.
-BUILD_REQS := 'scikit-build-core>=0.10' 'nanobind>=2.4'
+BUILD_REQS := 'scikit-build-core>=0.10' 'nanobind>=2.4' 'numpy>=1.26'
 $(BUILD_STAMP): | $(PY)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet $(BUILD_REQS)

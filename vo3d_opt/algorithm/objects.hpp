@@ -1,6 +1,6 @@
 // select() and select_arrays() on the default path in one call (nanobind glue, not the
 // algorithm): the user's own objects or arrays read where they lie (AgentState's arrays, each
-// Neighbor's fields, each obstacle's cached prism, float64 arrays through the buffer protocol),
+// Neighbor's fields, each obstacle's cached prism, numpy arrays through numpy's array struct),
 // one decide_one, and the Decision built here. A decision takes about as long as the Python
 // that would check and convert its inputs, so that Python is left out whenever the inputs are
 // of the plain kind; anything else (a subclass, a generator, an int dt or int array, a
@@ -15,6 +15,9 @@
 
 #include "convert.hpp"
 
+#define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
+#include <numpy/ndarraytypes.h>  // the array struct alone: its fields are read, no API called
+
 namespace vo3d::glue {
 
 // The Python objects select() is given and builds: the exact types read here (a subclass may
@@ -25,27 +28,23 @@ struct ObjectTypes {
     double max_magnitude;  // vo3d_opt.types.MAX_MAGNITUDE
 };
 
-// A numpy array's buffer (the buffer protocol), released however the scope is left.
-struct Buffer {
-    Py_buffer view{};
-    bool ok = false;
-    Buffer(nb::handle h, const nb::object& ndarray, int flags) {
-        if (h.type().is(ndarray)) ok = PyObject_GetBuffer(h.ptr(), &view, flags) == 0;
-        if (!ok) PyErr_Clear();
+// A numpy array read where it lies: numpy's array struct (ndarraytypes.h), its fields alone,
+// no call into numpy. The buffer protocol would do the same at several times the cost per
+// array, most of a fresh neighbour's reading.
+struct Array {
+    PyArrayObject* a = nullptr;
+    // ``h`` if it is a numpy array (exactly) of ``ndim`` dimensions and items of ``type`` in
+    // the machine's byte order; else none (ok() false).
+    Array(nb::handle h, const nb::object& ndarray, int ndim, int type) {
+        auto* x = reinterpret_cast<PyArrayObject*>(h.ptr());
+        if (h.type().is(ndarray) && PyArray_NDIM(x) == ndim && PyArray_TYPE(x) == type &&
+            PyArray_ISNOTSWAPPED(x))
+            a = x;
     }
-    ~Buffer() {
-        if (ok) PyBuffer_Release(&view);
-    }
-    Buffer(const Buffer&) = delete;
-    Buffer& operator=(const Buffer&) = delete;
-    // Of dimension ndim, items of ``format`` ("d": float64, "?": bool, nullptr: any).
-    bool is(int ndim, const char* format) const {
-        return ok && view.ndim == ndim &&
-               (!format || (view.format && std::strcmp(view.format, format) == 0));
-    }
-    const char* at(int64_t i, int64_t j = 0) const {
-        return static_cast<const char*>(view.buf) + i * view.strides[0] +
-               (view.ndim > 1 ? j * view.strides[1] : 0);
+    bool ok() const { return a != nullptr; }
+    int64_t shape(int d) const { return int64_t(PyArray_DIMS(a)[d]); }
+    char* at(int64_t i, int64_t j = 0) const {
+        return PyArray_BYTES(a) + i * PyArray_STRIDES(a)[0] + (j ? j * PyArray_STRIDES(a)[1] : 0);
     }
     double number(int64_t i, int64_t j = 0) const {
         double x;
@@ -154,9 +153,9 @@ class ObjectPath {
     // MAX_MAGNITUDE, positive in the columns from positive_from on (inputs._table's rules).
     bool floats_table(nb::handle h, int64_t width, int64_t positive_from,
                       std::vector<double>& buf) const {
-        Buffer a(h, t_.ndarray, PyBUF_STRIDES | PyBUF_FORMAT);
-        if (!a.is(2, "d") || a.view.shape[1] != width) return false;
-        int64_t n = int64_t(a.view.shape[0]);
+        Array a(h, t_.ndarray, 2, NPY_DOUBLE);
+        if (!a.ok() || a.shape(1) != width) return false;
+        int64_t n = a.shape(0);
         buf.resize(size_t(n * width));
         for (int64_t i = 0; i < n; ++i)
             for (int64_t j = 0; j < width; ++j) {
@@ -169,25 +168,24 @@ class ObjectPath {
 
     // The width of a numpy array of obstacle rows, 6 or 4 (no roof); 0 for anything else.
     int64_t obstacle_width(nb::handle h) const {
-        Buffer a(h, t_.ndarray, PyBUF_STRIDES);
-        int64_t width = a.is(2, nullptr) ? int64_t(a.view.shape[1]) : 0;
+        Array a(h, t_.ndarray, 2, NPY_DOUBLE);
+        int64_t width = a.ok() ? a.shape(1) : 0;
         return width == PRISM_ROOF_ROW || width == PRISM_ROW ? width : 0;
     }
 
     // A numpy bool array (n,) as the neighbours' cooperative column (8th of each row).
     bool flags(nb::handle h, int64_t n, std::vector<double>& nbrs) const {
-        Buffer a(h, t_.ndarray, PyBUF_STRIDES | PyBUF_FORMAT);
-        if (!a.is(1, "?") || a.view.shape[0] != n) return false;
+        Array a(h, t_.ndarray, 1, NPY_BOOL);
+        if (!a.ok() || a.shape(0) != n) return false;
         for (int64_t i = 0; i < n; ++i) nbrs[size_t(8 * i + 7)] = *a.at(i) ? 1.0 : 0.0;
         return true;
     }
 
     // A float64 numpy array of shape (3,), finite and within MAX_MAGNITUDE (AgentState's
-    // fields), read through the buffer protocol: a cast to nb::ndarray asks for DLPack first,
-    // several times the cost.
+    // fields, a Neighbor's, select_arrays' vectors).
     bool array3(nb::handle h, double* out) const {
-        Buffer a(h, t_.ndarray, PyBUF_STRIDES | PyBUF_FORMAT);
-        if (!a.is(1, "d") || a.view.shape[0] != 3) return false;
+        Array a(h, t_.ndarray, 1, NPY_DOUBLE);
+        if (!a.ok() || a.shape(0) != 3) return false;
         for (int k = 0; k < 3; ++k) out[k] = a.number(k);
         return plain(out[0]) && plain(out[1]) && plain(out[2]);
     }
@@ -283,13 +281,10 @@ class ObjectPath {
     }
 
     nb::object answer(const Decision& d, double t0) {
-        // numpy.empty(3) written through the buffer protocol: half the cost of an export
-        nb::object velocity = t_.empty(3);
-        {
-            Buffer v(velocity, t_.ndarray, PyBUF_WRITABLE | PyBUF_STRIDES);
-            if (!v.is(1, nullptr)) throw nb::type_error("numpy.empty(3): expected a writable array");
-            for (int k = 0; k < 3; ++k) std::memcpy(const_cast<char*>(v.at(k)), d.velocity + k, 8);
-        }
+        nb::object velocity = t_.empty(3);  // numpy.empty(3), written where it lies
+        Array v(velocity, t_.ndarray, 1, NPY_DOUBLE);
+        if (!v.ok() || v.shape(0) != 3) throw nb::type_error("numpy.empty(3): expected a float64 array");
+        for (int k = 0; k < 3; ++k) std::memcpy(v.at(k), d.velocity + k, 8);
         nb::dict info;
         info["round"] = t_.rounds[d.round];
         info["solved"] = d.solved;
