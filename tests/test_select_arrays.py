@@ -348,3 +348,14 @@ def test_none_for_any_argument_is_none_or_a_value_error_naming_it() -> None:
     for name in ("position", "velocity", "preferred_velocity", "dt"):
         with pytest.raises(ValueError, match=name):
             sel.select_arrays(**{**args, name: None})
+
+
+def test_another_numpy_major_takes_the_checked_path(monkeypatch) -> None:
+    """The one-call path reads numpy 1's and 2's array struct: under another major version the
+    selector decides through the Python checks, to the same answer."""
+    kw = select_kwargs(encounter(14))
+    want = VelocitySelector().select(**kw)
+    calls = _counting(monkeypatch)
+    monkeypatch.setattr(np, "__version__", "3.0.0")
+    assert same(VelocitySelector().select(**kw), want)
+    assert calls[0] == 1

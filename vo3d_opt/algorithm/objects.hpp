@@ -15,7 +15,9 @@
 
 #include "convert.hpp"
 
+#ifndef NPY_NO_DEPRECATED_API
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
+#endif
 #include <numpy/ndarraytypes.h>  // the array struct alone: its fields are read, no API called
 
 namespace vo3d::glue {
@@ -283,7 +285,8 @@ class ObjectPath {
     nb::object answer(const Decision& d, double t0) {
         nb::object velocity = t_.empty(3);  // numpy.empty(3), written where it lies
         Array v(velocity, t_.ndarray, 1, NPY_DOUBLE);
-        if (!v.ok() || v.shape(0) != 3) throw nb::type_error("numpy.empty(3): expected a float64 array");
+        if (!v.ok() || v.shape(0) != 3 || !PyArray_ISWRITEABLE(v.a))
+            throw nb::type_error("numpy.empty(3): expected a writable float64 array");
         for (int k = 0; k < 3; ++k) std::memcpy(v.at(k), d.velocity + k, 8);
         nb::dict info;
         info["round"] = t_.rounds[d.round];

@@ -84,7 +84,9 @@ def answer(
     )
 
 
-def object_path(decision: type, selector: Any, clock: Callable[[], float]) -> _core.ObjectPath:
+def object_path(
+    decision: type, selector: Any, clock: Callable[[], float]
+) -> _core.ObjectPath | None:
     """``selector.select()`` on the default path in one compiled call (algorithm/objects.hpp):
     ``decide(own, preferred_velocity, neighbors, obstacles, limits, dt, t0)`` reads the
     ``AgentState``, ``Neighbor``, ``Cylinder`` and ``Box`` objects where they lie (the
@@ -92,8 +94,11 @@ def object_path(decision: type, selector: Any, clock: Callable[[], float]) -> _c
     select() does (``clock() - t0`` its solve time); it returns None for inputs of any other
     kind, which then take select()'s own checks;
     ``decide_arrays`` is the same for ``select_arrays``. The limits and the period are planned
-    with ``selector._bounds_and_config``'s bounds and Config.
+    with ``selector._bounds_and_config``'s bounds and Config. None under a numpy whose array
+    struct the core was not written for.
     """
+    if int(np.__version__.split(".")[0]) not in (1, 2):
+        return None  # the array struct the core reads is numpy 1's and 2's; others: Python
     kinds = dict(agent=AgentState, neighbor=Neighbor, cylinder=Cylinder, box=Box, limits=Limits)
     return _core.ObjectPath(
         dict(
