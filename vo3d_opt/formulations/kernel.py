@@ -92,10 +92,10 @@ def object_path(
     ``AgentState``, ``Neighbor``, ``Cylinder`` and ``Box`` objects where they lie (the
     neighbours' fields, the obstacles' cached prisms), decides, and builds ``decision`` as
     select() does (``clock() - t0`` its solve time); it returns None for inputs of any other
-    kind, which then take select()'s own checks;
-    ``decide_arrays`` is the same for ``select_arrays``. The limits and the period are planned
-    with ``selector._bounds_and_config``'s bounds and Config. None under a numpy whose array
-    struct the core was not written for.
+    kind, which then take select()'s own checks. ``decide_arrays`` is the same for
+    ``select_arrays``. The limits and the period are planned with
+    ``selector._bounds_and_config``'s bounds and Config. No path (None) under a numpy whose
+    array struct the core was not written for.
     """
     if int(np.__version__.split(".")[0]) not in (1, 2):
         return None  # the array struct the core reads is numpy 1's and 2's; others: Python
