@@ -197,6 +197,30 @@ def test_a_missing_extra_is_one_line_naming_it():
     assert "available: exact2d" in out["plane_qp on osqp"]["message"]
 
 
+
+QP_EXTRA = """
+import json
+from vo3d_opt import VelocitySelector
+out = {}
+for name in ("proxqp", "quadprog", "piqp"):
+    try:
+        VelocitySelector("cone_qp", f"qpsolvers:{name}")
+        out[name] = None
+    except ValueError as exc:
+        out[name] = {"import": isinstance(exc, ImportError), "message": str(exc)}
+print(json.dumps(out))
+"""
+
+
+def test_a_qpsolvers_solver_of_the_qp_extra_names_it():
+    """qpsolvers comes with the core install, proxqp, quadprog and piqp with ``[qp]``: asking
+    for one of those without it names the extra and the library, not only 'uninstalled'."""
+    out = _json(_child(QP_EXTRA, block=("proxsuite", "quadprog", "piqp")))
+    for name, library in (("proxqp", "proxsuite"), ("quadprog", "quadprog"), ("piqp", "piqp")):
+        err = out[name]
+        assert err is not None and err["import"], (name, err)
+        assert f"needs the [qp] extra ({library} not installed)" in err["message"], err
+
 SIM_MISSING = """
 import json
 try:

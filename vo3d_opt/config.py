@@ -278,7 +278,8 @@ class SelectorConfig(Model):
             if rng is None:
                 raise ValueError(
                     f"sensing_range: preset {self.preset!r} derives its horizon from the "
-                    "sensing range; give VelocitySelector(..., sensing_range=METRES)"
+                    "sensing range; give VelocitySelector(..., sensing_range=METRES) or "
+                    "select(..., sensing_range=METRES)"
                 )
             horizon = float(rng) / (2.0 * float(v_max)) if v_max > 0 else None
             if horizon is not None and not math.isfinite(horizon):

@@ -10,10 +10,11 @@ Accepted names:
 - ``"qpsolvers:<name>"`` for every name in ``qpsolvers.available_solvers``;
 - ``"casadi"`` (plugin ipopt) and ``"casadi:<plugin>"`` for the non-convex NLP.
 
-Only ``exact2d`` comes with the core install; the others with the extras ``[qp]`` (osqp,
-clarabel, daqp, qpsolvers), ``[cvxpy]`` and ``[nlp]`` (CasADi). The name of a solver whose
-library is not installed raises :class:`~vo3d_opt.extras.MissingExtra`, one line naming the
-extra (an ImportError, and a ValueError as every unavailable name). Backend modules are
+``exact2d``, osqp, clarabel, daqp and qpsolvers come with the core install; qpsolvers'
+proxqp, quadprog and piqp with the extra ``[qp]``, cvxpy with ``[cvxpy]``, CasADi with
+``[nlp]``. The name of a solver whose library is not installed raises
+:class:`~vo3d_opt.extras.MissingExtra`, one line naming the extra (an ImportError, and a
+ValueError as every unavailable name). Backend modules are
 imported lazily, so importing this package stays cheap.
 """
 
@@ -29,6 +30,8 @@ CASADI_PLUGINS = ("ipopt", "sqpmethod")
 
 #: The extra that brings each solver library (the prefix of its solver names).
 _SOLVER_EXTRAS = {module: extra for extra in ("qp", "cvxpy", "nlp") for module in EXTRAS[extra]}
+#: The qpsolvers solvers the ``[qp]`` extra brings, by their modules.
+_QP_EXTRA_SOLVERS = {"proxqp": "proxsuite", "quadprog": "quadprog", "piqp": "piqp"}
 
 _CACHE: dict[str, Backend] = {}
 _REGISTERED: dict[str, Backend] = {}
@@ -112,6 +115,9 @@ def _unknown(name: str) -> ValueError:
     if module in _SOLVER_EXTRAS and not installed(module):
         extra = _SOLVER_EXTRAS[module]
         return MissingExtra(f"solver {name!r}", extra, (module,), f"; available: {available}")
+    library = _QP_EXTRA_SOLVERS.get(name.partition(":")[2]) if module == "qpsolvers" else None
+    if library is not None and not installed(library):
+        return MissingExtra(f"solver {name!r}", "qp", (library,), f"; available: {available}")
     return ValueError(f"unknown or uninstalled solver {name!r}; available: {available}")
 
 
